@@ -1,0 +1,77 @@
+// Streaming writer of .iso files.
+//
+// Chunks are compressed and written to disk as they are added, so memory does not grow with the
+// file's size (only 80 bytes per chunk for the table). The file is written under a temporary name
+// in the output's directory and renamed to the output path by finish(), after everything was
+// flushed to disk; an interrupted or failed write never leaves a file at the output path, and a
+// file already there stays untouched until the rename replaces it.
+//
+// Threading: one Writer is used by one thread at a time.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "iso/format.h"
+
+namespace iso {
+
+struct WriterOptions {
+  int zstdLevel = 3;
+};
+
+// What the caller says about a chunk; the writer fills in offsets, sizes and the checksum.
+struct ChunkDesc {
+  uint8_t kind = static_cast<uint8_t>(ChunkKind::Blob);
+  uint8_t level = 0;
+  uint64_t key = 0;
+  uint32_t parent = kNoParent;  // may also be set later with Writer::setParent
+  uint64_t pointCount = 0;
+  uint32_t nodeCount = 0;
+  uint32_t leafCount = 0;
+  float geometricError = 0.0f;
+  Codec codec = Codec::Zstd;  // zstd is stored raw when compression does not make it smaller
+};
+
+class Writer {
+ public:
+  // Create the temporary file and write the header. Throws std::invalid_argument for an invalid
+  // header and iso::FileError when the file cannot be created.
+  Writer(std::filesystem::path output, const FileHeader& header, WriterOptions options = {});
+  ~Writer();  // removes the temporary file unless finish() succeeded
+  Writer(Writer&&) noexcept;
+  Writer& operator=(Writer&&) noexcept;
+
+  // Compress (when asked and worthwhile), checksum and write one chunk; returns its id (the index
+  // in the chunk table, in the order of the calls). Throws std::invalid_argument for an invalid
+  // description (level above the header's maxLevel, key out of range, data over kMaxChunkRawSize)
+  // and iso::FileError when writing fails.
+  uint32_t addChunk(const ChunkDesc& desc, std::span<const std::byte> data);
+
+  // Set the parent of a chunk added earlier (parents are often written after their children).
+  void setParent(uint32_t chunk, uint32_t parent);
+
+  // The metadata JSON object, written at finish(). Defaults to "{}".
+  void setMetadata(std::string json);
+
+  // Write the chunk table, metadata and trailer, flush, and rename to the output path. Throws
+  // std::invalid_argument when a parent link breaks the format's rules, iso::FileError on I/O
+  // failure; either way nothing appears at the output path.
+  void finish();
+
+  // Remove the temporary file now; the writer cannot be used afterwards.
+  void abandon() noexcept;
+
+  uint32_t chunkCount() const;
+  uint64_t bytesWritten() const;  // file position so far
+  const std::filesystem::path& temporaryPath() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace iso

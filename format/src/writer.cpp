@@ -1,0 +1,187 @@
+// Streaming writer (specs/iso-format.md, "File layout"): header first, payloads as they come,
+// chunk table, metadata and trailer last, then an atomic rename.
+#include "iso/writer.h"
+
+#include <zstd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+#include <vector>
+
+#include "bytes.h"
+#include "file_io.h"
+#include "iso/check.h"
+#include "layout.h"
+
+namespace iso {
+
+using detail::alignUp;
+
+struct Writer::Impl {
+  detail::AtomicOutputFile file;
+  FileHeader header;
+  WriterOptions options;
+  std::vector<ChunkInfo> chunks;
+  std::string metadata = "{}";
+  std::vector<std::byte> compressed;
+  ZSTD_CCtx* zstd = nullptr;
+  bool isOpen = true;
+
+  Impl(std::filesystem::path output, const FileHeader& h, WriterOptions o)
+      : file(std::move(output)), header(h), options(o) {}
+  ~Impl() { ZSTD_freeCCtx(zstd); }
+
+  void requireOpen() const {
+    if (!isOpen) throw std::logic_error("iso::Writer used after finish() or abandon()");
+  }
+
+  // Compress data into `compressed`; returns false when that would not make it smaller.
+  bool compress(std::span<const std::byte> data) {
+    if (data.empty()) return false;
+    if (zstd == nullptr && (zstd = ZSTD_createCCtx()) == nullptr) throw std::bad_alloc();
+    ZSTD_CCtx_reset(zstd, ZSTD_reset_session_and_parameters);
+    ZSTD_CCtx_setParameter(zstd, ZSTD_c_compressionLevel, options.zstdLevel);
+    ZSTD_CCtx_setParameter(zstd, ZSTD_c_contentSizeFlag, 1);
+    compressed.resize(ZSTD_compressBound(data.size()));
+    const size_t size =
+        ZSTD_compress2(zstd, compressed.data(), compressed.size(), data.data(), data.size());
+    ISO_CHECK(!ZSTD_isError(size));
+    compressed.resize(size);
+    return size < data.size();
+  }
+
+  void validateParents() const {
+    for (const ChunkInfo& c : chunks) {
+      if (c.parent == kNoParent) continue;
+      const std::string who = "chunk " + std::to_string(c.id);
+      if (c.parent >= chunks.size())
+        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) + " does not exist");
+      const ChunkInfo& p = chunks[c.parent];
+      if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
+        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) +
+                                    " is not a coarser cell containing it");
+    }
+  }
+};
+
+Writer::Writer(std::filesystem::path output, const FileHeader& header, WriterOptions options) {
+  if (header.versionMajor != kFormatMajor || header.versionMinor != kFormatMinor)
+    throw std::invalid_argument("iso::Writer writes format version " +
+                                std::to_string(kFormatMajor) + "." + std::to_string(kFormatMinor) +
+                                " only");
+  if (std::optional<detail::FieldProblem> problem = detail::headerProblem(header))
+    throw std::invalid_argument("invalid .iso header: " + problem->reason);
+  if (options.zstdLevel < ZSTD_minCLevel() || options.zstdLevel > ZSTD_maxCLevel())
+    throw std::invalid_argument("zstd level out of range");
+  impl_ = std::make_unique<Impl>(std::move(output), header, options);
+  const auto encoded = detail::encodeHeader(header);
+  impl_->file.write(encoded);
+  impl_->file.writeZeros(alignUp(kHeaderSize, header.payloadAlignment()) - kHeaderSize);
+}
+
+Writer::~Writer() = default;
+Writer::Writer(Writer&&) noexcept = default;
+Writer& Writer::operator=(Writer&&) noexcept = default;
+
+uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data) {
+  Impl& w = *impl_;
+  w.requireOpen();
+  if (desc.level > w.header.maxLevel)
+    throw std::invalid_argument("chunk level is above the header's maxLevel");
+  if (!isValidKey(desc.level, desc.key))
+    throw std::invalid_argument("chunk key does not fit its level");
+  if (data.size() > kMaxChunkRawSize)
+    throw std::invalid_argument("chunk data is over the format's limit of 2^30 bytes");
+  if (!std::isfinite(desc.geometricError) || desc.geometricError < 0.0f)
+    throw std::invalid_argument("chunk geometric error must be finite and non-negative");
+  if (desc.codec != Codec::Raw && desc.codec != Codec::Zstd)
+    throw std::invalid_argument("unknown chunk codec");
+  if (w.chunks.size() >= kNoParent) throw std::invalid_argument("too many chunks");
+
+  ChunkInfo c;
+  c.id = static_cast<uint32_t>(w.chunks.size());
+  c.parent = desc.parent;
+  c.kind = desc.kind;
+  c.level = desc.level;
+  c.key = desc.key;
+  c.pointCount = desc.pointCount;
+  c.nodeCount = desc.nodeCount;
+  c.leafCount = desc.leafCount;
+  c.geometricError = desc.geometricError;
+  c.rawSize = data.size();
+
+  std::span<const std::byte> stored = data;
+  c.codec = Codec::Raw;
+  if (desc.codec == Codec::Zstd && w.compress(data)) {
+    stored = w.compressed;
+    c.codec = Codec::Zstd;
+  }
+  c.storedSize = stored.size();
+  c.checksum = detail::checksum(stored);
+  c.offset = w.file.position();
+  ISO_CHECK(c.offset % w.header.payloadAlignment() == 0);
+  w.file.write(stored);
+  w.file.writeZeros(alignUp(w.file.position(), w.header.payloadAlignment()) - w.file.position());
+  w.chunks.push_back(c);
+  return c.id;
+}
+
+void Writer::setParent(uint32_t chunk, uint32_t parent) {
+  impl_->requireOpen();
+  if (chunk >= impl_->chunks.size()) throw std::invalid_argument("setParent: no such chunk");
+  impl_->chunks[chunk].parent = parent;
+}
+
+void Writer::setMetadata(std::string json) {
+  impl_->requireOpen();
+  const size_t first = json.find_first_not_of(" \t\r\n");
+  const size_t last = json.find_last_not_of(" \t\r\n");
+  if (first == std::string::npos || json[first] != '{' || json[last] != '}')
+    throw std::invalid_argument("metadata must be a JSON object");
+  impl_->metadata = std::move(json);
+}
+
+void Writer::finish() {
+  Impl& w = *impl_;
+  w.requireOpen();
+  w.validateParents();
+
+  detail::Trailer trailer;
+  trailer.chunkTableOffset = w.file.position();
+  trailer.chunkCount = static_cast<uint32_t>(w.chunks.size());
+  detail::Checksummer tableChecksum;
+  std::vector<std::byte> block;
+  constexpr size_t kEntriesPerBlock = 1024;
+  for (size_t first = 0; first < w.chunks.size(); first += kEntriesPerBlock) {
+    const size_t count = std::min(kEntriesPerBlock, w.chunks.size() - first);
+    block.resize(count * kChunkEntrySize);
+    for (size_t i = 0; i < count; ++i)
+      detail::encodeChunkEntry(w.chunks[first + i], block.data() + i * kChunkEntrySize);
+    tableChecksum.update(block);
+    w.file.write(block);
+  }
+  trailer.chunkTableChecksum = tableChecksum.digest();
+
+  const auto metadata = std::as_bytes(std::span(w.metadata));
+  trailer.metadataOffset = w.file.position();
+  trailer.metadataSize = metadata.size();
+  trailer.metadataChecksum = detail::checksum(metadata);
+  w.file.write(metadata);
+  w.file.write(detail::encodeTrailer(trailer));
+  w.file.commit();
+  w.isOpen = false;
+}
+
+void Writer::abandon() noexcept {
+  if (!impl_) return;
+  impl_->file.discard();
+  impl_->isOpen = false;
+}
+
+uint32_t Writer::chunkCount() const { return static_cast<uint32_t>(impl_->chunks.size()); }
+uint64_t Writer::bytesWritten() const { return impl_->file.position(); }
+const std::filesystem::path& Writer::temporaryPath() const { return impl_->file.temporaryPath(); }
+
+}  // namespace iso

@@ -1,0 +1,126 @@
+#include "support.h"
+
+#define XXH_INLINE_ALL
+#include <unistd.h>
+#include <xxhash.h>
+
+#include <atomic>
+#include <cstring>
+#include <fstream>
+#include <stdexcept>
+
+namespace iso::test {
+namespace {
+
+uint64_t load64(const std::vector<std::byte>& b, size_t at) {
+  uint64_t v;
+  std::memcpy(&v, b.data() + at, 8);
+  return v;
+}
+
+void store64(std::vector<std::byte>& b, size_t at, uint64_t v) { std::memcpy(b.data() + at, &v, 8); }
+
+uint64_t hash(const std::vector<std::byte>& b, size_t at, size_t size) {
+  return XXH3_64bits(b.data() + at, size);
+}
+
+}  // namespace
+
+TempDir::TempDir() {
+  static std::atomic<int> counter{0};
+  path_ = std::filesystem::temp_directory_path() /
+          ("iso-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+  std::filesystem::remove_all(path_);
+  std::filesystem::create_directories(path_);
+}
+
+TempDir::~TempDir() {
+  std::error_code ignored;
+  std::filesystem::remove_all(path_, ignored);
+}
+
+std::vector<std::byte> readFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read " + path.string());
+  std::vector<char> chars((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::vector<std::byte> bytes(chars.size());
+  if (!chars.empty()) std::memcpy(bytes.data(), chars.data(), chars.size());
+  return bytes;
+}
+
+void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  if (!out) throw std::runtime_error("cannot write " + path.string());
+}
+
+// Offsets are those of specs/iso-format.md, written here independently of format/src/layout.h.
+void resealChecksums(std::vector<std::byte>& b) {
+  if (b.size() < 256 + 64) return;
+  store64(b, 248, hash(b, 0, 248));
+  const size_t trailer = b.size() - 64;
+  const uint64_t tableOffset = load64(b, trailer + 0);
+  uint32_t count;
+  std::memcpy(&count, b.data() + trailer + 8, 4);
+  const uint64_t tableBytes = uint64_t{count} * 80;
+  if (tableOffset <= trailer && tableBytes <= trailer - tableOffset)
+    store64(b, trailer + 32, hash(b, size_t(tableOffset), size_t(tableBytes)));
+  const uint64_t metadataOffset = load64(b, trailer + 16);
+  const uint64_t metadataSize = load64(b, trailer + 24);
+  if (metadataOffset <= trailer && metadataSize <= trailer - metadataOffset)
+    store64(b, trailer + 40, hash(b, size_t(metadataOffset), size_t(metadataSize)));
+  store64(b, trailer + 48, hash(b, trailer, 48));
+}
+
+FileHeader goldenHeader() {
+  FileHeader h;
+  h.maxLevel = 3;
+  h.frame.origin = {515000.25, 4918000.5, -1234.125};
+  h.frame.size = 64.0;
+  h.attributes = {{Semantic::SignedDistance, Encoding::Snorm8, 1, 0.5f},
+                  {Semantic::Normal, Encoding::Oct16, 2, 0.0f},
+                  {Semantic::Color, Encoding::Srgb8, 3, 0.0f}};
+  return h;
+}
+
+std::vector<GoldenChunk> goldenChunks() {
+  std::vector<GoldenChunk> chunks(5);
+  // 0: the root, compressible, zstd.
+  chunks[0].desc = {.level = 0, .key = 0, .pointCount = 1000, .nodeCount = 9, .leafCount = 8,
+                    .geometricError = 0.25f, .codec = Codec::Zstd};
+  for (int i = 0; i < 2000; ++i) chunks[0].data.push_back(std::byte((i * 7) % 13));
+  // 1: incompressible bytes, asked for zstd, so stored raw.
+  chunks[1].desc = {.level = 1, .key = 5, .parent = 0, .pointCount = 600, .nodeCount = 1,
+                    .leafCount = 1, .geometricError = 0.125f, .codec = Codec::Zstd};
+  uint32_t state = 12345;
+  for (int i = 0; i < 300; ++i) {
+    state = state * 1664525u + 1013904223u;
+    chunks[1].data.push_back(std::byte(state >> 24));
+  }
+  // 2: a grandchild of the root inside chunk 1's cell, text, zstd.
+  chunks[2].desc = {.level = 2, .key = (5 << 3) | 2, .parent = 1, .pointCount = 250,
+                    .nodeCount = 3, .leafCount = 2, .geometricError = 0.0f, .codec = Codec::Zstd};
+  const std::string text = "the surface is the zero set of the trilinear interpolation. ";
+  for (int i = 0; i < 25; ++i)
+    for (char c : text) chunks[2].data.push_back(std::byte(c));
+  // 3: an empty chunk, raw.
+  chunks[3].desc = {.level = 1, .key = 0, .parent = 0, .codec = Codec::Raw};
+  // 4: a chunk of a kind this version does not know (readers skip it), raw.
+  chunks[4].desc = {.kind = 7, .level = 3, .key = 0x3F, .parent = 3, .pointCount = 1,
+                    .codec = Codec::Raw};
+  for (int i = 0; i < 64; ++i) chunks[4].data.push_back(std::byte(255 - i));
+  return chunks;
+}
+
+std::string goldenMetadata() {
+  return R"({"generator":"iso golden file v1","note":"pins the bytes of format 1.0"})";
+}
+
+void writeGoldenFile(const std::filesystem::path& path) {
+  Writer writer(path, goldenHeader(), {.zstdLevel = 3});
+  for (const GoldenChunk& c : goldenChunks()) writer.addChunk(c.desc, c.data);
+  writer.setMetadata(goldenMetadata());
+  writer.finish();
+}
+
+}  // namespace iso::test

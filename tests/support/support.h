@@ -1,0 +1,46 @@
+// Helpers shared by the format tests and fuzzers.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "iso/writer.h"
+
+namespace iso::test {
+
+// A fresh directory under the system temporary directory, removed with everything in it.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+std::vector<std::byte> readFile(const std::filesystem::path& path);
+void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& bytes);
+
+// Recompute the header, chunk table, metadata and trailer checksums of a possibly modified file in
+// place, wherever the trailer's fields point inside the file, so that tests and fuzzers reach the
+// structural checks behind the checksums. Files too small to hold a header and trailer are left.
+void resealChecksums(std::vector<std::byte>& bytes);
+
+// The content of tests/data/golden-v1.iso: header, chunks and data, and metadata.
+struct GoldenChunk {
+  ChunkDesc desc;
+  std::vector<std::byte> data;
+};
+FileHeader goldenHeader();
+std::vector<GoldenChunk> goldenChunks();
+std::string goldenMetadata();
+// Write the golden file's content with the current writer.
+void writeGoldenFile(const std::filesystem::path& path);
+
+}  // namespace iso::test

@@ -1,0 +1,178 @@
+// `iso info FILE`: what a file holds, for people or (--json) for programs.
+#include <fmt/core.h>
+
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "iso/reader.h"
+#include "text.h"
+
+namespace iso::cli {
+namespace {
+
+struct LevelSummary {
+  uint64_t chunks = 0, storedBytes = 0, rawBytes = 0, points = 0;
+};
+
+struct Summary {
+  uint64_t storedBytes = 0, rawBytes = 0;
+  uint64_t points = 0;  // input points represented, counted over the chunks without a parent
+  std::map<std::string, uint64_t> codecs;
+  std::map<int, LevelSummary> levels;
+};
+
+Summary summarize(const Reader& reader) {
+  Summary s;
+  for (const ChunkInfo& c : reader.chunks()) {
+    s.storedBytes += c.storedSize;
+    s.rawBytes += c.rawSize;
+    if (c.parent == kNoParent) s.points += c.pointCount;  // roots cover all points once
+    ++s.codecs[std::string(codecName(c.codec))];
+    LevelSummary& level = s.levels[c.level];
+    ++level.chunks;
+    level.storedBytes += c.storedSize;
+    level.rawBytes += c.rawSize;
+    level.points += c.pointCount;
+  }
+  return s;
+}
+
+nlohmann::json attributeJson(const AttributeDesc& a) {
+  return {{"semantic", semanticName(a.semantic)},
+          {"encoding", encodingName(a.encoding)},
+          {"components", a.components},
+          {"scale", a.scale}};
+}
+
+nlohmann::json chunkJson(const ChunkInfo& c) {
+  return {{"id", c.id},
+          {"parent", c.parent == kNoParent ? nlohmann::json(nullptr) : nlohmann::json(c.parent)},
+          {"level", c.level},
+          {"key", c.key},
+          {"kind", chunkKindName(c.kind)},
+          {"kind_id", c.kind},
+          {"codec", codecName(c.codec)},
+          {"offset", c.offset},
+          {"stored_bytes", c.storedSize},
+          {"raw_bytes", c.rawSize},
+          {"checksum", fmt::format("{:016x}", c.checksum)},
+          {"points", c.pointCount},
+          {"nodes", c.nodeCount},
+          {"leaves", c.leafCount},
+          {"geometric_error", c.geometricError}};
+}
+
+nlohmann::json infoJson(const Reader& reader, bool withChunks) {
+  const FileHeader& h = reader.header();
+  const Summary s = summarize(reader);
+  nlohmann::json j;
+  j["file"] = reader.name();
+  j["file_size"] = reader.fileSize();
+  j["format_version"] = fmt::format("{}.{}", h.versionMajor, h.versionMinor);
+  j["flags"] = h.flags;
+  j["frame"] = {{"origin", h.frame.origin}, {"size", h.frame.size}};
+  j["max_level"] = h.maxLevel;
+  j["payload_alignment"] = h.payloadAlignment();
+  j["attributes"] = nlohmann::json::array();
+  for (const AttributeDesc& a : h.attributes) j["attributes"].push_back(attributeJson(a));
+  j["chunk_count"] = reader.chunks().size();
+  j["stored_bytes"] = s.storedBytes;
+  j["raw_bytes"] = s.rawBytes;
+  j["point_count"] = s.points;
+  j["codecs"] = s.codecs;
+  j["levels"] = nlohmann::json::array();
+  for (const auto& [level, l] : s.levels)
+    j["levels"].push_back({{"level", level},
+                           {"chunks", l.chunks},
+                           {"stored_bytes", l.storedBytes},
+                           {"raw_bytes", l.rawBytes},
+                           {"points", l.points}});
+  const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
+  if (metadata.is_discarded()) {
+    j["metadata"] = std::string(reader.metadata());
+    j["metadata_error"] = "not valid JSON";
+  } else {
+    j["metadata"] = metadata;
+  }
+  if (withChunks) {
+    j["chunks"] = nlohmann::json::array();
+    for (const ChunkInfo& c : reader.chunks()) j["chunks"].push_back(chunkJson(c));
+  }
+  return j;
+}
+
+void printChunkTable(const Reader& reader) {
+  fmt::print("\n{:>6} {:>6} {:>5} {:>18} {:>6} {:>5} {:>12} {:>12} {:>10} {:>8} {:>8} {:>10}\n",
+             "chunk", "parent", "level", "key", "kind", "codec", "stored", "raw", "points", "nodes",
+             "leaves", "error");
+  for (const ChunkInfo& c : reader.chunks())
+    fmt::print("{:>6} {:>6} {:>5} {:>#18x} {:>6} {:>5} {:>12} {:>12} {:>10} {:>8} {:>8} {:>10.4g}\n",
+               c.id, c.parent == kNoParent ? std::string("-") : std::to_string(c.parent), c.level,
+               c.key, chunkKindName(c.kind), codecName(c.codec), c.storedSize, c.rawSize,
+               c.pointCount, c.nodeCount, c.leafCount, c.geometricError);
+}
+
+void printInfo(const Reader& reader, bool withChunks) {
+  const FileHeader& h = reader.header();
+  const Summary s = summarize(reader);
+  fmt::print("{:<12}{}\n", "file", reader.name());
+  fmt::print("{:<12}{} bytes ({})\n", "size", withSeparators(reader.fileSize()),
+             humanBytes(reader.fileSize()));
+  fmt::print("{:<12}{}.{}\n", "format", h.versionMajor, h.versionMinor);
+  fmt::print("{:<12}origin ({}, {}, {}), size {}\n", "frame", h.frame.origin[0],
+             h.frame.origin[1], h.frame.origin[2], h.frame.size);
+  std::string attributes;
+  for (const AttributeDesc& a : h.attributes) {
+    if (!attributes.empty()) attributes += ", ";
+    attributes += fmt::format("{} {}", semanticName(a.semantic), encodingName(a.encoding));
+    if (a.semantic == Semantic::SignedDistance) attributes += fmt::format(" (range {:g} diagonals)", a.scale);
+  }
+  fmt::print("{:<12}{}\n", "attributes", attributes);
+  fmt::print("{:<12}max level {}, payloads aligned to {} bytes\n", "octree", h.maxLevel,
+             h.payloadAlignment());
+  std::string codecs;
+  for (const auto& [codec, count] : s.codecs) codecs += fmt::format(", {} {}", count, codec);
+  fmt::print("{:<12}{}{}; {} stored for {} of data", "chunks", withSeparators(reader.chunks().size()),
+             codecs, humanBytes(s.storedBytes), humanBytes(s.rawBytes));
+  if (s.rawBytes > 0) fmt::print(" ({:.1f}%)", 100.0 * double(s.storedBytes) / double(s.rawBytes));
+  fmt::print("\n");
+  for (const auto& [level, l] : s.levels)
+    fmt::print("  level {:<4}{} chunk{}, {} stored, {} points\n", level, withSeparators(l.chunks),
+               l.chunks == 1 ? "" : "s",
+               humanBytes(l.storedBytes), withSeparators(l.points));
+  fmt::print("{:<12}{}\n", "points", withSeparators(s.points));
+  const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
+  if (metadata.is_discarded())
+    fmt::print("{:<12}(not valid JSON, {} bytes)\n", "metadata", reader.metadata().size());
+  else
+    fmt::print("{:<12}{}\n", "metadata", indentLines(metadata.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), 12));
+  if (withChunks) printChunkTable(reader);
+}
+
+}  // namespace
+
+void addInfoCommand(CLI::App& app, int& exitCode) {
+  struct Options {
+    std::string file;
+    bool json = false;
+    bool chunks = false;
+  };
+  auto options = std::make_shared<Options>();
+  CLI::App* command = app.add_subcommand("info", "Describe an .iso file: frame, attributes, chunks, metadata");
+  command->add_option("file", options->file, ".iso file")->required();
+  command->add_flag("--json", options->json, "Print JSON for programs");
+  command->add_flag("--chunks", options->chunks, "Also list every chunk");
+  command->callback([options, &exitCode] {
+    exitCode = runGuarded("info", [&] {
+      const Reader reader = Reader::open(options->file);
+      if (options->json)
+        fmt::print("{}\n", infoJson(reader, options->chunks).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+      else
+        printInfo(reader, options->chunks);
+      return kExitOk;
+    });
+  });
+}
+
+}  // namespace iso::cli

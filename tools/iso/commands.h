@@ -1,0 +1,19 @@
+// The sub-commands of the `iso` program. Each registers its options on the CLI11 app and, when
+// selected, runs and sets the process exit code: 0 success, 1 failure, 2 usage error.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace iso::cli {
+
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitUsage = 2;
+
+// Runs body and turns exceptions into a message on stderr ("iso: ...") and kExitFailure.
+int runGuarded(const char* command, const std::function<int()>& body);
+
+void addInfoCommand(CLI::App& app, int& exitCode);
+void addVerifyCommand(CLI::App& app, int& exitCode);
+
+}  // namespace iso::cli

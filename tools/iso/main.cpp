@@ -1,0 +1,48 @@
+// `iso`: the command-line program (tools/iso/commands.h lists the sub-commands).
+#include <fmt/core.h>
+
+#include <exception>
+
+#include "commands.h"
+#include "iso/check.h"
+#include "iso/error.h"
+#include "iso/format.h"
+#include "version.h"
+
+namespace iso::cli {
+
+int runGuarded(const char* command, const std::function<int()>& body) {
+  try {
+    return body();
+  } catch (const FileError& error) {
+    fmt::print(stderr, "iso {}: {}\n", command, error.what());
+  } catch (const InternalError& error) {
+    fmt::print(stderr, "iso {}: {}\n", command, error.what());
+  } catch (const std::bad_alloc&) {
+    fmt::print(stderr, "iso {}: out of memory\n", command);
+  } catch (const std::exception& error) {
+    fmt::print(stderr, "iso {}: {}\n", command, error.what());
+  }
+  return kExitFailure;
+}
+
+}  // namespace iso::cli
+
+int main(int argc, char** argv) {
+  CLI::App app{"iso: compact level-of-detail surface assets (Implicit Surface Octrees) from 3D scans",
+               "iso"};
+  app.set_version_flag("--version", fmt::format("iso {} (.iso format {}.{})", ISO_VERSION,
+                                                iso::kFormatMajor, iso::kFormatMinor));
+  app.require_subcommand(1);
+  app.footer("Run `iso COMMAND --help` for the options of a command.");
+  int exitCode = iso::cli::kExitOk;
+  iso::cli::addInfoCommand(app, exitCode);
+  iso::cli::addVerifyCommand(app, exitCode);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& error) {
+    const int code = app.exit(error);
+    return code == 0 ? iso::cli::kExitOk : iso::cli::kExitUsage;
+  }
+  return exitCode;
+}

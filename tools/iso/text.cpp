@@ -1,0 +1,33 @@
+#include "text.h"
+
+#include <fmt/core.h>
+
+namespace iso::cli {
+
+std::string withSeparators(uint64_t value) {
+  std::string digits = std::to_string(value);
+  for (int i = static_cast<int>(digits.size()) - 3; i > 0; i -= 3) digits.insert(size_t(i), ",");
+  return digits;
+}
+
+std::string humanBytes(uint64_t bytes) {
+  static const char* const kUnits[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  double value = static_cast<double>(bytes);
+  int unit = 0;
+  while (value >= 1024.0 && unit < 4) {
+    value /= 1024.0;
+    ++unit;
+  }
+  return unit == 0 ? fmt::format("{} B", bytes) : fmt::format("{:.1f} {}", value, kUnits[unit]);
+}
+
+std::string indentLines(const std::string& text, int columns) {
+  std::string out;
+  for (char c : text) {
+    out += c;
+    if (c == '\n') out.append(size_t(columns), ' ');
+  }
+  return out;
+}
+
+}  // namespace iso::cli
