@@ -52,7 +52,8 @@ TEST(Cli, verifyNamesTheChunkWhosePayloadByteFlipped) {
   test::writeFile(dir / "flipped.iso", bytes);
   const CommandResult run = iso("verify " + quoted(dir / "flipped.iso"));
   EXPECT_EQ(run.exitCode, 1);
-  EXPECT_NE(run.err.find("chunk 1 (level 1, key 0x5) at byte 8192: checksum mismatch"), std::string::npos)
+  EXPECT_NE(run.err.find("chunk 1 (level 1, key 0x5) at byte 8192: checksum mismatch"),
+            std::string::npos)
       << run.err;
   EXPECT_NE(run.err.find("FAILED (1 problem)"), std::string::npos) << run.err;
 

@@ -42,13 +42,13 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const std::vector<std::byte> b = test::readFile(kGolden);
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
-  EXPECT_EQ(at<uint16_t>(b, 8), 1);       // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 0);      // versionMinor
-  EXPECT_EQ(at<uint32_t>(b, 12), 256u);   // headerSize
-  EXPECT_EQ(at<uint32_t>(b, 16), 0u);     // flags
-  EXPECT_EQ(at<uint8_t>(b, 20), 12);      // payloadAlignmentLog2
-  EXPECT_EQ(at<uint8_t>(b, 21), 3);       // maxLevel
-  EXPECT_EQ(at<uint8_t>(b, 22), 3);       // attributeCount
+  EXPECT_EQ(at<uint16_t>(b, 8), 1);      // versionMajor
+  EXPECT_EQ(at<uint16_t>(b, 10), 0);     // versionMinor
+  EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
+  EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
+  EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2
+  EXPECT_EQ(at<uint8_t>(b, 21), 3);      // maxLevel
+  EXPECT_EQ(at<uint8_t>(b, 22), 3);      // attributeCount
   EXPECT_EQ(at<double>(b, 24), 515000.25);
   EXPECT_EQ(at<double>(b, 32), 4918000.5);
   EXPECT_EQ(at<double>(b, 40), -1234.125);
@@ -79,7 +79,8 @@ TEST(FormatGolden, trailerAndChunkTableBytesAreWhereTheSpecSays) {
   EXPECT_EQ(at<uint64_t>(b, t + 32), xxh3(b, table, 80 * count));
   EXPECT_EQ(at<uint64_t>(b, t + 40), xxh3(b, metadataOffset, metadataSize));
   EXPECT_EQ(at<uint64_t>(b, t + 48), xxh3(b, t, 48));
-  const std::string metadata(reinterpret_cast<const char*>(b.data() + metadataOffset), metadataSize);
+  const std::string metadata(reinterpret_cast<const char*>(b.data() + metadataOffset),
+                             metadataSize);
   EXPECT_EQ(metadata, test::goldenMetadata());
 
   // Payloads at 4096-aligned offsets in table order: 0 (zstd), 1 (raw 300 B), 2 (zstd),
@@ -90,28 +91,28 @@ TEST(FormatGolden, trailerAndChunkTableBytesAreWhereTheSpecSays) {
     EXPECT_EQ(at<uint64_t>(b, e + 0), expectedOffset) << "chunk " << i;
     const uint64_t stored = at<uint64_t>(b, e + 8);
     EXPECT_EQ(at<uint64_t>(b, e + 24), xxh3(b, expectedOffset, stored)) << "chunk " << i;
-    EXPECT_EQ(at<uint32_t>(b, e + 48), i);                 // id
-    EXPECT_EQ(at<uint8_t>(b, e + 71), 0);                  // reserved
-    EXPECT_EQ(at<uint64_t>(b, e + 72), 0u);                // reserved
+    EXPECT_EQ(at<uint32_t>(b, e + 48), i);   // id
+    EXPECT_EQ(at<uint8_t>(b, e + 71), 0);    // reserved
+    EXPECT_EQ(at<uint64_t>(b, e + 72), 0u);  // reserved
     expectedOffset = (expectedOffset + stored + 4095) / 4096 * 4096;
   }
   EXPECT_EQ(expectedOffset, table);
   const size_t e0 = table, e1 = table + 80, e2 = table + 160, e3 = table + 240, e4 = table + 320;
-  EXPECT_EQ(at<uint8_t>(b, e0 + 69), 1);                   // codec zstd
-  EXPECT_EQ(at<uint64_t>(b, e0 + 16), 2000u);              // rawSize
-  EXPECT_EQ(at<uint32_t>(b, e0 + 52), 0xFFFFFFFFu);        // no parent
-  EXPECT_EQ(at<uint64_t>(b, e0 + 40), 1000u);              // pointCount
-  EXPECT_EQ(at<uint32_t>(b, e0 + 56), 9u);                 // nodeCount
-  EXPECT_EQ(at<uint32_t>(b, e0 + 60), 8u);                 // leafCount
-  EXPECT_EQ(at<float>(b, e0 + 64), 0.25f);                 // geometricError
-  EXPECT_EQ(at<uint8_t>(b, e1 + 69), 0);                   // incompressible: raw
+  EXPECT_EQ(at<uint8_t>(b, e0 + 69), 1);             // codec zstd
+  EXPECT_EQ(at<uint64_t>(b, e0 + 16), 2000u);        // rawSize
+  EXPECT_EQ(at<uint32_t>(b, e0 + 52), 0xFFFFFFFFu);  // no parent
+  EXPECT_EQ(at<uint64_t>(b, e0 + 40), 1000u);        // pointCount
+  EXPECT_EQ(at<uint32_t>(b, e0 + 56), 9u);           // nodeCount
+  EXPECT_EQ(at<uint32_t>(b, e0 + 60), 8u);           // leafCount
+  EXPECT_EQ(at<float>(b, e0 + 64), 0.25f);           // geometricError
+  EXPECT_EQ(at<uint8_t>(b, e1 + 69), 0);             // incompressible: raw
   EXPECT_EQ(at<uint64_t>(b, e1 + 8), 300u);
-  EXPECT_EQ(at<uint64_t>(b, e1 + 32), 5u);                 // key
-  EXPECT_EQ(at<uint8_t>(b, e1 + 68), 1);                   // level
-  EXPECT_EQ(at<uint32_t>(b, e2 + 52), 1u);                 // parent
+  EXPECT_EQ(at<uint64_t>(b, e1 + 32), 5u);  // key
+  EXPECT_EQ(at<uint8_t>(b, e1 + 68), 1);    // level
+  EXPECT_EQ(at<uint32_t>(b, e2 + 52), 1u);  // parent
   EXPECT_EQ(at<uint64_t>(b, e2 + 32), 42u);
-  EXPECT_EQ(at<uint64_t>(b, e3 + 8), 0u);                  // empty
-  EXPECT_EQ(at<uint8_t>(b, e4 + 70), 7);                   // kind
+  EXPECT_EQ(at<uint64_t>(b, e3 + 8), 0u);  // empty
+  EXPECT_EQ(at<uint8_t>(b, e4 + 70), 7);   // kind
   EXPECT_EQ(at<uint64_t>(b, e4 + 32), 0x3Fu);
   EXPECT_EQ(at<uint8_t>(b, e4 + 68), 3);
 }

@@ -76,7 +76,8 @@ class Hostile : public ::testing::Test {
 TEST_F(Hostile, everyTruncatedPrefixIsRejected) {
   for (size_t size = 0; size < golden_.size(); ++size) {
     const std::vector<std::byte> prefix(golden_.begin(), golden_.begin() + ptrdiff_t(size));
-    EXPECT_THROW(Reader::fromMemory(prefix, "prefix.iso"), FileError) << "prefix of " << size << " bytes";
+    EXPECT_THROW(Reader::fromMemory(prefix, "prefix.iso"), FileError)
+        << "prefix of " << size << " bytes";
   }
 }
 
@@ -94,7 +95,8 @@ TEST_F(Hostile, everySingleByteChangeIsRejectedOrCaughtByVerify) {
     for (size_t i = 0; i < golden_.size(); ++i) {
       std::vector<std::byte> b = golden_;
       b[i] ^= std::byte{mask};
-      ASSERT_TRUE(isRejectedOrCaught(b)) << "byte " << i << " xor " << int(mask) << " went unnoticed";
+      ASSERT_TRUE(isRejectedOrCaught(b))
+          << "byte " << i << " xor " << int(mask) << " went unnoticed";
     }
   }
 }
@@ -108,7 +110,8 @@ TEST_F(Hostile, payloadChangeIsCaughtByVerifyAndNamesTheChunk) {
   ASSERT_EQ(result.problems.size(), 1u);
   EXPECT_EQ(result.problems[0].chunk, 1u);
   EXPECT_EQ(result.problems[0].offset, payload);
-  EXPECT_NE(describe(reader, result.problems[0]).find("chunk 1 (level 1, key 0x5)"), std::string::npos);
+  EXPECT_NE(describe(reader, result.problems[0]).find("chunk 1 (level 1, key 0x5)"),
+            std::string::npos);
   EXPECT_NE(result.problems[0].reason.find("checksum mismatch"), std::string::npos);
 }
 
@@ -135,21 +138,30 @@ TEST_F(Hostile, structuralRulesAreCheckedBehindValidChecksums) {
   const std::vector<Case> cases = {
       {"major version", [](auto& b) { put<uint16_t>(b, 8, 2); }, "not supported", [] { return 8; }},
       {"header size", [](auto& b) { put<uint32_t>(b, 12, 512); }, "header size", [] { return 12; }},
-      {"reserved flag", [](auto& b) { put<uint32_t>(b, 16, 1); }, "reserved flag", [] { return 16; }},
+      {"reserved flag", [](auto& b) { put<uint32_t>(b, 16, 1); }, "reserved flag",
+       [] { return 16; }},
       {"unused flag is fine", [](auto&) {}, nullptr, nullptr},
-      {"reserved header byte", [](auto& b) { b[23] = std::byte{1}; }, "reserved", [] { return 23; }},
-      {"reserved header tail", [](auto& b) { b[200] = std::byte{1}; }, "reserved", [] { return 120; }},
+      {"reserved header byte", [](auto& b) { b[23] = std::byte{1}; }, "reserved",
+       [] { return 23; }},
+      {"reserved header tail", [](auto& b) { b[200] = std::byte{1}; }, "reserved",
+       [] { return 120; }},
       {"alignment", [](auto& b) { b[20] = std::byte{17}; }, "alignment", [] { return 20; }},
       {"max level", [](auto& b) { b[21] = std::byte{22}; }, "over 21", [] { return 21; }},
-      {"attribute count", [](auto& b) { b[22] = std::byte{0}; }, "attribute count", [] { return 22; }},
-      {"nan origin", [](auto& b) { put<double>(b, 32, std::nan("")); }, "origin", [] { return 32; }},
+      {"attribute count", [](auto& b) { b[22] = std::byte{0}; }, "attribute count",
+       [] { return 22; }},
+      {"nan origin", [](auto& b) { put<double>(b, 32, std::nan("")); }, "origin",
+       [] { return 32; }},
       {"zero frame", [](auto& b) { put<double>(b, 48, 0.0); }, "frame size", [] { return 48; }},
-      {"infinite frame", [](auto& b) { put<double>(b, 48, INFINITY); }, "frame size", [] { return 48; }},
+      {"infinite frame", [](auto& b) { put<double>(b, 48, INFINITY); }, "frame size",
+       [] { return 48; }},
       {"duplicate semantic", [](auto& b) { b[64] = std::byte{1}; }, "twice", [] { return 56; }},
       {"bad encoding", [](auto& b) { b[65] = std::byte{5}; }, "not allowed", [] { return 56; }},
-      {"unknown encoding", [](auto& b) { b[65] = std::byte{99}; }, "unknown attribute encoding", [] { return 56; }},
-      {"negative distance scale", [](auto& b) { put<float>(b, 60, -1.0f); }, "scale", [] { return 56; }},
-      {"unused attribute slot", [](auto& b) { b[80] = std::byte{1}; }, "unused attribute", [] { return 80; }},
+      {"unknown encoding", [](auto& b) { b[65] = std::byte{99}; }, "unknown attribute encoding",
+       [] { return 56; }},
+      {"negative distance scale", [](auto& b) { put<float>(b, 60, -1.0f); }, "scale",
+       [] { return 56; }},
+      {"unused attribute slot", [](auto& b) { b[80] = std::byte{1}; }, "unused attribute",
+       [] { return 80; }},
       {"entry size", [this](auto& b) { put<uint32_t>(b, trailer_ + 12, 96); }, "entry size",
        [this] { return trailer_ + 12; }},
       {"huge chunk count", [this](auto& b) { put<uint32_t>(b, trailer_ + 8, 0xFFFFFFFFu); },
@@ -168,34 +180,41 @@ TEST_F(Hostile, structuralRulesAreCheckedBehindValidChecksums) {
        [this] { return entry(1) + 72; }},
       {"unknown codec", [this](auto& b) { b[entry(0) + 69] = std::byte{2}; }, "unknown codec",
        [this] { return entry(0) + 69; }},
-      {"level above max", [this](auto& b) { b[entry(1) + 68] = std::byte{4}; }, "above the file's maximum",
-       [this] { return entry(1) + 68; }},
+      {"level above max", [this](auto& b) { b[entry(1) + 68] = std::byte{4}; },
+       "above the file's maximum", [this] { return entry(1) + 68; }},
       {"key out of range", [this](auto& b) { put<uint64_t>(b, entry(1) + 32, 8); }, "key",
        [this] { return entry(1) + 32; }},
-      {"raw size over limit", [this](auto& b) { put<uint64_t>(b, entry(0) + 16, uint64_t{1} << 31); },
-       "limit", [this] { return entry(0) + 16; }},
-      {"raw stored != raw", [this](auto& b) { put<uint64_t>(b, entry(1) + 16, 301); }, "stored size",
-       [this] { return entry(1) + 8; }},
+      {"raw size over limit",
+       [this](auto& b) { put<uint64_t>(b, entry(0) + 16, uint64_t{1} << 31); }, "limit",
+       [this] { return entry(0) + 16; }},
+      {"raw stored != raw", [this](auto& b) { put<uint64_t>(b, entry(1) + 16, 301); },
+       "stored size", [this] { return entry(1) + 8; }},
       {"misplaced payload", [this](auto& b) { put<uint64_t>(b, entry(1), 4096 * 3); }, "layout",
        [this] { return entry(1); }},
-      {"payload overlapping table", [this](auto& b) { put<uint64_t>(b, entry(4) + 8, ~uint64_t{0});
-                                                      put<uint64_t>(b, entry(4) + 16, ~uint64_t{0}); },
+      {"payload overlapping table",
+       [this](auto& b) {
+         put<uint64_t>(b, entry(4) + 8, ~uint64_t{0});
+         put<uint64_t>(b, entry(4) + 16, ~uint64_t{0});
+       },
        "limit", [this] { return entry(4) + 16; }},
-      {"payload into table", [this](auto& b) { put<uint64_t>(b, entry(4) + 8, 5000);
-                                               put<uint64_t>(b, entry(4) + 16, 5000); },
+      {"payload into table",
+       [this](auto& b) {
+         put<uint64_t>(b, entry(4) + 8, 5000);
+         put<uint64_t>(b, entry(4) + 16, 5000);
+       },
        "runs into the chunk table", [this] { return entry(4) + 8; }},
-      {"nan error", [this](auto& b) { put<float>(b, entry(0) + 64, std::nanf("")); }, "geometric error",
-       [this] { return entry(0) + 64; }},
-      {"negative error", [this](auto& b) { put<float>(b, entry(0) + 64, -1.0f); }, "geometric error",
-       [this] { return entry(0) + 64; }},
+      {"nan error", [this](auto& b) { put<float>(b, entry(0) + 64, std::nanf("")); },
+       "geometric error", [this] { return entry(0) + 64; }},
+      {"negative error", [this](auto& b) { put<float>(b, entry(0) + 64, -1.0f); },
+       "geometric error", [this] { return entry(0) + 64; }},
       {"missing parent", [this](auto& b) { put<uint32_t>(b, entry(1) + 52, 5); }, "does not exist",
        [this] { return entry(1) + 52; }},
       {"parent not coarser", [this](auto& b) { put<uint32_t>(b, entry(1) + 52, 3); }, "coarser",
        [this] { return entry(1) + 52; }},
       {"parent cycle", [this](auto& b) { put<uint32_t>(b, entry(0) + 52, 1); }, "coarser",
        [this] { return entry(0) + 52; }},
-      {"parent does not contain", [this](auto& b) { put<uint64_t>(b, entry(2) + 32, 3); }, "coarser",
-       [this] { return entry(2) + 52; }},
+      {"parent does not contain", [this](auto& b) { put<uint64_t>(b, entry(2) + 32, 3); },
+       "coarser", [this] { return entry(2) + 52; }},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
@@ -212,7 +231,8 @@ TEST_F(Hostile, structuralRulesAreCheckedBehindValidChecksums) {
 }
 
 TEST_F(Hostile, unusedFlagBitsAreIgnored) {
-  const std::vector<std::byte> b = mutate([](auto& bytes) { put<uint32_t>(bytes, 16, 0x00010000u); });
+  const std::vector<std::byte> b =
+      mutate([](auto& bytes) { put<uint32_t>(bytes, 16, 0x00010000u); });
   EXPECT_EQ(Reader::fromMemory(b, "flags.iso").header().flags, 0x00010000u);
 }
 
@@ -223,7 +243,8 @@ TEST_F(Hostile, newerMinorVersionIsRead) {
 
 TEST_F(Hostile, corruptZstdStreamsFailToDecodeWithoutCrashing) {
   // Lie about the raw size: the frame's content size no longer matches.
-  std::vector<std::byte> b = mutate([this](auto& bytes) { put<uint64_t>(bytes, entry(0) + 16, 1999); });
+  std::vector<std::byte> b =
+      mutate([this](auto& bytes) { put<uint64_t>(bytes, entry(0) + 16, 1999); });
   const Reader reader = Reader::fromMemory(b, "zstd.iso");
   std::vector<std::byte> out(4000);
   try {

@@ -24,7 +24,8 @@ std::vector<AttributeDesc> randomSchema(std::mt19937_64& rng) {
   const Encoding distance[] = {Encoding::Snorm8, Encoding::Snorm16, Encoding::Float32};
   schema.push_back({Semantic::SignedDistance, distance[rng() % 3], 1,
                     std::uniform_real_distribution<float>(0.01f, 4.0f)(rng)});
-  if (rng() % 2) schema.push_back({Semantic::Normal, rng() % 2 ? Encoding::Oct16 : Encoding::Oct24, 2, 0});
+  if (rng() % 2)
+    schema.push_back({Semantic::Normal, rng() % 2 ? Encoding::Oct16 : Encoding::Oct24, 2, 0});
   if (rng() % 2) schema.push_back({Semantic::Color, Encoding::Srgb8, 3, 0});
   if (rng() % 2) schema.push_back({Semantic::Occlusion, Encoding::Unorm8, 1, 0});
   return schema;
@@ -44,8 +45,8 @@ Expected makeRandomFile(uint64_t seed, const std::filesystem::path& path) {
   Expected e;
   e.header.payloadAlignmentLog2 = uint8_t(3 + rng() % 14);
   e.header.maxLevel = uint8_t(rng() % 22);
-  e.header.frame.origin = {std::ldexp(double(rng() % 1000), int(rng() % 24)), -6.4e6 + double(rng() % 7),
-                           double(rng() % 100) * 0.001};
+  e.header.frame.origin = {std::ldexp(double(rng() % 1000), int(rng() % 24)),
+                           -6.4e6 + double(rng() % 7), double(rng() % 100) * 0.001};
   e.header.frame.size = std::ldexp(1.0 + double(rng() % 1000), int(rng() % 20) - 10);
   e.header.attributes = randomSchema(rng);
   const size_t chunkCount = rng() % 30;

@@ -20,7 +20,8 @@ namespace {
 
 std::vector<std::filesystem::path> listDirectory(const std::filesystem::path& dir) {
   std::vector<std::filesystem::path> entries;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) entries.push_back(e.path().filename());
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    entries.push_back(e.path().filename());
   std::sort(entries.begin(), entries.end());
   return entries;
 }
@@ -71,7 +72,8 @@ TEST(Writer, failedWriteOnFullDiskNamesTheFileAndLeavesNothing) {
     int status = 10;
     try {
       Writer writer(dir / "out.iso", FileHeader{});
-      for (int i = 0; i < 100; ++i) writer.addChunk({.codec = Codec::Raw}, std::vector<std::byte>(8192));
+      for (int i = 0; i < 100; ++i)
+        writer.addChunk({.codec = Codec::Raw}, std::vector<std::byte>(8192));
       writer.finish();
     } catch (const FileError& error) {
       const std::string message = error.what();
@@ -86,7 +88,8 @@ TEST(Writer, failedWriteOnFullDiskNamesTheFileAndLeavesNothing) {
   int status = 0;
   ASSERT_EQ(waitpid(child, &status, 0), child);
   ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0) << "10: no error, 11: message lacks file or reason, 12: wrong type";
+  EXPECT_EQ(WEXITSTATUS(status), 0)
+      << "10: no error, 11: message lacks file or reason, 12: wrong type";
   EXPECT_EQ(test::readFile(dir / "out.iso"), kOld);
   EXPECT_EQ(listDirectory(dir.path()), std::vector<std::filesystem::path>{"out.iso"});
 }

@@ -12,7 +12,8 @@ namespace iso::detail {
 // A whole file mapped read-only. Empty files are not mapped (bytes() is empty).
 class MappedFile {
  public:
-  // Throws iso::FileError when the file cannot be opened, is not a regular file or cannot be mapped.
+  // Throws iso::FileError when the file cannot be opened, is not a regular file or cannot be
+  // mapped.
   explicit MappedFile(const std::filesystem::path& path);
   ~MappedFile();
   MappedFile(const MappedFile&) = delete;

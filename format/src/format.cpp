@@ -75,38 +75,52 @@ uint32_t encodedSize(const AttributeDesc& a) {
 
 std::string_view semanticName(Semantic semantic) {
   switch (semantic) {
-    case Semantic::SignedDistance: return "signed_distance";
-    case Semantic::Normal: return "normal";
-    case Semantic::Color: return "color";
-    case Semantic::Occlusion: return "occlusion";
+    case Semantic::SignedDistance:
+      return "signed_distance";
+    case Semantic::Normal:
+      return "normal";
+    case Semantic::Color:
+      return "color";
+    case Semantic::Occlusion:
+      return "occlusion";
   }
   return "unknown";
 }
 
 std::string_view encodingName(Encoding encoding) {
   switch (encoding) {
-    case Encoding::Snorm8: return "snorm8";
-    case Encoding::Snorm16: return "snorm16";
-    case Encoding::Oct16: return "oct16";
-    case Encoding::Oct24: return "oct24";
-    case Encoding::Srgb8: return "srgb8";
-    case Encoding::Unorm8: return "unorm8";
-    case Encoding::Float32: return "float32";
+    case Encoding::Snorm8:
+      return "snorm8";
+    case Encoding::Snorm16:
+      return "snorm16";
+    case Encoding::Oct16:
+      return "oct16";
+    case Encoding::Oct24:
+      return "oct24";
+    case Encoding::Srgb8:
+      return "srgb8";
+    case Encoding::Unorm8:
+      return "unorm8";
+    case Encoding::Float32:
+      return "float32";
   }
   return "unknown";
 }
 
 std::string_view codecName(Codec codec) {
   switch (codec) {
-    case Codec::Raw: return "raw";
-    case Codec::Zstd: return "zstd";
+    case Codec::Raw:
+      return "raw";
+    case Codec::Zstd:
+      return "zstd";
   }
   return "unknown";
 }
 
 std::string_view chunkKindName(uint8_t kind) {
   switch (static_cast<ChunkKind>(kind)) {
-    case ChunkKind::Blob: return "blob";
+    case ChunkKind::Blob:
+      return "blob";
   }
   return "unknown";
 }

@@ -100,8 +100,8 @@ FileHeader decodeHeader(const std::byte* p, std::optional<FieldProblem>& problem
       return h;
     }
     h.attributes.push_back({static_cast<Semantic>(loadLE<uint8_t>(a + 0)),
-                            static_cast<Encoding>(loadLE<uint8_t>(a + 1)),
-                            loadLE<uint8_t>(a + 2), loadLE<float>(a + 4)});
+                            static_cast<Encoding>(loadLE<uint8_t>(a + 1)), loadLE<uint8_t>(a + 2),
+                            loadLE<float>(a + 4)});
   }
   problem = headerProblem(h);
   return h;

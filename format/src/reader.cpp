@@ -58,14 +58,16 @@ class Parser {
     const uint16_t major = loadLE<uint16_t>(p + detail::hdr::kVersionMajor);
     const uint16_t minor = loadLE<uint16_t>(p + detail::hdr::kVersionMinor);
     if (major != kFormatMajor)
-      fail(detail::hdr::kVersionMajor,
-           "format version " + std::to_string(major) + "." + std::to_string(minor) +
-               " is not supported (this reader reads version " + std::to_string(kFormatMajor) +
-               ".x)");
+      fail(detail::hdr::kVersionMajor, "format version " + std::to_string(major) + "." +
+                                           std::to_string(minor) +
+                                           " is not supported (this reader reads version " +
+                                           std::to_string(kFormatMajor) + ".x)");
     const uint32_t headerSize = loadLE<uint32_t>(p + detail::hdr::kHeaderSize);
     if (headerSize != kHeaderSize)
-      fail(detail::hdr::kHeaderSize, "header size is " + std::to_string(headerSize) + ", expected 256");
-    if (loadLE<uint64_t>(p + detail::hdr::kChecksum) != detail::checksum({p, detail::hdr::kChecksum}))
+      fail(detail::hdr::kHeaderSize,
+           "header size is " + std::to_string(headerSize) + ", expected 256");
+    if (loadLE<uint64_t>(p + detail::hdr::kChecksum) !=
+        detail::checksum({p, detail::hdr::kChecksum}))
       fail(detail::hdr::kChecksum, "header checksum mismatch (the header is corrupt)");
     std::optional<detail::FieldProblem> problem;
     r_.header = detail::decodeHeader(p, problem);
@@ -76,9 +78,11 @@ class Parser {
     const uint64_t at = size_ - kTrailerSize;
     const std::byte* p = bytes_.data() + at;
     if (std::memcmp(p + detail::trl::kMagic, kTrailerMagic.data(), kTrailerMagic.size()) != 0)
-      fail(at + detail::trl::kMagic,
-           "no trailer at the end of the file: the file is truncated or was not completely written");
-    if (loadLE<uint64_t>(p + detail::trl::kChecksum) != detail::checksum({p, detail::trl::kChecksum}))
+      fail(
+          at + detail::trl::kMagic,
+          "no trailer at the end of the file: the file is truncated or was not completely written");
+    if (loadLE<uint64_t>(p + detail::trl::kChecksum) !=
+        detail::checksum({p, detail::trl::kChecksum}))
       fail(at + detail::trl::kChecksum, "trailer checksum mismatch (the trailer is corrupt)");
     const detail::Trailer t = detail::decodeTrailer(p);
     if (t.chunkEntrySize != kChunkEntrySize)
@@ -89,9 +93,9 @@ class Parser {
     const uint64_t firstPayload = alignUp(kHeaderSize, alignment);
     if (t.chunkTableOffset > at || t.chunkTableOffset < firstPayload ||
         t.chunkTableOffset % alignment != 0)
-      fail(at + detail::trl::kChunkTableOffset,
-           "chunk table offset " + std::to_string(t.chunkTableOffset) +
-               " is outside the file or not aligned");
+      fail(at + detail::trl::kChunkTableOffset, "chunk table offset " +
+                                                    std::to_string(t.chunkTableOffset) +
+                                                    " is outside the file or not aligned");
     const uint64_t tableBytes = uint64_t{t.chunkCount} * kChunkEntrySize;
     if (tableBytes > at - t.chunkTableOffset || t.metadataOffset != t.chunkTableOffset + tableBytes)
       fail(at + detail::trl::kMetadataOffset,
@@ -123,7 +127,8 @@ class Parser {
       return detail::FieldProblem{e::kLevel, "level " + std::to_string(c.level) +
                                                  " is above the file's maximum level " +
                                                  std::to_string(r_.header.maxLevel)};
-    if (!isValidKey(c.level, c.key)) return detail::FieldProblem{e::kKey, "key does not fit its level"};
+    if (!isValidKey(c.level, c.key))
+      return detail::FieldProblem{e::kKey, "key does not fit its level"};
     if (c.rawSize > kMaxChunkRawSize)
       return detail::FieldProblem{e::kRawSize, "raw size is over the limit of 2^30 bytes"};
     if (c.codec == Codec::Raw && c.storedSize != c.rawSize)
@@ -149,7 +154,8 @@ class Parser {
       const uint64_t at = t.chunkTableOffset + uint64_t{i} * kChunkEntrySize;
       std::optional<uint32_t> reserved;
       const ChunkInfo c = detail::decodeChunkEntry(bytes_.data() + at, reserved);
-      if (reserved) fail(at + *reserved, "chunk " + std::to_string(i) + ": reserved field is not zero");
+      if (reserved)
+        fail(at + *reserved, "chunk " + std::to_string(i) + ": reserved field is not zero");
       if (std::optional<detail::FieldProblem> problem = entryProblem(c, i, expected))
         fail(at + problem->offset, "chunk " + std::to_string(i) + ": " + problem->reason);
       expected = alignUp(c.offset + c.storedSize, alignment);
@@ -160,8 +166,10 @@ class Parser {
                                    std::to_string(expected) + ")");
     for (const ChunkInfo& c : r_.chunks) {
       if (c.parent == kNoParent) continue;
-      const uint64_t at = t.chunkTableOffset + uint64_t{c.id} * kChunkEntrySize + detail::entry::kParent;
-      const std::string who = "chunk " + std::to_string(c.id) + ": parent " + std::to_string(c.parent);
+      const uint64_t at =
+          t.chunkTableOffset + uint64_t{c.id} * kChunkEntrySize + detail::entry::kParent;
+      const std::string who =
+          "chunk " + std::to_string(c.id) + ": parent " + std::to_string(c.parent);
       if (c.parent >= r_.chunks.size()) fail(at, who + " does not exist");
       const ChunkInfo& p = r_.chunks[c.parent];
       if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))

@@ -14,7 +14,8 @@ namespace iso {
 namespace {
 
 // The offset of the first non-zero byte in [begin, end), if any.
-std::optional<uint64_t> firstNonZero(std::span<const std::byte> bytes, uint64_t begin, uint64_t end) {
+std::optional<uint64_t> firstNonZero(std::span<const std::byte> bytes, uint64_t begin,
+                                     uint64_t end) {
   for (uint64_t i = begin; i < end; ++i)
     if (bytes[i] != std::byte{0}) return i;
   return std::nullopt;

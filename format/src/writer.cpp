@@ -57,7 +57,8 @@ struct Writer::Impl {
       if (c.parent == kNoParent) continue;
       const std::string who = "chunk " + std::to_string(c.id);
       if (c.parent >= chunks.size())
-        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) + " does not exist");
+        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) +
+                                    " does not exist");
       const ChunkInfo& p = chunks[c.parent];
       if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
         throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) +

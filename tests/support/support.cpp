@@ -18,7 +18,9 @@ uint64_t load64(const std::vector<std::byte>& b, size_t at) {
   return v;
 }
 
-void store64(std::vector<std::byte>& b, size_t at, uint64_t v) { std::memcpy(b.data() + at, &v, 8); }
+void store64(std::vector<std::byte>& b, size_t at, uint64_t v) {
+  std::memcpy(b.data() + at, &v, 8);
+}
 
 uint64_t hash(const std::vector<std::byte>& b, size_t at, size_t size) {
   return XXH3_64bits(b.data() + at, size);
@@ -86,28 +88,45 @@ FileHeader goldenHeader() {
 std::vector<GoldenChunk> goldenChunks() {
   std::vector<GoldenChunk> chunks(5);
   // 0: the root, compressible, zstd.
-  chunks[0].desc = {.level = 0, .key = 0, .pointCount = 1000, .nodeCount = 9, .leafCount = 8,
-                    .geometricError = 0.25f, .codec = Codec::Zstd};
+  chunks[0].desc = {.level = 0,
+                    .key = 0,
+                    .pointCount = 1000,
+                    .nodeCount = 9,
+                    .leafCount = 8,
+                    .geometricError = 0.25f,
+                    .codec = Codec::Zstd};
   for (int i = 0; i < 2000; ++i) chunks[0].data.push_back(std::byte((i * 7) % 13));
   // 1: incompressible bytes, asked for zstd, so stored raw.
-  chunks[1].desc = {.level = 1, .key = 5, .parent = 0, .pointCount = 600, .nodeCount = 1,
-                    .leafCount = 1, .geometricError = 0.125f, .codec = Codec::Zstd};
+  chunks[1].desc = {.level = 1,
+                    .key = 5,
+                    .parent = 0,
+                    .pointCount = 600,
+                    .nodeCount = 1,
+                    .leafCount = 1,
+                    .geometricError = 0.125f,
+                    .codec = Codec::Zstd};
   uint32_t state = 12345;
   for (int i = 0; i < 300; ++i) {
     state = state * 1664525u + 1013904223u;
     chunks[1].data.push_back(std::byte(state >> 24));
   }
   // 2: a grandchild of the root inside chunk 1's cell, text, zstd.
-  chunks[2].desc = {.level = 2, .key = (5 << 3) | 2, .parent = 1, .pointCount = 250,
-                    .nodeCount = 3, .leafCount = 2, .geometricError = 0.0f, .codec = Codec::Zstd};
+  chunks[2].desc = {.level = 2,
+                    .key = (5 << 3) | 2,
+                    .parent = 1,
+                    .pointCount = 250,
+                    .nodeCount = 3,
+                    .leafCount = 2,
+                    .geometricError = 0.0f,
+                    .codec = Codec::Zstd};
   const std::string text = "the surface is the zero set of the trilinear interpolation. ";
   for (int i = 0; i < 25; ++i)
     for (char c : text) chunks[2].data.push_back(std::byte(c));
   // 3: an empty chunk, raw.
   chunks[3].desc = {.level = 1, .key = 0, .parent = 0, .codec = Codec::Raw};
   // 4: a chunk of a kind this version does not know (readers skip it), raw.
-  chunks[4].desc = {.kind = 7, .level = 3, .key = 0x3F, .parent = 3, .pointCount = 1,
-                    .codec = Codec::Raw};
+  chunks[4].desc = {
+      .kind = 7, .level = 3, .key = 0x3F, .parent = 3, .pointCount = 1, .codec = Codec::Raw};
   for (int i = 0; i < 64; ++i) chunks[4].data.push_back(std::byte(255 - i));
   return chunks;
 }

@@ -121,9 +121,12 @@ int main(int argc, char** argv) {
   config.dir = out ? out : std::filesystem::temp_directory_path().string();
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string option = argv[i];
-    if (option == "--chunks") config.chunks = uint32_t(std::stoul(argv[i + 1]));
-    else if (option == "--chunk-bytes") config.chunkBytes = std::stoul(argv[i + 1]);
-    else if (option == "--dir") config.dir = argv[i + 1];
+    if (option == "--chunks")
+      config.chunks = uint32_t(std::stoul(argv[i + 1]));
+    else if (option == "--chunk-bytes")
+      config.chunkBytes = std::stoul(argv[i + 1]);
+    else if (option == "--dir")
+      config.dir = argv[i + 1];
     else {
       fmt::print(stderr, "usage: iso-bench-format [--chunks N] [--chunk-bytes B] [--dir D]\n");
       return 2;
@@ -138,8 +141,8 @@ int main(int argc, char** argv) {
     std::vector<std::vector<std::byte>> samples;
     for (uint32_t i = 0; i < 16; ++i) samples.push_back(makeChunk(i, config.chunkBytes));
     fmt::print("container benchmark: {} chunks x {} bytes = {:.0f} MB of chunk data, in {}\n",
-               config.chunks, config.chunkBytes, double(config.chunks) * double(config.chunkBytes) / 1e6,
-               config.dir.string());
+               config.chunks, config.chunkBytes,
+               double(config.chunks) * double(config.chunkBytes) / 1e6, config.dir.string());
     fmt::print("{:<8} {:>9} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n", "codec", "write", "ratio",
                "file", "open", "verify", "decode", "write RSS");
     fmt::print("{:<8} {:>9} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n", "", "MB/s", "", "MB", "us",

@@ -38,11 +38,13 @@ std::vector<Point> readXyz(const std::string& path, bool& hasNormals) {
     int count = 0;
     while (count < 6 && fields >> v[count]) ++count;
     if (count != 3 && count != 6)
-      throw iso::FileError(path, std::nullopt,
-                           fmt::format("line {}: expected 3 or 6 numbers, found {}", lineNumber, count));
+      throw iso::FileError(
+          path, std::nullopt,
+          fmt::format("line {}: expected 3 or 6 numbers, found {}", lineNumber, count));
     for (int i = 0; i < count; ++i)
       if (!std::isfinite(v[i]))
-        throw iso::FileError(path, std::nullopt, fmt::format("line {}: a value is not finite", lineNumber));
+        throw iso::FileError(path, std::nullopt,
+                             fmt::format("line {}: a value is not finite", lineNumber));
     for (int i = 0; i < 3; ++i) p.position[i] = v[i];
     for (int i = 0; i < 3 && count == 6; ++i) p.normal[i] = static_cast<float>(v[3 + i]);
     hasNormals = hasNormals && count == 6;
@@ -70,7 +72,8 @@ iso::Frame boundingFrame(const std::vector<Point>& points) {
 uint64_t mortonKey(const std::array<uint32_t, 3>& cell, int level) {
   uint64_t key = 0;
   for (int bit = 0; bit < level; ++bit)
-    for (int axis = 0; axis < 3; ++axis) key |= uint64_t((cell[axis] >> bit) & 1u) << (3 * bit + axis);
+    for (int axis = 0; axis < 3; ++axis)
+      key |= uint64_t((cell[axis] >> bit) & 1u) << (3 * bit + axis);
   return key;
 }
 
@@ -99,7 +102,8 @@ int run(const std::string& inputPath, const std::string& outputPath) {
     std::array<uint32_t, 3> cell{};
     for (int a = 0; a < 3; ++a) {
       const double u = (points[i].position[a] - frame.origin[a]) / frame.size;
-      cell[a] = std::min<uint32_t>((1u << kLevel) - 1, static_cast<uint32_t>(std::max(0.0, u) * (1 << kLevel)));
+      cell[a] = std::min<uint32_t>((1u << kLevel) - 1,
+                                   static_cast<uint32_t>(std::max(0.0, u) * (1 << kLevel)));
     }
     cells[mortonKey(cell, kLevel)].push_back(&points[i]);
     if (i % 16 == 0) preview.push_back(&points[i]);

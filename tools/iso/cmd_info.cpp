@@ -107,10 +107,11 @@ void printChunkTable(const Reader& reader) {
              "chunk", "parent", "level", "key", "kind", "codec", "stored", "raw", "points", "nodes",
              "leaves", "error");
   for (const ChunkInfo& c : reader.chunks())
-    fmt::print("{:>6} {:>6} {:>5} {:>#18x} {:>6} {:>5} {:>12} {:>12} {:>10} {:>8} {:>8} {:>10.4g}\n",
-               c.id, c.parent == kNoParent ? std::string("-") : std::to_string(c.parent), c.level,
-               c.key, chunkKindName(c.kind), codecName(c.codec), c.storedSize, c.rawSize,
-               c.pointCount, c.nodeCount, c.leafCount, c.geometricError);
+    fmt::print(
+        "{:>6} {:>6} {:>5} {:>#18x} {:>6} {:>5} {:>12} {:>12} {:>10} {:>8} {:>8} {:>10.4g}\n", c.id,
+        c.parent == kNoParent ? std::string("-") : std::to_string(c.parent), c.level, c.key,
+        chunkKindName(c.kind), codecName(c.codec), c.storedSize, c.rawSize, c.pointCount,
+        c.nodeCount, c.leafCount, c.geometricError);
 }
 
 void printInfo(const Reader& reader, bool withChunks) {
@@ -120,33 +121,36 @@ void printInfo(const Reader& reader, bool withChunks) {
   fmt::print("{:<12}{} bytes ({})\n", "size", withSeparators(reader.fileSize()),
              humanBytes(reader.fileSize()));
   fmt::print("{:<12}{}.{}\n", "format", h.versionMajor, h.versionMinor);
-  fmt::print("{:<12}origin ({}, {}, {}), size {}\n", "frame", h.frame.origin[0],
-             h.frame.origin[1], h.frame.origin[2], h.frame.size);
+  fmt::print("{:<12}origin ({}, {}, {}), size {}\n", "frame", h.frame.origin[0], h.frame.origin[1],
+             h.frame.origin[2], h.frame.size);
   std::string attributes;
   for (const AttributeDesc& a : h.attributes) {
     if (!attributes.empty()) attributes += ", ";
     attributes += fmt::format("{} {}", semanticName(a.semantic), encodingName(a.encoding));
-    if (a.semantic == Semantic::SignedDistance) attributes += fmt::format(" (range {:g} diagonals)", a.scale);
+    if (a.semantic == Semantic::SignedDistance)
+      attributes += fmt::format(" (range {:g} diagonals)", a.scale);
   }
   fmt::print("{:<12}{}\n", "attributes", attributes);
   fmt::print("{:<12}max level {}, payloads aligned to {} bytes\n", "octree", h.maxLevel,
              h.payloadAlignment());
   std::string codecs;
   for (const auto& [codec, count] : s.codecs) codecs += fmt::format(", {} {}", count, codec);
-  fmt::print("{:<12}{}{}; {} stored for {} of data", "chunks", withSeparators(reader.chunks().size()),
-             codecs, humanBytes(s.storedBytes), humanBytes(s.rawBytes));
+  fmt::print("{:<12}{}{}; {} stored for {} of data", "chunks",
+             withSeparators(reader.chunks().size()), codecs, humanBytes(s.storedBytes),
+             humanBytes(s.rawBytes));
   if (s.rawBytes > 0) fmt::print(" ({:.1f}%)", 100.0 * double(s.storedBytes) / double(s.rawBytes));
   fmt::print("\n");
   for (const auto& [level, l] : s.levels)
     fmt::print("  level {:<4}{} chunk{}, {} stored, {} points\n", level, withSeparators(l.chunks),
-               l.chunks == 1 ? "" : "s",
-               humanBytes(l.storedBytes), withSeparators(l.points));
+               l.chunks == 1 ? "" : "s", humanBytes(l.storedBytes), withSeparators(l.points));
   fmt::print("{:<12}{}\n", "points", withSeparators(s.points));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (metadata.is_discarded())
     fmt::print("{:<12}(not valid JSON, {} bytes)\n", "metadata", reader.metadata().size());
   else
-    fmt::print("{:<12}{}\n", "metadata", indentLines(metadata.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), 12));
+    fmt::print(
+        "{:<12}{}\n", "metadata",
+        indentLines(metadata.dump(2, ' ', false, nlohmann::json::error_handler_t::replace), 12));
   if (withChunks) printChunkTable(reader);
 }
 
@@ -159,7 +163,8 @@ void addInfoCommand(CLI::App& app, int& exitCode) {
     bool chunks = false;
   };
   auto options = std::make_shared<Options>();
-  CLI::App* command = app.add_subcommand("info", "Describe an .iso file: frame, attributes, chunks, metadata");
+  CLI::App* command =
+      app.add_subcommand("info", "Describe an .iso file: frame, attributes, chunks, metadata");
   command->add_option("file", options->file, ".iso file")->required();
   command->add_flag("--json", options->json, "Print JSON for programs");
   command->add_flag("--chunks", options->chunks, "Also list every chunk");
@@ -167,7 +172,8 @@ void addInfoCommand(CLI::App& app, int& exitCode) {
     exitCode = runGuarded("info", [&] {
       const Reader reader = Reader::open(options->file);
       if (options->json)
-        fmt::print("{}\n", infoJson(reader, options->chunks).dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+        fmt::print("{}\n", infoJson(reader, options->chunks)
+                               .dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
       else
         printInfo(reader, options->chunks);
       return kExitOk;

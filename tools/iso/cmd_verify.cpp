@@ -24,9 +24,10 @@ Outcome check(const std::string& file) {
     const VerifyResult result = verifyFile(reader);
     for (const VerifyProblem& p : result.problems) {
       outcome.problems.push_back(describe(reader, p));
-      outcome.problemJson.push_back({{"chunk", p.chunk ? nlohmann::json(*p.chunk) : nlohmann::json()},
-                                     {"offset", p.offset},
-                                     {"reason", p.reason}});
+      outcome.problemJson.push_back(
+          {{"chunk", p.chunk ? nlohmann::json(*p.chunk) : nlohmann::json()},
+           {"offset", p.offset},
+           {"reason", p.reason}});
     }
     if (nlohmann::json::parse(reader.metadata(), nullptr, false).is_object() == false) {
       const uint64_t at = reader.fileSize() - kTrailerSize - reader.metadata().size();
@@ -74,7 +75,8 @@ void addVerifyCommand(CLI::App& app, int& exitCode) {
         fmt::print("{}: ok ({} chunks, {} bytes checked)\n", options->file,
                    withSeparators(outcome.chunks), withSeparators(outcome.bytes));
       } else {
-        for (const std::string& p : outcome.problems) fmt::print(stderr, "{}: {}\n", options->file, p);
+        for (const std::string& p : outcome.problems)
+          fmt::print(stderr, "{}: {}\n", options->file, p);
         fmt::print(stderr, "{}: FAILED ({} problem{})\n", options->file, outcome.problems.size(),
                    outcome.problems.size() == 1 ? "" : "s");
       }

@@ -29,8 +29,9 @@ int runGuarded(const char* command, const std::function<int()>& body) {
 }  // namespace iso::cli
 
 int main(int argc, char** argv) {
-  CLI::App app{"iso: compact level-of-detail surface assets (Implicit Surface Octrees) from 3D scans",
-               "iso"};
+  CLI::App app{
+      "iso: compact level-of-detail surface assets (Implicit Surface Octrees) from 3D scans",
+      "iso"};
   app.set_version_flag("--version", fmt::format("iso {} (.iso format {}.{})", ISO_VERSION,
                                                 iso::kFormatMajor, iso::kFormatMinor));
   app.require_subcommand(1);

@@ -18,10 +18,10 @@ class InternalError : public std::logic_error {
 
 }  // namespace iso
 
-#define ISO_CHECK(condition)                                  \
-  do {                                                        \
-    if (!(condition)) [[unlikely]]                            \
-      ::iso::failCheck(#condition, __FILE__, __LINE__);       \
+#define ISO_CHECK(condition)                            \
+  do {                                                  \
+    if (!(condition)) [[unlikely]]                      \
+      ::iso::failCheck(#condition, __FILE__, __LINE__); \
   } while (false)
 
 #ifdef NDEBUG

@@ -14,7 +14,8 @@ namespace iso {
 inline constexpr uint16_t kFormatMajor = 1;
 inline constexpr uint16_t kFormatMinor = 0;
 
-inline constexpr std::array<uint8_t, 8> kHeaderMagic = {0x89, 'I', 'S', 'O', 0x0D, 0x0A, 0x1A, 0x0A};
+inline constexpr std::array<uint8_t, 8> kHeaderMagic = {0x89, 'I',  'S',  'O',
+                                                        0x0D, 0x0A, 0x1A, 0x0A};
 inline constexpr std::array<uint8_t, 8> kTrailerMagic = {0x89, 'I', 'S', 'O', 'E', 'N', 'D', 0x0A};
 
 inline constexpr uint32_t kHeaderSize = 256;
