@@ -1,0 +1,31 @@
+// PLY meshes and PLY output.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "io/point_cloud.h"
+
+namespace iso {
+
+// Read the vertices and faces of a PLY mesh (ASCII or binary, optionally .gz). Polygons with more
+// than three vertices are fanned into triangles. Throws iso::FileError (file, offset or line,
+// reason) for malformed or truncated files and for files without faces.
+TriangleMesh readPlyMesh(const std::filesystem::path& path);
+
+struct PlyWriteOptions {
+  bool binary = true;            // binary little endian, else ASCII
+  bool doublePositions = true;   // x y z as double (keeps large offsets exact), else float
+  std::vector<std::string> comments;  // "comment" lines in the header
+};
+
+// Write points (with their normals and colors when present; colors as uchar sRGB) to a PLY file,
+// atomically: a temporary file renamed into place. Throws iso::FileError on failure.
+void writePly(const std::filesystem::path& path, const PointCloud& points,
+              const PlyWriteOptions& options = {});
+
+// Write a triangle mesh as PLY (binary little endian, float positions).
+void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh);
+
+}  // namespace iso

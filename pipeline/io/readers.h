@@ -1,0 +1,60 @@
+// Readers of point files: PLY (ASCII, binary little and big endian), XYZ-like text with a column
+// spec, LAS 1.2–1.4. Gzip-compressed files (.gz) are read transparently. Readers stream: they
+// hand out points in batches, so memory does not grow with the file.
+//
+// Errors (unreadable, malformed, truncated, unsupported files) throw iso::FileError naming the file
+// and the byte offset (binary formats) or line (text formats). Points with a NaN or infinite
+// coordinate are dropped and counted, never returned. A reader is used by one thread at a time.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "io/point_cloud.h"
+
+namespace iso {
+
+struct ReadOptions {
+  // Column spec for text files: comma-separated names among x,y,z,nx,ny,nz,r,g,b and "_" (skip),
+  // e.g. "x,y,z,_,r,g,b". Empty: guessed from the column count (3: xyz, 6: xyz + normals,
+  // 7: xyz + intensity + rgb is NOT guessed; 9: xyz + normals + rgb). Colors in text files are
+  // 0–255 when any value in the first line exceeds 1, else 0–1.
+  std::string columns;
+};
+
+struct PointFileInfo {
+  std::filesystem::path path;
+  std::string format;                 // "ply-ascii", "ply-binary-le", "ply-binary-be", "xyz", "las 1.2 format 2", ...
+  std::optional<uint64_t> declaredPoints;  // the header's count, when the format has one
+  bool hasNormals = false;
+  bool hasColors = false;
+};
+
+struct ReadStats {
+  uint64_t pointsRead = 0;        // returned to the caller
+  uint64_t droppedNonFinite = 0;  // points with a NaN or infinite coordinate, dropped
+};
+
+class PointReader {
+ public:
+  virtual ~PointReader() = default;
+  virtual const PointFileInfo& info() const = 0;
+  // Append up to maxPoints points to out (whose attribute vectors match info()'s has* flags);
+  // returns how many were appended, 0 at the end of the file.
+  virtual size_t read(PointCloud& out, size_t maxPoints) = 0;
+  virtual const ReadStats& stats() const = 0;
+};
+
+// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF") and then by
+// extension (.xyz, .txt, .pts, .csv). LAZ files are refused with a clear message.
+std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
+                                           const ReadOptions& options = {});
+
+// Read a whole file into memory.
+PointCloud readPointFile(const std::filesystem::path& path, const ReadOptions& options = {},
+                         ReadStats* stats = nullptr);
+
+}  // namespace iso
