@@ -42,7 +42,7 @@ std::string quoted(const std::filesystem::path& path) { return "'" + path.string
 TEST(Cli, verifyAcceptsTheGoldenFile) {
   const CommandResult run = iso("verify " + quoted(kGolden));
   EXPECT_EQ(run.exitCode, 0) << run.err;
-  EXPECT_NE(run.out.find("ok (5 chunks"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("ok (6 chunks"), std::string::npos) << run.out;
 }
 
 TEST(Cli, verifyNamesTheChunkWhosePayloadByteFlipped) {
@@ -92,8 +92,8 @@ TEST(Cli, infoJsonIsValidAndComplete) {
   const CommandResult run = iso("info --json --chunks " + quoted(kGolden));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
-  EXPECT_EQ(j["format_version"], "1.0");
-  EXPECT_EQ(j["chunk_count"], 5);
+  EXPECT_EQ(j["format_version"], "1.1");
+  EXPECT_EQ(j["chunk_count"], 6);
   EXPECT_EQ(j["frame"]["origin"][0].get<double>(), 515000.25);
   EXPECT_EQ(j["frame"]["origin"][2].get<double>(), -1234.125);
   EXPECT_EQ(j["frame"]["size"].get<double>(), 64.0);
@@ -105,16 +105,17 @@ TEST(Cli, infoJsonIsValidAndComplete) {
   EXPECT_EQ(j["attributes"][1]["encoding"], "oct16");
   EXPECT_EQ(j["attributes"][2]["semantic"], "color");
   EXPECT_EQ(j["point_count"], 1000);  // the root covers every point
-  EXPECT_EQ(j["levels"][1]["points"], 600);
-  EXPECT_EQ(j["raw_bytes"], 2000 + 300 + 1500 + 64);
+  EXPECT_EQ(j["levels"][1]["points"], 600 + 40);
+  EXPECT_EQ(j["raw_bytes"], 2000 + 300 + 1500 + 64 + 156);
   EXPECT_EQ(j["file_size"], std::filesystem::file_size(kGolden));
   EXPECT_EQ(j["metadata"]["generator"], "iso golden file v1");
   EXPECT_EQ(j["codecs"]["zstd"], 2);
-  EXPECT_EQ(j["codecs"]["raw"], 3);
-  ASSERT_EQ(j["chunks"].size(), 5u);
+  EXPECT_EQ(j["codecs"]["raw"], 4);
+  ASSERT_EQ(j["chunks"].size(), 6u);
   EXPECT_TRUE(j["chunks"][0]["parent"].is_null());
   EXPECT_EQ(j["chunks"][2]["parent"], 1);
   EXPECT_EQ(j["chunks"][4]["kind"], "unknown");
+  EXPECT_EQ(j["chunks"][5]["kind"], "surface");
   EXPECT_EQ(j["levels"].size(), 4u);
 }
 
@@ -148,7 +149,7 @@ TEST(Cli, badFilesAndUsageErrorsExitNonZeroWithAMessage) {
   EXPECT_NE(run.out.find("verify"), std::string::npos);
   run = iso("--version");
   EXPECT_EQ(run.exitCode, 0);
-  EXPECT_NE(run.out.find(".iso format 1.0"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find(".iso format 1.1"), std::string::npos) << run.out;
 }
 
 }  // namespace

@@ -5,9 +5,11 @@
 #define XXH_INLINE_ALL
 #include <xxhash.h>
 
+#include <cmath>
 #include <cstring>
 
 #include "iso/reader.h"
+#include "iso/surface.h"
 #include "iso/verify.h"
 #include "support/support.h"
 
@@ -43,7 +45,7 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
   EXPECT_EQ(at<uint16_t>(b, 8), 1);      // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 0);     // versionMinor
+  EXPECT_EQ(at<uint16_t>(b, 10), 1);     // versionMinor
   EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
   EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
   EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2
@@ -70,7 +72,7 @@ TEST(FormatGolden, trailerAndChunkTableBytesAreWhereTheSpecSays) {
   EXPECT_EQ(std::memcmp(b.data() + t + 56, magic, 8), 0);
   const uint64_t table = at<uint64_t>(b, t + 0);
   const uint32_t count = at<uint32_t>(b, t + 8);
-  EXPECT_EQ(count, 5u);
+  EXPECT_EQ(count, 6u);
   EXPECT_EQ(at<uint32_t>(b, t + 12), 80u);
   EXPECT_EQ(at<uint64_t>(b, t + 16), table + 80 * count);
   const uint64_t metadataOffset = at<uint64_t>(b, t + 16);
@@ -84,7 +86,7 @@ TEST(FormatGolden, trailerAndChunkTableBytesAreWhereTheSpecSays) {
   EXPECT_EQ(metadata, test::goldenMetadata());
 
   // Payloads at 4096-aligned offsets in table order: 0 (zstd), 1 (raw 300 B), 2 (zstd),
-  // 3 (empty, raw), 4 (raw 64 B, kind 7).
+  // 3 (empty, raw), 4 (raw 64 B, kind 7), 5 (raw surface).
   uint64_t expectedOffset = 4096;
   for (uint32_t i = 0; i < count; ++i) {
     const size_t e = table + 80 * i;
@@ -115,6 +117,57 @@ TEST(FormatGolden, trailerAndChunkTableBytesAreWhereTheSpecSays) {
   EXPECT_EQ(at<uint8_t>(b, e4 + 70), 7);   // kind
   EXPECT_EQ(at<uint64_t>(b, e4 + 32), 0x3Fu);
   EXPECT_EQ(at<uint8_t>(b, e4 + 68), 3);
+  const size_t e5 = table + 400;
+  EXPECT_EQ(at<uint8_t>(b, e5 + 70), 1);    // kind surface
+  EXPECT_EQ(at<uint32_t>(b, e5 + 56), 3u);  // nodeCount
+  // The surface data (specs/iso-format.md, "Surface chunks"): header, root key, masks, arrays.
+  const size_t s = at<uint64_t>(b, e5);
+  EXPECT_EQ(at<uint32_t>(b, s + 0), 1u);     // rootCount
+  EXPECT_EQ(at<uint32_t>(b, s + 4), 3u);     // nodeCount
+  EXPECT_EQ(at<uint32_t>(b, s + 8), 12u);    // leaf corners: two leaves sharing a face
+  EXPECT_EQ(at<uint32_t>(b, s + 12), 8u);    // LOD corners of the internal node
+  EXPECT_EQ(at<uint8_t>(b, s + 16), 1);      // startLevel
+  EXPECT_EQ(at<uint8_t>(b, s + 17), 2);      // depth
+  EXPECT_EQ(at<uint64_t>(b, s + 24), 6u);    // root key
+  EXPECT_EQ(at<uint8_t>(b, s + 32), 0b101);  // root's children: octants 0 and 2
+  EXPECT_EQ(at<uint16_t>(b, s + 33), 0);     // two leaves
+  // snorm8 distances from byte 36: 12 leaf corners (scale level 2), pad, 8 LOD corners (level 1).
+  const double leafUnit = std::sqrt(3.0) / 4.0 * 0.5, lodUnit = std::sqrt(3.0) / 2.0 * 0.5;
+  const test::GoldenSurface g = test::goldenSurface();
+  for (int i = 0; i < 12; ++i)
+    EXPECT_EQ(at<int8_t>(b, s + 36 + size_t(i)),
+              std::lround(g.leafValues.distance[size_t(i)] / leafUnit * 127.0));
+  for (int i = 0; i < 8; ++i)
+    EXPECT_EQ(at<int8_t>(b, s + 48 + size_t(i)),
+              std::lround(g.lodValues.distance[size_t(i)] / lodUnit * 127.0));
+  EXPECT_EQ(at<uint64_t>(b, e5 + 8), 36u + 12 + 8 + 24 + 16 + 36 + 24);  // + normals and colors
+}
+
+TEST(FormatGolden, surfaceChunkDecodesToItsValues) {
+  const Reader reader = Reader::open(kGolden);
+  const SurfaceChunk chunk = decodeSurfaceChunk(reader, 5);
+  const test::GoldenSurface g = test::goldenSurface();
+  ASSERT_EQ(chunk.layout.nodes.size(), 3u);
+  EXPECT_EQ(chunk.layout.nodes[0].firstChild, 1u);
+  EXPECT_EQ(chunk.layout.nodes[1].key, 6u << 3);
+  EXPECT_EQ(chunk.layout.nodes[2].key, (6u << 3) | 2);
+  // The second leaf (octant 2, one cell up in y) shares its lower face with the first.
+  for (int c : {0, 1, 4, 5})
+    EXPECT_EQ(chunk.layout.nodes[2].corners[size_t(c)],
+              chunk.layout.nodes[1].corners[size_t(c + 2)]);
+  ASSERT_EQ(chunk.leafValues.size(), 12u);
+  ASSERT_EQ(chunk.lodValues.size(), 8u);
+  const double leafStep = std::sqrt(3.0) / 4.0 * 0.5 / 127.0,
+               lodStep = std::sqrt(3.0) / 2.0 * 0.5 / 127.0;
+  for (size_t i = 0; i < 12; ++i) {
+    EXPECT_NEAR(chunk.leafValues.distance[i], g.leafValues.distance[i], 0.5 * leafStep + 1e-7);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(chunk.leafValues.normal[i][size_t(k)], g.leafValues.normal[i][size_t(k)], 0.02);
+      EXPECT_NEAR(chunk.leafValues.color[i][size_t(k)], g.leafValues.color[i][size_t(k)], 0.01);
+    }
+  }
+  for (size_t i = 0; i < 8; ++i)
+    EXPECT_NEAR(chunk.lodValues.distance[i], g.lodValues.distance[i], 0.5 * lodStep + 1e-7);
 }
 
 TEST(FormatGolden, readerReadsTheExpectedValues) {
@@ -137,6 +190,7 @@ TEST(FormatGolden, readerReadsTheExpectedValues) {
     EXPECT_EQ(data, expected[i].data) << "chunk " << i;
   }
   EXPECT_EQ(chunkKindName(reader.chunk(4).kind), "unknown");
+  EXPECT_EQ(chunkKindName(reader.chunk(5).kind), "surface");
   EXPECT_TRUE(verifyFile(reader).ok());
 }
 

@@ -193,21 +193,21 @@ TEST_F(Hostile, structuralRulesAreCheckedBehindValidChecksums) {
        [this] { return entry(1); }},
       {"payload overlapping table",
        [this](auto& b) {
-         put<uint64_t>(b, entry(4) + 8, ~uint64_t{0});
-         put<uint64_t>(b, entry(4) + 16, ~uint64_t{0});
+         put<uint64_t>(b, entry(5) + 8, ~uint64_t{0});
+         put<uint64_t>(b, entry(5) + 16, ~uint64_t{0});
        },
-       "limit", [this] { return entry(4) + 16; }},
+       "limit", [this] { return entry(5) + 16; }},
       {"payload into table",
        [this](auto& b) {
-         put<uint64_t>(b, entry(4) + 8, 5000);
-         put<uint64_t>(b, entry(4) + 16, 5000);
+         put<uint64_t>(b, entry(5) + 8, 5000);
+         put<uint64_t>(b, entry(5) + 16, 5000);
        },
-       "runs into the chunk table", [this] { return entry(4) + 8; }},
+       "runs into the chunk table", [this] { return entry(5) + 8; }},
       {"nan error", [this](auto& b) { put<float>(b, entry(0) + 64, std::nanf("")); },
        "geometric error", [this] { return entry(0) + 64; }},
       {"negative error", [this](auto& b) { put<float>(b, entry(0) + 64, -1.0f); },
        "geometric error", [this] { return entry(0) + 64; }},
-      {"missing parent", [this](auto& b) { put<uint32_t>(b, entry(1) + 52, 5); }, "does not exist",
+      {"missing parent", [this](auto& b) { put<uint32_t>(b, entry(1) + 52, 6); }, "does not exist",
        [this] { return entry(1) + 52; }},
       {"parent not coarser", [this](auto& b) { put<uint32_t>(b, entry(1) + 52, 3); }, "coarser",
        [this] { return entry(1) + 52; }},

@@ -105,6 +105,13 @@ void AtomicOutputFile::writeZeros(uint64_t count) {
   }
 }
 
+void AtomicOutputFile::truncate(uint64_t size) {
+  if (fd_ < 0) fail("truncate after the file was closed", EBADF);
+  if (::ftruncate(fd_, off_t(size)) != 0) fail("cannot truncate", errno);
+  if (::lseek(fd_, off_t(size), SEEK_SET) < 0) fail("cannot seek", errno);
+  position_ = size;
+}
+
 void AtomicOutputFile::commit() {
   if (fd_ < 0) fail("commit after the file was closed", EBADF);
   if (::fsync(fd_) != 0) fail("cannot flush to disk", errno);

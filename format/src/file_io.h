@@ -37,6 +37,8 @@ class AtomicOutputFile {
 
   void write(std::span<const std::byte> bytes);
   void writeZeros(uint64_t count);
+  // Cut the file to `size` bytes and continue writing there.
+  void truncate(uint64_t size);
   uint64_t position() const { return position_; }
 
   // Flush to disk, rename over the final path, and flush the directory entry.

@@ -121,6 +121,8 @@ std::string_view chunkKindName(uint8_t kind) {
   switch (static_cast<ChunkKind>(kind)) {
     case ChunkKind::Blob:
       return "blob";
+    case ChunkKind::Surface:
+      return "surface";
   }
   return "unknown";
 }

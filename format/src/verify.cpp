@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "bytes.h"
+#include "iso/error.h"
+#include "iso/surface.h"
 
 namespace iso {
 namespace {
@@ -57,6 +59,15 @@ std::string ZstdChecker::problem(std::span<const std::byte> stored, uint64_t raw
   return {};
 }
 
+// Whether a surface chunk's data follows the rules of specs/iso-format.md, "Surface chunks".
+void checkSurface(const Reader& reader, const ChunkInfo& c, VerifyResult& result) {
+  try {
+    decodeSurfaceChunk(reader, c.id);
+  } catch (const FileError& error) {
+    result.problems.push_back({c.id, c.offset, error.reason()});
+  }
+}
+
 }  // namespace
 
 VerifyResult verifyFile(const Reader& reader) {
@@ -83,6 +94,10 @@ VerifyResult verifyFile(const Reader& reader) {
     } else if (c.codec == Codec::Zstd) {
       if (std::string problem = zstd.problem(stored, c.rawSize); !problem.empty())
         result.problems.push_back({c.id, c.offset, problem});
+      else if (c.kind == kSurfaceKind)
+        checkSurface(reader, c, result);
+    } else if (c.kind == kSurfaceKind) {
+      checkSurface(reader, c, result);
     }
     checkPadding(c.id, c.offset + c.storedSize);
     ++result.chunksChecked;

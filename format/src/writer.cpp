@@ -27,7 +27,9 @@ struct Writer::Impl {
   std::string metadata = "{}";
   std::vector<std::byte> compressed;
   ZSTD_CCtx* zstd = nullptr;
-  bool isOpen = true;
+  bool isOpen = true;     // chunks may be added
+  bool isClosed = false;  // the temporary file is complete, not yet committed
+  detail::Trailer trailer;
 
   Impl(std::filesystem::path output, const FileHeader& h, WriterOptions o)
       : file(std::move(output)), header(h), options(o) {}
@@ -50,6 +52,16 @@ struct Writer::Impl {
     ISO_CHECK(!ZSTD_isError(size));
     compressed.resize(size);
     return size < data.size();
+  }
+
+  // Write metadata and trailer at the current position (right after the chunk table).
+  void writeMetadataAndTrailer() {
+    const auto bytes = std::as_bytes(std::span(metadata));
+    trailer.metadataOffset = file.position();
+    trailer.metadataSize = bytes.size();
+    trailer.metadataChecksum = detail::checksum(bytes);
+    file.write(bytes);
+    file.write(detail::encodeTrailer(trailer));
   }
 
   void validateParents() const {
@@ -135,21 +147,34 @@ void Writer::setParent(uint32_t chunk, uint32_t parent) {
   impl_->chunks[chunk].parent = parent;
 }
 
-void Writer::setMetadata(std::string json) {
-  impl_->requireOpen();
+namespace {
+
+void requireJsonObject(const std::string& json) {
   const size_t first = json.find_first_not_of(" \t\r\n");
   const size_t last = json.find_last_not_of(" \t\r\n");
   if (first == std::string::npos || json[first] != '{' || json[last] != '}')
     throw std::invalid_argument("metadata must be a JSON object");
+}
+
+}  // namespace
+
+void Writer::setMetadata(std::string json) {
+  impl_->requireOpen();
+  requireJsonObject(json);
   impl_->metadata = std::move(json);
 }
 
 void Writer::finish() {
+  close();
+  commit();
+}
+
+void Writer::close() {
   Impl& w = *impl_;
   w.requireOpen();
   w.validateParents();
 
-  detail::Trailer trailer;
+  detail::Trailer& trailer = w.trailer;
   trailer.chunkTableOffset = w.file.position();
   trailer.chunkCount = static_cast<uint32_t>(w.chunks.size());
   detail::Checksummer tableChecksum;
@@ -164,21 +189,32 @@ void Writer::finish() {
     w.file.write(block);
   }
   trailer.chunkTableChecksum = tableChecksum.digest();
-
-  const auto metadata = std::as_bytes(std::span(w.metadata));
-  trailer.metadataOffset = w.file.position();
-  trailer.metadataSize = metadata.size();
-  trailer.metadataChecksum = detail::checksum(metadata);
-  w.file.write(metadata);
-  w.file.write(detail::encodeTrailer(trailer));
-  w.file.commit();
+  w.writeMetadataAndTrailer();
   w.isOpen = false;
+  w.isClosed = true;
+}
+
+void Writer::replaceMetadata(std::string json) {
+  Impl& w = *impl_;
+  if (!w.isClosed) throw std::logic_error("iso::Writer::replaceMetadata before close()");
+  requireJsonObject(json);
+  w.metadata = std::move(json);
+  w.file.truncate(w.trailer.metadataOffset);
+  w.writeMetadataAndTrailer();
+}
+
+void Writer::commit() {
+  Impl& w = *impl_;
+  if (!w.isClosed) throw std::logic_error("iso::Writer::commit before close()");
+  w.file.commit();
+  w.isClosed = false;
 }
 
 void Writer::abandon() noexcept {
   if (!impl_) return;
   impl_->file.discard();
   impl_->isOpen = false;
+  impl_->isClosed = false;
 }
 
 uint32_t Writer::chunkCount() const { return static_cast<uint32_t>(impl_->chunks.size()); }

@@ -5,6 +5,7 @@
 #include <xxhash.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 #include <stdexcept>
@@ -128,7 +129,42 @@ std::vector<GoldenChunk> goldenChunks() {
   chunks[4].desc = {
       .kind = 7, .level = 3, .key = 0x3F, .parent = 3, .pointCount = 1, .codec = Codec::Raw};
   for (int i = 0; i < 64; ++i) chunks[4].data.push_back(std::byte(255 - i));
+  // 5: a surface chunk: one internal node (level 1, key 6) with two filled leaves.
+  chunks.push_back({});
+  chunks[5].desc = {.kind = kSurfaceKind,
+                    .level = 1,
+                    .key = 6,
+                    .parent = 0,
+                    .pointCount = 40,
+                    .nodeCount = 3,
+                    .leafCount = 2,
+                    .geometricError = 0.01f,
+                    .codec = Codec::Raw};
+  const GoldenSurface surface = goldenSurface();
+  const CornerLayout layout = layoutSurface(surface.topology, 1, 6, goldenHeader().maxLevel);
+  chunks[5].data = encodeSurfaceChunk(surface.topology, layout, goldenHeader().attributes,
+                                      surface.leafValues, surface.lodValues);
   return chunks;
+}
+
+GoldenSurface goldenSurface() {
+  GoldenSurface g;
+  g.topology.startLevel = 1;
+  g.topology.depth = 2;
+  g.topology.rootKeys = {6};
+  g.topology.childMasks = {0b00000101, 0, 0};
+  const auto fill = [](CornerValues& v, size_t n, float base) {
+    for (size_t i = 0; i < n; ++i) {
+      const float t = float(i) / float(n);
+      v.distance.push_back((t - 0.5f) * base);
+      const float x = 0.6f - t, y = 0.3f, z = std::sqrt(1.0f - x * x - y * y);
+      v.normal.push_back({x, y, z});
+      v.color.push_back({t, 0.5f, 1.0f - t});
+    }
+  };
+  fill(g.leafValues, 12, 0.2f);
+  fill(g.lodValues, 8, 0.4f);
+  return g;
 }
 
 std::string goldenMetadata() {

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "iso/surface.h"
 #include "iso/writer.h"
 
 namespace iso::test {
@@ -40,6 +41,12 @@ struct GoldenChunk {
 FileHeader goldenHeader();
 std::vector<GoldenChunk> goldenChunks();
 std::string goldenMetadata();
+// The golden file's surface chunk (chunk 5) before quantization.
+struct GoldenSurface {
+  SurfaceTopology topology;
+  CornerValues leafValues, lodValues;
+};
+GoldenSurface goldenSurface();
 // Write the golden file's content with the current writer.
 void writeGoldenFile(const std::filesystem::path& path);
 

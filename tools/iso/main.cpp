@@ -7,7 +7,7 @@
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/format.h"
-#include "version.h"
+#include "iso/version.h"
 
 namespace iso::cli {
 

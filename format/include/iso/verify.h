@@ -23,8 +23,9 @@ struct VerifyResult {
   bool ok() const { return problems.empty(); }
 };
 
-// Check every payload's checksum, that every zstd payload decodes to exactly rawSize bytes and
-// that all padding is zero. (Whether the metadata is a JSON object is for the caller to check.)
+// Check every payload's checksum, that every zstd payload decodes to exactly rawSize bytes, that
+// every surface chunk follows its rules, and that all padding is zero. (Whether the metadata is a
+// JSON object is for the caller to check.)
 VerifyResult verifyFile(const Reader& reader);
 
 // "chunk 3 (level 1, key 0x5) at byte 8192: REASON" or "byte 300: REASON".

@@ -59,8 +59,16 @@ class Writer {
 
   // Write the chunk table, metadata and trailer, flush, and rename to the output path. Throws
   // std::invalid_argument when a parent link breaks the format's rules, iso::FileError on I/O
-  // failure; either way nothing appears at the output path.
+  // failure; either way nothing appears at the output path. Same as close() then commit().
   void finish();
+
+  // Write the chunk table, metadata and trailer: the temporary file is then a complete .iso file
+  // that a Reader can open (to measure what was written), still not at the output path.
+  void close();
+  // After close(): replace the metadata (and trailer) of the temporary file.
+  void replaceMetadata(std::string json);
+  // After close(): flush and rename the temporary file to the output path.
+  void commit();
 
   // Remove the temporary file now; the writer cannot be used afterwards.
   void abandon() noexcept;

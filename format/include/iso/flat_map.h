@@ -1,0 +1,97 @@
+// A compact open-addressing hash map (linear probing, power-of-two capacity, no erase) for the
+// many small integer keys of octree work: corner positions, node codes. Much faster and smaller
+// than std::unordered_map for that use.
+//
+// Threading: like std containers (concurrent const use only).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace iso {
+
+// A 128-bit key; hashed with a 64-bit mix of both halves.
+struct Key128 {
+  uint64_t a = 0, b = 0;
+  bool operator==(const Key128&) const = default;
+};
+
+inline uint64_t mixBits(uint64_t x) {  // the splitmix64 finalizer
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ull;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+struct KeyHash {
+  uint64_t operator()(uint64_t k) const { return mixBits(k); }
+  uint64_t operator()(const Key128& k) const {
+    return mixBits(k.a ^ mixBits(k.b + 0x9e3779b97f4a7c15ull));
+  }
+};
+
+template <typename Key, typename Value>
+class FlatMap {
+ public:
+  explicit FlatMap(size_t expected = 16) { rehash(capacityFor(expected)); }
+
+  // The value for key, inserting `value` first when the key is new; second is true when inserted.
+  std::pair<Value*, bool> insert(const Key& key, const Value& value) {
+    if ((size_ + 1) * 2 > slots_.size()) rehash(slots_.size() * 2);
+    size_t i = KeyHash{}(key)&mask_;
+    while (used_[i]) {
+      if (slots_[i].first == key) return {&slots_[i].second, false};
+      i = (i + 1) & mask_;
+    }
+    used_[i] = 1;
+    slots_[i] = {key, value};
+    ++size_;
+    return {&slots_[i].second, true};
+  }
+
+  const Value* find(const Key& key) const {
+    size_t i = KeyHash{}(key)&mask_;
+    while (used_[i]) {
+      if (slots_[i].first == key) return &slots_[i].second;
+      i = (i + 1) & mask_;
+    }
+    return nullptr;
+  }
+  Value* find(const Key& key) { return const_cast<Value*>(std::as_const(*this).find(key)); }
+
+  size_t size() const { return size_; }
+
+  template <typename F>
+  void forEach(F&& f) const {
+    for (size_t i = 0; i < slots_.size(); ++i)
+      if (used_[i]) f(slots_[i].first, slots_[i].second);
+  }
+
+ private:
+  static size_t capacityFor(size_t expected) {
+    size_t c = 16;
+    while (c < expected * 2) c *= 2;
+    return c;
+  }
+
+  void rehash(size_t capacity) {
+    std::vector<std::pair<Key, Value>> old = std::move(slots_);
+    std::vector<uint8_t> oldUsed = std::move(used_);
+    slots_.assign(capacity, {});
+    used_.assign(capacity, 0);
+    mask_ = capacity - 1;
+    size_ = 0;
+    for (size_t i = 0; i < old.size(); ++i)
+      if (oldUsed[i]) insert(old[i].first, old[i].second);
+  }
+
+  std::vector<std::pair<Key, Value>> slots_;
+  std::vector<uint8_t> used_;
+  size_t mask_ = 0;
+  size_t size_ = 0;
+};
+
+}  // namespace iso

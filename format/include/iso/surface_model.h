@@ -1,0 +1,96 @@
+// The finest surface of an .iso file in memory, with the queries that measure and draw it: the
+// filled leaf containing a point, the trilinear signed distance and its gradient, ray hits
+// (octree traversal and the root of the cubic along the ray), projection of points onto the zero
+// set, and area-weighted samples of the zero set. Coordinates are frame units: the frame's cube is
+// [0, 1)^3.
+//
+// Threading: after load(), all const member functions may run from many threads at once.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "iso/format.h"
+#include "iso/surface.h"
+
+namespace iso {
+
+class Reader;
+
+using Vec3 = std::array<double, 3>;
+
+struct SurfaceEval {
+  double distance = 0.0;          // the trilinear signed distance
+  Vec3 gradient{};                // its gradient
+  std::array<float, 3> normal{};  // interpolated stored normal, or the gradient's direction
+  std::array<float, 3> color{};   // interpolated linear color (zero when the file has none)
+};
+
+struct RayHit {
+  double t = 0.0;
+  uint32_t leaf = kNoNode;
+};
+
+struct ZeroSetSample {
+  Vec3 position{};
+  double area = 0.0;  // the area of the zero set this sample stands for
+  uint32_t leaf = kNoNode;
+};
+
+class SurfaceModel {
+ public:
+  struct Leaf {
+    uint64_t key = 0;
+    uint8_t level = 0;
+    std::array<uint32_t, kCorners> corners{};  // into the model's corner arrays
+  };
+
+  // Decode every surface chunk of the file and link them into one octree. Throws iso::FileError
+  // for invalid chunks and when chunks overlap or leave a cut node without its children.
+  static SurfaceModel load(const Reader& reader);
+
+  const FileHeader& header() const { return header_; }
+  std::span<const Leaf> leaves() const { return leaves_; }
+  bool hasNormals() const { return !corners_.normal.empty(); }
+  bool hasColors() const { return !corners_.color.empty(); }
+  const CornerValues& corners() const { return corners_; }
+
+  // The filled leaf that contains p, or kNoNode in empty space and outside the frame.
+  uint32_t findLeaf(const Vec3& p) const;
+  SurfaceEval evaluate(uint32_t leaf, const Vec3& p) const;
+
+  // The first hit of the ray origin + t·direction with t in [tMin, tMax]. A sign change between
+  // the exit of one leaf and the entry of the next counts as a hit, so that no mismatch below the
+  // quantization step can let a ray through.
+  std::optional<RayHit> intersect(const Vec3& origin, const Vec3& direction, double tMin,
+                                  double tMax) const;
+
+  // A point of the zero set near p, by Newton steps along the gradient; none when the steps leave
+  // the filled leaves or do not converge.
+  std::optional<Vec3> project(const Vec3& p) const;
+
+  // Points of the zero set: roots along axis-aligned lines, `linesPerEdge` per leaf edge, each kept
+  // by the axis most aligned with the gradient and weighted by the area it stands for.
+  std::vector<ZeroSetSample> sampleZeroSet(int linesPerEdge) const;
+
+ private:
+  struct Node {
+    std::array<uint32_t, 8> child;  // kNoNode where absent
+    uint32_t leaf = kNoNode;        // index into leaves_ for filled leaves
+  };
+  struct Traversal;
+
+  bool intersectNode(uint32_t node, uint8_t level, const std::array<uint32_t, 3>& cell, double t0,
+                     double t1, Traversal& state) const;
+  bool intersectLeaf(uint32_t leaf, double t0, double t1, Traversal& state) const;
+
+  FileHeader header_;
+  std::vector<Node> nodes_;  // node 0 is the root (level 0)
+  std::vector<Leaf> leaves_;
+  CornerValues corners_;
+};
+
+}  // namespace iso

@@ -1,0 +1,397 @@
+// Surface chunk payloads (specs/iso-format.md, "Surface chunks"): topology, corner numbering,
+// quantization of corner attributes, and validation of untrusted payloads.
+#include "iso/surface.h"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "bytes.h"
+#include "iso/error.h"
+#include "iso/flat_map.h"
+#include "iso/quantize.h"
+#include "iso/reader.h"
+
+namespace iso {
+
+using detail::loadLE;
+using detail::storeLE;
+
+namespace {
+
+// Spread the low 21 bits of v so that bit j moves to bit 3j.
+uint64_t spreadBits(uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+
+uint32_t compactBits(uint64_t v) {
+  v &= 0x1249249249249249ull;
+  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ull;
+  v = (v ^ (v >> 4)) & 0x100f00f00f00f00full;
+  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffull;
+  v = (v ^ (v >> 16)) & 0x1f00000000ffffull;
+  v = (v ^ (v >> 32)) & 0x1fffffull;
+  return static_cast<uint32_t>(v);
+}
+
+Key128 leafCornerKey(const GridPoint& p) { return {p.x | uint64_t(p.y) << 32, p.z}; }
+Key128 lodCornerKey(const GridPoint& p, uint8_t level) {
+  return {p.x | uint64_t(p.y) << 32, p.z | uint64_t(level) << 32};
+}
+
+[[noreturn]] void invalid(const std::string& reason) {
+  throw std::invalid_argument("surface chunk: " + reason);
+}
+
+void checkRoots(const SurfaceTopology& t, uint8_t chunkLevel, uint64_t chunkKey, uint8_t maxLevel) {
+  if (t.depth < 1) invalid("depth is 0");
+  if (t.startLevel < chunkLevel) invalid("start level is above the chunk's cell");
+  if (int(t.startLevel) + t.depth - 1 > maxLevel)
+    invalid("levels go below the file's maximum level");
+  if (t.rootKeys.empty()) invalid("no roots");
+  for (size_t i = 0; i < t.rootKeys.size(); ++i) {
+    const uint64_t key = t.rootKeys[i];
+    if (!isValidKey(t.startLevel, key) || !cellContains(chunkLevel, chunkKey, t.startLevel, key))
+      invalid("root " + std::to_string(i) + " is not inside the chunk's cell");
+    if (i > 0 && key <= t.rootKeys[i - 1]) invalid("root keys are not strictly increasing");
+  }
+}
+
+// The nodes in breadth-first order with keys, levels and first-child links.
+std::vector<SurfaceNode> expandNodes(const SurfaceTopology& t) {
+  std::vector<SurfaceNode> nodes;
+  nodes.reserve(t.childMasks.size());
+  for (uint64_t key : t.rootKeys) nodes.push_back({key, t.startLevel, 0, kNoNode, {}});
+  size_t levelBegin = 0;
+  for (int d = 0; d < t.depth; ++d) {
+    const size_t levelEnd = nodes.size();
+    if (levelEnd > t.childMasks.size()) invalid("fewer node masks than nodes");
+    for (size_t i = levelBegin; i < levelEnd; ++i) {
+      nodes[i].childMask = t.childMasks[i];
+      if (d + 1 == t.depth || nodes[i].childMask == 0) continue;
+      nodes[i].firstChild = static_cast<uint32_t>(nodes.size());
+      for (int o = 0; o < 8; ++o)
+        if (nodes[i].childMask & (1u << o))
+          nodes.push_back(
+              {nodes[i].key << 3 | uint64_t(o), uint8_t(nodes[i].level + 1), 0, kNoNode, {}});
+      if (nodes.size() > t.childMasks.size()) invalid("fewer node masks than nodes");
+    }
+    levelBegin = levelEnd;
+  }
+  if (nodes.size() != t.childMasks.size()) invalid("more node masks than nodes");
+  return nodes;
+}
+
+uint32_t numberCorner(FlatMap<Key128, uint32_t>& map, std::vector<CornerKey>& corners,
+                      const Key128& key, const GridPoint& point, uint8_t level) {
+  const auto [index, inserted] = map.insert(key, uint32_t(corners.size()));
+  if (inserted) corners.push_back({point, level});
+  CornerKey& corner = corners[*index];
+  corner.level = std::min(corner.level, level);  // leaf corners: the coarsest leaf
+  return *index;
+}
+
+// Byte sizes of the payload's parts.
+struct PayloadLayout {
+  size_t rootsOffset = kSurfaceHeaderSize, masksOffset = 0, attributesOffset = 0, size = 0;
+};
+
+size_t pad4(size_t n) { return (n + 3) & ~size_t{3}; }
+
+PayloadLayout payloadLayout(size_t roots, size_t nodes, size_t leafCorners, size_t lodCorners,
+                            const std::vector<AttributeDesc>& schema) {
+  PayloadLayout p;
+  p.masksOffset = p.rootsOffset + 8 * roots;
+  p.attributesOffset = pad4(p.masksOffset + nodes);
+  p.size = p.attributesOffset;
+  for (const AttributeDesc& a : schema)
+    p.size += pad4(encodedSize(a) * leafCorners) + pad4(encodedSize(a) * lodCorners);
+  return p;
+}
+
+float distanceUnit(uint8_t level, const AttributeDesc& a) {
+  return static_cast<float>(nodeDiagonal(level) * double(a.scale));
+}
+
+void encodeValue(const AttributeDesc& a, const CornerValues& v, const CornerKey& key, size_t i,
+                 std::byte* out) {
+  switch (a.semantic) {
+    case Semantic::SignedDistance: {
+      const float f = v.distance[i];
+      if (a.encoding == Encoding::Snorm8)
+        storeLE<int8_t>(out, encodeSnorm8(f / distanceUnit(key.level, a)));
+      if (a.encoding == Encoding::Snorm16)
+        storeLE<int16_t>(out, encodeSnorm16(f / distanceUnit(key.level, a)));
+      if (a.encoding == Encoding::Float32) storeLE<float>(out, f);
+      return;
+    }
+    case Semantic::Normal: {
+      const std::array<float, 3>& n = v.normal[i];
+      if (a.encoding == Encoding::Float32) {
+        for (int c = 0; c < 3; ++c) storeLE<float>(out + 4 * c, n[c]);
+      } else if (a.encoding == Encoding::Oct16) {
+        const auto q = encodeOctahedral(n, 8);
+        storeLE<int8_t>(out, int8_t(q[0]));
+        storeLE<int8_t>(out + 1, int8_t(q[1]));
+      } else {
+        const auto q = encodeOctahedral(n, 12);
+        const uint32_t packed = (uint32_t(q[0]) & 0xFFF) | (uint32_t(q[1]) & 0xFFF) << 12;
+        for (int b = 0; b < 3; ++b) out[b] = std::byte((packed >> (8 * b)) & 0xFF);
+      }
+      return;
+    }
+    case Semantic::Color:
+      for (int c = 0; c < 3; ++c) {
+        if (a.encoding == Encoding::Srgb8)
+          storeLE<uint8_t>(out + c, linearToSrgb8(v.color[i][c]));
+        else
+          storeLE<float>(out + 4 * c, v.color[i][c]);
+      }
+      return;
+    case Semantic::Occlusion: {
+      const float o = std::clamp(v.occlusion[i], 0.0f, 1.0f);
+      if (a.encoding == Encoding::Unorm8)
+        storeLE<uint8_t>(out, uint8_t(std::lround(o * 255.0f)));
+      else
+        storeLE<float>(out, v.occlusion[i]);
+      return;
+    }
+  }
+}
+
+int32_t signExtend12(uint32_t v) { return int32_t(v << 20) >> 20; }
+
+void decodeValue(const AttributeDesc& a, const std::byte* in, const CornerKey& key, size_t i,
+                 CornerValues& v) {
+  switch (a.semantic) {
+    case Semantic::SignedDistance:
+      if (a.encoding == Encoding::Snorm8)
+        v.distance[i] = decodeSnorm8(loadLE<int8_t>(in)) * distanceUnit(key.level, a);
+      if (a.encoding == Encoding::Snorm16)
+        v.distance[i] = decodeSnorm16(loadLE<int16_t>(in)) * distanceUnit(key.level, a);
+      if (a.encoding == Encoding::Float32) v.distance[i] = loadLE<float>(in);
+      return;
+    case Semantic::Normal:
+      if (a.encoding == Encoding::Float32) {
+        for (int c = 0; c < 3; ++c) v.normal[i][c] = loadLE<float>(in + 4 * c);
+      } else if (a.encoding == Encoding::Oct16) {
+        v.normal[i] = decodeOctahedral({loadLE<int8_t>(in), loadLE<int8_t>(in + 1)}, 8);
+      } else {
+        const uint32_t packed = uint32_t(in[0]) | uint32_t(in[1]) << 8 | uint32_t(in[2]) << 16;
+        v.normal[i] =
+            decodeOctahedral({signExtend12(packed & 0xFFF), signExtend12(packed >> 12)}, 12);
+      }
+      return;
+    case Semantic::Color:
+      for (int c = 0; c < 3; ++c)
+        v.color[i][c] = a.encoding == Encoding::Srgb8 ? srgb8ToLinear(loadLE<uint8_t>(in + c))
+                                                      : loadLE<float>(in + 4 * c);
+      return;
+    case Semantic::Occlusion:
+      v.occlusion[i] =
+          a.encoding == Encoding::Unorm8 ? float(loadLE<uint8_t>(in)) / 255.0f : loadLE<float>(in);
+      return;
+  }
+}
+
+void resizeValues(CornerValues& v, const std::vector<AttributeDesc>& schema, size_t n) {
+  v.distance.assign(n, 0.0f);
+  for (const AttributeDesc& a : schema) {
+    if (a.semantic == Semantic::Normal) v.normal.assign(n, {0.0f, 0.0f, 1.0f});
+    if (a.semantic == Semantic::Color) v.color.assign(n, {0.0f, 0.0f, 0.0f});
+    if (a.semantic == Semantic::Occlusion) v.occlusion.assign(n, 1.0f);
+  }
+}
+
+void checkValueCounts(const CornerValues& v, const std::vector<AttributeDesc>& schema, size_t n) {
+  if (v.distance.size() != n) invalid("distance count differs from the corner count");
+  for (const AttributeDesc& a : schema) {
+    if (a.semantic == Semantic::Normal && v.normal.size() != n) invalid("normal count differs");
+    if (a.semantic == Semantic::Color && v.color.size() != n) invalid("color count differs");
+    if (a.semantic == Semantic::Occlusion && v.occlusion.size() != n)
+      invalid("occlusion count differs");
+  }
+}
+
+}  // namespace
+
+std::array<double, 8> trilinearWeights(const std::array<double, 3>& u) {
+  std::array<double, 8> w{};
+  for (int c = 0; c < 8; ++c) {
+    double weight = 1.0;
+    for (int a = 0; a < 3; ++a) weight *= ((c >> a) & 1) ? u[size_t(a)] : 1.0 - u[size_t(a)];
+    w[size_t(c)] = weight;
+  }
+  return w;
+}
+
+std::array<std::array<double, 8>, 3> trilinearWeightGradients(const std::array<double, 3>& u) {
+  std::array<std::array<double, 8>, 3> g{};
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 8; ++c) {
+      double d = ((c >> a) & 1) ? 1.0 : -1.0;
+      for (int b = 0; b < 3; ++b)
+        if (b != a) d *= ((c >> b) & 1) ? u[size_t(b)] : 1.0 - u[size_t(b)];
+      g[size_t(a)][size_t(c)] = d;
+    }
+  return g;
+}
+
+std::array<uint32_t, 3> mortonDecode(uint64_t key) {
+  return {compactBits(key), compactBits(key >> 1), compactBits(key >> 2)};
+}
+
+uint64_t mortonEncode(uint32_t x, uint32_t y, uint32_t z) {
+  return spreadBits(x) | spreadBits(y) << 1 | spreadBits(z) << 2;
+}
+
+GridPoint cornerPoint(uint8_t level, uint64_t key, int corner) {
+  const auto cell = mortonDecode(key);
+  const int shift = kMaxLevel - level;
+  return {(cell[0] + uint32_t(corner & 1)) << shift,
+          (cell[1] + uint32_t((corner >> 1) & 1)) << shift,
+          (cell[2] + uint32_t((corner >> 2) & 1)) << shift};
+}
+
+CornerLayout layoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel, uint64_t chunkKey,
+                           uint8_t maxLevel) {
+  checkRoots(topology, chunkLevel, chunkKey, maxLevel);
+  CornerLayout layout;
+  layout.nodes = expandNodes(topology);
+  FlatMap<Key128, uint32_t> leafMap(layout.nodes.size() * 4), lodMap(layout.nodes.size() * 2);
+  for (SurfaceNode& node : layout.nodes)
+    for (int c = 0; c < kCorners; ++c) {
+      const GridPoint p = cornerPoint(node.level, node.key, c);
+      node.corners[c] =
+          node.isLeaf()
+              ? numberCorner(leafMap, layout.leafCorners, leafCornerKey(p), p, node.level)
+              : numberCorner(lodMap, layout.lodCorners, lodCornerKey(p, node.level), p, node.level);
+    }
+  return layout;
+}
+
+std::vector<std::byte> encodeSurfaceChunk(const SurfaceTopology& topology,
+                                          const CornerLayout& layout,
+                                          const std::vector<AttributeDesc>& schema,
+                                          const CornerValues& leafValues,
+                                          const CornerValues& lodValues) {
+  checkValueCounts(leafValues, schema, layout.leafCorners.size());
+  checkValueCounts(lodValues, schema, layout.lodCorners.size());
+  const PayloadLayout p =
+      payloadLayout(topology.rootKeys.size(), topology.childMasks.size(), layout.leafCorners.size(),
+                    layout.lodCorners.size(), schema);
+  std::vector<std::byte> out(p.size);
+  std::byte* b = out.data();
+  storeLE<uint32_t>(b + 0, uint32_t(topology.rootKeys.size()));
+  storeLE<uint32_t>(b + 4, uint32_t(topology.childMasks.size()));
+  storeLE<uint32_t>(b + 8, uint32_t(layout.leafCorners.size()));
+  storeLE<uint32_t>(b + 12, uint32_t(layout.lodCorners.size()));
+  storeLE<uint8_t>(b + 16, topology.startLevel);
+  storeLE<uint8_t>(b + 17, topology.depth);
+  for (size_t i = 0; i < topology.rootKeys.size(); ++i)
+    storeLE<uint64_t>(b + p.rootsOffset + 8 * i, topology.rootKeys[i]);
+  std::memcpy(b + p.masksOffset, topology.childMasks.data(), topology.childMasks.size());
+  size_t at = p.attributesOffset;
+  for (const AttributeDesc& a : schema) {
+    const size_t size = encodedSize(a);
+    for (const auto* part : {&leafValues, &lodValues}) {
+      const std::vector<CornerKey>& keys =
+          part == &leafValues ? layout.leafCorners : layout.lodCorners;
+      for (size_t i = 0; i < keys.size(); ++i) encodeValue(a, *part, keys[i], i, b + at + size * i);
+      at += pad4(size * keys.size());
+    }
+  }
+  return out;
+}
+
+float roundTripDistance(float f, uint8_t level, const AttributeDesc& distance) {
+  CornerValues v;
+  v.distance = {f};
+  const CornerKey key{{}, level};
+  std::array<std::byte, 16> bytes{};
+  encodeValue(distance, v, key, 0, bytes.data());
+  decodeValue(distance, bytes.data(), key, 0, v);
+  return v.distance[0];
+}
+
+namespace {
+
+[[noreturn]] void failChunk(const Reader& reader, uint32_t id, const std::string& reason) {
+  throw FileError(reader.name(), reader.chunk(id).offset,
+                  "chunk " + std::to_string(id) + ": " + reason);
+}
+
+bool allFinite(const CornerValues& v) {
+  const auto finite = [](float x) { return std::isfinite(x); };
+  if (!std::all_of(v.distance.begin(), v.distance.end(), finite)) return false;
+  for (const auto* vectors : {&v.normal, &v.color})
+    for (const auto& x : *vectors)
+      if (!std::all_of(x.begin(), x.end(), finite)) return false;
+  return std::all_of(v.occlusion.begin(), v.occlusion.end(), finite);
+}
+
+}  // namespace
+
+SurfaceChunk decodeSurfaceChunk(const Reader& reader, uint32_t id) {
+  const ChunkInfo& chunk = reader.chunk(id);
+  const auto fail = [&](const std::string& reason) { failChunk(reader, id, reason); };
+  if (chunk.kind != kSurfaceKind) fail("not a surface chunk");
+  std::vector<std::byte> payload(chunk.rawSize);
+  reader.decodePayload(id, payload);
+  if (payload.size() < kSurfaceHeaderSize) fail("surface payload is shorter than its header");
+  const std::byte* b = payload.data();
+  const uint32_t rootCount = loadLE<uint32_t>(b), nodeCount = loadLE<uint32_t>(b + 4);
+  const uint32_t leafCount = loadLE<uint32_t>(b + 8), lodCount = loadLE<uint32_t>(b + 12);
+  if (loadLE<uint16_t>(b + 18) != 0 || loadLE<uint32_t>(b + 20) != 0)
+    fail("reserved surface header bytes are not zero");
+  const std::vector<AttributeDesc>& schema = reader.header().attributes;
+  // Every count is bounded by the payload size before anything is allocated from it.
+  const uint64_t minimum = kSurfaceHeaderSize + 8ull * rootCount + nodeCount;
+  if (rootCount > nodeCount || minimum > payload.size() || leafCount > 8ull * nodeCount ||
+      lodCount > 8ull * nodeCount)
+    fail("surface header counts do not fit the payload");
+  const PayloadLayout p = payloadLayout(rootCount, nodeCount, leafCount, lodCount, schema);
+  if (p.size != payload.size())
+    fail("surface payload is " + std::to_string(payload.size()) + " bytes, its header implies " +
+         std::to_string(p.size));
+
+  SurfaceChunk out;
+  out.topology.startLevel = loadLE<uint8_t>(b + 16);
+  out.topology.depth = loadLE<uint8_t>(b + 17);
+  out.topology.rootKeys.resize(rootCount);
+  for (uint32_t i = 0; i < rootCount; ++i)
+    out.topology.rootKeys[i] = loadLE<uint64_t>(b + p.rootsOffset + 8ull * i);
+  out.topology.childMasks.resize(nodeCount);
+  std::memcpy(out.topology.childMasks.data(), b + p.masksOffset, nodeCount);
+  try {
+    out.layout = layoutSurface(out.topology, chunk.level, chunk.key, reader.header().maxLevel);
+  } catch (const std::invalid_argument& error) {
+    fail(error.what());
+  }
+  if (out.layout.leafCorners.size() != leafCount || out.layout.lodCorners.size() != lodCount)
+    fail("corner counts differ from those the nodes use");
+  resizeValues(out.leafValues, schema, leafCount);
+  resizeValues(out.lodValues, schema, lodCount);
+  size_t at = p.attributesOffset;
+  for (const AttributeDesc& a : schema) {
+    const size_t size = encodedSize(a);
+    for (CornerValues* part : {&out.leafValues, &out.lodValues}) {
+      const std::vector<CornerKey>& keys =
+          part == &out.leafValues ? out.layout.leafCorners : out.layout.lodCorners;
+      for (size_t i = 0; i < keys.size(); ++i) decodeValue(a, b + at + size * i, keys[i], i, *part);
+      at += pad4(size * keys.size());
+    }
+  }
+  if (!allFinite(out.leafValues) || !allFinite(out.lodValues)) fail("a corner value is not finite");
+  return out;
+}
+
+}  // namespace iso

@@ -1,0 +1,362 @@
+// The finest surface of a file and its queries (see surface_model.h).
+#include "iso/surface_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "iso/error.h"
+#include "iso/flat_map.h"
+#include "iso/reader.h"
+
+namespace iso {
+namespace {
+
+uint64_t locationalCode(uint8_t level, uint64_t key) { return (uint64_t{1} << (3 * level)) | key; }
+
+double sign(double v) { return v < 0.0 ? -1.0 : 1.0; }
+
+// Sort values[begin, end) of a tiny array in place (insertion sort).
+template <size_t N>
+void sortRange(std::array<double, N>& values, int begin, int end) {
+  for (int i = begin + 1; i < end; ++i)
+    for (int j = i; j > begin && values[size_t(j)] < values[size_t(j - 1)]; --j)
+      std::swap(values[size_t(j)], values[size_t(j - 1)]);
+}
+
+// The cubic g(s) = c[0] + c[1] s + c[2] s² + c[3] s³.
+double evalCubic(const std::array<double, 4>& c, double s) {
+  return ((c[3] * s + c[2]) * s + c[1]) * s + c[0];
+}
+
+// The root of g in [a, b] where g(a) and g(b) have opposite signs (Illinois false position).
+double refineRoot(const std::array<double, 4>& c, double a, double b) {
+  double ga = evalCubic(c, a), gb = evalCubic(c, b);
+  int side = 0;
+  for (int i = 0; i < 100 && b - a > 1e-15 * (1.0 + std::abs(a)); ++i) {
+    const double m = (a * gb - b * ga) / (gb - ga);
+    const double gm = evalCubic(c, m);
+    if (gm == 0.0) return m;
+    if (sign(gm) == sign(ga)) {
+      a = m;
+      ga = gm;
+      if (side == -1) gb *= 0.5;
+      side = -1;
+    } else {
+      b = m;
+      gb = gm;
+      if (side == 1) ga *= 0.5;
+      side = 1;
+    }
+  }
+  return 0.5 * (a + b);
+}
+
+// The first root of the cubic in [0, length]: split at the critical points, where g is monotonic.
+std::optional<double> firstRoot(const std::array<double, 4>& c, double length) {
+  std::array<double, 4> splits{0.0, length, length, length};
+  int count = 1;
+  const double qa = 3.0 * c[3], qb = 2.0 * c[2], qc = c[1];
+  if (std::abs(qa) > 1e-300) {
+    const double disc = qb * qb - 4.0 * qa * qc;
+    if (disc >= 0.0) {
+      const double q = -0.5 * (qb + std::copysign(std::sqrt(disc), qb));
+      const double r1 = q / qa, r2 = q != 0.0 ? qc / q : r1;
+      for (double r : {std::min(r1, r2), std::max(r1, r2)})
+        if (r > 0.0 && r < length) splits[size_t(count++)] = r;
+    }
+  } else if (std::abs(qb) > 1e-300) {
+    const double r = -qc / qb;
+    if (r > 0.0 && r < length) splits[size_t(count++)] = r;
+  }
+  splits[size_t(count)] = length;
+  sortRange(splits, 1, count);
+  for (int i = 0; i < count; ++i) {
+    const double a = splits[size_t(i)], b = splits[size_t(i + 1)];
+    const double ga = evalCubic(c, a), gb = evalCubic(c, b);
+    if (ga == 0.0) return a;
+    if (sign(ga) != sign(gb)) return gb == 0.0 ? b : refineRoot(c, a, b);
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+struct SurfaceModel::Traversal {
+  Vec3 origin, direction;
+  bool hasPrevious = false;  // the previous filled leaf ended where the next one starts
+  double previousExitT = 0.0, previousExitValue = 0.0;
+  std::optional<RayHit> hit;
+};
+
+SurfaceModel SurfaceModel::load(const Reader& reader) {
+  SurfaceModel model;
+  model.header_ = reader.header();
+  model.nodes_.push_back({});
+  model.nodes_[0].child.fill(kNoNode);
+  FlatMap<uint64_t, uint32_t> index(1024);
+  index.insert(locationalCode(0, 0), 0);
+  const auto ensureNode = [&](uint8_t level, uint64_t key, auto& self) -> uint32_t {
+    if (const uint32_t* found = index.find(locationalCode(level, key))) return *found;
+    const uint32_t parent = self(uint8_t(level - 1), key >> 3, self);
+    const uint32_t id = uint32_t(model.nodes_.size());
+    model.nodes_.push_back({});
+    model.nodes_.back().child.fill(kNoNode);
+    model.nodes_[parent].child[key & 7] = id;
+    index.insert(locationalCode(level, key), id);
+    return id;
+  };
+  struct Cut {
+    uint32_t chunk, node;
+    uint8_t mask;
+  };
+  std::vector<Cut> cuts;
+  for (const ChunkInfo& info : reader.chunks()) {
+    if (info.kind != kSurfaceKind) continue;
+    const SurfaceChunk chunk = decodeSurfaceChunk(reader, info.id);
+    const uint32_t cornerBase = uint32_t(model.corners_.distance.size());
+    const CornerValues& v = chunk.leafValues;
+    model.corners_.distance.insert(model.corners_.distance.end(), v.distance.begin(),
+                                   v.distance.end());
+    model.corners_.normal.insert(model.corners_.normal.end(), v.normal.begin(), v.normal.end());
+    model.corners_.color.insert(model.corners_.color.end(), v.color.begin(), v.color.end());
+    model.corners_.occlusion.insert(model.corners_.occlusion.end(), v.occlusion.begin(),
+                                    v.occlusion.end());
+    for (const SurfaceNode& node : chunk.layout.nodes) {
+      const uint32_t id = ensureNode(node.level, node.key, ensureNode);
+      if (node.isLeaf()) {
+        if (model.nodes_[id].leaf != kNoNode)
+          throw FileError(
+              reader.name(), info.offset,
+              "chunk " + std::to_string(info.id) + ": a leaf overlaps another chunk's leaf");
+        Leaf leaf{node.key, node.level, {}};
+        for (int c = 0; c < kCorners; ++c)
+          leaf.corners[size_t(c)] = cornerBase + node.corners[size_t(c)];
+        model.nodes_[id].leaf = uint32_t(model.leaves_.size());
+        model.leaves_.push_back(leaf);
+      } else if (node.firstChild == kNoNode) {
+        cuts.push_back({info.id, id, node.childMask});
+      }
+    }
+  }
+  for (const Node& node : model.nodes_)
+    if (node.leaf != kNoNode &&
+        std::any_of(node.child.begin(), node.child.end(), [](uint32_t c) { return c != kNoNode; }))
+      throw FileError(reader.name(), std::nullopt,
+                      "a filled leaf also has children in another chunk");
+  for (const Cut& cut : cuts)
+    for (int o = 0; o < 8; ++o)
+      if ((cut.mask >> o & 1) && model.nodes_[cut.node].child[size_t(o)] == kNoNode)
+        throw FileError(
+            reader.name(), reader.chunk(cut.chunk).offset,
+            "chunk " + std::to_string(cut.chunk) + ": a node's children are in no chunk");
+  return model;
+}
+
+uint32_t SurfaceModel::findLeaf(const Vec3& p) const {
+  std::array<uint32_t, 3> cell{};
+  for (int a = 0; a < 3; ++a) {
+    if (!(p[size_t(a)] >= 0.0 && p[size_t(a)] < 1.0)) return kNoNode;
+    cell[size_t(a)] =
+        std::min<uint32_t>(uint32_t(p[size_t(a)] * double(1u << kMaxLevel)), (1u << kMaxLevel) - 1);
+  }
+  uint32_t node = 0;
+  for (int level = 0; level < kMaxLevel; ++level) {
+    if (nodes_[node].leaf != kNoNode) return nodes_[node].leaf;
+    const int shift = kMaxLevel - 1 - level;
+    const int octant = int((cell[0] >> shift) & 1) | int((cell[1] >> shift) & 1) << 1 |
+                       int((cell[2] >> shift) & 1) << 2;
+    node = nodes_[node].child[size_t(octant)];
+    if (node == kNoNode) return kNoNode;
+  }
+  return nodes_[node].leaf;
+}
+
+SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
+  const Leaf& leaf = leaves_[leafId];
+  const auto cell = mortonDecode(leaf.key);
+  const double scale = std::ldexp(1.0, leaf.level);
+  Vec3 u{};
+  for (int a = 0; a < 3; ++a)
+    u[size_t(a)] = std::clamp(p[size_t(a)] * scale - double(cell[size_t(a)]), 0.0, 1.0);
+  const std::array<double, 8> w = trilinearWeights(u);
+  const std::array<std::array<double, 8>, 3> dw = trilinearWeightGradients(u);
+  SurfaceEval e;
+  for (int c = 0; c < 8; ++c) {
+    const uint32_t corner = leaf.corners[size_t(c)];
+    const double f = corners_.distance[corner];
+    e.distance += w[size_t(c)] * f;
+    for (int a = 0; a < 3; ++a) e.gradient[size_t(a)] += dw[size_t(a)][size_t(c)] * f * scale;
+    for (int k = 0; k < 3; ++k) {
+      if (hasNormals())
+        e.normal[size_t(k)] += float(w[size_t(c)]) * corners_.normal[corner][size_t(k)];
+      if (hasColors())
+        e.color[size_t(k)] += float(w[size_t(c)]) * corners_.color[corner][size_t(k)];
+    }
+  }
+  if (!hasNormals())
+    for (int k = 0; k < 3; ++k) e.normal[size_t(k)] = float(e.gradient[size_t(k)]);
+  const float length =
+      std::sqrt(e.normal[0] * e.normal[0] + e.normal[1] * e.normal[1] + e.normal[2] * e.normal[2]);
+  if (length > 0.0f)
+    for (float& n : e.normal) n /= length;
+  return e;
+}
+
+bool SurfaceModel::intersectLeaf(uint32_t leafId, double t0, double t1, Traversal& state) const {
+  const Leaf& leaf = leaves_[leafId];
+  const auto cell = mortonDecode(leaf.key);
+  const double scale = std::ldexp(1.0, leaf.level);
+  // Local coordinates along the ray: u(s) = a + b s with s = t - t0.
+  std::array<double, 3> a{}, b{};
+  for (int k = 0; k < 3; ++k) {
+    a[size_t(k)] = (state.origin[size_t(k)] + t0 * state.direction[size_t(k)]) * scale -
+                   double(cell[size_t(k)]);
+    b[size_t(k)] = state.direction[size_t(k)] * scale;
+  }
+  std::array<double, 4> g{};  // the trilinear along the ray, a cubic in s
+  for (int c = 0; c < 8; ++c) {
+    std::array<double, 4> poly{corners_.distance[leaf.corners[size_t(c)]], 0.0, 0.0, 0.0};
+    for (int k = 0; k < 3; ++k) {
+      const double p0 = ((c >> k) & 1) ? a[size_t(k)] : 1.0 - a[size_t(k)];
+      const double p1 = ((c >> k) & 1) ? b[size_t(k)] : -b[size_t(k)];
+      for (int d = 3; d >= 0; --d)
+        poly[size_t(d)] = poly[size_t(d)] * p0 + (d > 0 ? poly[size_t(d - 1)] * p1 : 0.0);
+    }
+    for (int d = 0; d < 4; ++d) g[size_t(d)] += poly[size_t(d)];
+  }
+  const double length = t1 - t0;
+  const double entryValue = g[0];
+  if (state.hasPrevious && std::abs(state.previousExitT - t0) <= 1e-12 * (1.0 + std::abs(t0)) &&
+      sign(state.previousExitValue) != sign(entryValue)) {
+    state.hit = RayHit{t0, leafId};
+    return true;
+  }
+  if (std::optional<double> s = firstRoot(g, length)) {
+    state.hit = RayHit{t0 + *s, leafId};
+    return true;
+  }
+  state.hasPrevious = true;
+  state.previousExitT = t1;
+  state.previousExitValue = evalCubic(g, length);
+  return false;
+}
+
+bool SurfaceModel::intersectNode(uint32_t nodeId, uint8_t level,
+                                 const std::array<uint32_t, 3>& cell, double t0, double t1,
+                                 Traversal& state) const {
+  const Node& node = nodes_[nodeId];
+  if (node.leaf != kNoNode) return intersectLeaf(node.leaf, t0, t1, state);
+  const double size = std::ldexp(1.0, -level);
+  std::array<double, 5> splits{t0, t1, t1, t1, t1};
+  int count = 1;
+  for (int k = 0; k < 3; ++k) {
+    if (state.direction[size_t(k)] == 0.0) continue;
+    const double mid = (double(cell[size_t(k)]) + 0.5) * size;
+    const double t = (mid - state.origin[size_t(k)]) / state.direction[size_t(k)];
+    if (t > t0 && t < t1) splits[size_t(count++)] = t;
+  }
+  splits[size_t(count)] = t1;
+  sortRange(splits, 1, count);
+  for (int i = 0; i < count; ++i) {
+    const double ta = splits[size_t(i)], tb = splits[size_t(i + 1)];
+    if (!(tb > ta)) continue;
+    const double tm = 0.5 * (ta + tb);
+    int octant = 0;
+    std::array<uint32_t, 3> childCell{};
+    for (int k = 0; k < 3; ++k) {
+      const double mid = (double(cell[size_t(k)]) + 0.5) * size;
+      const int upper = state.origin[size_t(k)] + tm * state.direction[size_t(k)] >= mid ? 1 : 0;
+      octant |= upper << k;
+      childCell[size_t(k)] = 2 * cell[size_t(k)] + uint32_t(upper);
+    }
+    const uint32_t child = node.child[size_t(octant)];
+    if (child == kNoNode) {
+      state.hasPrevious = false;  // empty space breaks the chain of leaves
+      continue;
+    }
+    if (intersectNode(child, uint8_t(level + 1), childCell, ta, tb, state)) return true;
+  }
+  return false;
+}
+
+std::optional<RayHit> SurfaceModel::intersect(const Vec3& origin, const Vec3& direction,
+                                              double tMin, double tMax) const {
+  // Clip the ray to the frame's cube [0, 1]^3.
+  double t0 = tMin, t1 = tMax;
+  for (int k = 0; k < 3; ++k) {
+    if (direction[size_t(k)] == 0.0) {
+      if (origin[size_t(k)] < 0.0 || origin[size_t(k)] > 1.0) return std::nullopt;
+      continue;
+    }
+    double ta = (0.0 - origin[size_t(k)]) / direction[size_t(k)],
+           tb = (1.0 - origin[size_t(k)]) / direction[size_t(k)];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  if (!(t0 < t1)) return std::nullopt;
+  Traversal state;
+  state.origin = origin;
+  state.direction = direction;
+  intersectNode(0, 0, {0, 0, 0}, t0, t1, state);
+  return state.hit;
+}
+
+std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
+  Vec3 x = p;
+  for (int step = 0; step < 64; ++step) {
+    const uint32_t leaf = findLeaf(x);
+    if (leaf == kNoNode) return std::nullopt;
+    const SurfaceEval e = evaluate(leaf, x);
+    const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] +
+                      e.gradient[2] * e.gradient[2];
+    if (!(g2 > 0.0)) return std::nullopt;
+    const double cellSize = std::ldexp(1.0, -leaves_[leaf].level);
+    if (std::abs(e.distance) <= 1e-7 * cellSize) return x;
+    double scale = e.distance / g2;
+    const double stepLength = std::abs(scale) * std::sqrt(g2);
+    if (stepLength > 0.5 * cellSize) scale *= 0.5 * cellSize / stepLength;  // stay near the leaf
+    for (int k = 0; k < 3; ++k) x[size_t(k)] -= scale * e.gradient[size_t(k)];
+  }
+  return std::nullopt;
+}
+
+std::vector<ZeroSetSample> SurfaceModel::sampleZeroSet(int linesPerEdge) const {
+  std::vector<ZeroSetSample> samples;
+  const int m = std::max(1, linesPerEdge);
+  for (uint32_t id = 0; id < leaves_.size(); ++id) {
+    const Leaf& leaf = leaves_[id];
+    const auto cell = mortonDecode(leaf.key);
+    const double size = std::ldexp(1.0, -leaf.level);
+    for (int axis = 0; axis < 3; ++axis) {
+      const int ua = (axis + 1) % 3, ub = (axis + 2) % 3;
+      for (int i = 0; i < m; ++i)
+        for (int j = 0; j < m; ++j) {
+          Vec3 lo{}, hi{};
+          lo[size_t(ua)] = hi[size_t(ua)] = (double(cell[size_t(ua)]) + (i + 0.5) / m) * size;
+          lo[size_t(ub)] = hi[size_t(ub)] = (double(cell[size_t(ub)]) + (j + 0.5) / m) * size;
+          lo[size_t(axis)] = double(cell[size_t(axis)]) * size;
+          hi[size_t(axis)] = lo[size_t(axis)] + size;
+          const double f0 = evaluate(id, lo).distance, f1 = evaluate(id, hi).distance;
+          if (sign(f0) == sign(f1) || f0 == f1)
+            continue;  // linear along the axis: one root at most
+          Vec3 x = lo;
+          x[size_t(axis)] += size * f0 / (f0 - f1);
+          const SurfaceEval e = evaluate(id, x);
+          const double gl =
+              std::sqrt(e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] +
+                        e.gradient[2] * e.gradient[2]);
+          if (!(gl > 0.0)) continue;
+          const double na = std::abs(e.gradient[size_t(axis)]) / gl;
+          if (na < std::abs(e.gradient[size_t(ua)]) / gl ||
+              na < std::abs(e.gradient[size_t(ub)]) / gl)
+            continue;
+          samples.push_back({x, (size / m) * (size / m) / na, id});
+        }
+    }
+  }
+  return samples;
+}
+
+}  // namespace iso

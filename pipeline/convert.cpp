@@ -1,0 +1,280 @@
+// The in-core conversion: every stage of pipeline/stages.h in order, timed, and the report.
+#include "convert.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <glm/geometric.hpp>
+#include <map>
+#include <numeric>
+
+#include "iso/reader.h"
+#include "iso/surface_model.h"
+#include "iso/version.h"
+#include "knn.h"
+#include "measure.h"
+
+namespace iso {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr size_t kAccuracySamples = 100000;
+
+class StageTimer {
+ public:
+  StageTimer(nlohmann::json& stages, const ConvertHooks& hooks) : stages_(stages), hooks_(hooks) {}
+  void end(const std::string& name) {
+    const auto now = Clock::now();
+    const double seconds = std::chrono::duration<double>(now - start_).count();
+    stages_.push_back({{"name", name}, {"seconds", seconds}});
+    if (hooks_.onStage) hooks_.onStage(name, seconds);
+    start_ = now;
+  }
+
+ private:
+  nlohmann::json& stages_;
+  const ConvertHooks& hooks_;
+  Clock::time_point start_ = Clock::now();
+};
+
+void validate(const BuildOptions& o) {
+  const auto require = [](bool ok, const char* what) {
+    if (!ok) throw std::invalid_argument(what);
+  };
+  require(o.neighbors >= 3 && o.neighbors <= 64, "--neighbors must be 3 to 64");
+  require(std::isfinite(o.smoothing) && o.smoothing > 0.0, "--smoothing must be positive");
+  require(o.leafPoints >= 1, "--leaf-points must be at least 1");
+  require(o.maxDepth >= 1 && o.maxDepth <= 20, "--max-depth must be 1 to 20");
+  require(std::isfinite(o.tolerance) && o.tolerance >= 0.0, "--tolerance must be 0 or more");
+  require(o.normalBits == 8 || o.normalBits == 12, "--normal-bits must be 8 or 12");
+  require(o.chunkNodes >= 64, "--chunk-nodes must be at least 64");
+  require(o.zstdLevel >= 1 && o.zstdLevel <= 19, "--zstd-level must be 1 to 19");
+}
+
+// Whether all points lie on one line (then they define no surface).
+bool isCollinear(const PointSet& points) {
+  const auto farthestFrom = [&](const glm::vec3& from) {
+    size_t best = 0;
+    float bestD = -1.0f;
+    for (size_t i = 0; i < points.size(); ++i) {
+      const float d = glm::length(points.position[i] - from);
+      if (d > bestD) {
+        bestD = d;
+        best = i;
+      }
+    }
+    return best;
+  };
+  const glm::dvec3 a(points.position[farthestFrom(points.position[0])]);
+  const glm::dvec3 b(points.position[farthestFrom(glm::vec3(a))]);
+  const double length = glm::length(b - a);
+  if (length == 0.0) return true;
+  const glm::dvec3 d = (b - a) / length;
+  for (const glm::vec3& p : points.position) {
+    const glm::dvec3 v = glm::dvec3(p) - a;
+    if (glm::length(v - glm::dot(v, d) * d) > 1e-6 * length) return false;
+  }
+  return true;
+}
+
+struct Prepared {
+  Frame frame;
+  PointSet points;
+  size_t duplicates = 0;
+};
+
+Prepared prepare(const PointCloud& cloud) {
+  Prepared p;
+  p.frame = chooseFrame(cloud);
+  p.points = makePointSet(cloud, p.frame);
+  sortByKey(p.points);
+  p.duplicates = mergeDuplicates(p.points);
+  if (p.points.size() < 3)
+    throw ConvertError("a surface needs at least 3 distinct points; the input has " +
+                       std::to_string(p.points.size()));
+  if (isCollinear(p.points))
+    throw ConvertError("all points lie on one line: they define no surface");
+  return p;
+}
+
+PointCloud withoutSources(const PointCloud& cloud, const PointSet& points,
+                          const std::vector<uint8_t>& flagged) {
+  std::vector<uint8_t> drop(cloud.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i)
+    if (flagged[i]) drop[points.source[i]] = 1;
+  PointCloud out;
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    if (drop[i]) continue;
+    out.positions.push_back(cloud.positions[i]);
+    if (cloud.hasNormals()) out.normals.push_back(cloud.normals[i]);
+    if (cloud.hasColors()) out.colors.push_back(cloud.colors[i]);
+  }
+  return out;
+}
+
+nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t passive,
+                          size_t splits) {
+  std::map<int, uint64_t> leavesPerLevel, passivePerLevel;
+  uint64_t internal = 0, leaves = 0, passiveLeaves = 0;
+  int maxLevel = 0;
+  for (const OctreeNode& n : tree.nodes) {
+    if (n.kind == NodeKind::Internal) ++internal;
+    if (!n.isFilled()) continue;
+    ++leaves;
+    ++leavesPerLevel[n.level];
+    if (n.kind == NodeKind::Passive) {
+      ++passiveLeaves;
+      ++passivePerLevel[n.level];
+    }
+    maxLevel = std::max(maxLevel, int(n.level));
+  }
+  nlohmann::json perLevel = nlohmann::json::object();
+  for (const auto& [level, count] : leavesPerLevel) perLevel[std::to_string(level)] = count;
+  return {{"internal_nodes", internal},      {"leaves", leaves},
+          {"passive_leaves", passiveLeaves}, {"leaves_per_level", perLevel},
+          {"max_level", maxLevel},           {"passive_marked", passive},
+          {"balance_splits", splits},        {"patches_tested", stats.testedPatches},
+          {"thin_splits", stats.thinSplits}};
+}
+
+}  // namespace
+
+uint64_t peakRssBytes() {
+  FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  unsigned long long kib = 0;
+  while (std::fgets(line, sizeof line, f))
+    if (std::sscanf(line, "VmHWM: %llu kB", &kib) == 1) break;
+  std::fclose(f);
+  return kib * 1024;
+}
+
+nlohmann::json optionsJson(const BuildOptions& o) {
+  const char* orient = o.orient == OrientMode::Up
+                           ? "up"
+                           : (o.orient == OrientMode::Propagate ? "propagate" : "auto");
+  return {{"neighbors", o.neighbors},
+          {"smoothing", o.smoothing},
+          {"fit", o.fit == FitMode::Plane ? "plane" : "sphere"},
+          {"orient", orient},
+          {"leaf_points", o.leafPoints},
+          {"max_depth", o.maxDepth},
+          {"tolerance", o.tolerance},
+          {"normal_bits", o.normalBits},
+          {"chunk_nodes", o.chunkNodes},
+          {"zstd_level", o.zstdLevel},
+          {"remove_outliers", o.removeOutliers}};
+}
+
+nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
+                            const BuildOptions& options, const nlohmann::json& inputs,
+                            const ConvertHooks& hooks) {
+  validate(options);
+  if (input.size() == 0) throw ConvertError("no points to convert");
+  const auto started = Clock::now();
+  nlohmann::json report;
+  report["stages"] = nlohmann::json::array();
+  StageTimer timer(report["stages"], hooks);
+
+  const PointCloud* cloud = &input;
+  PointCloud filtered;
+  Prepared prepared = prepare(*cloud);
+  timer.end("prepare");
+  auto tree = std::make_unique<KdTree>(prepared.points.position);
+  Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
+  size_t outliers = 0;
+  if (options.removeOutliers) {
+    const std::vector<uint8_t> flagged = findOutliers(prepared.points, neighbors);
+    outliers = size_t(std::count(flagged.begin(), flagged.end(), uint8_t{1}));
+    if (outliers > 0) {  // choose the frame again without them: far outliers waste precision
+      filtered = withoutSources(*cloud, prepared.points, flagged);
+      cloud = &filtered;
+      prepared = prepare(*cloud);
+      tree = std::make_unique<KdTree>(prepared.points.position);
+      neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
+    }
+  }
+  PointSet& points = prepared.points;
+  const Frame& frame = prepared.frame;
+  const RadiusStats radii = estimateRadii(points, neighbors);
+  timer.end("radii");
+
+  std::vector<uint8_t> wasEstimated(points.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i)
+    wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
+  estimateNormals(points, neighbors);
+  const NormalStats normals = orientNormals(points, neighbors, options.orient, wasEstimated);
+  timer.end("normals");
+
+  const SdfEvaluator sdf(points, *tree, options.smoothing, options.fit);
+  OctreeStats octreeStats;
+  CornerCache cornerCache(points.size() / 2);
+  Octree octree = buildOctree(points, sdf, options, radii.meanSpacing, cornerCache, &octreeStats);
+  timer.end("octree");
+  const size_t passive = markPassiveLeaves(octree, points);
+  const size_t splits = balanceOctree(octree, points);
+  timer.end("passive+balance");
+  CornerField corners = sampleLeafCorners(octree, sdf, cornerCache);
+  const std::vector<HangingCorner> hanging = findHangingCorners(octree, corners);
+  snapHangingCorners(corners, hanging);
+  timer.end("corners");
+  const LodField lod = sampleLodCorners(octree, points, options);
+  timer.end("lod");
+
+  const double spacing = radii.meanSpacing * frame.size;
+  report["points"] = {{"input", input.size()},
+                      {"duplicates_merged", prepared.duplicates},
+                      {"outliers_removed", outliers},
+                      {"used", points.size()}};
+  report["normals"] = {{"estimated", normals.estimated},
+                       {"from_input", points.size() - normals.estimated},
+                       {"flipped_to_agree", normals.flipped}};
+  report["mean_spacing"] = spacing;
+  report["median_radius"] = radii.medianRadius * frame.size;
+  report["octree"] = octreeJson(octree, octreeStats, passive, splits);
+  report["corners"] = {
+      {"leaf", corners.point.size()}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
+
+  WriteInput write{&octree, &points, &corners,           &hanging, &lod,
+                   frame,   "{}",    points.hasColors(), options};
+  const auto metadata = [&](const nlohmann::json& r) {
+    return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
+                          {"inputs", inputs},
+                          {"parameters", optionsJson(options)},
+                          {"report", r}};
+  };
+  write.metadata = metadata(report).dump();
+  writeSurfaceFile(
+      output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
+        timer.end("write");
+        const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
+        report["file"] = {
+            {"chunks", stats.chunks},
+            {"bytes_without_metadata", stats.fileBytesWithoutMetadata},
+            {"bytes_per_leaf",
+             double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
+            {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(input.size())}};
+        const SurfaceModel surface = SurfaceModel::load(Reader::open(written));
+        const std::vector<glm::dvec3> sample = samplePoints(*cloud, kAccuracySamples);
+        const DistanceStats d = pointsToZeroSet(surface, frame, sample);
+        report["accuracy"] = {{"samples", d.samples},
+                              {"unprojected", d.unprojected},
+                              {"rms", d.rms},
+                              {"max", d.max},
+                              {"mean", d.mean},
+                              {"rms_over_spacing", d.rms / spacing},
+                              {"max_over_spacing", d.max / spacing}};
+        timer.end("accuracy");
+        const double seconds = std::chrono::duration<double>(Clock::now() - started).count();
+        report["seconds"] = seconds;
+        report["points_per_second"] = double(input.size()) / seconds;
+        report["peak_rss_bytes"] = peakRssBytes();
+        return metadata(report).dump();
+      });
+  return report;
+}
+
+}  // namespace iso

@@ -1,0 +1,32 @@
+// Distances between points and the zero set of an .iso surface, in world units.
+#pragma once
+
+#include <cstdint>
+#include <glm/vec3.hpp>
+#include <span>
+#include <vector>
+
+#include "io/point_cloud.h"
+#include "iso/format.h"
+#include "iso/surface_model.h"
+
+namespace iso {
+
+struct DistanceStats {
+  uint64_t samples = 0;      // points measured
+  uint64_t unprojected = 0;  // points whose projection found no zero set (not in the statistics)
+  double mean = 0.0, rms = 0.0, max = 0.0;
+  std::vector<double> values;  // per projected point, when asked for
+};
+
+// Distance of each point (world coordinates) to the zero set, by projection onto it.
+DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
+                              std::span<const glm::dvec3> points, bool keepValues = false);
+
+// Every step-th point, at most `limit` of them, spread over the whole cloud.
+std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit);
+
+// The mean distance from each point to its nearest other point (exact duplicates skipped).
+double meanNearestSpacing(const PointCloud& cloud);
+
+}  // namespace iso

@@ -1,0 +1,278 @@
+// The adaptive octree (specs/pipeline.md, "Octree"). A node is subdivided while it is above the
+// maximum depth and
+//   - it holds more than leafPoints points and its own patch (the trilinear interpolation of its
+//     8 corner distances) misses its points by more than the tolerance, or leaves surface where
+//     there are no points (an open boundary, a hole: "coverage"), or
+//   - its points have opposing normals (two sheets, a thin part): regardless of the point count,
+//     because a trilinear patch has at most one zero crossing along an axis.
+// Flat regions therefore stay coarse. Levels are built one at a time; the decisions of a level run
+// in parallel.
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
+
+#include "stages.h"
+
+namespace iso {
+namespace {
+
+constexpr uint32_t kMaxTestedPoints = 4096;  // larger nodes subdivide without a patch test
+constexpr float kLeafSigmaFraction = 0.1f;   // σ floor of leaf corners, in leaf edges
+constexpr int kCoverageLines = 4;            // zero-set samples per patch edge for coverage
+
+double cellSize(uint8_t level) { return std::ldexp(1.0, -level); }
+
+glm::dvec3 cellOrigin(uint8_t level, uint64_t key) {
+  const auto c = mortonDecode(key);
+  return glm::dvec3(c[0], c[1], c[2]) * cellSize(level);
+}
+
+// Whether some point's normal opposes the points' mean normal (or the normals cancel).
+bool hasOpposingNormals(const PointSet& points, const OctreeNode& node) {
+  glm::vec3 mean(0.0f);
+  for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i)
+    mean += points.normal[i] * points.weight[i];
+  const float length = glm::length(mean);
+  if (!(length > 1e-6f)) return node.pointCount() > 1;
+  mean /= length;
+  for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i)
+    if (glm::dot(points.normal[i], mean) < -0.5f) return true;
+  return false;
+}
+
+Patch leafPatch(const OctreeNode& node, const CornerCache& cache) {
+  Patch patch(node.level, node.key);
+  for (int c = 0; c < 8; ++c)
+    patch.distance[size_t(c)] =
+        cache.find(lodKey(node.level, cornerPoint(node.level, node.key, c)))->distance;
+  return patch;
+}
+
+// Whether a node needs a patch test, or the answer without one.
+enum class Verdict : uint8_t { Leaf, Subdivide, Test };
+
+Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const BuildOptions& options) {
+  if (node.level >= options.maxDepth) return Verdict::Leaf;
+  if (hasOpposingNormals(points, node)) return Verdict::Subdivide;
+  if (node.pointCount() <= options.leafPoints) return Verdict::Leaf;
+  if (node.pointCount() > kMaxTestedPoints) return Verdict::Subdivide;
+  return Verdict::Test;
+}
+
+// Evaluate the corners of the nodes to be tested that the cache does not hold yet.
+void fillCache(const Octree& tree, const std::vector<uint32_t>& frontier,
+               const std::vector<Verdict>& verdict, const SdfEvaluator& sdf, CornerCache& cache) {
+  std::vector<std::pair<Key128, glm::dvec3>> missing;
+  for (size_t i = 0; i < frontier.size(); ++i) {
+    if (verdict[i] != Verdict::Test) continue;
+    const OctreeNode& node = tree.nodes[frontier[i]];
+    for (int c = 0; c < kCorners; ++c) {
+      const GridPoint p = cornerPoint(node.level, node.key, c);
+      const Key128 key = lodKey(node.level, p);
+      if (cache.insert(key, CornerSample{}).second)
+        missing.push_back({key, glm::dvec3(p.x, p.y, p.z) * std::ldexp(1.0, -kMaxLevel)});
+    }
+  }
+  std::vector<CornerSample> values(missing.size());
+  const uint8_t level = frontier.empty() ? 0 : tree.nodes[frontier[0]].level;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, missing.size(), 64),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i)
+                        values[i] = sdf.evaluate(missing[i].second, leafSigmaFloor(level));
+                    });
+  for (size_t i = 0; i < missing.size(); ++i) *cache.find(missing[i].first) = values[i];
+}
+
+// Whether every zero crossing of the patch along a grid of lines lies within the radius of
+// influence of its nearest point: surface only where points are.
+bool isCovered(const Patch& patch, const SdfEvaluator& sdf, const PointSet& points,
+               const OctreeNode& node) {
+  glm::vec3 mean(0.0f);
+  for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) mean += points.normal[i];
+  const glm::vec3 a = glm::abs(mean);
+  const int axis = a.x >= a.y && a.x >= a.z ? 0 : (a.y >= a.z ? 1 : 2);
+  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+  for (int i = 0; i < kCoverageLines; ++i)
+    for (int j = 0; j < kCoverageLines; ++j) {
+      glm::dvec3 lo = patch.origin, hi = patch.origin;
+      lo[u] = hi[u] = patch.origin[u] + (i + 0.5) / kCoverageLines * patch.size;
+      lo[v] = hi[v] = patch.origin[v] + (j + 0.5) / kCoverageLines * patch.size;
+      hi[axis] += patch.size;
+      const double f0 = patch.value(lo, nullptr), f1 = patch.value(hi, nullptr);
+      if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) continue;
+      glm::dvec3 x = lo;
+      x[axis] += patch.size * f0 / (f0 - f1);
+      float distance = 0.0f;
+      const uint32_t nearest = sdf.nearest(x, distance);
+      if (distance > points.radius[nearest]) return false;
+    }
+  return true;
+}
+
+bool failsPatchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
+                    const CornerCache& cache, double tolerance) {
+  const Patch patch = leafPatch(node, cache);
+  return patch.maxPointDistance(points, node.pointBegin, node.pointEnd) > tolerance ||
+         !isCovered(patch, sdf, points, node);
+}
+
+float maxRadiusOf(const PointSet& points, uint32_t begin, uint32_t end) {
+  float r = 0.0f;
+  for (uint32_t i = begin; i < end; ++i) r = std::max(r, points.radius[i]);
+  return r;
+}
+
+}  // namespace
+
+float leafSigmaFloor(uint8_t level) { return kLeafSigmaFraction * float(std::ldexp(1.0, -level)); }
+
+Patch::Patch(uint8_t level, uint64_t key) : origin(cellOrigin(level, key)), size(cellSize(level)) {}
+
+double Patch::value(const glm::dvec3& p, glm::dvec3* gradient) const {
+  const std::array<double, 3> u = {std::clamp((p.x - origin.x) / size, 0.0, 1.0),
+                                   std::clamp((p.y - origin.y) / size, 0.0, 1.0),
+                                   std::clamp((p.z - origin.z) / size, 0.0, 1.0)};
+  const auto w = trilinearWeights(u);
+  double f = 0.0;
+  for (int c = 0; c < 8; ++c) f += w[size_t(c)] * distance[size_t(c)];
+  if (gradient) {
+    const auto dw = trilinearWeightGradients(u);
+    *gradient = glm::dvec3(0.0);
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 8; ++c)
+        (*gradient)[a] += dw[size_t(a)][size_t(c)] * distance[size_t(c)] / size;
+  }
+  return f;
+}
+
+double Patch::maxPointDistance(const PointSet& points, uint32_t begin, uint32_t end) const {
+  double worst = 0.0;
+  for (uint32_t i = begin; i < end; ++i) {
+    glm::dvec3 gradient;
+    const double f = value(glm::dvec3(points.position[i]), &gradient);
+    const double g = glm::length(gradient);
+    worst =
+        std::max(worst, g > 1e-12 ? std::abs(f) / g : size);  // a flat patch: as far as its cell
+  }
+  return worst;
+}
+
+uint32_t Octree::find(uint8_t level, uint64_t key) const {
+  uint32_t node = 0;
+  for (int l = 0; l < level; ++l) {
+    if (nodes[node].kind != NodeKind::Internal) return node;
+    node = nodes[node].firstChild + uint32_t((key >> (3 * (level - 1 - l))) & 7);
+  }
+  return node;
+}
+
+void Octree::split(uint32_t id, const PointSet& points) {
+  const OctreeNode parent = nodes[id];
+  const uint32_t first = uint32_t(nodes.size());
+  const int shift = 3 * (kMaxLevel - parent.level - 1);
+  uint32_t begin = parent.pointBegin;
+  for (uint64_t o = 0; o < 8; ++o) {
+    OctreeNode child;
+    child.key = parent.key << 3 | o;
+    child.level = uint8_t(parent.level + 1);
+    const auto end =
+        std::partition_point(points.key.begin() + begin, points.key.begin() + parent.pointEnd,
+                             [&](uint64_t k) { return (k >> shift) <= child.key; });
+    child.pointBegin = begin;
+    child.pointEnd = uint32_t(end - points.key.begin());
+    child.kind = child.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
+    child.maxRadius = maxRadiusOf(points, child.pointBegin, child.pointEnd);
+    begin = child.pointEnd;
+    nodes.push_back(child);
+  }
+  nodes[id].kind = NodeKind::Internal;
+  nodes[id].firstChild = first;
+}
+
+void Octree::updateMaxRadius(const PointSet& points) {
+  for (size_t i = nodes.size(); i-- > 0;) {
+    OctreeNode& node = nodes[i];
+    if (node.kind == NodeKind::Internal) {
+      node.maxRadius = 0.0f;
+      for (uint32_t c = 0; c < 8; ++c)
+        node.maxRadius = std::max(node.maxRadius, nodes[node.firstChild + c].maxRadius);
+    } else {
+      node.maxRadius = maxRadiusOf(points, node.pointBegin, node.pointEnd);
+    }
+  }
+}
+
+void Octree::forEachPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
+                              const std::function<void(uint32_t)>& f) const {
+  const auto boxDistance = [&](const glm::dvec3& a, const glm::dvec3& b) {
+    const glm::dvec3 d = glm::max(glm::max(lo - b, a - hi), glm::dvec3(0.0));
+    return glm::length(d);
+  };
+  std::vector<uint32_t> stack = {0};
+  while (!stack.empty()) {
+    const OctreeNode& node = nodes[stack.back()];
+    stack.pop_back();
+    if (node.pointCount() == 0) continue;
+    const glm::dvec3 origin = cellOrigin(node.level, node.key);
+    if (boxDistance(origin, origin + cellSize(node.level)) > node.maxRadius) continue;
+    if (node.kind == NodeKind::Internal) {
+      for (uint32_t c = 0; c < 8; ++c) stack.push_back(node.firstChild + c);
+      continue;
+    }
+    for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) {
+      const glm::dvec3 p(points.position[i]);
+      if (boxDistance(p, p) <= points.radius[i]) f(i);
+    }
+  }
+}
+
+Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
+                   double meanSpacing, CornerCache& cache, OctreeStats* statsOut) {
+  Octree tree;
+  OctreeNode root;
+  root.pointEnd = uint32_t(points.size());
+  root.kind = root.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
+  tree.nodes.push_back(root);
+  const double tolerance = options.tolerance * meanSpacing;
+  std::vector<uint32_t> frontier = {0};
+  OctreeStats stats;
+  while (!frontier.empty()) {  // one level at a time
+    std::vector<Verdict> verdict(frontier.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 64),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          verdict[i] = quickVerdict(tree.nodes[frontier[i]], points, options);
+                      });
+    fillCache(tree, frontier, verdict, sdf, cache);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          if (verdict[i] == Verdict::Test)
+                            verdict[i] = failsPatchTest(tree.nodes[frontier[i]], points, sdf, cache,
+                                                        tolerance)
+                                             ? Verdict::Subdivide
+                                             : Verdict::Leaf;
+                      });
+    std::vector<uint32_t> next;
+    for (size_t i = 0; i < frontier.size(); ++i) {
+      const OctreeNode& node = tree.nodes[frontier[i]];
+      if (node.pointCount() > options.leafPoints && node.pointCount() <= kMaxTestedPoints &&
+          node.level < options.maxDepth)
+        ++stats.testedPatches;
+      if (verdict[i] != Verdict::Subdivide) continue;
+      if (node.pointCount() <= options.leafPoints) ++stats.thinSplits;
+      tree.split(frontier[i], points);
+      const uint32_t first = tree.nodes[frontier[i]].firstChild;
+      for (uint32_t c = 0; c < 8; ++c)
+        if (tree.nodes[first + c].kind == NodeKind::Leaf) next.push_back(first + c);
+    }
+    frontier.swap(next);
+  }
+  tree.updateMaxRadius(points);
+  if (statsOut) *statsOut = stats;
+  return tree;
+}
+
+}  // namespace iso

@@ -1,0 +1,268 @@
+// The stages that turn points into an Implicit Surface Octree, one file each, in pipeline order:
+//
+//   frame.cpp     world → frame units, Morton keys, sort, merge exact duplicates
+//   radii.cpp     radius of influence r_i from k nearest neighbours, outliers, mean spacing
+//   normals.cpp   PCA normals where the input has none (or invalid ones)
+//   orient.cpp    consistent orientation of normals; repair of flipped input normals
+//   sdf.cpp       the signed distance estimator at a corner (truncated Gaussian plane fit)
+//   octree.cpp    adaptive octree: point count, error-driven tolerance, coverage, thin sheets
+//   passive.cpp   passive leaves: empty cells inside a point's disk of influence
+//   balance.cpp   2:1 balance between face-, edge- and corner-adjacent filled leaves
+//   corners.cpp   leaf corner sampling: each distinct corner evaluated once
+//   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
+//   lod.cpp       level of detail: corners of internal nodes from point proxies, chunk errors
+//   chunks.cpp    cutting the octree into file chunks, quantization, writing through format/
+//
+// The math, with the paper's equations and every deviation from them, is in specs/pipeline.md.
+// All stages work in frame units: the frame's cube is [0, 1)^3.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <glm/vec3.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "io/point_cloud.h"
+#include "iso/flat_map.h"
+#include "iso/format.h"
+#include "iso/surface.h"
+
+namespace iso {
+
+class KdTree;
+
+enum class OrientMode { Auto, Up, Propagate };
+// The local surface fitted at a corner: the paper's plane, or an algebraic sphere (APSS,
+// Guennebaud & Gross 2007), which has no curvature bias (specs/pipeline.md measures both).
+enum class FitMode { Plane, Sphere };
+
+struct BuildOptions {
+  int neighbors = 10;      // k of the k-NN radius r_i (and of PCA normals)
+  double smoothing = 1.0;  // σ_i = smoothing · r_i
+  FitMode fit = FitMode::Sphere;
+  OrientMode orient = OrientMode::Auto;
+  uint32_t leafPoints = 8;      // a node with more points may be subdivided
+  int maxDepth = 20;            // deepest octree level (at most 20)
+  double tolerance = 0.25;      // allowed patch error, in mean point spacings
+  int normalBits = 8;           // octahedral normal bits per component: 8 or 12
+  uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
+  int zstdLevel = 3;
+  bool removeOutliers = true;
+};
+
+// The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
+struct PointSet {
+  std::vector<glm::vec3> position;
+  std::vector<glm::vec3> normal;  // unit length, or zero where unknown; empty before normals exist
+  std::vector<glm::vec3> color;   // linear RGB; empty when the input has none
+  std::vector<float> weight;      // input points merged into this one (exact duplicates)
+  std::vector<float> radius;      // radius of influence r_i
+  std::vector<uint64_t> key;      // Morton key at kMaxLevel
+  std::vector<uint32_t> source;   // index of the (first) input point
+  size_t size() const { return position.size(); }
+  bool hasColors() const { return !color.empty(); }
+};
+
+// ---- frame.cpp
+// The cube around the points, grown so that surfaces reaching past the outermost points stay
+// inside; a degenerate extent (one point, a plane) still gives a positive size.
+Frame chooseFrame(const PointCloud& cloud);
+// Frame-unit points with keys; normals copied (renormalized; invalid ones set to zero).
+PointSet makePointSet(const PointCloud& cloud, const Frame& frame);
+glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
+void sortByKey(PointSet& points);
+// Merge points with identical positions into one (weights add, normals and colors average);
+// returns how many were merged away. Requires sorted points.
+size_t mergeDuplicates(PointSet& points);
+
+// ---- radii.cpp
+struct Neighbors {  // the k nearest other points of every point
+  int k = 0;
+  std::vector<uint32_t> index;  // k per point
+  std::vector<float> distance;  // k per point, increasing
+};
+Neighbors findNeighbors(const PointSet& points, const KdTree& tree, int k);
+struct RadiusStats {
+  double meanSpacing = 0.0;  // mean distance to the nearest other point
+  double medianRadius = 0.0;
+  size_t outliers = 0;  // removed by removeOutliers
+};
+// r_i = distance to the k-th nearest neighbour; mean spacing from the nearest.
+RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
+// Points whose radius exceeds 10 times the median radius of their neighbours (far outliers).
+std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors);
+// Keep the points not flagged (order kept).
+void removePoints(PointSet& points, const std::vector<uint8_t>& flagged);
+
+// ---- normals.cpp / orient.cpp
+struct NormalStats {
+  size_t estimated = 0;  // normals computed by PCA
+  size_t flipped = 0;    // input normals flipped to agree with their neighbourhood
+};
+// PCA normals (in double, stable symmetric eigen solver) for every point whose normal is zero.
+size_t estimateNormals(PointSet& points, const Neighbors& neighbors);
+// Orient estimated normals consistently (mode) and repair isolated flipped input normals.
+NormalStats orientNormals(PointSet& points, const Neighbors& neighbors, OrientMode mode,
+                          const std::vector<uint8_t>& wasEstimated);
+
+// ---- sdf.cpp
+struct CornerSample {
+  float distance = 0.0f;
+  glm::vec3 normal{0.0f, 0.0f, 1.0f};
+  glm::vec3 color{0.0f};
+};
+// f(Q) = (Q - p̄)·n̄ with truncated Gaussian weights (specs/pipeline.md, "Signed distance").
+class SdfEvaluator {
+ public:
+  SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing, FitMode fit);
+  // minSigma widens every σ_i (level of detail: a fraction of the node size).
+  CornerSample evaluate(const glm::dvec3& q, float minSigma) const;
+  // The point nearest to q and its distance.
+  uint32_t nearest(const glm::dvec3& q, float& distance) const;
+  const PointSet& points() const { return points_; }
+
+ private:
+  const PointSet& points_;
+  const KdTree& tree_;
+  double smoothing_;
+  FitMode fit_;
+};
+
+// ---- octree.cpp
+// The trilinear patch of one node: its 8 corner distances over its cell.
+struct Patch {
+  std::array<double, 8> distance{};
+  glm::dvec3 origin{0.0};
+  double size = 1.0;
+  Patch() = default;
+  Patch(uint8_t level, uint64_t key);  // the cell of a node, distances zero
+  // The signed distance at p (clamped into the cell) and, when asked, its gradient.
+  double value(const glm::dvec3& p, glm::dvec3* gradient = nullptr) const;
+  // The largest |f|/|∇f| over points [begin, end): how far they are from the zero set.
+  double maxPointDistance(const PointSet& points, uint32_t begin, uint32_t end) const;
+};
+
+enum class NodeKind : uint8_t { Empty, Internal, Leaf, Passive };
+
+struct OctreeNode {
+  uint64_t key = 0;
+  uint32_t firstChild = kNoNode;  // Internal: 8 children in octant order
+  uint32_t pointBegin = 0, pointEnd = 0;
+  uint8_t level = 0;
+  NodeKind kind = NodeKind::Empty;
+  float maxRadius = 0.0f;  // largest r_i of the points below (disk queries)
+  bool isFilled() const { return kind == NodeKind::Leaf || kind == NodeKind::Passive; }
+  uint32_t pointCount() const { return pointEnd - pointBegin; }
+};
+
+struct Octree {
+  std::vector<OctreeNode> nodes;  // node 0: the root (level 0)
+  // The deepest node on the path to cell (level, key), at most at that level.
+  uint32_t find(uint8_t level, uint64_t key) const;
+  // Make a filled node Internal with 8 children over its points (kinds: Leaf with points, else
+  // Empty).
+  void split(uint32_t node, const PointSet& points);
+  // Call f(pointIndex) for every point whose disk of influence may touch the box (frame units).
+  void forEachPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
+                        const std::function<void(uint32_t)>& f) const;
+  void updateMaxRadius(const PointSet& points);
+};
+
+struct OctreeStats {
+  size_t testedPatches = 0, thinSplits = 0;
+};
+// Leaf corner samples evaluated while building, by (level of their σ floor, grid point): the
+// corners of a leaf at level L are evaluated with the same parameters later.
+using CornerCache = FlatMap<Key128, CornerSample>;
+// σ floor of a leaf corner whose coarsest leaf is at `level`.
+float leafSigmaFloor(uint8_t level);
+Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
+                   double meanSpacing, CornerCache& cache, OctreeStats* stats = nullptr);
+
+// ---- passive.cpp
+// Whether the disk of point i (center, normal, radius r_i) touches the box.
+bool diskTouchesBox(const PointSet& points, uint32_t i, const glm::dvec3& lo, const glm::dvec3& hi);
+bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node);
+// Mark Empty children of Internal nodes Passive when a disk touches them; returns how many.
+size_t markPassiveLeaves(Octree& tree, const PointSet& points);
+
+// ---- balance.cpp
+// Split filled leaves until face-, edge- and corner-adjacent filled leaves differ by at most one
+// level; returns the number of splits.
+size_t balanceOctree(Octree& tree, const PointSet& points);
+
+// ---- corners.cpp
+// Values of every distinct leaf corner, keyed by grid point.
+struct CornerField {
+  FlatMap<Key128, uint32_t> index{1024};  // grid point → entry
+  std::vector<GridPoint> point;
+  std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner
+  std::vector<CornerSample> value;
+  uint32_t find(const GridPoint& p) const;
+};
+Key128 gridKey(const GridPoint& p);
+CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf,
+                              const CornerCache& cache);
+
+// ---- snap.cpp
+struct HangingCorner {
+  uint32_t corner;                    // entry in the CornerField
+  std::array<uint32_t, 4> sources{};  // the coarser leaf's corners it interpolates
+  uint8_t sourceCount = 0;            // 2 (edge) or 4 (face)
+};
+std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field);
+// Set each hanging corner to the mean of its sources, coarse levels first.
+void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& hanging);
+
+// ---- lod.cpp
+// Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
+struct LodField {
+  FlatMap<Key128, uint32_t> index{1024};
+  std::vector<CornerSample> value;
+  uint32_t find(uint8_t level, const GridPoint& p) const;
+};
+Key128 lodKey(uint8_t level, const GridPoint& p);
+LodField sampleLodCorners(const Octree& tree, const PointSet& points, const BuildOptions& options);
+// The largest distance of the points below an internal node to the node's own patch.
+float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
+                     uint32_t node);
+
+// ---- chunks.cpp
+struct ChunkPlan {
+  uint8_t cellLevel = 0;
+  uint64_t cellKey = 0;
+  uint32_t parent = kNoParent;
+  SurfaceTopology topology;
+  std::vector<uint32_t> nodes;  // octree nodes in topology order
+  uint64_t pointCount = 0;      // input points below the roots
+};
+std::vector<ChunkPlan> planChunks(const Octree& tree, uint32_t nodeBudget);
+
+struct WriteInput {
+  const Octree* tree;
+  const PointSet* points;
+  const CornerField* corners;
+  const std::vector<HangingCorner>* hanging;
+  const LodField* lod;
+  Frame frame;
+  std::string metadata;  // JSON object
+  bool colors = false;
+  BuildOptions options;
+};
+struct WriteStats {
+  uint64_t chunks = 0, fileBytesWithoutMetadata = 0;
+  uint64_t leafCorners = 0, lodCorners = 0;
+};
+FileHeader surfaceHeader(const Frame& frame, uint8_t maxLevel, bool colors, int normalBits);
+// Plan chunks, encode and write the file with input.metadata. Before the file is moved to the
+// output path, `finalMetadata` gets the complete file (under its temporary name, readable with
+// iso::Reader) and the stats, and returns the metadata that replaces the first.
+WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInput& input,
+                            const std::function<std::string(const std::filesystem::path&,
+                                                            const WriteStats&)>& finalMetadata);
+
+}  // namespace iso
