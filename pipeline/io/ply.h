@@ -17,7 +17,7 @@ TriangleMesh readPlyMesh(const std::filesystem::path& path);
 struct PlyWriteOptions {
   bool binary = true;            // binary little endian, else ASCII
   bool doublePositions = true;   // x y z as double (keeps large offsets exact), else float
-  std::vector<std::string> comments;  // "comment" lines in the header
+  std::vector<std::string> comments = {};  // "comment" lines in the header
 };
 
 // Write points (with their normals and colors when present; colors as uchar sRGB) to a PLY file,

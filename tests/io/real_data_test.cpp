@@ -1,0 +1,121 @@
+// The readers on real scans from ../shared/data (skipped when that folder is absent). Expected
+// values were read from the files independently of the readers.
+#include <chrono>
+#include <set>
+
+#include "io/ply.h"
+#include "io_test_util.h"
+
+namespace iso {
+namespace {
+
+using Triangles = std::vector<std::array<uint32_t, 3>>;
+
+std::filesystem::path sharedData(const std::string& name) {
+  return std::filesystem::path(ISO_SHARED_DATA_DIR) / name;
+}
+
+#define SKIP_WITHOUT_SHARED_DATA()                                        \
+  do {                                                                    \
+    if (!std::filesystem::is_directory(ISO_SHARED_DATA_DIR))              \
+      GTEST_SKIP() << "no shared data folder at " << ISO_SHARED_DATA_DIR; \
+  } while (false)
+
+glm::dvec3 asFloat(double x, double y, double z) { return test::roundedToFloat({x, y, z}); }
+
+float linearOf16(uint16_t code) {
+  const float c = float(code) / 65535.0f;
+  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+
+TEST(RealData, lionLasHasSixteenBitColors) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const auto reader = openPointFile(sharedData("lion_rgb.las"));
+  EXPECT_EQ(reader->info().format, "las 1.2 format 2");
+  EXPECT_TRUE(reader->info().hasColors);
+  ReadStats stats;
+  const PointCloud points = readPointFile(sharedData("lion_rgb.las"), {}, &stats);
+  ASSERT_EQ(points.size(), 341989u);
+  EXPECT_EQ(stats.droppedNonFinite, 0u);
+  EXPECT_EQ(points.positions.front(), glm::dvec3(-2.544, 2.878, 0.882));
+  EXPECT_EQ(points.positions.back(), glm::dvec3(-2.076, 4.023, -0.548));
+  EXPECT_FLOAT_EQ(points.colors.front().r, linearOf16(49408));
+  EXPECT_FLOAT_EQ(points.colors.front().g, linearOf16(50688));
+  EXPECT_FLOAT_EQ(points.colors.front().b, linearOf16(52736));
+  EXPECT_FLOAT_EQ(points.colors.back().b, linearOf16(34816));
+}
+
+TEST(RealData, loneStarLasKeepsMillimetresAtUtmCoordinates) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const PointCloud points = readPointFile(sharedData("lone_star_tls_utm.las"));
+  ASSERT_EQ(points.size(), 518862u);
+  EXPECT_FALSE(points.hasColors());
+  EXPECT_EQ(points.positions.front(), glm::dvec3(515396.1665, 4918348.4715, 2323.85525));
+  EXPECT_EQ(points.positions.back(), glm::dvec3(515394.67075, 4918366.2755, 2335.297));
+  std::set<double> xs;
+  std::set<float> floatXs;
+  std::set<int64_t> millimetres;
+  for (const glm::dvec3& p : points.positions) {
+    EXPECT_NEAR(p.x, 515385.0, 50.0);
+    EXPECT_NEAR(p.y, 4918360.0, 50.0);
+    xs.insert(p.x);
+    floatXs.insert(float(p.x));
+    millimetres.insert(std::llround(p.x * 1000.0) % 1000);
+  }
+  EXPECT_EQ(xs.size(), 91212u);  // float positions would keep 1039 of them
+  EXPECT_EQ(floatXs.size(), 1039u);
+  EXPECT_EQ(millimetres.size(), 1000u);  // every millimetre fraction occurs
+}
+
+TEST(RealData, bunnyHasItsVerticesAndTriangles) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const PointCloud points = readPointFile(sharedData("bunny_zipper.ply"));
+  ASSERT_EQ(points.size(), 35947u);
+  EXPECT_FALSE(points.hasNormals());
+  EXPECT_EQ(points.positions.front(), asFloat(-0.0378297, 0.12794, 0.00447467));
+  EXPECT_EQ(points.positions.back(), asFloat(-0.0400442, 0.15362, -0.00816685));
+
+  const TriangleMesh mesh = readPlyMesh(sharedData("bunny_zipper.ply"));
+  EXPECT_EQ(mesh.vertices.size(), 35947u);
+  ASSERT_EQ(mesh.triangles.size(), 69451u);
+  EXPECT_EQ(mesh.triangles.back(), (std::array<uint32_t, 3>{17277, 17346, 17345}));
+}
+
+TEST(RealData, parasaurolophusHasNormals) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const PointCloud points = readPointFile(sharedData("parasaurolophus_normals.ply"));
+  ASSERT_EQ(points.size(), 28291u);
+  ASSERT_TRUE(points.hasNormals());
+  EXPECT_EQ(points.positions.front(), asFloat(-46.9977, -13.4493, -686.008));
+  EXPECT_EQ(points.normals.front(), glm::vec3(1.13992f, -0.728988f, -2.52818f));
+  EXPECT_EQ(points.normals.back(), glm::vec3(0.822641f, 1.41742f, 5.9841f));
+}
+
+TEST(RealData, kittenXyzHasNormals) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const PointCloud points = readPointFile(sharedData("kitten_normals.xyz"));
+  ASSERT_EQ(points.size(), 5210u);
+  ASSERT_TRUE(points.hasNormals());
+  EXPECT_EQ(points.positions.front(), glm::dvec3(-0.0721898, -0.159749, -0.108444));
+  EXPECT_EQ(points.normals.back(), glm::vec3(-0.224494f, 0.265859f, -0.937508f));
+}
+
+TEST(RealData, dragonMeshReadsQuickly) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const auto start = std::chrono::steady_clock::now();
+  const TriangleMesh mesh = readPlyMesh(sharedData("dragon_vrip.ply.gz"));
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  RecordProperty("seconds", std::to_string(seconds));
+  ASSERT_EQ(mesh.vertices.size(), 437645u);
+  ASSERT_EQ(mesh.triangles.size(), 871414u);
+  EXPECT_EQ(mesh.vertices.front(), asFloat(0.032027, 0.056575, -0.0503644));
+  EXPECT_EQ(mesh.vertices.back(), asFloat(0.0437841, 0.0798208, 0.0205537));
+  EXPECT_EQ(mesh.triangles.front(), (std::array<uint32_t, 3>{2, 37, 0}));
+  EXPECT_EQ(mesh.triangles.back(), (std::array<uint32_t, 3>{435598, 435560, 435559}));
+  // Generous for a loaded machine; about a second is expected in a release build.
+  EXPECT_LT(seconds, 10.0);
+}
+
+}  // namespace
+}  // namespace iso
