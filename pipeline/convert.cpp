@@ -24,18 +24,20 @@ constexpr size_t kAccuracySamples = 100000;
 
 class StageTimer {
  public:
-  StageTimer(nlohmann::json& stages, const ConvertHooks& hooks) : stages_(stages), hooks_(hooks) {}
+  StageTimer(nlohmann::json& stages, const ConvertSource& source) : stages_(stages), source_(source) {}
   void end(const std::string& name) {
     const auto now = Clock::now();
-    const double seconds = std::chrono::duration<double>(now - start_).count();
-    stages_.push_back({{"name", name}, {"seconds", seconds}});
-    if (hooks_.onStage) hooks_.onStage(name, seconds);
+    add(name, std::chrono::duration<double>(now - start_).count());
     start_ = now;
+  }
+  void add(const std::string& name, double seconds) {
+    stages_.push_back({{"name", name}, {"seconds", seconds}});
+    if (source_.onStage) source_.onStage(name, seconds);
   }
 
  private:
   nlohmann::json& stages_;
-  const ConvertHooks& hooks_;
+  const ConvertSource& source_;
   Clock::time_point start_ = Clock::now();
 };
 
@@ -135,7 +137,8 @@ nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t p
   return {{"internal_nodes", internal},      {"leaves", leaves},
           {"passive_leaves", passiveLeaves}, {"leaves_per_level", perLevel},
           {"max_level", maxLevel},           {"passive_marked", passive},
-          {"balance_splits", splits},        {"patches_tested", stats.testedPatches},
+          {"balance_splits", splits},        {"patch_splits", stats.testedPatches},
+          {"patch_splits_too_far", stats.tooFar}, {"patch_splits_uncovered", stats.uncovered},
           {"thin_splits", stats.thinSplits}};
 }
 
@@ -170,14 +173,14 @@ nlohmann::json optionsJson(const BuildOptions& o) {
 }
 
 nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
-                            const BuildOptions& options, const nlohmann::json& inputs,
-                            const ConvertHooks& hooks) {
+                            const BuildOptions& options, const ConvertSource& source) {
   validate(options);
   if (input.size() == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
   nlohmann::json report;
   report["stages"] = nlohmann::json::array();
-  StageTimer timer(report["stages"], hooks);
+  StageTimer timer(report["stages"], source);
+  if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
 
   const PointCloud* cloud = &input;
   PointCloud filtered;
@@ -207,25 +210,27 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
     wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
   estimateNormals(points, neighbors);
   const NormalStats normals = orientNormals(points, neighbors, options.orient, wasEstimated);
+  estimateRoughness(points, neighbors);
   timer.end("normals");
 
   const SdfEvaluator sdf(points, *tree, options.smoothing, options.fit);
   OctreeStats octreeStats;
   CornerCache cornerCache(points.size() / 2);
-  Octree octree = buildOctree(points, sdf, options, radii.meanSpacing, cornerCache, &octreeStats);
+  Octree octree = buildOctree(points, sdf, options, radii, cornerCache, &octreeStats);
   timer.end("octree");
   const size_t passive = markPassiveLeaves(octree, points);
   const size_t splits = balanceOctree(octree, points);
   timer.end("passive+balance");
-  CornerField corners = sampleLeafCorners(octree, sdf, cornerCache);
-  const std::vector<HangingCorner> hanging = findHangingCorners(octree, corners);
-  snapHangingCorners(corners, hanging);
+  Closure closure = sampleClosedSurface(octree, points, sdf, cornerCache);
+  const CornerField& corners = closure.corners;
+  const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.end("corners");
   const LodField lod = sampleLodCorners(octree, points, options);
   timer.end("lod");
 
   const double spacing = radii.meanSpacing * frame.size;
-  report["points"] = {{"input", input.size()},
+  report["points"] = {{"input", input.size() + source.nonFiniteDropped},
+                      {"non_finite_dropped", source.nonFiniteDropped},
                       {"duplicates_merged", prepared.duplicates},
                       {"outliers_removed", outliers},
                       {"used", points.size()}};
@@ -235,6 +240,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   report["mean_spacing"] = spacing;
   report["median_radius"] = radii.medianRadius * frame.size;
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
+  report["octree"]["closure_filled"] = closure.filled;
   report["corners"] = {
       {"leaf", corners.point.size()}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 
@@ -242,7 +248,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
                    frame,   "{}",    points.hasColors(), options};
   const auto metadata = [&](const nlohmann::json& r) {
     return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
-                          {"inputs", inputs},
+                          {"inputs", source.inputs},
                           {"parameters", optionsJson(options)},
                           {"report", r}};
   };
@@ -268,9 +274,10 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
                               {"rms_over_spacing", d.rms / spacing},
                               {"max_over_spacing", d.max / spacing}};
         timer.end("accuracy");
-        const double seconds = std::chrono::duration<double>(Clock::now() - started).count();
+        const double seconds =
+            std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;
         report["seconds"] = seconds;
-        report["points_per_second"] = double(input.size()) / seconds;
+        report["points_per_second"] = double(input.size() + source.nonFiniteDropped) / seconds;
         report["peak_rss_bytes"] = peakRssBytes();
         return metadata(report).dump();
       });

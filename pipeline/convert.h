@@ -19,17 +19,19 @@ class ConvertError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-struct ConvertHooks {
+// Where the points came from, for the report and the file's metadata.
+struct ConvertSource {
+  nlohmann::json inputs = nlohmann::json::array();  // e.g. [{"file": ..., "format": ..., "points": ...}]
+  double readSeconds = 0.0;                          // reported as the "read" stage
+  uint64_t nonFiniteDropped = 0;                     // points the readers dropped
   // Called when a stage ends, with its name and duration.
   std::function<void(const std::string& stage, double seconds)> onStage;
 };
 
-// Convert the points into the .iso file at output (written atomically). `inputs` describes where
-// the points came from (stored in the metadata with the options and the report). Returns the
-// report, which the file's metadata also holds under "report".
+// Convert the points into the .iso file at output (written atomically). Returns the report, which
+// the file's metadata also holds under "report" (with "inputs", "parameters" and "generator").
 nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path& output,
-                            const BuildOptions& options, const nlohmann::json& inputs,
-                            const ConvertHooks& hooks = {});
+                            const BuildOptions& options, const ConvertSource& source = {});
 
 // The options as JSON (the file's "parameters").
 nlohmann::json optionsJson(const BuildOptions& options);

@@ -15,8 +15,7 @@ uint32_t CornerField::find(const GridPoint& p) const {
   return found ? *found : kNoNode;
 }
 
-CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf,
-                              const CornerCache& cache) {
+CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache) {
   CornerField field;
   for (const OctreeNode& node : tree.nodes) {
     if (!node.isFilled()) continue;
@@ -46,6 +45,8 @@ CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf,
           field.value[i] = sdf.evaluate(q, leafSigmaFloor(field.coarsestLevel[i]));
         }
       });
+  for (size_t i = 0; i < field.point.size(); ++i)  // for later passes (closeSurface)
+    cache.insert(lodKey(field.coarsestLevel[i], field.point[i]), field.value[i]);
   return field;
 }
 

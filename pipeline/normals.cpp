@@ -87,4 +87,24 @@ size_t estimateNormals(PointSet& points, const Neighbors& neighbors) {
   return count;
 }
 
+void estimateRoughness(PointSet& points, const Neighbors& neighbors) {
+  const size_t n = points.size(), k = size_t(neighbors.k);
+  points.roughness.assign(n, 0.0f);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t i = range.begin(); i < range.end(); ++i) {
+      glm::dvec3 mean(points.position[i]);
+      for (size_t j = 0; j < k; ++j) mean += glm::dvec3(points.position[neighbors.index[i * k + j]]);
+      mean /= double(k + 1);
+      const glm::dvec3 normal(points.normal[i]);
+      double sum = glm::dot(glm::dvec3(points.position[i]) - mean, normal);
+      sum *= sum;
+      for (size_t j = 0; j < k; ++j) {
+        const double d = glm::dot(glm::dvec3(points.position[neighbors.index[i * k + j]]) - mean, normal);
+        sum += d * d;
+      }
+      points.roughness[i] = float(std::sqrt(sum / double(k + 1)));
+    }
+  });
+}
+
 }  // namespace iso

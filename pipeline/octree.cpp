@@ -21,6 +21,7 @@ namespace {
 constexpr uint32_t kMaxTestedPoints = 4096;  // larger nodes subdivide without a patch test
 constexpr float kLeafSigmaFraction = 0.1f;   // σ floor of leaf corners, in leaf edges
 constexpr int kCoverageLines = 4;            // zero-set samples per patch edge for coverage
+constexpr double kNoiseFactor = 3.0;         // tolerance floor in RMS roughness
 
 double cellSize(uint8_t level) { return std::ldexp(1.0, -level); }
 
@@ -50,8 +51,14 @@ Patch leafPatch(const OctreeNode& node, const CornerCache& cache) {
   return patch;
 }
 
-// Whether a node needs a patch test, or the answer without one.
-enum class Verdict : uint8_t { Leaf, Subdivide, Test };
+// What happens to a node: the answer without a patch test, or the need for one, or why a tested
+// node is subdivided.
+enum class Verdict : uint8_t { Leaf, Subdivide, Test, TooFar, Uncovered };
+
+struct ToleranceScale {
+  double tolerance, meanSpacing, medianRadius;
+};
+
 
 Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const BuildOptions& options) {
   if (node.level >= options.maxDepth) return Verdict::Leaf;
@@ -111,11 +118,27 @@ bool isCovered(const Patch& patch, const SdfEvaluator& sdf, const PointSet& poin
   return true;
 }
 
-bool failsPatchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
-                    const CornerCache& cache, double tolerance) {
+// The tolerance of a node in frame units: the option's, in units of the local point spacing (the
+// mean spacing scaled by the points' radii against the median radius: sparse parts cannot hold
+// detail finer than their sampling), but never below 3 times the points' roughness (RMS), so
+// that noise is not mistaken for shape that needs smaller leaves.
+double nodeTolerance(const OctreeNode& node, const PointSet& points, const ToleranceScale& scale) {
+  double squares = 0.0, radii = 0.0;
+  for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) {
+    squares += double(points.roughness[i]) * points.roughness[i];
+    radii += points.radius[i];
+  }
+  const double n = std::max<uint32_t>(node.pointCount(), 1);
+  const double localSpacing = scale.meanSpacing * (radii / n) / scale.medianRadius;
+  return std::max(scale.tolerance * localSpacing, kNoiseFactor * std::sqrt(squares / n));
+}
+
+Verdict patchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
+                  const CornerCache& cache, const ToleranceScale& tolerance) {
   const Patch patch = leafPatch(node, cache);
-  return patch.maxPointDistance(points, node.pointBegin, node.pointEnd) > tolerance ||
-         !isCovered(patch, sdf, points, node);
+  if (patch.maxPointDistance(points, node.pointBegin, node.pointEnd) > nodeTolerance(node, points, tolerance))
+    return Verdict::TooFar;
+  return isCovered(patch, sdf, points, node) ? Verdict::Leaf : Verdict::Uncovered;
 }
 
 float maxRadiusOf(const PointSet& points, uint32_t begin, uint32_t end) {
@@ -229,13 +252,13 @@ void Octree::forEachPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const 
 }
 
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
-                   double meanSpacing, CornerCache& cache, OctreeStats* statsOut) {
+                   const RadiusStats& radii, CornerCache& cache, OctreeStats* statsOut) {
   Octree tree;
   OctreeNode root;
   root.pointEnd = uint32_t(points.size());
   root.kind = root.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
   tree.nodes.push_back(root);
-  const double tolerance = options.tolerance * meanSpacing;
+  const ToleranceScale tolerance{options.tolerance, radii.meanSpacing, std::max(radii.medianRadius, 1e-12)};
   std::vector<uint32_t> frontier = {0};
   OctreeStats stats;
   while (!frontier.empty()) {  // one level at a time
@@ -246,22 +269,17 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                           verdict[i] = quickVerdict(tree.nodes[frontier[i]], points, options);
                       });
     fillCache(tree, frontier, verdict, sdf, cache);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t i = r.begin(); i < r.end(); ++i)
-                          if (verdict[i] == Verdict::Test)
-                            verdict[i] = failsPatchTest(tree.nodes[frontier[i]], points, sdf, cache,
-                                                        tolerance)
-                                             ? Verdict::Subdivide
-                                             : Verdict::Leaf;
-                      });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i)
+        if (verdict[i] == Verdict::Test) verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, cache, tolerance);
+    });
     std::vector<uint32_t> next;
     for (size_t i = 0; i < frontier.size(); ++i) {
       const OctreeNode& node = tree.nodes[frontier[i]];
-      if (node.pointCount() > options.leafPoints && node.pointCount() <= kMaxTestedPoints &&
-          node.level < options.maxDepth)
-        ++stats.testedPatches;
-      if (verdict[i] != Verdict::Subdivide) continue;
+      stats.tooFar += verdict[i] == Verdict::TooFar;
+      stats.uncovered += verdict[i] == Verdict::Uncovered;
+      if (verdict[i] == Verdict::Leaf) continue;
+      if (verdict[i] == Verdict::TooFar || verdict[i] == Verdict::Uncovered) ++stats.testedPatches;
       if (node.pointCount() <= options.leafPoints) ++stats.thinSplits;
       tree.split(frontier[i], points);
       const uint32_t first = tree.nodes[frontier[i]].firstChild;

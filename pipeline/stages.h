@@ -47,7 +47,7 @@ struct BuildOptions {
   OrientMode orient = OrientMode::Auto;
   uint32_t leafPoints = 8;      // a node with more points may be subdivided
   int maxDepth = 20;            // deepest octree level (at most 20)
-  double tolerance = 0.25;      // allowed patch error, in mean point spacings
+  double tolerance = 0.1;       // allowed patch error, in mean point spacings
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;
@@ -61,6 +61,7 @@ struct PointSet {
   std::vector<glm::vec3> color;   // linear RGB; empty when the input has none
   std::vector<float> weight;      // input points merged into this one (exact duplicates)
   std::vector<float> radius;      // radius of influence r_i
+  std::vector<float> roughness;   // RMS distance of the neighbours to the point's tangent plane
   std::vector<uint64_t> key;      // Morton key at kMaxLevel
   std::vector<uint32_t> source;   // index of the (first) input point
   size_t size() const { return position.size(); }
@@ -108,6 +109,9 @@ size_t estimateNormals(PointSet& points, const Neighbors& neighbors);
 // Orient estimated normals consistently (mode) and repair isolated flipped input normals.
 NormalStats orientNormals(PointSet& points, const Neighbors& neighbors, OrientMode mode,
                           const std::vector<uint8_t>& wasEstimated);
+// Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS
+// distance of its neighbours to the plane through their centroid with the point's normal.
+void estimateRoughness(PointSet& points, const Neighbors& neighbors);
 
 // ---- sdf.cpp
 struct CornerSample {
@@ -173,7 +177,10 @@ struct Octree {
 };
 
 struct OctreeStats {
-  size_t testedPatches = 0, thinSplits = 0;
+  size_t testedPatches = 0;  // patch tests that led to a subdivision
+  size_t tooFar = 0;         // ... because points were farther than the tolerance
+  size_t uncovered = 0;      // ... because the patch had surface where there are no points
+  size_t thinSplits = 0;     // subdivisions below leafPoints for opposing normals
 };
 // Leaf corner samples evaluated while building, by (level of their σ floor, grid point): the
 // corners of a leaf at level L are evaluated with the same parameters later.
@@ -181,7 +188,7 @@ using CornerCache = FlatMap<Key128, CornerSample>;
 // σ floor of a leaf corner whose coarsest leaf is at `level`.
 float leafSigmaFloor(uint8_t level);
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
-                   double meanSpacing, CornerCache& cache, OctreeStats* stats = nullptr);
+                   const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
 
 // ---- passive.cpp
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
@@ -205,8 +212,8 @@ struct CornerField {
   uint32_t find(const GridPoint& p) const;
 };
 Key128 gridKey(const GridPoint& p);
-CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf,
-                              const CornerCache& cache);
+// Corners of the filled leaves; values found in the cache are reused, new ones are added to it.
+CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache);
 
 // ---- snap.cpp
 struct HangingCorner {
@@ -217,6 +224,18 @@ struct HangingCorner {
 std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field);
 // Set each hanging corner to the mean of its sources, coarse levels first.
 void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& hanging);
+
+// ---- close.cpp
+struct Closure {
+  CornerField corners;
+  std::vector<HangingCorner> hanging;
+  size_t filled = 0;      // empty cells filled because the surface ran into them
+  size_t passes = 0;
+};
+// Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
+// which the zero set of a filled leaf runs (sharp edges, repaired normals), until none is left:
+// near the points the surface never leaves the filled leaves, so rays cannot slip out of it.
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, CornerCache& cache);
 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.

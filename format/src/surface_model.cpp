@@ -304,22 +304,50 @@ std::optional<RayHit> SurfaceModel::intersect(const Vec3& origin, const Vec3& di
 }
 
 std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
-  Vec3 x = p;
+  Vec3 x = p, previous = p;
+  double previousValue = 0.0;
   for (int step = 0; step < 64; ++step) {
     const uint32_t leaf = findLeaf(x);
     if (leaf == kNoNode) return std::nullopt;
     const SurfaceEval e = evaluate(leaf, x);
-    const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] +
-                      e.gradient[2] * e.gradient[2];
+    if (step > 0 && sign(e.distance) != sign(previousValue))
+      return bisectSignChange(previous, x);  // stepped over the zero set, perhaps at a leaf face
+    const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] + e.gradient[2] * e.gradient[2];
     if (!(g2 > 0.0)) return std::nullopt;
     const double cellSize = std::ldexp(1.0, -leaves_[leaf].level);
     if (std::abs(e.distance) <= 1e-7 * cellSize) return x;
     double scale = e.distance / g2;
     const double stepLength = std::abs(scale) * std::sqrt(g2);
     if (stepLength > 0.5 * cellSize) scale *= 0.5 * cellSize / stepLength;  // stay near the leaf
+    previous = x;
+    previousValue = e.distance;
     for (int k = 0; k < 3; ++k) x[size_t(k)] -= scale * e.gradient[size_t(k)];
   }
   return std::nullopt;
+}
+
+std::optional<Vec3> SurfaceModel::bisectSignChange(Vec3 a, Vec3 b) const {
+  const auto valueAt = [&](const Vec3& x) -> std::optional<double> {
+    const uint32_t leaf = findLeaf(x);
+    if (leaf == kNoNode) return std::nullopt;
+    return evaluate(leaf, x).distance;
+  };
+  const std::optional<double> fa = valueAt(a);
+  if (!fa) return std::nullopt;
+  for (int i = 0; i < 60; ++i) {
+    Vec3 m{};
+    for (int k = 0; k < 3; ++k) m[size_t(k)] = 0.5 * (a[size_t(k)] + b[size_t(k)]);
+    const std::optional<double> fm = valueAt(m);
+    if (!fm) return std::nullopt;
+    if (sign(*fm) == sign(*fa)) {
+      a = m;
+    } else {
+      b = m;
+    }
+  }
+  Vec3 m{};
+  for (int k = 0; k < 3; ++k) m[size_t(k)] = 0.5 * (a[size_t(k)] + b[size_t(k)]);
+  return m;
 }
 
 std::vector<ZeroSetSample> SurfaceModel::sampleZeroSet(int linesPerEdge) const {

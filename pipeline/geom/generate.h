@@ -10,11 +10,11 @@
 namespace iso {
 
 struct GenerateOptions {
-  uint64_t count = 200000;     // points
-  double noise = 0.0;          // standard deviation of displacement along the normal, in spacings
-  double densityRatio = 1.0;   // densest / sparsest sampling density, varying smoothly along x
-  glm::dvec3 offset{0.0};      // added to every position (e.g. UTM-like 500000,4900000,0)
-  bool normals = true;         // write the true normals
+  uint64_t count = 200000;    // points
+  double noise = 0.0;         // standard deviation of displacement along the normal, in spacings
+  double densityRatio = 1.0;  // densest / sparsest sampling density, varying smoothly along x
+  glm::dvec3 offset{0.0};     // added to every position (e.g. UTM-like 500000,4900000,0)
+  bool normals = true;        // write the true normals
   uint64_t seed = 1;
 };
 

@@ -22,8 +22,8 @@ struct SurfacePoint {
 
 struct ClosestPoint {
   glm::dvec3 position;
-  glm::dvec3 normal;   // unit normal of the surface at position
-  double distance;     // |query - position|, >= 0
+  glm::dvec3 normal;  // unit normal of the surface at position
+  double distance;    // |query - position|, >= 0
 };
 
 class Shape {
@@ -45,12 +45,12 @@ class Shape {
 
 // Parameters of the analytic shapes; the defaults are those of `iso gen` and `iso eval`.
 struct ShapeParams {
-  std::string name = "sphere";     // sphere, torus, cube, plane, sheets
-  glm::dvec3 center{0.0};          // added to every shape (also the place of large offsets)
-  double radius = 1.0;             // sphere radius; torus major radius
-  double minorRadius = 0.35;       // torus tube radius
-  double halfSize = 1.0;           // cube half edge; plane and sheets half extent in x and y
-  double gap = 0.02;               // sheets: distance between the two sheets (z = ±gap/2)
+  std::string name = "sphere";  // sphere, torus, cube, plane, sheets
+  glm::dvec3 center{0.0};       // added to every shape (also the place of large offsets)
+  double radius = 1.0;          // sphere radius; torus major radius
+  double minorRadius = 0.35;    // torus tube radius
+  double halfSize = 1.0;        // cube half edge; plane and sheets half extent in x and y
+  double gap = 0.02;            // sheets: distance between the two sheets (z = ±gap/2)
 };
 
 // Make an analytic shape; throws std::invalid_argument for an unknown name or bad parameters.
@@ -60,8 +60,11 @@ struct ShapeParams {
 std::unique_ptr<Shape> makeShape(const ShapeParams& params);
 
 // A triangle mesh as a shape (closest point and ray queries through a bounding volume hierarchy).
-// isClosed() is true when every edge is shared by exactly two triangles. Normals are the
-// triangles' geometric normals (winding order).
+// isClosed() is true when every edge is shared by exactly two triangles (a triangle with a repeated
+// vertex index has no edges). Normals are the triangles' geometric normals (winding order).
+// Zero-area triangles are never sampled nor met by queries; closest() of a non-finite query has a
+// NaN distance. Throws std::invalid_argument for an index out of range, a non-finite vertex, or no
+// triangle of positive area. Builds with TBB in about a second per million triangles.
 std::unique_ptr<Shape> makeMeshShape(TriangleMesh mesh);
 
 }  // namespace iso

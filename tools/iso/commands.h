@@ -13,6 +13,9 @@ inline constexpr int kExitUsage = 2;
 // Runs body and turns exceptions into a message on stderr ("iso: ...") and kExitFailure.
 int runGuarded(const char* command, const std::function<int()>& body);
 
+void addConvertCommand(CLI::App& app, int& exitCode);
+void addEvalCommand(CLI::App& app, int& exitCode);
+void addGenCommand(CLI::App& app, int& exitCode);
 void addInfoCommand(CLI::App& app, int& exitCode);
 void addVerifyCommand(CLI::App& app, int& exitCode);
 

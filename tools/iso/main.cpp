@@ -37,6 +37,9 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.footer("Run `iso COMMAND --help` for the options of a command.");
   int exitCode = iso::cli::kExitOk;
+  iso::cli::addConvertCommand(app, exitCode);
+  iso::cli::addEvalCommand(app, exitCode);
+  iso::cli::addGenCommand(app, exitCode);
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);
   try {

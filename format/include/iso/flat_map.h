@@ -18,7 +18,7 @@ struct Key128 {
   bool operator==(const Key128&) const = default;
 };
 
-inline uint64_t mixBits(uint64_t x) {  // the splitmix64 finalizer
+inline uint64_t hashBits(uint64_t x) {  // the splitmix64 finalizer
   x ^= x >> 30;
   x *= 0xbf58476d1ce4e5b9ull;
   x ^= x >> 27;
@@ -27,9 +27,9 @@ inline uint64_t mixBits(uint64_t x) {  // the splitmix64 finalizer
 }
 
 struct KeyHash {
-  uint64_t operator()(uint64_t k) const { return mixBits(k); }
+  uint64_t operator()(uint64_t k) const { return hashBits(k); }
   uint64_t operator()(const Key128& k) const {
-    return mixBits(k.a ^ mixBits(k.b + 0x9e3779b97f4a7c15ull));
+    return hashBits(k.a ^ hashBits(k.b + 0x9e3779b97f4a7c15ull));
   }
 };
 

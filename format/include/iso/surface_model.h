@@ -68,8 +68,9 @@ class SurfaceModel {
   std::optional<RayHit> intersect(const Vec3& origin, const Vec3& direction, double tMin,
                                   double tMax) const;
 
-  // A point of the zero set near p, by Newton steps along the gradient; none when the steps leave
-  // the filled leaves or do not converge.
+  // A point of the zero set near p, by Newton steps along the gradient, or where a step changes
+  // the sign of f (found by bisection: a root inside a leaf or a sign change at a leaf face); none
+  // when the steps leave the filled leaves or do not converge.
   std::optional<Vec3> project(const Vec3& p) const;
 
   // Points of the zero set: roots along axis-aligned lines, `linesPerEdge` per leaf edge, each kept
@@ -86,6 +87,7 @@ class SurfaceModel {
   bool intersectNode(uint32_t node, uint8_t level, const std::array<uint32_t, 3>& cell, double t0,
                      double t1, Traversal& state) const;
   bool intersectLeaf(uint32_t leaf, double t0, double t1, Traversal& state) const;
+  std::optional<Vec3> bisectSignChange(Vec3 a, Vec3 b) const;
 
   FileHeader header_;
   std::vector<Node> nodes_;  // node 0 is the root (level 0)

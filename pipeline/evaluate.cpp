@@ -1,0 +1,240 @@
+#include "evaluate.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <numbers>
+
+#include "geom/random.h"
+#include "knn.h"
+#include "measure.h"
+#include "stages.h"
+
+namespace iso {
+namespace {
+
+struct Weighted {
+  double sum = 0.0, squares = 0.0, weight = 0.0, max = 0.0;
+  void add(double d, double w) {
+    sum += w * d;
+    squares += w * d * d;
+    weight += w;
+    max = std::max(max, d);
+  }
+  double mean() const { return weight > 0 ? sum / weight : 0.0; }
+  double rms() const { return weight > 0 ? std::sqrt(squares / weight) : 0.0; }
+};
+
+glm::dvec3 toWorld(const Vec3& p, const Frame& f) {
+  return glm::dvec3(p[0], p[1], p[2]) * f.size + glm::dvec3(f.origin[0], f.origin[1], f.origin[2]);
+}
+
+double percentile(std::vector<double> values, double q) {
+  if (values.empty()) return 0.0;
+  const size_t i = std::min(values.size() - 1, size_t(q * double(values.size())));
+  std::nth_element(values.begin(), values.begin() + ptrdiff_t(i), values.end());
+  return values[i];
+}
+
+struct IsoToTruth {
+  Weighted distance;
+  std::vector<double> normalAngles;  // degrees
+  std::vector<glm::vec3> samples;    // frame units, for the fallback of truth → iso
+};
+
+IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const EvalOptions& options) {
+  const Frame& frame = surface.header().frame;
+  const std::vector<ZeroSetSample> samples = surface.sampleZeroSet(options.linesPerEdge);
+  std::vector<double> distance(samples.size()), angle(samples.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const ClosestPoint c = truth.closest(toWorld(samples[i].position, frame));
+      distance[i] = c.distance;
+      const SurfaceEval e = surface.evaluate(samples[i].leaf, samples[i].position);
+      double dot = glm::dot(glm::dvec3(e.normal[0], e.normal[1], e.normal[2]), c.normal);
+      if (!options.orientedNormals) dot = std::abs(dot);
+      angle[i] = std::acos(std::clamp(dot, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+    }
+  });
+  IsoToTruth out;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    out.distance.add(distance[i], samples[i].area);
+    out.samples.push_back(glm::vec3(float(samples[i].position[0]), float(samples[i].position[1]),
+                                    float(samples[i].position[2])));
+  }
+  out.normalAngles = std::move(angle);
+  return out;
+}
+
+struct TruthToIso {
+  Weighted distance;
+  uint64_t unprojected = 0;
+};
+
+// The point of the zero set closest to p (frame units): projection from p, or from the nearest
+// zero-set sample when p lies in empty space, refined by moving along the tangent plane toward p
+// and projecting again (alternating projections converge to the closest point of a smooth patch).
+std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const glm::dvec3& p, const KdTree& samples,
+                                           const std::vector<glm::vec3>& samplePositions) {
+  std::optional<Vec3> x = surface.project({p.x, p.y, p.z});
+  if (!x && samples.size() > 0) {
+    uint32_t nearest = 0;
+    float d2 = 0.0f;
+    samples.nearest(glm::vec3(p), 1, &nearest, &d2);
+    const glm::dvec3 s(samplePositions[nearest]);
+    x = surface.project({s.x, s.y, s.z});
+  }
+  if (!x) return std::nullopt;
+  glm::dvec3 c((*x)[0], (*x)[1], (*x)[2]);
+  for (int i = 0; i < 4; ++i) {
+    const uint32_t leaf = surface.findLeaf({c.x, c.y, c.z});
+    if (leaf == kNoNode) break;
+    const SurfaceEval e = surface.evaluate(leaf, {c.x, c.y, c.z});
+    const glm::dvec3 g(e.gradient[0], e.gradient[1], e.gradient[2]);
+    if (!(glm::dot(g, g) > 0.0)) break;
+    const glm::dvec3 n = glm::normalize(g), toward = p - c;
+    const glm::dvec3 y = c + (toward - glm::dot(toward, n) * n);
+    const std::optional<Vec3> next = surface.project({y.x, y.y, y.z});
+    if (!next) break;
+    const glm::dvec3 candidate((*next)[0], (*next)[1], (*next)[2]);
+    if (glm::length(candidate - p) >= glm::length(c - p)) break;
+    c = candidate;
+  }
+  return c;
+}
+
+TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth, const std::vector<glm::vec3>& isoSamples,
+                      const EvalOptions& options) {
+  const Frame& frame = surface.header().frame;
+  std::mt19937_64 rng(options.seed);
+  std::vector<glm::dvec3> points(options.truthSamples);
+  for (glm::dvec3& p : points) p = truth.sample(rng).position;
+  const KdTree tree(isoSamples);
+  std::vector<double> distance(points.size());
+  std::vector<uint8_t> projected(points.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const glm::dvec3 p = toFrame(points[i], frame);
+      if (const std::optional<glm::dvec3> x = closestOnZeroSet(surface, p, tree, isoSamples)) {
+        distance[i] = glm::length(*x - p) * frame.size;
+        projected[i] = 1;
+      } else if (tree.size() > 0) {  // no zero set found near p: the nearest sample bounds it
+        uint32_t nearest = 0;
+        float d2 = 0.0f;
+        tree.nearest(glm::vec3(p), 1, &nearest, &d2);
+        distance[i] = std::sqrt(double(d2)) * frame.size;
+      } else {
+        distance[i] = std::numeric_limits<double>::infinity();
+      }
+    }
+  });
+  TruthToIso out;
+  for (size_t i = 0; i < points.size(); ++i) {
+    out.distance.add(distance[i], 1.0);
+    out.unprojected += projected[i] ? 0 : 1;
+  }
+  return out;
+}
+
+struct Rays {
+  uint64_t truthHits = 0, holes = 0, spurious = 0;
+};
+
+// Rays from a sphere around the truth. For a closed truth each ray aims at a point inside it
+// (depth 1 % of the diagonal below a random surface point), so it must cross the surface before
+// reaching that point whatever its angle: a ray that reaches it without hitting the zero set went
+// through a hole. For an open truth each ray aims at a surface point and must hit the zero set
+// near there.
+Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions& options) {
+  const Frame& frame = surface.header().frame;
+  const glm::dvec3 center = 0.5 * (truth.boundsMin() + truth.boundsMax());
+  const double radius = glm::length(truth.boundsMax() - truth.boundsMin());
+  const double depth = 0.01 * radius;
+  std::vector<uint8_t> outcome(options.rays);  // bit 0: truth hit, bit 1: iso hit
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, outcome.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+    std::mt19937_64 rng(mixBits(options.seed * 0x100000001ull + r.begin()));
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      glm::dvec3 d(standardNormal(rng), standardNormal(rng), standardNormal(rng));
+      const glm::dvec3 origin = center + radius * glm::normalize(d);
+      const SurfacePoint aim = truth.sample(rng);
+      const glm::dvec3 target = truth.isClosed() ? aim.position - depth * aim.normal : aim.position;
+      const double length = glm::length(target - origin);
+      const glm::dvec3 direction = (target - origin) / length;
+      const double tMax = truth.isClosed() ? length : length + depth;
+      const bool truthHit = truth.intersect(origin, direction, 0.0, tMax).has_value();
+      const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
+      const bool isoHit = surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();
+      outcome[i] = uint8_t((truthHit ? 1 : 0) | (isoHit ? 2 : 0));
+    }
+  });
+  Rays rays;
+  for (uint8_t o : outcome) {
+    rays.truthHits += o & 1;
+    rays.holes += (o & 1) && !(o & 2);
+    rays.spurious += !(o & 1) && (o & 2);
+  }
+  return rays;
+}
+
+double outwardFraction(const std::vector<double>& anglesDeg) {
+  if (anglesDeg.empty()) return 0.0;
+  return double(std::count_if(anglesDeg.begin(), anglesDeg.end(), [](double a) { return a < 90.0; })) /
+         double(anglesDeg.size());
+}
+
+nlohmann::json weightedJson(const Weighted& w, double spacing) {
+  return {{"rms", w.rms()}, {"max", w.max}, {"mean", w.mean()}, {"rms_over_spacing", w.rms() / spacing},
+          {"max_over_spacing", w.max / spacing}};
+}
+
+}  // namespace
+
+nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth, double meanSpacing,
+                                    const EvalOptions& options) {
+  const IsoToTruth a = isoToTruth(surface, truth, options);
+  const TruthToIso b = truthToIso(surface, truth, a.samples, options);
+  const Rays rays = castRays(surface, truth, options);
+  const double rms = std::sqrt(0.5 * (a.distance.rms() * a.distance.rms() + b.distance.rms() * b.distance.rms()));
+  const double max = std::max(a.distance.max, b.distance.max);
+  const double diagonal = glm::length(truth.boundsMax() - truth.boundsMin());
+  nlohmann::json iso = weightedJson(a.distance, meanSpacing);
+  iso["samples"] = a.normalAngles.size();
+  nlohmann::json back = weightedJson(b.distance, meanSpacing);
+  back["samples"] = options.truthSamples;
+  back["unprojected"] = b.unprojected;
+  return {{"truth", truth.name()},
+          {"rms", rms},
+          {"max", max},
+          {"mean", 0.5 * (a.distance.mean() + b.distance.mean())},
+          {"mean_spacing", meanSpacing},
+          {"rms_over_spacing", rms / meanSpacing},
+          {"max_over_spacing", max / meanSpacing},
+          {"rms_over_diagonal", rms / diagonal},
+          {"normal_median_deg", percentile(a.normalAngles, 0.5)},
+          {"normal_p99_deg", percentile(a.normalAngles, 0.99)},
+          {"normal_outward_fraction", outwardFraction(a.normalAngles)},
+          {"hole_rate", rays.truthHits > 0 ? double(rays.holes) / double(rays.truthHits) : 0.0},
+          {"rays", options.rays},
+          {"rays_hitting_truth", rays.truthHits},
+          {"holes", rays.holes},
+          {"spurious_hits", rays.spurious},
+          {"iso_to_truth", iso},
+          {"truth_to_iso", back}};
+}
+
+nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points) {
+  const double spacing = meanNearestSpacing(points);
+  const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions);
+  return {{"points", d.samples},
+          {"unprojected", d.unprojected},
+          {"rms", d.rms},
+          {"max", d.max},
+          {"mean", d.mean},
+          {"mean_spacing", spacing},
+          {"rms_over_spacing", spacing > 0 ? d.rms / spacing : 0.0},
+          {"max_over_spacing", spacing > 0 ? d.max / spacing : 0.0}};
+}
+
+}  // namespace iso

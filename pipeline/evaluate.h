@@ -1,0 +1,38 @@
+// Accuracy of an .iso surface against a known answer (`iso eval`): an analytic shape or a mesh,
+// measured both ways, or the input points themselves. All distances in world units.
+//
+//   iso → truth   area-weighted samples of the zero set (SurfaceModel::sampleZeroSet), each at
+//                 its distance to the truth's closest point; the normal angle there
+//   truth → iso   uniform samples of the truth projected onto the zero set; a sample that finds
+//                 no zero set takes its distance to the nearest zero-set sample instead
+//   holes         rays from outside aimed through the truth (closed: at points just inside it,
+//                 which every ray must cross the surface to reach): the fraction that hit the
+//                 truth but not the zero set
+// The combined "rms" is sqrt((rms_iso→truth² + rms_truth→iso²) / 2); "max" the larger max.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+
+#include "geom/shape.h"
+#include "io/point_cloud.h"
+#include "iso/surface_model.h"
+
+namespace iso {
+
+struct EvalOptions {
+  uint64_t rays = 100000;          // for the hole rate
+  uint64_t truthSamples = 200000;  // for truth → iso
+  int linesPerEdge = 4;            // zero-set sampling density per leaf
+  bool orientedNormals = true;     // false: normal angles ignore the sign (meshes of unknown winding)
+  uint64_t seed = 1;
+};
+
+// meanSpacing: the input's mean point spacing (world units), the unit of the *_over_spacing values.
+nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth, double meanSpacing,
+                                    const EvalOptions& options = {});
+
+// Distances of the points to the zero set (the conversion report's measure) with their spacing.
+nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);
+
+}  // namespace iso

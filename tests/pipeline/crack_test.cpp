@@ -1,0 +1,122 @@
+// Crack-freeness (specs/pipeline.md §6): for every pair of face-adjacent filled leaves of different
+// levels, the two trilinear patches agree on the shared face — to float rounding in the pipeline,
+// and within one quantization step in the written file, where the ray caster's sign-change rule
+// closes what is left (the accuracy tests count leaks of 10^5 rays).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "knn.h"
+#include "pipeline_support.h"
+#include "stages.h"
+
+namespace iso {
+namespace {
+
+struct Built {
+  PointSet points;
+  Octree tree;
+  CornerField corners;
+};
+
+Built buildStages(const PointCloud& cloud) {
+  Built b;
+  const Frame frame = chooseFrame(cloud);
+  b.points = makePointSet(cloud, frame);
+  sortByKey(b.points);
+  mergeDuplicates(b.points);
+  const KdTree tree(b.points.position);
+  const Neighbors neighbors = findNeighbors(b.points, tree, 10);
+  const RadiusStats radii = estimateRadii(b.points, neighbors);
+  estimateRoughness(b.points, neighbors);
+  const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
+  CornerCache cache;
+  b.tree = buildOctree(b.points, sdf, BuildOptions{}, radii, cache);
+  markPassiveLeaves(b.tree, b.points);
+  balanceOctree(b.tree, b.points);
+  b.corners = sampleClosedSurface(b.tree, b.points, sdf, cache).corners;
+  return b;
+}
+
+// The patch of a filled leaf at frame point p.
+double leafValue(const Built& b, const OctreeNode& leaf, const glm::dvec3& p) {
+  Patch patch(leaf.level, leaf.key);
+  for (int c = 0; c < kCorners; ++c)
+    patch.distance[size_t(c)] = b.corners.value[b.corners.find(cornerPoint(leaf.level, leaf.key, c))].distance;
+  return patch.value(p);
+}
+
+TEST(CrackFree, patchesOfAdjacentLeavesAgreeOnSharedFaces) {
+  for (const char* shape : {"sphere", "cube"}) {
+    const Built b = buildStages(test::scanOf(shape, 100000));
+    size_t pairs = 0;
+    double worst = 0.0;
+    for (const OctreeNode& leaf : b.tree.nodes) {
+      if (!leaf.isFilled()) continue;
+      const auto cell = mortonDecode(leaf.key);
+      const double size = std::ldexp(1.0, -leaf.level);
+      for (int face = 0; face < 6; ++face) {
+        const int axis = face / 2, side = face % 2;
+        std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
+        n[size_t(axis)] += side ? 1 : -1;
+        if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
+        const OctreeNode& other = b.tree.nodes[b.tree.find(leaf.level, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])))];
+        if (!other.isFilled() || other.level != leaf.level - 1) continue;
+        ++pairs;
+        for (int i = 0; i <= 4; ++i)
+          for (int j = 0; j <= 4; ++j) {  // points of the small leaf's face
+            glm::dvec3 p = glm::dvec3(cell[0], cell[1], cell[2]) * size;
+            p[axis] += side ? size : 0.0;
+            p[(axis + 1) % 3] += size * i / 4.0;
+            p[(axis + 2) % 3] += size * j / 4.0;
+            const double a = leafValue(b, leaf, p), c = leafValue(b, other, p);
+            worst = std::max(worst, std::abs(a - c) / size);
+          }
+      }
+    }
+    std::printf("%s: %zu face pairs across levels, largest mismatch %.3g leaf edges\n", shape, pairs, worst);
+    EXPECT_GT(pairs, 100u);
+    EXPECT_LE(worst, 1e-5);  // float rounding of the corner values, relative to the leaf edge
+  }
+}
+
+TEST(CrackFree, writtenPatchesAgreeWithinAQuantizationStep) {
+  test::TempDir dir;
+  const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 100000), dir / "sphere.iso");
+  const SurfaceModel& s = c.surface;
+  size_t pairs = 0, exact = 0;
+  double worstSteps = 0.0;
+  for (uint32_t id = 0; id < s.leaves().size(); ++id) {
+    const auto& leaf = s.leaves()[id];
+    const auto cell = mortonDecode(leaf.key);
+    const double size = std::ldexp(1.0, -leaf.level);
+    for (int face = 0; face < 6; ++face) {
+      const int axis = face / 2, side = face % 2;
+      glm::dvec3 probe = (glm::dvec3(cell[0], cell[1], cell[2]) + 0.5) * size;
+      probe[axis] += side ? 0.75 * size : -0.75 * size;
+      const uint32_t other = s.findLeaf({probe.x, probe.y, probe.z});
+      if (other == kNoNode || s.leaves()[other].level != leaf.level - 1) continue;
+      ++pairs;
+      const double step = nodeDiagonal(uint8_t(leaf.level - 1)) / 127.0;  // the coarser leaf's step
+      double mismatch = 0.0;
+      for (int i = 0; i <= 4; ++i)
+        for (int j = 0; j <= 4; ++j) {
+          glm::dvec3 p = glm::dvec3(cell[0], cell[1], cell[2]) * size;
+          p[axis] += side ? size : 0.0;
+          p[(axis + 1) % 3] += size * i / 4.0;
+          p[(axis + 2) % 3] += size * j / 4.0;
+          mismatch = std::max(mismatch, std::abs(s.evaluate(id, {p.x, p.y, p.z}).distance -
+                                                 s.evaluate(other, {p.x, p.y, p.z}).distance));
+        }
+      exact += mismatch <= 1e-7 * size ? 1 : 0;
+      worstSteps = std::max(worstSteps, mismatch / step);
+    }
+  }
+  std::printf("%zu face pairs across levels in the file, %zu exact, largest mismatch %.3f steps\n", pairs, exact,
+              worstSteps);
+  EXPECT_GT(pairs, 100u);
+  EXPECT_LE(worstSteps, 1.0);
+}
+
+}  // namespace
+}  // namespace iso

@@ -1,0 +1,34 @@
+// Helpers of the pipeline tests: scans of shapes with a known answer, converted and measured.
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "convert.h"
+#include "evaluate.h"
+#include "geom/generate.h"
+#include "geom/shape.h"
+#include "iso/reader.h"
+#include "iso/surface_model.h"
+#include "support/support.h"
+
+namespace iso::test {
+
+// A scan of an analytic shape.
+PointCloud scanOf(const std::string& shape, uint64_t count, bool normals = true, double noise = 0.0,
+                  uint64_t seed = 1);
+
+struct Converted {
+  nlohmann::json report;
+  SurfaceModel surface;
+};
+
+// Convert points to path (quietly) and load the written surface.
+Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& path,
+                         const BuildOptions& options = {});
+
+// evaluateAgainstShape with the report's mean spacing.
+nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t rays = 20000);
+
+}  // namespace iso::test

@@ -1,0 +1,295 @@
+// The stages one by one, against brute force or analytic answers.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <random>
+
+#include "knn.h"
+#include "pipeline_support.h"
+#include "stages.h"
+
+namespace iso {
+namespace {
+
+PointCloud randomCloud(size_t n, uint64_t seed) {
+  PointCloud cloud;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (size_t i = 0; i < n; ++i) cloud.positions.push_back({u(rng), u(rng), 0.3 * u(rng)});
+  return cloud;
+}
+
+PointSet prepared(const PointCloud& cloud) {
+  PointSet points = makePointSet(cloud, chooseFrame(cloud));
+  sortByKey(points);
+  mergeDuplicates(points);
+  return points;
+}
+
+TEST(Morton, encodeAndDecodeAreInverse) {
+  std::mt19937 rng(5);
+  for (int i = 0; i < 10000; ++i) {
+    const uint32_t x = rng() & 0x1fffff, y = rng() & 0x1fffff, z = rng() & 0x1fffff;
+    const auto c = mortonDecode(mortonEncode(x, y, z));
+    EXPECT_EQ(c, (std::array<uint32_t, 3>{x, y, z}));
+  }
+  EXPECT_EQ(mortonEncode(1, 0, 0), 1u);
+  EXPECT_EQ(mortonEncode(0, 1, 0), 2u);
+  EXPECT_EQ(mortonEncode(0, 0, 1), 4u);
+  EXPECT_EQ(mortonEncode(2, 0, 0), 8u);
+}
+
+TEST(Frame, pointsAreInsideTheCubeAndSortedByKey) {
+  PointCloud cloud = randomCloud(20000, 1);
+  for (glm::dvec3& p : cloud.positions) p += glm::dvec3(512345.6, 4918000.2, 1200.0);  // UTM-like
+  const Frame frame = chooseFrame(cloud);
+  const PointSet points = prepared(cloud);
+  ASSERT_EQ(points.size(), cloud.size());
+  EXPECT_TRUE(std::is_sorted(points.key.begin(), points.key.end()));
+  for (size_t i = 0; i < points.size(); ++i) {
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_GT(points.position[i][a], 0.0f);
+      EXPECT_LT(points.position[i][a], 1.0f);
+    }
+    const glm::dvec3 back = glm::dvec3(points.position[i]) * frame.size +
+                            glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+    EXPECT_LT(glm::length(back - cloud.positions[points.source[i]]), 1e-6);  // float in frame units
+  }
+}
+
+TEST(Frame, exactDuplicatesMergeIntoWeightedPoints) {
+  PointCloud cloud = randomCloud(1000, 2);
+  cloud.normals.assign(cloud.size(), glm::vec3(0, 0, 1));
+  for (size_t i = 0; i < 300; ++i) {
+    cloud.positions.push_back(cloud.positions[i]);
+    cloud.normals.push_back(glm::vec3(1, 0, 0));
+  }
+  PointSet points = makePointSet(cloud, chooseFrame(cloud));
+  sortByKey(points);
+  EXPECT_EQ(mergeDuplicates(points), 300u);
+  ASSERT_EQ(points.size(), 1000u);
+  float weight = 0.0f;
+  for (size_t i = 0; i < points.size(); ++i) {
+    weight += points.weight[i];
+    if (points.weight[i] == 2.0f) {
+      EXPECT_NEAR(glm::length(points.normal[i] - glm::normalize(glm::vec3(1, 0, 1))), 0.0f, 1e-6f);
+    }
+  }
+  EXPECT_EQ(weight, 1300.0f);
+}
+
+TEST(Radii, nearestNeighboursMatchBruteForce) {
+  PointSet points = prepared(randomCloud(3000, 3));
+  const KdTree tree(points.position);
+  const Neighbors neighbors = findNeighbors(points, tree, 10);
+  estimateRadii(points, neighbors);
+  for (size_t i = 0; i < points.size(); i += 37) {
+    std::vector<float> d;
+    for (size_t j = 0; j < points.size(); ++j)
+      if (j != i) d.push_back(glm::length(points.position[i] - points.position[j]));
+    std::sort(d.begin(), d.end());
+    for (int k = 0; k < 10; ++k) EXPECT_FLOAT_EQ(neighbors.distance[i * 10 + size_t(k)], d[size_t(k)]);
+    EXPECT_LE(points.radius[i], d[9]);
+  }
+}
+
+TEST(Normals, pcaRecoversAPlaneAndPropagationOrientsASphere) {
+  PointCloud plane = randomCloud(5000, 4);
+  for (glm::dvec3& p : plane.positions) p.z = 0.3 * p.x - 0.2 * p.y;
+  PointSet points = prepared(plane);
+  const KdTree tree(points.position);
+  const Neighbors neighbors = findNeighbors(points, tree, 10);
+  EXPECT_EQ(estimateNormals(points, neighbors), points.size());
+  const glm::vec3 truth = glm::normalize(glm::vec3(-0.3f, 0.2f, 1.0f));
+  for (const glm::vec3& n : points.normal) EXPECT_GT(std::abs(glm::dot(n, truth)), 0.99999f);
+
+  PointSet sphere = prepared(test::scanOf("sphere", 50000, false));
+  const KdTree sphereTree(sphere.position);
+  const Neighbors sphereNeighbors = findNeighbors(sphere, sphereTree, 10);
+  estimateNormals(sphere, sphereNeighbors);
+  orientNormals(sphere, sphereNeighbors, OrientMode::Auto, std::vector<uint8_t>(sphere.size(), 1));
+  size_t outward = 0;
+  for (size_t i = 0; i < sphere.size(); ++i)
+    outward += glm::dot(sphere.normal[i], sphere.position[i] - glm::vec3(0.5f)) > 0.0f ? 1 : 0;
+  EXPECT_EQ(outward, sphere.size());
+}
+
+struct Evaluated {
+  PointSet points;
+  std::unique_ptr<KdTree> tree;
+};
+
+Evaluated withRadii(const PointCloud& cloud) {
+  Evaluated e{prepared(cloud), nullptr};
+  e.tree = std::make_unique<KdTree>(e.points.position);
+  estimateRadii(e.points, findNeighbors(e.points, *e.tree, 10));
+  return e;
+}
+
+TEST(SignedDistance, isExactForAPlaneWithEitherFit) {
+  PointCloud plane = randomCloud(20000, 6);
+  for (glm::dvec3& p : plane.positions) p.z = 0.0;
+  plane.normals.assign(plane.size(), glm::vec3(0, 0, 1));
+  const Evaluated e = withRadii(plane);
+  const double z = e.points.position[0].z;
+  for (FitMode fit : {FitMode::Plane, FitMode::Sphere}) {
+    const SdfEvaluator sdf(e.points, *e.tree, 1.0, fit);
+    for (double offset : {-0.1, -0.01, 0.0, 0.003, 0.05, 0.2}) {
+      const CornerSample s = sdf.evaluate({0.5, 0.45, z + offset}, 0.0f);
+      EXPECT_NEAR(s.distance, offset, 1e-6) << "offset " << offset;
+      EXPECT_NEAR(s.normal.z, 1.0f, 1e-6f);
+    }
+  }
+}
+
+TEST(SignedDistance, sphereFitRemovesTheCurvatureBiasOfThePlaneFit) {
+  const Evaluated e = withRadii(test::scanOf("sphere", 100000));
+  const Frame frame = chooseFrame(test::scanOf("sphere", 100000));
+  const SdfEvaluator plane(e.points, *e.tree, 1.0, FitMode::Plane), sphere(e.points, *e.tree, 1.0, FitMode::Sphere);
+  const glm::dvec3 center = toFrame(glm::dvec3(0.0), frame);
+  double planeError = 0.0, sphereError = 0.0;
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> g;
+  for (int i = 0; i < 500; ++i) {
+    const glm::dvec3 dir = glm::normalize(glm::dvec3(g(rng), g(rng), g(rng)));
+    const double r = 1.0 + 0.02 * (double(i % 11) - 5.0) / 5.0;  // within 2 % of the surface
+    const glm::dvec3 q = center + dir * r / frame.size;
+    const double truth = (r - 1.0) / frame.size;
+    planeError = std::max(planeError, std::abs(plane.evaluate(q, 0.0f).distance - truth));
+    sphereError = std::max(sphereError, std::abs(sphere.evaluate(q, 0.0f).distance - truth));
+  }
+  std::printf("largest error: plane fit %.3g, sphere fit %.3g (frame units)\n", planeError, sphereError);
+  EXPECT_LT(sphereError, 0.25 * planeError);
+}
+
+TEST(SignedDistance, farCornersStayFiniteWhenWeightsUnderflow) {
+  PointCloud plane = randomCloud(2000, 8);
+  for (glm::dvec3& p : plane.positions) p.z = 0.0;
+  plane.normals.assign(plane.size(), glm::vec3(0, 0, 1));
+  const Evaluated e = withRadii(plane);
+  const SdfEvaluator sdf(e.points, *e.tree, 1.0, FitMode::Sphere);
+  // 0.4 frame units is thousands of σ: exp(-d²/2σ²) is 0 in double for every point.
+  const CornerSample s = sdf.evaluate({0.5, 0.5, e.points.position[0].z + 0.4}, 0.0f);
+  EXPECT_TRUE(std::isfinite(s.distance));
+  EXPECT_NEAR(s.distance, 0.4, 1e-5);
+}
+
+TEST(SignedDistance, cornersBetweenOpposingSheetsSeeTheNearerSheet) {
+  PointCloud sheets = randomCloud(20000, 9);
+  const double gap = 0.004;
+  for (size_t i = 0; i < sheets.size(); ++i) {
+    const bool top = i % 2 == 0;
+    sheets.positions[i].z = top ? gap / 2 : -gap / 2;
+    sheets.normals.push_back(glm::vec3(0, 0, top ? 1.0f : -1.0f));
+  }
+  const Evaluated e = withRadii(sheets);
+  const Frame frame = chooseFrame(sheets);
+  ASSERT_GT(e.points.radius[0] * frame.size, gap);  // the sheets are closer than the radius
+  const SdfEvaluator sdf(e.points, *e.tree, 1.0, FitMode::Sphere);
+  const glm::dvec3 mid = toFrame(glm::dvec3(0.1, 0.2, 0.0), frame);
+  for (double z : {0.3 * gap, -0.3 * gap, 0.9 * gap, -0.9 * gap}) {
+    const double f = sdf.evaluate(mid + glm::dvec3(0, 0, z / frame.size), 0.0f).distance * frame.size;
+    const double truth = std::abs(z) - gap / 2;  // negative between the sheets
+    EXPECT_NEAR(f, truth, 0.05 * gap) << "z " << z;
+  }
+}
+
+TEST(Passive, boxDiskTestMatchesDenseSampling) {
+  std::mt19937_64 rng(10);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  PointSet one;
+  one.position = {glm::vec3(0.5f)};
+  one.radius = {0.0f};
+  one.normal = {glm::vec3(0.0f)};
+  int touching = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const glm::vec3 n = glm::normalize(glm::vec3(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5));
+    one.normal[0] = n;
+    one.radius[0] = float(0.05 + 0.2 * u(rng));
+    const glm::dvec3 lo(u(rng) * 0.6 + 0.2, u(rng) * 0.6 + 0.2, u(rng) * 0.6 + 0.2);
+    const glm::dvec3 hi = lo + 0.1 + 0.1 * u(rng);
+    // Dense samples of the disk.
+    const glm::vec3 t1 = glm::normalize(glm::cross(n, std::abs(n.x) < 0.9f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0)));
+    const glm::vec3 t2 = glm::cross(n, t1);
+    bool sampled = false;
+    for (int a = 0; a <= 200 && !sampled; ++a)
+      for (int b = 0; b <= 200 && !sampled; ++b) {
+        const float x = (a / 100.0f - 1.0f) * one.radius[0], y = (b / 100.0f - 1.0f) * one.radius[0];
+        if (x * x + y * y > one.radius[0] * one.radius[0]) continue;
+        const glm::dvec3 p(one.position[0] + x * t1 + y * t2);
+        sampled = glm::all(glm::greaterThanEqual(p, lo)) && glm::all(glm::lessThanEqual(p, hi));
+      }
+    const bool exact = diskTouchesBox(one, 0, lo, hi);
+    if (sampled) {
+      EXPECT_TRUE(exact) << "trial " << trial;  // sampling can only miss thin slivers
+    }
+    touching += exact;
+  }
+  EXPECT_GT(touching, 100);
+}
+
+TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
+  const Evaluated e = withRadii(test::scanOf("cube", 40000));
+  PointSet points = e.points;
+  const KdTree tree(points.position);
+  estimateRoughness(points, findNeighbors(points, tree, 10));
+  const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
+  CornerCache cache;
+  RadiusStats radii;
+  radii.meanSpacing = 1e-3;
+  radii.medianRadius = 3e-3;
+  Octree octree = buildOctree(points, sdf, BuildOptions{}, radii, cache);
+  markPassiveLeaves(octree, points);
+  EXPECT_GT(balanceOctree(octree, points), 0u);
+  std::vector<uint32_t> filled;
+  for (uint32_t i = 0; i < octree.nodes.size(); ++i)
+    if (octree.nodes[i].isFilled()) filled.push_back(i);
+  const auto box = [&](const OctreeNode& n) {
+    const auto c = mortonDecode(n.key);
+    const double size = std::ldexp(1.0, -n.level);
+    return std::pair(glm::dvec3(c[0], c[1], c[2]) * size, glm::dvec3(c[0] + 1, c[1] + 1, c[2] + 1) * size);
+  };
+  size_t checked = 0;
+  for (uint32_t a : filled) {  // brute force over pairs whose boxes touch
+    const auto [alo, ahi] = box(octree.nodes[a]);
+    for (uint32_t b : filled) {
+      if (b <= a) continue;
+      const auto [blo, bhi] = box(octree.nodes[b]);
+      if (glm::any(glm::greaterThan(alo, bhi)) || glm::any(glm::greaterThan(blo, ahi))) continue;
+      ++checked;
+      EXPECT_LE(std::abs(int(octree.nodes[a].level) - int(octree.nodes[b].level)), 1);
+    }
+  }
+  EXPECT_GT(checked, 1000u);
+}
+
+TEST(Chunks, everyNodeIsInExactlyOneChunkWithinTheBudget) {
+  const Evaluated e = withRadii(test::scanOf("torus", 60000));
+  PointSet points = e.points;
+  const KdTree tree(points.position);
+  estimateRoughness(points, findNeighbors(points, tree, 10));
+  const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
+  CornerCache cache;
+  RadiusStats radii;
+  radii.meanSpacing = 1e-3;
+  radii.medianRadius = 3e-3;
+  Octree octree = buildOctree(points, sdf, BuildOptions{}, radii, cache);
+  const std::vector<ChunkPlan> plans = planChunks(octree, 500);
+  std::vector<int> seen(octree.nodes.size(), 0);
+  for (size_t p = 0; p < plans.size(); ++p) {
+    EXPECT_LE(plans[p].nodes.size(), 500u);
+    EXPECT_EQ(plans[p].parent == kNoParent, p == 0);
+    if (p > 0) {
+      EXPECT_LT(plans[plans[p].parent].cellLevel, plans[p].cellLevel);
+    }
+    for (uint32_t n : plans[p].nodes) ++seen[n];
+    EXPECT_NO_THROW(layoutSurface(plans[p].topology, plans[p].cellLevel, plans[p].cellKey, 21));
+  }
+  for (size_t i = 0; i < octree.nodes.size(); ++i) EXPECT_EQ(seen[i], octree.nodes[i].kind == NodeKind::Empty ? 0 : 1);
+  EXPECT_GT(plans.size(), 5u);
+}
+
+}  // namespace
+}  // namespace iso

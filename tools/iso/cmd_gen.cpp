@@ -1,0 +1,73 @@
+// `iso gen SHAPE -o OUT.ply`: a synthetic scan with a known answer.
+#include <fmt/core.h>
+
+#include "commands.h"
+#include "geom/generate.h"
+#include "io/ply.h"
+#include "iso/error.h"
+#include "shape_options.h"
+#include "text.h"
+
+namespace iso::cli {
+namespace {
+
+struct Options {
+  std::string shape;
+  std::string output;
+  ShapeOptions truth;
+  GenerateOptions generate;
+  bool noNormals = false, ascii = false, force = false;
+};
+
+int run(Options& o) {
+  if (o.shape.empty() == o.truth.mesh.empty())
+    throw std::invalid_argument("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+  if (std::filesystem::exists(o.output) && !o.force)
+    throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
+  if (o.truth.mesh.empty()) o.truth.params.name = o.shape;
+  ShapeOptions placed = o.truth;
+  placed.offset = "0,0,0";  // generateScan adds the offset itself
+  const std::unique_ptr<Shape> shape = makeTruth(placed);
+  o.generate.offset = parseVector(o.truth.offset, "--offset");
+  o.generate.normals = !o.noNormals;
+  const PointCloud points = generateScan(*shape, o.generate);
+  PlyWriteOptions write;
+  write.binary = !o.ascii;
+  write.comments = {fmt::format("iso gen {}: {} points, noise {} spacings, density ratio {}, seed {}",
+                                shape->name(), o.generate.count, o.generate.noise, o.generate.densityRatio,
+                                o.generate.seed)};
+  writePly(o.output, points, write);
+  fmt::print("{}: {} points of a {} (area {:.6g}, expected spacing {:.6g})\n", o.output,
+             withSeparators(points.size()), shape->name(), shape->area(),
+             expectedSpacing(shape->area(), o.generate.count));
+  return kExitOk;
+}
+
+}  // namespace
+
+void addGenCommand(CLI::App& app, int& exitCode) {
+  auto o = std::make_shared<Options>();
+  CLI::App* c = app.add_subcommand("gen", "Write a synthetic scan with a known answer (PLY)");
+  c->add_option("shape", o->shape, "sphere, torus, cube, plane or sheets (or --mesh)");
+  c->add_option("-o,--output", o->output, "The PLY file to write")->required();
+  c->add_option("-n,--count", o->generate.count, "Number of points")->capture_default_str();
+  c->add_option("--noise", o->generate.noise, "Noise along the normal, in point spacings (σ)")->capture_default_str();
+  c->add_option("--density-ratio", o->generate.densityRatio, "Densest to sparsest sampling along x")->capture_default_str();
+  c->add_option("--seed", o->generate.seed, "Random seed")->capture_default_str();
+  c->add_flag("--no-normals", o->noNormals, "Leave the normals out");
+  c->add_flag("--ascii", o->ascii, "ASCII PLY instead of binary");
+  c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
+  addShapeOptions(*c, o->truth);
+  c->callback([o, &exitCode] {
+    exitCode = runGuarded("gen", [&] {
+      try {
+        return run(*o);
+      } catch (const std::invalid_argument& error) {
+        fmt::print(stderr, "iso gen: {}\n", error.what());
+        return kExitUsage;
+      }
+    });
+  });
+}
+
+}  // namespace iso::cli
