@@ -4,7 +4,6 @@
 // refines the nodes at its parent's last level. Chunks are written parents first.
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <functional>
 
 #include "iso/writer.h"
@@ -172,7 +171,7 @@ FileHeader surfaceHeader(const Frame& frame, uint8_t maxLevel, bool colors, int 
   header.frame = frame;
   header.maxLevel = maxLevel;
   header.attributes = {
-      {Semantic::SignedDistance, getenv("ISO_F16") ? Encoding::Snorm16 : Encoding::Snorm8, 1, 1.0f},
+      kDistanceEncoding,
       {Semantic::Normal, normalBits > 8 ? Encoding::Oct24 : Encoding::Oct16, 2, 0.0f}};
   if (colors) header.attributes.push_back({Semantic::Color, Encoding::Srgb8, 3, 0.0f});
   return header;

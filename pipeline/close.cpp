@@ -2,9 +2,11 @@
 // the zero set of the patches can run past them, most at sharp edges, whose reconstruction is
 // rounded inward, into empty cells. A ray that enters such a region would cross no zero set and
 // leak into the empty inside. So every empty cell into which a filled leaf's zero set runs through
-// a shared face is filled, when it lies within reach of the points (its centre at most the nearest
-// point's radius plus half its diagonal away, so open boundaries do not grow without end); the
-// new leaves are balanced and sampled, and the pass repeats until nothing is left to fill.
+// a shared face is filled, when the zero set crosses that face within the radius of influence of a
+// point (so open boundaries do not grow without end); the new leaves are balanced and sampled, and
+// the pass repeats until nothing is left to fill. A leaf that holds points but no zero set (its
+// estimate displaced, where sampling is sparse) gets its neighbour across the face nearest to the
+// zero set filled the same way.
 #include <cmath>
 
 #include "stages.h"
@@ -14,16 +16,55 @@ namespace {
 
 constexpr size_t kMaxPasses = 8;
 
-// Whether the zero set of a filled leaf's patch crosses the face (axis, side).
-bool crossesFace(const CornerField& field, const OctreeNode& leaf, int axis, int side) {
-  bool positive = false, negative = false;
-  for (int c = 0; c < kCorners; ++c) {
-    if (((c >> axis) & 1) != side) continue;
-    const float f = field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance;
-    positive = positive || f >= 0.0f;
-    negative = negative || f < 0.0f;
+// A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the points
+// (within the radius of influence of the nearest one), if there is one: the crossings along the
+// face's 4 edges are tried.
+bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int axis, int side,
+                           const SdfEvaluator& sdf, const PointSet& points) {
+  std::array<int, 4> corners{};
+  int count = 0;
+  for (int c = 0; c < kCorners; ++c)
+    if (((c >> axis) & 1) == side) corners[size_t(count++)] = c;
+  // Face corners in cyclic order: 0, 1, 3, 2 of the four with the face's bit fixed.
+  const std::array<int, 4> cycle = {corners[0], corners[1], corners[3], corners[2]};
+  const double unit = std::ldexp(1.0, -kMaxLevel);
+  for (int e = 0; e < 4; ++e) {
+    const GridPoint pa = cornerPoint(leaf.level, leaf.key, cycle[size_t(e)]);
+    const GridPoint pb = cornerPoint(leaf.level, leaf.key, cycle[size_t((e + 1) % 4)]);
+    const double fa = field.value[field.find(pa)].distance, fb = field.value[field.find(pb)].distance;
+    if ((fa < 0.0) == (fb < 0.0)) continue;
+    const double t = fa / (fa - fb);
+    const glm::dvec3 a(pa.x, pa.y, pa.z), b(pb.x, pb.y, pb.z);
+    const glm::dvec3 x = (a + t * (b - a)) * unit;
+    float distance = 0.0f;
+    const uint32_t nearest = sdf.nearest(x, distance);
+    if (distance <= points.radius[nearest]) return true;
   }
-  return positive && negative;
+  return false;
+}
+
+// The face of a leaf whose corners are nearest the zero set (smallest mean |f|).
+int faceTowardSurface(const CornerField& field, const OctreeNode& leaf) {
+  int best = 0;
+  double bestMean = 1e300;
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, side = face % 2;
+    double sum = 0.0;
+    for (int c = 0; c < kCorners; ++c)
+      if (((c >> axis) & 1) == side) sum += std::abs(field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance);
+    if (sum < bestMean) {
+      bestMean = sum;
+      best = face;
+    }
+  }
+  return best;
+}
+
+bool hasSurface(const CornerField& field, const OctreeNode& leaf) {
+  int negative = 0;
+  for (int c = 0; c < kCorners; ++c)
+    negative += field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance < 0.0f ? 1 : 0;
+  return negative != 0 && negative != kCorners;
 }
 
 // Make the cell (level, key) a node of the tree, splitting empty ancestors; returns it.
@@ -33,14 +74,6 @@ uint32_t materialize(Octree& tree, const PointSet& points, uint8_t level, uint64
     if (tree.nodes[node].level == level || tree.nodes[node].kind != NodeKind::Empty) return node;
     tree.split(node, points);  // an empty node: its children are empty too
   }
-}
-
-bool isNearPoints(const SdfEvaluator& sdf, const PointSet& points, uint8_t level, uint64_t key) {
-  const auto c = mortonDecode(key);
-  const double size = std::ldexp(1.0, -level);
-  float distance = 0.0f;
-  const uint32_t nearest = sdf.nearest((glm::dvec3(c[0], c[1], c[2]) + 0.5) * size, distance);
-  return distance <= points.radius[nearest] + 0.5 * std::sqrt(3.0) * size;
 }
 
 // Fill the empty cells the surface runs into; returns how many.
@@ -56,8 +89,11 @@ size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, 
       if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
       const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
       if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
-      if (!crossesFace(field, leaf, axis, side) || !isNearPoints(sdf, points, leaf.level, key)) continue;
-      targets.push_back({leaf.level, key});
+      // The zero set runs out through this face near the points, or the leaf holds points but no
+      // zero set (a displaced estimate) and this face is the nearest to it.
+      const bool exit = crossesFaceNearPoints(field, leaf, axis, side, sdf, points);
+      const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf) && face == faceTowardSurface(field, leaf);
+      if (exit || lost) targets.push_back({leaf.level, key});
     }
   }
   size_t filled = 0;

@@ -158,11 +158,21 @@ Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions
     for (size_t i = r.begin(); i < r.end(); ++i) {
       glm::dvec3 d(standardNormal(rng), standardNormal(rng), standardNormal(rng));
       const glm::dvec3 origin = center + radius * glm::normalize(d);
-      const SurfacePoint aim = truth.sample(rng);
-      const glm::dvec3 target = truth.isClosed() ? aim.position - depth * aim.normal : aim.position;
+      // A closed truth's target lies at least half the depth from every part of the surface (a
+      // point near an edge is deep below one face but close to the next), so it is inside the
+      // zero set too, which is within a small fraction of the depth of the truth.
+      SurfacePoint aim = truth.sample(rng);
+      glm::dvec3 target = truth.isClosed() ? aim.position - depth * aim.normal : aim.position;
+      for (int tries = 0; truth.isClosed() && truth.closest(target).distance < 0.5 * depth && tries < 100; ++tries) {
+        aim = truth.sample(rng);
+        target = aim.position - depth * aim.normal;
+      }
       const double length = glm::length(target - origin);
       const glm::dvec3 direction = (target - origin) / length;
-      const double tMax = truth.isClosed() ? length : length + depth;
+      // Past an open truth the zero set may be hit a little later; how much later grows as the
+      // ray grazes the surface, so the allowance is the depth over the cosine of incidence.
+      const double cosine = std::max(std::abs(glm::dot(direction, aim.normal)), 0.05);
+      const double tMax = truth.isClosed() ? length : length + depth / cosine;
       const bool truthHit = truth.intersect(origin, direction, 0.0, tMax).has_value();
       const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
       const bool isoHit = surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();

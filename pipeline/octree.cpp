@@ -43,11 +43,14 @@ bool hasOpposingNormals(const PointSet& points, const OctreeNode& node) {
   return false;
 }
 
+// The patch a leaf would have in the file: its corners as quantized, so that the tolerance test
+// also covers the quantization step (a large leaf's step can exceed the tolerance by itself).
 Patch leafPatch(const OctreeNode& node, const CornerCache& cache) {
   Patch patch(node.level, node.key);
-  for (int c = 0; c < 8; ++c)
-    patch.distance[size_t(c)] =
-        cache.find(lodKey(node.level, cornerPoint(node.level, node.key, c)))->distance;
+  for (int c = 0; c < 8; ++c) {
+    const float f = cache.find(lodKey(node.level, cornerPoint(node.level, node.key, c)))->distance;
+    patch.distance[size_t(c)] = roundTripDistance(f, node.level, kDistanceEncoding);
+  }
   return patch;
 }
 
@@ -270,8 +273,9 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                       });
     fillCache(tree, frontier, verdict, sdf, cache);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i)
+      for (size_t i = r.begin(); i < r.end(); ++i) {
         if (verdict[i] == Verdict::Test) verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, cache, tolerance);
+      }
     });
     std::vector<uint32_t> next;
     for (size_t i = 0; i < frontier.size(); ++i) {
@@ -280,7 +284,7 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
       stats.uncovered += verdict[i] == Verdict::Uncovered;
       if (verdict[i] == Verdict::Leaf) continue;
       if (verdict[i] == Verdict::TooFar || verdict[i] == Verdict::Uncovered) ++stats.testedPatches;
-      if (node.pointCount() <= options.leafPoints) ++stats.thinSplits;
+      if (verdict[i] == Verdict::Subdivide && node.pointCount() <= options.leafPoints) ++stats.thinSplits;
       tree.split(frontier[i], points);
       const uint32_t first = tree.nodes[frontier[i]].firstChild;
       for (uint32_t c = 0; c < 8; ++c)

@@ -1,16 +1,19 @@
 // The signed distance at a corner Q (specs/pipeline.md, "Signed distance"): Gaussian weights
 // w_i = exp(-|Q - p_i|² / 2σ_i²) with σ_i = max(smoothing · r_i, minSigma), truncated where they
-// fall below e^-4.5 of the largest, p̄ = Σ w_i p_i / Σ w_i, n̄ = Σ w_i n_i / |Σ w_i n_i|,
-// f(Q) = (Q - p̄)·n̄.
+// fall below e^-2 of the largest, p̄ = Σ w_i p_i / Σ w_i, n̄ = Σ w_i n_i / |Σ w_i n_i|,
+// f(Q) = (Q - p̄)·n̄ (the paper's plane), or the distance to an algebraic sphere (--fit sphere).
 //
 // Deviations from the paper, each for a defined answer in a hard case:
 // - weights are computed relative to the largest (log-sum-exp shift), so exp() never underflows
 //   however far Q is from the points, and the truncation is relative, so the support always
 //   reaches Q (a large leaf's corners can be farther than every r_i from the points);
-// - only points whose normal is within 120° of the dominant point's normal take part, so two
-//   sheets closer than the radius with opposite normals do not cancel: Q sees the sheet it is
-//   nearest to (in σ units);
-// - if the normals still cancel, n̄ is the dominant point's normal.
+// - when the normals mostly agree, points whose normal is more than 120° from their weighted mean
+//   are left out (a few wrong normals are outvoted);
+// - when they do not (two sheets closer than the radius with opposite normals, whose normals
+//   would cancel), each side is fitted on its own and the two are combined as solids: the slab
+//   between sheets facing away from each other is inside (the larger distance), the gap between
+//   sheets facing each other is outside (the smaller);
+// - a group whose normals cancel takes the dominant point's normal.
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -24,6 +27,9 @@ namespace {
 constexpr size_t kProbe = 4;              // nearest points that set the search radius
 constexpr double kTruncation = 2.0;       // relative log-weight below which weights are 0 (2σ)
 constexpr float kOpposingNormal = -0.5f;  // cos 120°
+constexpr double kMajority = 0.5;         // |Σ w n| / Σ w above which the normals agree
+constexpr double kMinorGroup = 0.1;       // a group of opposing normals below this count is noise
+constexpr double kReach = 0.5;            // σ floor in distances to the nearest point
 
 // The signed distance from Q (the origin) to the algebraic sphere s(x) = u0 + u·x + u4 |x|² fitted
 // to the weighted points and normals (APSS, Guennebaud & Gross 2007, eqs. 7–9), from weighted
@@ -44,10 +50,62 @@ double sphereDistance(const glm::dvec3& pMean, const glm::dvec3& nMean, double p
   return 2.0 * u0 / (gradient + std::sqrt(discriminant));
 }
 
+// Weighted sums of one group of points (relative to Q) and the surface fitted to them.
+struct FitSums {
+  double weight = 0.0, pn = 0.0, pp = 0.0;  // Σw, Σw p·n, Σw p·p
+  glm::dvec3 p{0.0}, n{0.0}, color{0.0};    // Σw p, Σw n, Σw c
+  size_t count = 0;
+
+  void add(double w, const glm::dvec3& position, const glm::dvec3& normal, const glm::vec3* c) {
+    ++count;
+    weight += w;
+    p += w * position;
+    n += w * normal;
+    pn += w * glm::dot(position, normal);
+    pp += w * glm::dot(position, position);
+    if (c) color += w * glm::dvec3(*c);
+  }
+
+  // The sample of this group's surface at Q (the origin).
+  CornerSample sample(FitMode fit, double sigma, const glm::vec3& fallbackNormal) const {
+    CornerSample out;
+    const double length = glm::length(n);
+    const bool oriented = length > 1e-9 * weight;
+    const glm::dvec3 normal = oriented ? n / length : glm::dvec3(fallbackNormal);
+    const glm::dvec3 mean = p / weight;  // p̄ - Q
+    out.distance = float(-glm::dot(mean, normal));  // (Q - p̄)·n̄
+    if (fit == FitMode::Sphere && oriented)
+      out.distance = float(sphereDistance(mean, n / weight, pn / weight, pp / weight, sigma));
+    out.normal = glm::vec3(normal);
+    out.color = glm::vec3(color / weight);
+    return out;
+  }
+};
+
+// The fit over the points whose normal is within 120° of the mean normal (a few wrong normals are
+// outvoted and left out).
+CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode fit,
+                            const std::vector<std::pair<uint32_t, float>>& found,
+                            const std::vector<double>& logWeight, double best, const FitSums& all,
+                            double sigma, const glm::vec3& axis) {
+  const double length = glm::length(all.n);
+  const glm::vec3 reference = length > 1e-9 * all.weight ? glm::vec3(all.n / length) : axis;
+  FitSums agreeing;
+  for (size_t j = 0; j < found.size(); ++j) {
+    const double relative = logWeight[j] - best;
+    if (relative < -kTruncation) continue;
+    const uint32_t i = found[j].first;
+    if (glm::dot(points.normal[i], reference) < kOpposingNormal) continue;
+    const glm::vec3* color = points.hasColors() ? &points.color[i] : nullptr;
+    agreeing.add(std::exp(relative) * double(points.weight[i]), glm::dvec3(points.position[i]) - q,
+                 glm::dvec3(points.normal[i]), color);
+  }
+  return agreeing.sample(fit, sigma, reference);
+}
+
 }  // namespace
 
-SdfEvaluator::SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing,
-                           FitMode fit)
+SdfEvaluator::SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing, FitMode fit)
     : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {}
 
 uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
@@ -65,19 +123,17 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   std::array<uint32_t, kProbe> probe{};
   std::array<float, kProbe> probeD2{};
   const size_t probes = tree_.nearest(qf, kProbe, probe.data(), probeD2.data());
-  CornerSample out;
-  if (probes == 0) return out;
-  const auto sigmaOf = [&](uint32_t i) {
-    return std::max(smoothing_ * double(points_.radius[i]), double(minSigma));
-  };
-  // Every point with a relative weight above e^-4.5 lies within this radius when its σ is at most
+  if (probes == 0) return {};
+  // σ grows with the distance to the nearest point: far from the points a common scale ranks them
+  // by distance, where their own radii would rank them by radius.
+  const double floor = std::max(double(minSigma), kReach * std::sqrt(double(probeD2[0])));
+  const auto sigmaOf = [&](uint32_t i) { return std::max(smoothing_ * double(points_.radius[i]), floor); };
+  // Every point with a relative weight above e^-2 lies within this radius when its σ is at most
   // the largest σ among the nearest points (specs/pipeline.md derives it).
   double sigmaMax = 0.0;
   for (size_t j = 0; j < probes; ++j) sigmaMax = std::max(sigmaMax, sigmaOf(probe[j]));
   const double sigma0 = sigmaOf(probe[0]);
-  const double d0Squared = double(probeD2[0]);
-  const double radius =
-      sigmaMax * std::sqrt(d0Squared / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
+  const double radius = sigmaMax * std::sqrt(double(probeD2[0]) / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
   tree_.withinRadius(qf, float(radius), found);
   if (found.empty()) found.push_back({probe[0], probeD2[0]});
 
@@ -94,36 +150,32 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
       dominant = i;
     }
   }
-  const glm::vec3 reference = points_.normal[dominant];
-  double weightSum = 0.0, dotSum = 0.0, squareSum = 0.0;  // Σw p·n and Σw p·p, p relative to Q
-  glm::dvec3 offsetSum(0.0), normalSum(0.0), colorSum(0.0);
+  // Split the points by the side their normal faces, relative to the dominant point's normal.
+  const glm::vec3 axis = points_.normal[dominant];
+  FitSums with, against, all;
   for (size_t j = 0; j < found.size(); ++j) {
     const double relative = logWeight[j] - best;
     if (relative < -kTruncation) continue;
     const uint32_t i = found[j].first;
-    if (glm::dot(points_.normal[i], reference) < kOpposingNormal) continue;
     const double w = std::exp(relative) * double(points_.weight[i]);
-    const glm::dvec3 p = glm::dvec3(points_.position[i]) - q;
-    const glm::dvec3 n(points_.normal[i]);
-    weightSum += w;
-    offsetSum += w * p;
-    normalSum += w * n;
-    dotSum += w * glm::dot(p, n);
-    squareSum += w * glm::dot(p, p);
-    if (points_.hasColors()) colorSum += w * glm::dvec3(points_.color[i]);
+    const glm::dvec3 p = glm::dvec3(points_.position[i]) - q, n(points_.normal[i]);
+    const glm::vec3* color = points_.hasColors() ? &points_.color[i] : nullptr;
+    all.add(w, p, n, color);
+    (glm::dot(points_.normal[i], axis) >= 0.0f ? with : against).add(w, p, n, color);
   }
-  const double normalLength = glm::length(normalSum);
-  const glm::dvec3 normal =
-      normalLength > 1e-9 * weightSum ? normalSum / normalLength : glm::dvec3(reference);
-  const glm::dvec3 mean = offsetSum / weightSum;  // p̄ - Q
-  out.distance = float(-glm::dot(mean, normal));  // (Q - p̄)·n̄
-  if (fit_ == FitMode::Sphere && normalLength > 1e-9 * weightSum) {
-    out.distance = float(sphereDistance(mean, normalSum / weightSum, dotSum / weightSum,
-                                        squareSum / weightSum, sigmaOf(dominant)));
-  }
-  out.normal = glm::vec3(normal);
-  if (points_.hasColors()) out.color = glm::vec3(colorSum / weightSum);
-  return out;
+  const double sigma = sigmaOf(dominant);
+  // Two sides when many points face against the dominant one and the two groups oppose each other
+  // (two sheets closer than the radius). Counted, not weighted: far from the sheets the weights
+  // favour whichever points are nearest sideways, not the nearer sheet.
+  const bool twoSided = against.count >= kMinorGroup * double(with.count) &&
+                        glm::dot(with.n, against.n) < kOpposingNormal * glm::length(with.n) * glm::length(against.n);
+  if (!twoSided) return agreeingSample(points_, q, fit_, found, logWeight, best, all, sigma, axis);
+  // The slab between sheets that face away from each other is inside (CSG intersection: the larger
+  // distance), the gap between sheets that face each other is outside (union of the two solids:
+  // the smaller).
+  const CornerSample a = with.sample(fit_, sigma, axis), b = against.sample(fit_, sigma, -axis);
+  const bool slab = glm::dot(against.p / against.weight - with.p / with.weight, glm::dvec3(a.normal)) < 0.0;
+  return (slab ? a.distance >= b.distance : a.distance <= b.distance) ? a : b;
 }
 
 }  // namespace iso

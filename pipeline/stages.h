@@ -40,6 +40,9 @@ enum class OrientMode { Auto, Up, Propagate };
 // Guennebaud & Gross 2007), which has no curvature bias (specs/pipeline.md measures both).
 enum class FitMode { Plane, Sphere };
 
+// How corner distances are stored: snorm8, 1.0 = one node diagonal (specs/pipeline.md, §7).
+inline constexpr AttributeDesc kDistanceEncoding{Semantic::SignedDistance, Encoding::Snorm8, 1, 1.0f};
+
 struct BuildOptions {
   int neighbors = 10;      // k of the k-NN radius r_i (and of PCA normals)
   double smoothing = 1.0;  // σ_i = smoothing · r_i
