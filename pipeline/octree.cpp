@@ -19,7 +19,7 @@ namespace iso {
 namespace {
 
 constexpr uint32_t kMaxTestedPoints = 4096;  // larger nodes subdivide without a patch test
-constexpr float kLeafSigmaFraction = 0.1f;   // σ floor of leaf corners, in leaf edges
+constexpr float kLeafSigmaFraction = 0.0f;   // σ floor of leaf corners, in leaf edges
 constexpr int kCoverageLines = 4;            // zero-set samples per patch edge for coverage
 constexpr double kNoiseFactor = 3.0;         // tolerance floor in RMS roughness
 

@@ -29,7 +29,7 @@ constexpr double kTruncation = 2.0;       // relative log-weight below which wei
 constexpr float kOpposingNormal = -0.5f;  // cos 120°
 constexpr double kMajority = 0.5;         // |Σ w n| / Σ w above which the normals agree
 constexpr double kMinorGroup = 0.1;       // a group of opposing normals below this count is noise
-constexpr double kReach = 0.5;            // σ floor in distances to the nearest point
+constexpr double kReach = 0.25;           // σ floor in distances to the nearest point
 
 // The signed distance from Q (the origin) to the algebraic sphere s(x) = u0 + u·x + u4 |x|² fitted
 // to the weighted points and normals (APSS, Guennebaud & Gross 2007, eqs. 7–9), from weighted

@@ -1,43 +1,22 @@
 // The `iso` program: info, verify, usage errors and exit codes, run as a user would run it.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdio>
 #include <cstring>
 #include <nlohmann/json.hpp>
 
 #include "iso/writer.h"
-#include "support/support.h"
+#include "cli_support.h"
 
 namespace iso {
 namespace {
 
 const std::filesystem::path kGolden = std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso";
 
-struct CommandResult {
-  int exitCode = -1;
-  std::string out;  // stdout
-  std::string err;  // stderr
-};
+using test::CommandResult;
+using test::quoted;
 
-std::string slurp(const std::filesystem::path& path) {
-  const std::vector<std::byte> bytes = test::readFile(path);
-  return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
-}
-
-CommandResult iso(const std::string& arguments) {
-  test::TempDir dir;
-  const std::string command = std::string(ISO_BINARY) + " " + arguments + " >" +
-                              (dir / "out").string() + " 2>" + (dir / "err").string();
-  const int status = std::system(command.c_str());
-  CommandResult run;
-  run.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  run.out = slurp(dir / "out");
-  run.err = slurp(dir / "err");
-  return run;
-}
-
-std::string quoted(const std::filesystem::path& path) { return "'" + path.string() + "'"; }
+CommandResult iso(const std::string& arguments) { return test::runIso(arguments); }
 
 TEST(Cli, verifyAcceptsTheGoldenFile) {
   const CommandResult run = iso("verify " + quoted(kGolden));

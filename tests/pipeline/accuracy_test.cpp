@@ -68,3 +68,28 @@ TEST(Accuracy, hundredThousandRaysAtAClosedShapeNeverLeak) {
 
 }  // namespace
 }  // namespace iso
+
+namespace iso {
+namespace {
+
+// The paper's layout takes 56 bytes per leaf (8 corners of a distance, a normal and a color).
+// With colors, at the error of the sphere test above, the file must be smaller per leaf.
+TEST(Size, bytesPerLeafBeatThePapersLayoutWithColors) {
+  PointCloud points = test::scanOf("sphere", 200000);
+  points.colors.resize(points.size());
+  for (size_t i = 0; i < points.size(); ++i)
+    points.colors[i] = glm::vec3(0.5f + 0.5f * float(points.positions[i].x), 0.3f, 0.5f - 0.4f * float(points.positions[i].z));
+  test::TempDir dir;
+  const test::Converted c = test::convertAndLoad(points, dir / "colored.iso");
+  ShapeParams params;
+  const nlohmann::json e = test::evaluate(c, *makeShape(params));
+  const double bytesPerLeaf = c.report["file"]["bytes_per_leaf"].get<double>();
+  std::printf("with colors: %.2f bytes/leaf, %.3f bytes/point, rms %.4f spacings\n", bytesPerLeaf,
+              c.report["file"]["bytes_per_point"].get<double>(), e["rms_over_spacing"].get<double>());
+  EXPECT_TRUE(c.surface.hasColors());
+  EXPECT_LE(e["rms_over_spacing"].get<double>(), 0.10);
+  EXPECT_LT(bytesPerLeaf, 56.0);
+}
+
+}  // namespace
+}  // namespace iso

@@ -1,0 +1,119 @@
+// `iso gen`, `iso convert` and `iso eval` run as a user would: outputs, reports, exit codes, and
+// clear errors for bad input that leave nothing behind.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "cli_support.h"
+
+namespace iso {
+namespace {
+
+using test::quoted;
+using test::runIso;
+
+class CliPipeline : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto run = runIso("gen sphere -n 20000 --seed 3 -o " + quoted(dir_ / "sphere.ply"));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+  }
+  test::TempDir dir_;
+};
+
+TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
+  auto run = runIso("convert " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "sphere.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("bytes/leaf"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("accuracy"), std::string::npos) << run.out;
+  EXPECT_NE(run.err.find("octree"), std::string::npos) << run.err;  // progress per stage
+  EXPECT_EQ(runIso("verify " + quoted(dir_ / "sphere.iso")).exitCode, 0);
+
+  run = runIso("info --json " + quoted(dir_ / "sphere.iso"));
+  ASSERT_EQ(run.exitCode, 0);
+  const nlohmann::json info = nlohmann::json::parse(run.out);
+  EXPECT_EQ(info["metadata"]["inputs"][0]["points"], 20000);
+  EXPECT_EQ(info["metadata"]["parameters"]["leaf_points"], 8);
+  EXPECT_GT(info["metadata"]["report"]["accuracy"]["samples"].get<int>(), 0);
+  EXPECT_EQ(info["point_count"], 20000);
+
+  run = runIso("eval " + quoted(dir_ / "sphere.iso") + " --shape sphere --rays 2000 --samples 5000");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json e = nlohmann::json::parse(run.out);
+  for (const char* key : {"rms", "max", "mean_spacing", "rms_over_spacing", "max_over_spacing", "normal_median_deg",
+                          "normal_p99_deg", "hole_rate"})
+    EXPECT_TRUE(e.contains(key)) << key;
+  EXPECT_LT(e["rms_over_spacing"].get<double>(), 0.2);
+  EXPECT_EQ(e["holes"], 0);
+
+  run = runIso("eval " + quoted(dir_ / "sphere.iso") + " --points " + quoted(dir_ / "sphere.ply"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(nlohmann::json::parse(run.out)["points"], 20000);
+}
+
+TEST_F(CliPipeline, convertRefusesToReplaceAnExistingFileWithoutForce) {
+  test::writeFile(dir_ / "out.iso", {std::byte{'o'}, std::byte{'l'}, std::byte{'d'}});
+  auto run = runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("exists already"), std::string::npos) << run.err;
+  EXPECT_EQ(test::slurp(dir_ / "out.iso"), "old");
+  run = runIso("convert -q --force " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"));
+  EXPECT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
+}
+
+TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
+  // A missing file, a truncated PLY, an empty PLY, a LAZ file.
+  const std::vector<std::byte> ply = test::readFile(dir_ / "sphere.ply");
+  test::writeFile(dir_ / "cut.ply", {ply.begin(), ply.begin() + ptrdiff_t(ply.size() / 2)});
+  std::ofstream(dir_ / "empty.ply") << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                                       "property float z\nend_header\n";
+  test::writeFile(dir_ / "scan.laz", std::vector<std::byte>(400, std::byte{0}));
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"missing.ply", "missing.ply"}, {"cut.ply", "file ends after"}, {"empty.ply", "no points"}, {"scan.laz", "LAZ"}};
+  for (const auto& [input, expected] : cases) {
+    const auto run = runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));
+    EXPECT_EQ(run.exitCode, 1) << input;
+    EXPECT_NE(run.err.find(input), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find(expected), std::string::npos) << run.err;
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "bad.iso")) << input;
+  }
+  for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_EQ(entry.path().extension() == ".isotmp", false) << entry.path();
+}
+
+TEST_F(CliPipeline, nonFinitePointsAreDroppedAndCounted) {
+  std::ofstream(dir_ / "nan.xyz") << "0 0 0\n1 0 0\nnan 1 0\n0 1 0\ninf 0 0\n1 1 0.01\n0.5 0.5 0.02\n0.2 0.7 0\n";
+  const auto run = runIso("convert -q --json " + quoted(dir_ / "nan.xyz") + " -o " + quoted(dir_ / "nan.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json report = nlohmann::json::parse(run.out);
+  EXPECT_EQ(report["points"]["non_finite_dropped"], 2);
+  EXPECT_EQ(report["points"]["input"], 8);
+}
+
+TEST_F(CliPipeline, impossibleOptionsAreUsageErrors) {
+  for (const std::string options : {"--max-depth 30", "--leaf-points 0", "--normal-bits 10", "--fit cubic",
+                                    "--orient sideways", "--smoothing -1", "--tolerance nan"}) {
+    const auto run = runIso("convert -q " + options + " " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "x.iso"));
+    EXPECT_EQ(run.exitCode, 2) << options << ": " << run.err;
+    EXPECT_FALSE(run.err.empty());
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
+  }
+  EXPECT_EQ(runIso("gen -o " + quoted(dir_ / "x.ply")).exitCode, 2);  // no shape
+  EXPECT_EQ(runIso("gen torus --minor-radius 2 -o " + quoted(dir_ / "x.ply")).exitCode, 2);
+  EXPECT_EQ(runIso("gen sphere --offset 1,2 -o " + quoted(dir_ / "x.ply")).exitCode, 2);
+  EXPECT_EQ(runIso("eval " + quoted(dir_ / "sphere.ply")).exitCode, 2);  // no truth
+}
+
+TEST_F(CliPipeline, directoriesOfPointFilesConvertTogether) {
+  std::filesystem::create_directories(dir_ / "parts");
+  ASSERT_EQ(runIso("gen plane -n 5000 --seed 1 -o " + quoted(dir_ / "parts" / "a.ply")).exitCode, 0);
+  ASSERT_EQ(runIso("gen plane -n 5000 --seed 2 -o " + quoted(dir_ / "parts" / "b.ply")).exitCode, 0);
+  const auto run = runIso("convert -q --json " + quoted(dir_ / "parts") + " -o " + quoted(dir_ / "parts.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(nlohmann::json::parse(run.out)["points"]["input"], 10000);
+}
+
+}  // namespace
+}  // namespace iso
