@@ -16,9 +16,9 @@ namespace {
 
 constexpr size_t kMaxPasses = 8;
 
-// A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the points
-// (within the radius of influence of the nearest one), if there is one: the crossings along the
-// face's 4 edges are tried.
+// A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the
+// points (within the radius of influence of the nearest one), if there is one: the crossings along
+// the face's 4 edges are tried.
 bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int axis, int side,
                            const SdfEvaluator& sdf, const PointSet& points) {
   std::array<int, 4> corners{};
@@ -31,7 +31,8 @@ bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int
   for (int e = 0; e < 4; ++e) {
     const GridPoint pa = cornerPoint(leaf.level, leaf.key, cycle[size_t(e)]);
     const GridPoint pb = cornerPoint(leaf.level, leaf.key, cycle[size_t((e + 1) % 4)]);
-    const double fa = field.value[field.find(pa)].distance, fb = field.value[field.find(pb)].distance;
+    const double fa = field.value[field.find(pa)].distance,
+                 fb = field.value[field.find(pb)].distance;
     if ((fa < 0.0) == (fb < 0.0)) continue;
     const double t = fa / (fa - fb);
     const glm::dvec3 a(pa.x, pa.y, pa.z), b(pb.x, pb.y, pb.z);
@@ -51,7 +52,8 @@ int faceTowardSurface(const CornerField& field, const OctreeNode& leaf) {
     const int axis = face / 2, side = face % 2;
     double sum = 0.0;
     for (int c = 0; c < kCorners; ++c)
-      if (((c >> axis) & 1) == side) sum += std::abs(field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance);
+      if (((c >> axis) & 1) == side)
+        sum += std::abs(field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance);
     if (sum < bestMean) {
       bestMean = sum;
       best = face;
@@ -63,7 +65,8 @@ int faceTowardSurface(const CornerField& field, const OctreeNode& leaf) {
 bool hasSurface(const CornerField& field, const OctreeNode& leaf) {
   int negative = 0;
   for (int c = 0; c < kCorners; ++c)
-    negative += field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance < 0.0f ? 1 : 0;
+    negative +=
+        field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance < 0.0f ? 1 : 0;
   return negative != 0 && negative != kCorners;
 }
 
@@ -77,7 +80,8 @@ uint32_t materialize(Octree& tree, const PointSet& points, uint8_t level, uint64
 }
 
 // Fill the empty cells the surface runs into; returns how many.
-size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, const CornerField& field) {
+size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                 const CornerField& field) {
   std::vector<std::pair<uint8_t, uint64_t>> targets;
   for (const OctreeNode& leaf : tree.nodes) {
     if (!leaf.isFilled()) continue;
@@ -92,7 +96,8 @@ size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, 
       // The zero set runs out through this face near the points, or the leaf holds points but no
       // zero set (a displaced estimate) and this face is the nearest to it.
       const bool exit = crossesFaceNearPoints(field, leaf, axis, side, sdf, points);
-      const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf) && face == faceTowardSurface(field, leaf);
+      const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf) &&
+                        face == faceTowardSurface(field, leaf);
       if (exit || lost) targets.push_back({leaf.level, key});
     }
   }
@@ -108,7 +113,8 @@ size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, 
 
 }  // namespace
 
-Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, CornerCache& cache) {
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                            CornerCache& cache) {
   Closure closure;
   for (;;) {
     closure.corners = sampleLeafCorners(tree, sdf, cache);

@@ -24,7 +24,8 @@ constexpr size_t kAccuracySamples = 100000;
 
 class StageTimer {
  public:
-  StageTimer(nlohmann::json& stages, const ConvertSource& source) : stages_(stages), source_(source) {}
+  StageTimer(nlohmann::json& stages, const ConvertSource& source)
+      : stages_(stages), source_(source) {}
   void end(const std::string& name) {
     const auto now = Clock::now();
     add(name, std::chrono::duration<double>(now - start_).count());
@@ -134,11 +135,16 @@ nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t p
   }
   nlohmann::json perLevel = nlohmann::json::object();
   for (const auto& [level, count] : leavesPerLevel) perLevel[std::to_string(level)] = count;
-  return {{"internal_nodes", internal},      {"leaves", leaves},
-          {"passive_leaves", passiveLeaves}, {"leaves_per_level", perLevel},
-          {"max_level", maxLevel},           {"passive_marked", passive},
-          {"balance_splits", splits},        {"patch_splits", stats.testedPatches},
-          {"patch_splits_too_far", stats.tooFar}, {"patch_splits_uncovered", stats.uncovered},
+  return {{"internal_nodes", internal},
+          {"leaves", leaves},
+          {"passive_leaves", passiveLeaves},
+          {"leaves_per_level", perLevel},
+          {"max_level", maxLevel},
+          {"passive_marked", passive},
+          {"balance_splits", splits},
+          {"patch_splits", stats.testedPatches},
+          {"patch_splits_too_far", stats.tooFar},
+          {"patch_splits_uncovered", stats.uncovered},
           {"thin_splits", stats.thinSplits}};
 }
 

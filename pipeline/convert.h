@@ -21,9 +21,10 @@ class ConvertError : public std::runtime_error {
 
 // Where the points came from, for the report and the file's metadata.
 struct ConvertSource {
-  nlohmann::json inputs = nlohmann::json::array();  // e.g. [{"file": ..., "format": ..., "points": ...}]
-  double readSeconds = 0.0;                          // reported as the "read" stage
-  uint64_t nonFiniteDropped = 0;                     // points the readers dropped
+  nlohmann::json inputs =
+      nlohmann::json::array();    // e.g. [{"file": ..., "format": ..., "points": ...}]
+  double readSeconds = 0.0;       // reported as the "read" stage
+  uint64_t nonFiniteDropped = 0;  // points the readers dropped
   // Called when a stage ends, with its name and duration.
   std::function<void(const std::string& stage, double seconds)> onStage;
 };

@@ -42,7 +42,7 @@ CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, Corne
             continue;
           }
           const glm::dvec3 q(p.x * unit, p.y * unit, p.z * unit);
-          field.value[i] = sdf.evaluate(q, leafSigmaFloor(field.coarsestLevel[i]));
+          field.value[i] = sdf.evaluate(q, 0.0f);
         }
       });
   for (size_t i = 0; i < field.point.size(); ++i)  // for later passes (closeSurface)

@@ -48,16 +48,18 @@ IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const Eva
   const Frame& frame = surface.header().frame;
   const std::vector<ZeroSetSample> samples = surface.sampleZeroSet(options.linesPerEdge);
   std::vector<double> distance(samples.size()), angle(samples.size());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, samples.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i < r.end(); ++i) {
-      const ClosestPoint c = truth.closest(toWorld(samples[i].position, frame));
-      distance[i] = c.distance;
-      const SurfaceEval e = surface.evaluate(samples[i].leaf, samples[i].position);
-      double dot = glm::dot(glm::dvec3(e.normal[0], e.normal[1], e.normal[2]), c.normal);
-      if (!options.orientedNormals) dot = std::abs(dot);
-      angle[i] = std::acos(std::clamp(dot, -1.0, 1.0)) * 180.0 / std::numbers::pi;
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, samples.size(), 1024),
+      [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const ClosestPoint c = truth.closest(toWorld(samples[i].position, frame));
+          distance[i] = c.distance;
+          const SurfaceEval e = surface.evaluate(samples[i].leaf, samples[i].position);
+          double dot = glm::dot(glm::dvec3(e.normal[0], e.normal[1], e.normal[2]), c.normal);
+          if (!options.orientedNormals) dot = std::abs(dot);
+          angle[i] = std::acos(std::clamp(dot, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+        }
+      });
   IsoToTruth out;
   for (size_t i = 0; i < samples.size(); ++i) {
     out.distance.add(distance[i], samples[i].area);
@@ -76,7 +78,8 @@ struct TruthToIso {
 // The point of the zero set closest to p (frame units): projection from p, or from the nearest
 // zero-set sample when p lies in empty space, refined by moving along the tangent plane toward p
 // and projecting again (alternating projections converge to the closest point of a smooth patch).
-std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const glm::dvec3& p, const KdTree& samples,
+std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const glm::dvec3& p,
+                                           const KdTree& samples,
                                            const std::vector<glm::vec3>& samplePositions) {
   std::optional<Vec3> x = surface.project({p.x, p.y, p.z});
   if (!x && samples.size() > 0) {
@@ -105,8 +108,8 @@ std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const gl
   return c;
 }
 
-TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth, const std::vector<glm::vec3>& isoSamples,
-                      const EvalOptions& options) {
+TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
+                      const std::vector<glm::vec3>& isoSamples, const EvalOptions& options) {
   const Frame& frame = surface.header().frame;
   std::mt19937_64 rng(options.seed);
   std::vector<glm::dvec3> points(options.truthSamples);
@@ -114,22 +117,23 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth, const std
   const KdTree tree(isoSamples);
   std::vector<double> distance(points.size());
   std::vector<uint8_t> projected(points.size());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i < r.end(); ++i) {
-      const glm::dvec3 p = toFrame(points[i], frame);
-      if (const std::optional<glm::dvec3> x = closestOnZeroSet(surface, p, tree, isoSamples)) {
-        distance[i] = glm::length(*x - p) * frame.size;
-        projected[i] = 1;
-      } else if (tree.size() > 0) {  // no zero set found near p: the nearest sample bounds it
-        uint32_t nearest = 0;
-        float d2 = 0.0f;
-        tree.nearest(glm::vec3(p), 1, &nearest, &d2);
-        distance[i] = std::sqrt(double(d2)) * frame.size;
-      } else {
-        distance[i] = std::numeric_limits<double>::infinity();
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const glm::dvec3 p = toFrame(points[i], frame);
+          if (const std::optional<glm::dvec3> x = closestOnZeroSet(surface, p, tree, isoSamples)) {
+            distance[i] = glm::length(*x - p) * frame.size;
+            projected[i] = 1;
+          } else if (tree.size() > 0) {  // no zero set found near p: the nearest sample bounds it
+            uint32_t nearest = 0;
+            float d2 = 0.0f;
+            tree.nearest(glm::vec3(p), 1, &nearest, &d2);
+            distance[i] = std::sqrt(double(d2)) * frame.size;
+          } else {
+            distance[i] = std::numeric_limits<double>::infinity();
+          }
+        }
+      });
   TruthToIso out;
   for (size_t i = 0; i < points.size(); ++i) {
     out.distance.add(distance[i], 1.0);
@@ -153,32 +157,36 @@ Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions
   const double radius = glm::length(truth.boundsMax() - truth.boundsMin());
   const double depth = 0.01 * radius;
   std::vector<uint8_t> outcome(options.rays);  // bit 0: truth hit, bit 1: iso hit
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, outcome.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
-    std::mt19937_64 rng(mixBits(options.seed * 0x100000001ull + r.begin()));
-    for (size_t i = r.begin(); i < r.end(); ++i) {
-      glm::dvec3 d(standardNormal(rng), standardNormal(rng), standardNormal(rng));
-      const glm::dvec3 origin = center + radius * glm::normalize(d);
-      // A closed truth's target lies at least half the depth from every part of the surface (a
-      // point near an edge is deep below one face but close to the next), so it is inside the
-      // zero set too, which is within a small fraction of the depth of the truth.
-      SurfacePoint aim = truth.sample(rng);
-      glm::dvec3 target = truth.isClosed() ? aim.position - depth * aim.normal : aim.position;
-      for (int tries = 0; truth.isClosed() && truth.closest(target).distance < 0.5 * depth && tries < 100; ++tries) {
-        aim = truth.sample(rng);
-        target = aim.position - depth * aim.normal;
-      }
-      const double length = glm::length(target - origin);
-      const glm::dvec3 direction = (target - origin) / length;
-      // Past an open truth the zero set may be hit a little later; how much later grows as the
-      // ray grazes the surface, so the allowance is the depth over the cosine of incidence.
-      const double cosine = std::max(std::abs(glm::dot(direction, aim.normal)), 0.05);
-      const double tMax = truth.isClosed() ? length : length + depth / cosine;
-      const bool truthHit = truth.intersect(origin, direction, 0.0, tMax).has_value();
-      const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
-      const bool isoHit = surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();
-      outcome[i] = uint8_t((truthHit ? 1 : 0) | (isoHit ? 2 : 0));
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, outcome.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+        std::mt19937_64 rng(mixBits(options.seed * 0x100000001ull + r.begin()));
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          glm::dvec3 d(standardNormal(rng), standardNormal(rng), standardNormal(rng));
+          const glm::dvec3 origin = center + radius * glm::normalize(d);
+          // A closed truth's target lies at least half the depth from every part of the surface (a
+          // point near an edge is deep below one face but close to the next), so it is inside the
+          // zero set too, which is within a small fraction of the depth of the truth.
+          SurfacePoint aim = truth.sample(rng);
+          glm::dvec3 target = truth.isClosed() ? aim.position - depth * aim.normal : aim.position;
+          for (int tries = 0;
+               truth.isClosed() && truth.closest(target).distance < 0.5 * depth && tries < 100;
+               ++tries) {
+            aim = truth.sample(rng);
+            target = aim.position - depth * aim.normal;
+          }
+          const double length = glm::length(target - origin);
+          const glm::dvec3 direction = (target - origin) / length;
+          // Past an open truth the zero set may be hit a little later; how much later grows as the
+          // ray grazes the surface, so the allowance is the depth over the cosine of incidence.
+          const double cosine = std::max(std::abs(glm::dot(direction, aim.normal)), 0.05);
+          const double tMax = truth.isClosed() ? length : length + depth / cosine;
+          const bool truthHit = truth.intersect(origin, direction, 0.0, tMax).has_value();
+          const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
+          const bool isoHit =
+              surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();
+          outcome[i] = uint8_t((truthHit ? 1 : 0) | (isoHit ? 2 : 0));
+        }
+      });
   Rays rays;
   for (uint8_t o : outcome) {
     rays.truthHits += o & 1;
@@ -190,23 +198,28 @@ Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions
 
 double outwardFraction(const std::vector<double>& anglesDeg) {
   if (anglesDeg.empty()) return 0.0;
-  return double(std::count_if(anglesDeg.begin(), anglesDeg.end(), [](double a) { return a < 90.0; })) /
+  return double(
+             std::count_if(anglesDeg.begin(), anglesDeg.end(), [](double a) { return a < 90.0; })) /
          double(anglesDeg.size());
 }
 
 nlohmann::json weightedJson(const Weighted& w, double spacing) {
-  return {{"rms", w.rms()}, {"max", w.max}, {"mean", w.mean()}, {"rms_over_spacing", w.rms() / spacing},
+  return {{"rms", w.rms()},
+          {"max", w.max},
+          {"mean", w.mean()},
+          {"rms_over_spacing", w.rms() / spacing},
           {"max_over_spacing", w.max / spacing}};
 }
 
 }  // namespace
 
-nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth, double meanSpacing,
-                                    const EvalOptions& options) {
+nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
+                                    double meanSpacing, const EvalOptions& options) {
   const IsoToTruth a = isoToTruth(surface, truth, options);
   const TruthToIso b = truthToIso(surface, truth, a.samples, options);
   const Rays rays = castRays(surface, truth, options);
-  const double rms = std::sqrt(0.5 * (a.distance.rms() * a.distance.rms() + b.distance.rms() * b.distance.rms()));
+  const double rms =
+      std::sqrt(0.5 * (a.distance.rms() * a.distance.rms() + b.distance.rms() * b.distance.rms()));
   const double max = std::max(a.distance.max, b.distance.max);
   const double diagonal = glm::length(truth.boundsMax() - truth.boundsMin());
   nlohmann::json iso = weightedJson(a.distance, meanSpacing);

@@ -24,13 +24,13 @@ struct EvalOptions {
   uint64_t rays = 100000;          // for the hole rate
   uint64_t truthSamples = 200000;  // for truth → iso
   int linesPerEdge = 4;            // zero-set sampling density per leaf
-  bool orientedNormals = true;     // false: normal angles ignore the sign (meshes of unknown winding)
+  bool orientedNormals = true;  // false: normal angles ignore the sign (meshes of unknown winding)
   uint64_t seed = 1;
 };
 
 // meanSpacing: the input's mean point spacing (world units), the unit of the *_over_spacing values.
-nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth, double meanSpacing,
-                                    const EvalOptions& options = {});
+nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
+                                    double meanSpacing, const EvalOptions& options = {});
 
 // Distances of the points to the zero set (the conversion report's measure) with their spacing.
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);

@@ -19,7 +19,6 @@ namespace iso {
 namespace {
 
 constexpr uint32_t kMaxTestedPoints = 4096;  // larger nodes subdivide without a patch test
-constexpr float kLeafSigmaFraction = 0.0f;   // σ floor of leaf corners, in leaf edges
 constexpr int kCoverageLines = 4;            // zero-set samples per patch edge for coverage
 constexpr double kNoiseFactor = 3.0;         // tolerance floor in RMS roughness
 
@@ -62,7 +61,6 @@ struct ToleranceScale {
   double tolerance, meanSpacing, medianRadius;
 };
 
-
 Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const BuildOptions& options) {
   if (node.level >= options.maxDepth) return Verdict::Leaf;
   if (hasOpposingNormals(points, node)) return Verdict::Subdivide;
@@ -86,11 +84,10 @@ void fillCache(const Octree& tree, const std::vector<uint32_t>& frontier,
     }
   }
   std::vector<CornerSample> values(missing.size());
-  const uint8_t level = frontier.empty() ? 0 : tree.nodes[frontier[0]].level;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, missing.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
                       for (size_t i = r.begin(); i < r.end(); ++i)
-                        values[i] = sdf.evaluate(missing[i].second, leafSigmaFloor(level));
+                        values[i] = sdf.evaluate(missing[i].second, 0.0f);
                     });
   for (size_t i = 0; i < missing.size(); ++i) *cache.find(missing[i].first) = values[i];
 }
@@ -139,7 +136,8 @@ double nodeTolerance(const OctreeNode& node, const PointSet& points, const Toler
 Verdict patchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
                   const CornerCache& cache, const ToleranceScale& tolerance) {
   const Patch patch = leafPatch(node, cache);
-  if (patch.maxPointDistance(points, node.pointBegin, node.pointEnd) > nodeTolerance(node, points, tolerance))
+  if (patch.maxPointDistance(points, node.pointBegin, node.pointEnd) >
+      nodeTolerance(node, points, tolerance))
     return Verdict::TooFar;
   return isCovered(patch, sdf, points, node) ? Verdict::Leaf : Verdict::Uncovered;
 }
@@ -151,8 +149,6 @@ float maxRadiusOf(const PointSet& points, uint32_t begin, uint32_t end) {
 }
 
 }  // namespace
-
-float leafSigmaFloor(uint8_t level) { return kLeafSigmaFraction * float(std::ldexp(1.0, -level)); }
 
 Patch::Patch(uint8_t level, uint64_t key) : origin(cellOrigin(level, key)), size(cellSize(level)) {}
 
@@ -261,7 +257,8 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   root.pointEnd = uint32_t(points.size());
   root.kind = root.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
   tree.nodes.push_back(root);
-  const ToleranceScale tolerance{options.tolerance, radii.meanSpacing, std::max(radii.medianRadius, 1e-12)};
+  const ToleranceScale tolerance{options.tolerance, radii.meanSpacing,
+                                 std::max(radii.medianRadius, 1e-12)};
   std::vector<uint32_t> frontier = {0};
   OctreeStats stats;
   while (!frontier.empty()) {  // one level at a time
@@ -272,11 +269,14 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                           verdict[i] = quickVerdict(tree.nodes[frontier[i]], points, options);
                       });
     fillCache(tree, frontier, verdict, sdf, cache);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        if (verdict[i] == Verdict::Test) verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, cache, tolerance);
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i) {
+                          if (verdict[i] == Verdict::Test)
+                            verdict[i] =
+                                patchTest(tree.nodes[frontier[i]], points, sdf, cache, tolerance);
+                        }
+                      });
     std::vector<uint32_t> next;
     for (size_t i = 0; i < frontier.size(); ++i) {
       const OctreeNode& node = tree.nodes[frontier[i]];
@@ -284,7 +284,8 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
       stats.uncovered += verdict[i] == Verdict::Uncovered;
       if (verdict[i] == Verdict::Leaf) continue;
       if (verdict[i] == Verdict::TooFar || verdict[i] == Verdict::Uncovered) ++stats.testedPatches;
-      if (verdict[i] == Verdict::Subdivide && node.pointCount() <= options.leafPoints) ++stats.thinSplits;
+      if (verdict[i] == Verdict::Subdivide && node.pointCount() <= options.leafPoints)
+        ++stats.thinSplits;
       tree.split(frontier[i], points);
       const uint32_t first = tree.nodes[frontier[i]].firstChild;
       for (uint32_t c = 0; c < 8; ++c)

@@ -113,24 +113,26 @@ void propagate(PointSet& points, const Graph& g, const std::vector<uint8_t>& was
 // Flip input normals that oppose at least 80% of their neighbours' (and at least 3 of them). Only
 // neighbours near the point's tangent plane count (within 30° of it): on two sheets closer than
 // the radius the other sheet's points lie along the normal, and their opposite normals are right.
-size_t repairFlipped(PointSet& points, const Neighbors& neighbors, const std::vector<uint8_t>& wasEstimated) {
+size_t repairFlipped(PointSet& points, const Neighbors& neighbors,
+                     const std::vector<uint8_t>& wasEstimated) {
   const size_t n = points.size(), k = size_t(neighbors.k);
   std::vector<uint8_t> flip(n, 0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t i = range.begin(); i < range.end(); ++i) {
-      if (wasEstimated[i]) continue;
-      size_t opposing = 0, known = 0;
-      for (size_t j = 0; j < k; ++j) {
-        const uint32_t other = neighbors.index[i * k + j];
-        if (wasEstimated[other]) continue;
-        const glm::vec3 offset = points.position[other] - points.position[i];
-        if (std::abs(glm::dot(offset, points.normal[i])) > 0.5f * glm::length(offset)) continue;
-        ++known;
-        opposing += glm::dot(points.normal[i], points.normal[other]) < -0.5f ? 1 : 0;
-      }
-      flip[i] = opposing >= 3 && opposing * 5 >= known * 4;
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+          if (wasEstimated[i]) continue;
+          size_t opposing = 0, known = 0;
+          for (size_t j = 0; j < k; ++j) {
+            const uint32_t other = neighbors.index[i * k + j];
+            if (wasEstimated[other]) continue;
+            const glm::vec3 offset = points.position[other] - points.position[i];
+            if (std::abs(glm::dot(offset, points.normal[i])) > 0.5f * glm::length(offset)) continue;
+            ++known;
+            opposing += glm::dot(points.normal[i], points.normal[other]) < -0.5f ? 1 : 0;
+          }
+          flip[i] = opposing >= 3 && opposing * 5 >= known * 4;
+        }
+      });
   size_t count = 0;
   for (size_t i = 0; i < n; ++i)
     if (flip[i]) {

@@ -72,7 +72,7 @@ struct FitSums {
     const double length = glm::length(n);
     const bool oriented = length > 1e-9 * weight;
     const glm::dvec3 normal = oriented ? n / length : glm::dvec3(fallbackNormal);
-    const glm::dvec3 mean = p / weight;  // p̄ - Q
+    const glm::dvec3 mean = p / weight;             // p̄ - Q
     out.distance = float(-glm::dot(mean, normal));  // (Q - p̄)·n̄
     if (fit == FitMode::Sphere && oriented)
       out.distance = float(sphereDistance(mean, n / weight, pn / weight, pp / weight, sigma));
@@ -105,7 +105,8 @@ CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode
 
 }  // namespace
 
-SdfEvaluator::SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing, FitMode fit)
+SdfEvaluator::SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing,
+                           FitMode fit)
     : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {}
 
 uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
@@ -127,13 +128,16 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   // σ grows with the distance to the nearest point: far from the points a common scale ranks them
   // by distance, where their own radii would rank them by radius.
   const double floor = std::max(double(minSigma), kReach * std::sqrt(double(probeD2[0])));
-  const auto sigmaOf = [&](uint32_t i) { return std::max(smoothing_ * double(points_.radius[i]), floor); };
+  const auto sigmaOf = [&](uint32_t i) {
+    return std::max(smoothing_ * double(points_.radius[i]), floor);
+  };
   // Every point with a relative weight above e^-2 lies within this radius when its σ is at most
   // the largest σ among the nearest points (specs/pipeline.md derives it).
   double sigmaMax = 0.0;
   for (size_t j = 0; j < probes; ++j) sigmaMax = std::max(sigmaMax, sigmaOf(probe[j]));
   const double sigma0 = sigmaOf(probe[0]);
-  const double radius = sigmaMax * std::sqrt(double(probeD2[0]) / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
+  const double radius =
+      sigmaMax * std::sqrt(double(probeD2[0]) / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
   tree_.withinRadius(qf, float(radius), found);
   if (found.empty()) found.push_back({probe[0], probeD2[0]});
 
@@ -167,14 +171,16 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   // Two sides when many points face against the dominant one and the two groups oppose each other
   // (two sheets closer than the radius). Counted, not weighted: far from the sheets the weights
   // favour whichever points are nearest sideways, not the nearer sheet.
-  const bool twoSided = against.count >= kMinorGroup * double(with.count) &&
-                        glm::dot(with.n, against.n) < kOpposingNormal * glm::length(with.n) * glm::length(against.n);
+  const bool twoSided =
+      against.count >= kMinorGroup * double(with.count) &&
+      glm::dot(with.n, against.n) < kOpposingNormal * glm::length(with.n) * glm::length(against.n);
   if (!twoSided) return agreeingSample(points_, q, fit_, found, logWeight, best, all, sigma, axis);
   // The slab between sheets that face away from each other is inside (CSG intersection: the larger
   // distance), the gap between sheets that face each other is outside (union of the two solids:
   // the smaller).
   const CornerSample a = with.sample(fit_, sigma, axis), b = against.sample(fit_, sigma, -axis);
-  const bool slab = glm::dot(against.p / against.weight - with.p / with.weight, glm::dvec3(a.normal)) < 0.0;
+  const bool slab =
+      glm::dot(against.p / against.weight - with.p / with.weight, glm::dvec3(a.normal)) < 0.0;
   return (slab ? a.distance >= b.distance : a.distance <= b.distance) ? a : b;
 }
 

@@ -41,7 +41,8 @@ enum class OrientMode { Auto, Up, Propagate };
 enum class FitMode { Plane, Sphere };
 
 // How corner distances are stored: snorm8, 1.0 = one node diagonal (specs/pipeline.md, §7).
-inline constexpr AttributeDesc kDistanceEncoding{Semantic::SignedDistance, Encoding::Snorm8, 1, 1.0f};
+inline constexpr AttributeDesc kDistanceEncoding{Semantic::SignedDistance, Encoding::Snorm8, 1,
+                                                 1.0f};
 
 struct BuildOptions {
   int neighbors = 10;      // k of the k-NN radius r_i (and of PCA normals)
@@ -188,8 +189,6 @@ struct OctreeStats {
 // Leaf corner samples evaluated while building, by (level of their σ floor, grid point): the
 // corners of a leaf at level L are evaluated with the same parameters later.
 using CornerCache = FlatMap<Key128, CornerSample>;
-// σ floor of a leaf corner whose coarsest leaf is at `level`.
-float leafSigmaFloor(uint8_t level);
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
                    const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
 
@@ -232,13 +231,14 @@ void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& ha
 struct Closure {
   CornerField corners;
   std::vector<HangingCorner> hanging;
-  size_t filled = 0;      // empty cells filled because the surface ran into them
+  size_t filled = 0;  // empty cells filled because the surface ran into them
   size_t passes = 0;
 };
 // Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
 // which the zero set of a filled leaf runs (sharp edges, repaired normals), until none is left:
 // near the points the surface never leaves the filled leaves, so rays cannot slip out of it.
-Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, CornerCache& cache);
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                            CornerCache& cache);
 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.

@@ -23,7 +23,8 @@ class CliPipeline : public ::testing::Test {
 };
 
 TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
-  auto run = runIso("convert " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "sphere.iso"));
+  auto run =
+      runIso("convert " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "sphere.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.out.find("bytes/leaf"), std::string::npos) << run.out;
   EXPECT_NE(run.out.find("accuracy"), std::string::npos) << run.out;
@@ -38,11 +39,12 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
   EXPECT_GT(info["metadata"]["report"]["accuracy"]["samples"].get<int>(), 0);
   EXPECT_EQ(info["point_count"], 20000);
 
-  run = runIso("eval " + quoted(dir_ / "sphere.iso") + " --shape sphere --rays 2000 --samples 5000");
+  run =
+      runIso("eval " + quoted(dir_ / "sphere.iso") + " --shape sphere --rays 2000 --samples 5000");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json e = nlohmann::json::parse(run.out);
-  for (const char* key : {"rms", "max", "mean_spacing", "rms_over_spacing", "max_over_spacing", "normal_median_deg",
-                          "normal_p99_deg", "hole_rate"})
+  for (const char* key : {"rms", "max", "mean_spacing", "rms_over_spacing", "max_over_spacing",
+                          "normal_median_deg", "normal_p99_deg", "hole_rate"})
     EXPECT_TRUE(e.contains(key)) << key;
   EXPECT_LT(e["rms_over_spacing"].get<double>(), 0.2);
   EXPECT_EQ(e["holes"], 0);
@@ -54,11 +56,13 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
 
 TEST_F(CliPipeline, convertRefusesToReplaceAnExistingFileWithoutForce) {
   test::writeFile(dir_ / "out.iso", {std::byte{'o'}, std::byte{'l'}, std::byte{'d'}});
-  auto run = runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"));
+  auto run =
+      runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"));
   EXPECT_EQ(run.exitCode, 1);
   EXPECT_NE(run.err.find("exists already"), std::string::npos) << run.err;
   EXPECT_EQ(test::slurp(dir_ / "out.iso"), "old");
-  run = runIso("convert -q --force " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"));
+  run = runIso("convert -q --force " + quoted(dir_ / "sphere.ply") + " -o " +
+               quoted(dir_ / "out.iso"));
   EXPECT_EQ(run.exitCode, 0) << run.err;
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
 }
@@ -67,13 +71,17 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
   // A missing file, a truncated PLY, an empty PLY, a LAZ file.
   const std::vector<std::byte> ply = test::readFile(dir_ / "sphere.ply");
   test::writeFile(dir_ / "cut.ply", {ply.begin(), ply.begin() + ptrdiff_t(ply.size() / 2)});
-  std::ofstream(dir_ / "empty.ply") << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
-                                       "property float z\nend_header\n";
+  std::ofstream(dir_ / "empty.ply")
+      << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+         "property float z\nend_header\n";
   test::writeFile(dir_ / "scan.laz", std::vector<std::byte>(400, std::byte{0}));
-  const std::vector<std::pair<std::string, std::string>> cases = {
-      {"missing.ply", "missing.ply"}, {"cut.ply", "file ends after"}, {"empty.ply", "no points"}, {"scan.laz", "LAZ"}};
+  const std::vector<std::pair<std::string, std::string>> cases = {{"missing.ply", "missing.ply"},
+                                                                  {"cut.ply", "file ends after"},
+                                                                  {"empty.ply", "no points"},
+                                                                  {"scan.laz", "LAZ"}};
   for (const auto& [input, expected] : cases) {
-    const auto run = runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));
+    const auto run =
+        runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));
     EXPECT_EQ(run.exitCode, 1) << input;
     EXPECT_NE(run.err.find(input), std::string::npos) << run.err;
     EXPECT_NE(run.err.find(expected), std::string::npos) << run.err;
@@ -84,8 +92,10 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
 }
 
 TEST_F(CliPipeline, nonFinitePointsAreDroppedAndCounted) {
-  std::ofstream(dir_ / "nan.xyz") << "0 0 0\n1 0 0\nnan 1 0\n0 1 0\ninf 0 0\n1 1 0.01\n0.5 0.5 0.02\n0.2 0.7 0\n";
-  const auto run = runIso("convert -q --json " + quoted(dir_ / "nan.xyz") + " -o " + quoted(dir_ / "nan.iso"));
+  std::ofstream(dir_ / "nan.xyz")
+      << "0 0 0\n1 0 0\nnan 1 0\n0 1 0\ninf 0 0\n1 1 0.01\n0.5 0.5 0.02\n0.2 0.7 0\n";
+  const auto run =
+      runIso("convert -q --json " + quoted(dir_ / "nan.xyz") + " -o " + quoted(dir_ / "nan.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json report = nlohmann::json::parse(run.out);
   EXPECT_EQ(report["points"]["non_finite_dropped"], 2);
@@ -93,9 +103,11 @@ TEST_F(CliPipeline, nonFinitePointsAreDroppedAndCounted) {
 }
 
 TEST_F(CliPipeline, impossibleOptionsAreUsageErrors) {
-  for (const std::string options : {"--max-depth 30", "--leaf-points 0", "--normal-bits 10", "--fit cubic",
-                                    "--orient sideways", "--smoothing -1", "--tolerance nan"}) {
-    const auto run = runIso("convert -q " + options + " " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "x.iso"));
+  for (const std::string options :
+       {"--max-depth 30", "--leaf-points 0", "--normal-bits 10", "--fit cubic", "--orient sideways",
+        "--smoothing -1", "--tolerance nan"}) {
+    const auto run = runIso("convert -q " + options + " " + quoted(dir_ / "sphere.ply") + " -o " +
+                            quoted(dir_ / "x.iso"));
     EXPECT_EQ(run.exitCode, 2) << options << ": " << run.err;
     EXPECT_FALSE(run.err.empty());
     EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
@@ -108,9 +120,12 @@ TEST_F(CliPipeline, impossibleOptionsAreUsageErrors) {
 
 TEST_F(CliPipeline, directoriesOfPointFilesConvertTogether) {
   std::filesystem::create_directories(dir_ / "parts");
-  ASSERT_EQ(runIso("gen plane -n 5000 --seed 1 -o " + quoted(dir_ / "parts" / "a.ply")).exitCode, 0);
-  ASSERT_EQ(runIso("gen plane -n 5000 --seed 2 -o " + quoted(dir_ / "parts" / "b.ply")).exitCode, 0);
-  const auto run = runIso("convert -q --json " + quoted(dir_ / "parts") + " -o " + quoted(dir_ / "parts.iso"));
+  ASSERT_EQ(runIso("gen plane -n 5000 --seed 1 -o " + quoted(dir_ / "parts" / "a.ply")).exitCode,
+            0);
+  ASSERT_EQ(runIso("gen plane -n 5000 --seed 2 -o " + quoted(dir_ / "parts" / "b.ply")).exitCode,
+            0);
+  const auto run =
+      runIso("convert -q --json " + quoted(dir_ / "parts") + " -o " + quoted(dir_ / "parts.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_EQ(nlohmann::json::parse(run.out)["points"]["input"], 10000);
 }

@@ -23,8 +23,8 @@ inline std::string slurp(const std::filesystem::path& path) {
 
 inline CommandResult runIso(const std::string& arguments) {
   TempDir dir;
-  const std::string command = std::string(ISO_BINARY) + " " + arguments + " >" + (dir / "out").string() +
-                              " 2>" + (dir / "err").string();
+  const std::string command = std::string(ISO_BINARY) + " " + arguments + " >" +
+                              (dir / "out").string() + " 2>" + (dir / "err").string();
   const int status = std::system(command.c_str());
   CommandResult run;
   run.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;

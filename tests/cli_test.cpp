@@ -5,8 +5,8 @@
 #include <cstring>
 #include <nlohmann/json.hpp>
 
-#include "iso/writer.h"
 #include "cli_support.h"
+#include "iso/writer.h"
 
 namespace iso {
 namespace {

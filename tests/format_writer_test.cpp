@@ -12,6 +12,7 @@
 
 #include "iso/error.h"
 #include "iso/reader.h"
+#include "iso/verify.h"
 #include "iso/writer.h"
 #include "support/support.h"
 
@@ -160,6 +161,30 @@ TEST(Writer, outputInMissingDirectoryIsAClearError) {
     EXPECT_NE(std::string(error.what()).find("a.iso"), std::string::npos);
     EXPECT_NE(error.reason().find("No such file or directory"), std::string::npos);
   }
+}
+
+}  // namespace
+}  // namespace iso
+
+namespace iso {
+namespace {
+
+TEST(Writer, closedFileCanBeReadThenItsMetadataReplacedBeforeCommit) {
+  test::TempDir dir;
+  Writer writer(dir / "out.iso", FileHeader{});
+  writer.addChunk({}, std::vector<std::byte>(3000, std::byte{9}));
+  writer.setMetadata(R"({"step":1})");
+  writer.close();
+  EXPECT_FALSE(std::filesystem::exists(dir / "out.iso"));
+  EXPECT_EQ(Reader::open(writer.temporaryPath()).metadata(), R"({"step":1})");
+  writer.replaceMetadata(R"({"step":2,"longer":"metadata than before"})");
+  writer.replaceMetadata(R"({"step":3})");  // shorter again
+  writer.commit();
+  const Reader reader = Reader::open(dir / "out.iso");
+  EXPECT_EQ(reader.metadata(), R"({"step":3})");
+  EXPECT_EQ(reader.chunks().size(), 1u);
+  EXPECT_TRUE(verifyFile(reader).ok());
+  EXPECT_EQ(listDirectory(dir.path()), std::vector<std::filesystem::path>{"out.iso"});
 }
 
 }  // namespace

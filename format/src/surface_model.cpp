@@ -312,7 +312,8 @@ std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
     const SurfaceEval e = evaluate(leaf, x);
     if (step > 0 && sign(e.distance) != sign(previousValue))
       return bisectSignChange(previous, x);  // stepped over the zero set, perhaps at a leaf face
-    const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] + e.gradient[2] * e.gradient[2];
+    const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] +
+                      e.gradient[2] * e.gradient[2];
     if (!(g2 > 0.0)) return std::nullopt;
     const double cellSize = std::ldexp(1.0, -leaves_[leaf].level);
     if (std::abs(e.distance) <= 1e-7 * cellSize) return x;

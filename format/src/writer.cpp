@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "bytes.h"
-#include "file_io.h"
+#include "iso/atomic_file.h"
 #include "iso/check.h"
 #include "layout.h"
 
@@ -20,7 +20,7 @@ namespace iso {
 using detail::alignUp;
 
 struct Writer::Impl {
-  detail::AtomicOutputFile file;
+  AtomicFile file;
   FileHeader header;
   WriterOptions options;
   std::vector<ChunkInfo> chunks;
@@ -62,6 +62,7 @@ struct Writer::Impl {
     trailer.metadataChecksum = detail::checksum(bytes);
     file.write(bytes);
     file.write(detail::encodeTrailer(trailer));
+    file.flush();  // a reader may open the temporary file now
   }
 
   void validateParents() const {

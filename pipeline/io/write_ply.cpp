@@ -12,7 +12,7 @@
 
 #include "io/color.h"
 #include "io/narrow.h"
-#include "io/output_file.h"
+#include "iso/atomic_file.h"
 #include "io/ply.h"
 #include "iso/check.h"
 
@@ -55,7 +55,7 @@ std::string pointHeader(const PointCloud& points, const PlyWriteOptions& options
   return header + "end_header\n";
 }
 
-void writeBinaryPoints(io::OutputFile& file, const PointCloud& points, bool doublePositions) {
+void writeBinaryPoints(AtomicFile& file, const PointCloud& points, bool doublePositions) {
   std::vector<std::byte> chunk;
   chunk.reserve(kChunkBytes + 64);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -78,7 +78,7 @@ void writeBinaryPoints(io::OutputFile& file, const PointCloud& points, bool doub
   file.write(chunk);
 }
 
-void writeAsciiPoints(io::OutputFile& file, const PointCloud& points, bool doublePositions) {
+void writeAsciiPoints(AtomicFile& file, const PointCloud& points, bool doublePositions) {
   std::string chunk;
   chunk.reserve(kChunkBytes + 256);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -116,7 +116,7 @@ void writePly(const std::filesystem::path& path, const PointCloud& points,
               const PlyWriteOptions& options) {
   ISO_CHECK(points.normals.empty() || points.normals.size() == points.size());
   ISO_CHECK(points.colors.empty() || points.colors.size() == points.size());
-  io::OutputFile file(path);
+  AtomicFile file(path);
   file.write(pointHeader(points, options));
   if (options.binary) {
     writeBinaryPoints(file, points, options.doublePositions);
@@ -129,7 +129,7 @@ void writePly(const std::filesystem::path& path, const PointCloud& points,
 void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh) {
   // Indices are written as PLY "int", so every vertex must be reachable by a signed 32-bit index.
   ISO_CHECK(mesh.vertices.size() <= size_t{std::numeric_limits<int32_t>::max()} + 1);
-  io::OutputFile file(path);
+  AtomicFile file(path);
   file.write(
       fmt::format("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
                   "property float y\nproperty float z\nelement face {}\n"

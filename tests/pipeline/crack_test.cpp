@@ -42,7 +42,8 @@ Built buildStages(const PointCloud& cloud) {
 double leafValue(const Built& b, const OctreeNode& leaf, const glm::dvec3& p) {
   Patch patch(leaf.level, leaf.key);
   for (int c = 0; c < kCorners; ++c)
-    patch.distance[size_t(c)] = b.corners.value[b.corners.find(cornerPoint(leaf.level, leaf.key, c))].distance;
+    patch.distance[size_t(c)] =
+        b.corners.value[b.corners.find(cornerPoint(leaf.level, leaf.key, c))].distance;
   return patch.value(p);
 }
 
@@ -60,7 +61,8 @@ TEST(CrackFree, patchesOfAdjacentLeavesAgreeOnSharedFaces) {
         std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
         n[size_t(axis)] += side ? 1 : -1;
         if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
-        const OctreeNode& other = b.tree.nodes[b.tree.find(leaf.level, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])))];
+        const OctreeNode& other = b.tree.nodes[b.tree.find(
+            leaf.level, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])))];
         if (!other.isFilled() || other.level != leaf.level - 1) continue;
         ++pairs;
         for (int i = 0; i <= 4; ++i)
@@ -74,7 +76,8 @@ TEST(CrackFree, patchesOfAdjacentLeavesAgreeOnSharedFaces) {
           }
       }
     }
-    std::printf("%s: %zu face pairs across levels, largest mismatch %.3g leaf edges\n", shape, pairs, worst);
+    std::printf("%s: %zu face pairs across levels, largest mismatch %.3g leaf edges\n", shape,
+                pairs, worst);
     EXPECT_GT(pairs, 100u);
     EXPECT_LE(worst, 1e-5);  // float rounding of the corner values, relative to the leaf edge
   }
@@ -82,7 +85,8 @@ TEST(CrackFree, patchesOfAdjacentLeavesAgreeOnSharedFaces) {
 
 TEST(CrackFree, writtenPatchesAgreeWithinAQuantizationStep) {
   test::TempDir dir;
-  const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 100000), dir / "sphere.iso");
+  const test::Converted c =
+      test::convertAndLoad(test::scanOf("sphere", 100000), dir / "sphere.iso");
   const SurfaceModel& s = c.surface;
   size_t pairs = 0, exact = 0;
   double worstSteps = 0.0;
@@ -112,8 +116,8 @@ TEST(CrackFree, writtenPatchesAgreeWithinAQuantizationStep) {
       worstSteps = std::max(worstSteps, mismatch / step);
     }
   }
-  std::printf("%zu face pairs across levels in the file, %zu exact, largest mismatch %.3f steps\n", pairs, exact,
-              worstSteps);
+  std::printf("%zu face pairs across levels in the file, %zu exact, largest mismatch %.3f steps\n",
+              pairs, exact, worstSteps);
   EXPECT_GT(pairs, 100u);
   EXPECT_LE(worstSteps, 1.0);
 }

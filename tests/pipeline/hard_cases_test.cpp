@@ -3,8 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <random>
 #include <glm/geometric.hpp>
+#include <random>
 
 #include "iso/verify.h"
 #include "knn.h"
@@ -32,16 +32,17 @@ std::unique_ptr<Shape> shape(const std::string& name) {
 }
 
 // Convert, verify the file, and measure it against the named truth.
-nlohmann::json convertAndMeasure(const PointCloud& points, const Shape& truth, nlohmann::json* report = nullptr,
-                                 BuildOptions options = {}) {
+nlohmann::json convertAndMeasure(const PointCloud& points, const Shape& truth,
+                                 nlohmann::json* report = nullptr, BuildOptions options = {}) {
   test::TempDir dir;
   const test::Converted c = test::convertAndLoad(points, dir / "out.iso", options);
   EXPECT_TRUE(verifyFile(Reader::open(dir / "out.iso")).ok());
   if (report) *report = c.report;
   const nlohmann::json e = test::evaluate(c, truth);
   EXPECT_TRUE(std::isfinite(e["rms"].get<double>()));
-  std::printf("%s: rms %.4f max %.4f spacings, holes %llu\n", truth.name().c_str(), e["rms_over_spacing"].get<double>(),
-              e["max_over_spacing"].get<double>(), (unsigned long long)e["holes"].get<uint64_t>());
+  std::printf("%s: rms %.4f max %.4f spacings, holes %llu\n", truth.name().c_str(),
+              e["rms_over_spacing"].get<double>(), e["max_over_spacing"].get<double>(),
+              (unsigned long long)e["holes"].get<uint64_t>());
   return e;
 }
 
@@ -65,7 +66,8 @@ TEST(HardCases, identicalPointsAreAClearError) {
 
 TEST(HardCases, collinearPointsAreAClearError) {
   PointCloud line;
-  for (int i = 0; i < 1000; ++i) line.positions.push_back(glm::dvec3(1.0, 2.0, 3.0) + double(i) * glm::dvec3(0.3, -0.2, 0.1));
+  for (int i = 0; i < 1000; ++i)
+    line.positions.push_back(glm::dvec3(1.0, 2.0, 3.0) + double(i) * glm::dvec3(0.3, -0.2, 0.1));
   EXPECT_NE(conversionError(line).find("one line"), std::string::npos);
 }
 
@@ -144,11 +146,14 @@ TEST(HardCases, tenThousandFoldDensityVariationGivesAValidSurface) {
     const glm::dvec3 origin = toFrame(s.position + 2.0 * s.normal, frame);
     const glm::dvec3 target = toFrame(s.position - 2.0 * local * s.normal, frame);
     const glm::dvec3 dirFrame = glm::normalize(target - origin);
-    leaks += c.surface.intersect({origin.x, origin.y, origin.z}, {dirFrame.x, dirFrame.y, dirFrame.z}, 0.0,
-                                 glm::length(target - origin)) ? 0 : 1;
+    leaks +=
+        c.surface.intersect({origin.x, origin.y, origin.z}, {dirFrame.x, dirFrame.y, dirFrame.z},
+                            0.0, glm::length(target - origin))
+            ? 0
+            : 1;
   }
-  std::printf("density 1e4: rms %.3f, worst %.3f local spacings, %d leaks of %d rays\n", std::sqrt(squares / samples),
-              worst, leaks, samples);
+  std::printf("density 1e4: rms %.3f, worst %.3f local spacings, %d leaks of %d rays\n",
+              std::sqrt(squares / samples), worst, leaks, samples);
   EXPECT_LE(std::sqrt(squares / samples), 0.2);
   EXPECT_LE(worst, 1.0);
   EXPECT_EQ(leaks, 0);
@@ -169,16 +174,19 @@ TEST(HardCases, sheetsCloserThanTheRadiusStaySeparate) {
   // Both sheets are there (the truth finds the zero set close by everywhere) and rays find them.
   EXPECT_LE(e["truth_to_iso"]["rms_over_spacing"].get<double>(), 0.10);
   EXPECT_LE(e["hole_rate"].get<double>(), 0.001);
-  // The surface reaches past the square's rim by about a radius and a leaf (√2 of it at the corners).
+  // The surface reaches past the square's rim by about a radius and a leaf (√2 of it at the
+  // corners).
   EXPECT_LE(e["iso_to_truth"]["max"].get<double>(), 3.0 * std::sqrt(2.0) * radius);
   // Vertical rays stop at the sheet on their side.
   const Frame& f = c.surface.header().frame;
   for (double x : {-0.7, -0.1, 0.3, 0.8}) {
     for (int side : {1, -1}) {
       const glm::dvec3 origin = toFrame(glm::dvec3(x, 0.37 * x, 0.5 * side), f);
-      const auto hit = c.surface.intersect({origin.x, origin.y, origin.z}, {0.0, 0.0, -double(side) / f.size}, 0.0, 1.0);
+      const auto hit = c.surface.intersect({origin.x, origin.y, origin.z},
+                                           {0.0, 0.0, -double(side) / f.size}, 0.0, 1.0);
       ASSERT_TRUE(hit.has_value());
-      EXPECT_NEAR(0.5 * side - side * hit->t, side * params.gap / 2, 0.1 * params.gap) << "x " << x << " side " << side;
+      EXPECT_NEAR(0.5 * side - side * hit->t, side * params.gap / 2, 0.1 * params.gap)
+          << "x " << x << " side " << side;
     }
   }
 }
@@ -192,21 +200,24 @@ TEST(HardCases, sharpCubeEdgesHaveBoundedError) {
 
 TEST(HardCases, openSurfaceOverhangsItsBoundaryByLittle) {
   nlohmann::json report;
-  const nlohmann::json e = convertAndMeasure(test::scanOf("plane", 40000), *shape("plane"), &report);
+  const nlohmann::json e =
+      convertAndMeasure(test::scanOf("plane", 40000), *shape("plane"), &report);
   // The surface may reach past the boundary by about a radius of influence, not more.
   EXPECT_LE(e["iso_to_truth"]["max"].get<double>(), 2.0 * report["median_radius"].get<double>());
 }
 
 PointCloud withSpoiledNormals(uint64_t every, const glm::vec3& replacement, bool flip) {
   PointCloud points = test::scanOf("sphere", 100000);
-  for (size_t i = 0; i < points.size(); i += every) points.normals[i] = flip ? -points.normals[i] : replacement;
+  for (size_t i = 0; i < points.size(); i += every)
+    points.normals[i] = flip ? -points.normals[i] : replacement;
   return points;
 }
 
 TEST(HardCases, zeroAndNanNormalsAreEstimated) {
   for (const glm::vec3& bad : {glm::vec3(0.0f), glm::vec3(std::nanf(""), 0.0f, 1.0f)}) {
     nlohmann::json report;
-    const nlohmann::json e = convertAndMeasure(withSpoiledNormals(10, bad, false), *shape("sphere"), &report);
+    const nlohmann::json e =
+        convertAndMeasure(withSpoiledNormals(10, bad, false), *shape("sphere"), &report);
     EXPECT_EQ(report["normals"]["estimated"].get<uint64_t>(), 10000u);
     EXPECT_LE(e["rms_over_spacing"].get<double>(), 0.15);
     EXPECT_GE(e["normal_outward_fraction"].get<double>(), 0.999);
@@ -215,7 +226,8 @@ TEST(HardCases, zeroAndNanNormalsAreEstimated) {
 
 TEST(HardCases, flippedInputNormalsAreRepaired) {
   nlohmann::json report;
-  const nlohmann::json e = convertAndMeasure(withSpoiledNormals(20, {}, true), *shape("sphere"), &report);
+  const nlohmann::json e =
+      convertAndMeasure(withSpoiledNormals(20, {}, true), *shape("sphere"), &report);
   EXPECT_GE(report["normals"]["flipped_to_agree"].get<uint64_t>(), 4900u);  // of 5,000
   EXPECT_LE(e["rms_over_spacing"].get<double>(), 0.15);
   EXPECT_EQ(e["holes"].get<uint64_t>(), 0u);
@@ -237,7 +249,8 @@ TEST(HardCases, maximumDepthWithManyPointsPerCellTerminates) {
   BuildOptions options;
   options.maxDepth = 3;  // leaves of 1/8 of the frame with thousands of points each
   nlohmann::json report;
-  const nlohmann::json e = convertAndMeasure(test::scanOf("sphere", 50000), *shape("sphere"), &report, options);
+  const nlohmann::json e =
+      convertAndMeasure(test::scanOf("sphere", 50000), *shape("sphere"), &report, options);
   EXPECT_LE(report["octree"]["max_level"].get<int>(), 3);
   EXPECT_EQ(e["holes"].get<uint64_t>(), 0u);
   EXPECT_LE(e["rms_over_diagonal"].get<double>(), 0.02);  // coarse, but a sphere

@@ -2,7 +2,8 @@
 
 namespace iso::test {
 
-PointCloud scanOf(const std::string& shape, uint64_t count, bool normals, double noise, uint64_t seed) {
+PointCloud scanOf(const std::string& shape, uint64_t count, bool normals, double noise,
+                  uint64_t seed) {
   ShapeParams params;
   params.name = shape;
   const std::unique_ptr<Shape> truth = makeShape(params);
@@ -14,7 +15,8 @@ PointCloud scanOf(const std::string& shape, uint64_t count, bool normals, double
   return generateScan(*truth, options);
 }
 
-Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& path, const BuildOptions& options) {
+Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& path,
+                         const BuildOptions& options) {
   nlohmann::json report = convertToIso(points, path, options);
   return {std::move(report), SurfaceModel::load(Reader::open(path))};
 }
@@ -23,7 +25,8 @@ nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t
   EvalOptions options;
   options.rays = rays;
   options.truthSamples = 50000;
-  return evaluateAgainstShape(converted.surface, truth, converted.report["mean_spacing"].get<double>(), options);
+  return evaluateAgainstShape(converted.surface, truth,
+                              converted.report["mean_spacing"].get<double>(), options);
 }
 
 }  // namespace iso::test

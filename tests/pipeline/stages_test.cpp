@@ -90,7 +90,8 @@ TEST(Radii, nearestNeighboursMatchBruteForce) {
     for (size_t j = 0; j < points.size(); ++j)
       if (j != i) d.push_back(glm::length(points.position[i] - points.position[j]));
     std::sort(d.begin(), d.end());
-    for (int k = 0; k < 10; ++k) EXPECT_FLOAT_EQ(neighbors.distance[i * 10 + size_t(k)], d[size_t(k)]);
+    for (int k = 0; k < 10; ++k)
+      EXPECT_FLOAT_EQ(neighbors.distance[i * 10 + size_t(k)], d[size_t(k)]);
     EXPECT_LE(points.radius[i], d[9]);
   }
 }
@@ -147,7 +148,8 @@ TEST(SignedDistance, isExactForAPlaneWithEitherFit) {
 TEST(SignedDistance, sphereFitRemovesTheCurvatureBiasOfThePlaneFit) {
   const Evaluated e = withRadii(test::scanOf("sphere", 100000));
   const Frame frame = chooseFrame(test::scanOf("sphere", 100000));
-  const SdfEvaluator plane(e.points, *e.tree, 1.0, FitMode::Plane), sphere(e.points, *e.tree, 1.0, FitMode::Sphere);
+  const SdfEvaluator plane(e.points, *e.tree, 1.0, FitMode::Plane),
+      sphere(e.points, *e.tree, 1.0, FitMode::Sphere);
   const glm::dvec3 center = toFrame(glm::dvec3(0.0), frame);
   double planeError = 0.0, sphereError = 0.0;
   std::mt19937_64 rng(7);
@@ -160,7 +162,8 @@ TEST(SignedDistance, sphereFitRemovesTheCurvatureBiasOfThePlaneFit) {
     planeError = std::max(planeError, std::abs(plane.evaluate(q, 0.0f).distance - truth));
     sphereError = std::max(sphereError, std::abs(sphere.evaluate(q, 0.0f).distance - truth));
   }
-  std::printf("largest error: plane fit %.3g, sphere fit %.3g (frame units)\n", planeError, sphereError);
+  std::printf("largest error: plane fit %.3g, sphere fit %.3g (frame units)\n", planeError,
+              sphereError);
   EXPECT_LT(sphereError, 0.25 * planeError);
 }
 
@@ -190,7 +193,8 @@ TEST(SignedDistance, cornersBetweenOpposingSheetsSeeTheNearerSheet) {
   const SdfEvaluator sdf(e.points, *e.tree, 1.0, FitMode::Sphere);
   const glm::dvec3 mid = toFrame(glm::dvec3(0.1, 0.2, 0.0), frame);
   for (double z : {0.3 * gap, -0.3 * gap, 0.9 * gap, -0.9 * gap}) {
-    const double f = sdf.evaluate(mid + glm::dvec3(0, 0, z / frame.size), 0.0f).distance * frame.size;
+    const double f =
+        sdf.evaluate(mid + glm::dvec3(0, 0, z / frame.size), 0.0f).distance * frame.size;
     const double truth = std::abs(z) - gap / 2;  // negative between the sheets
     EXPECT_NEAR(f, truth, 0.05 * gap) << "z " << z;
   }
@@ -211,12 +215,14 @@ TEST(Passive, boxDiskTestMatchesDenseSampling) {
     const glm::dvec3 lo(u(rng) * 0.6 + 0.2, u(rng) * 0.6 + 0.2, u(rng) * 0.6 + 0.2);
     const glm::dvec3 hi = lo + 0.1 + 0.1 * u(rng);
     // Dense samples of the disk.
-    const glm::vec3 t1 = glm::normalize(glm::cross(n, std::abs(n.x) < 0.9f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0)));
+    const glm::vec3 t1 = glm::normalize(
+        glm::cross(n, std::abs(n.x) < 0.9f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0)));
     const glm::vec3 t2 = glm::cross(n, t1);
     bool sampled = false;
     for (int a = 0; a <= 200 && !sampled; ++a)
       for (int b = 0; b <= 200 && !sampled; ++b) {
-        const float x = (a / 100.0f - 1.0f) * one.radius[0], y = (b / 100.0f - 1.0f) * one.radius[0];
+        const float x = (a / 100.0f - 1.0f) * one.radius[0],
+                    y = (b / 100.0f - 1.0f) * one.radius[0];
         if (x * x + y * y > one.radius[0] * one.radius[0]) continue;
         const glm::dvec3 p(one.position[0] + x * t1 + y * t2);
         sampled = glm::all(glm::greaterThanEqual(p, lo)) && glm::all(glm::lessThanEqual(p, hi));
@@ -249,7 +255,8 @@ TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
   const auto box = [&](const OctreeNode& n) {
     const auto c = mortonDecode(n.key);
     const double size = std::ldexp(1.0, -n.level);
-    return std::pair(glm::dvec3(c[0], c[1], c[2]) * size, glm::dvec3(c[0] + 1, c[1] + 1, c[2] + 1) * size);
+    return std::pair(glm::dvec3(c[0], c[1], c[2]) * size,
+                     glm::dvec3(c[0] + 1, c[1] + 1, c[2] + 1) * size);
   };
   size_t checked = 0;
   for (uint32_t a : filled) {  // brute force over pairs whose boxes touch
@@ -287,7 +294,8 @@ TEST(Chunks, everyNodeIsInExactlyOneChunkWithinTheBudget) {
     for (uint32_t n : plans[p].nodes) ++seen[n];
     EXPECT_NO_THROW(layoutSurface(plans[p].topology, plans[p].cellLevel, plans[p].cellKey, 21));
   }
-  for (size_t i = 0; i < octree.nodes.size(); ++i) EXPECT_EQ(seen[i], octree.nodes[i].kind == NodeKind::Empty ? 0 : 1);
+  for (size_t i = 0; i < octree.nodes.size(); ++i)
+    EXPECT_EQ(seen[i], octree.nodes[i].kind == NodeKind::Empty ? 0 : 1);
   EXPECT_GT(plans.size(), 5u);
 }
 

@@ -42,25 +42,31 @@ void run(const Config& config, uint64_t count) {
   const std::filesystem::path output = config.dir / "iso-bench-build.iso";
   const nlohmann::json r = iso::convertToIso(points, output, iso::BuildOptions{});
   std::filesystem::remove(output);
-  fmt::print("\n{} points of a {} ({} normals)\n", count, config.shape, config.normals ? "with" : "without");
+  fmt::print("\n{} points of a {} ({} normals)\n", count, config.shape,
+             config.normals ? "with" : "without");
   fmt::print("  {:<18} {:>9} {:>14}\n", "stage", "seconds", "points/s");
   for (const auto& s : r["stages"]) {
     const double seconds = s["seconds"].get<double>();
-    fmt::print("  {:<18} {:>9.3f} {:>14.0f}\n", s["name"].get<std::string>(), seconds, double(count) / seconds);
+    fmt::print("  {:<18} {:>9.3f} {:>14.0f}\n", s["name"].get<std::string>(), seconds,
+               double(count) / seconds);
   }
-  fmt::print("  {:<18} {:>9.3f} {:>14.0f}\n", "total", r["seconds"].get<double>(), r["points_per_second"].get<double>());
-  fmt::print("  peak RSS {:.0f} MiB; {} leaves; {:.2f} bytes/leaf, {:.3f} bytes/point; "
-             "accuracy RMS {:.3f}, max {:.3f} spacings\n",
-             double(r["peak_rss_bytes"].get<uint64_t>()) / 1048576.0, r["octree"]["leaves"].get<uint64_t>(),
-             r["file"]["bytes_per_leaf"].get<double>(), r["file"]["bytes_per_point"].get<double>(),
-             r["accuracy"]["rms_over_spacing"].get<double>(), r["accuracy"]["max_over_spacing"].get<double>());
+  fmt::print("  {:<18} {:>9.3f} {:>14.0f}\n", "total", r["seconds"].get<double>(),
+             r["points_per_second"].get<double>());
+  fmt::print(
+      "  peak RSS {:.0f} MiB; {} leaves; {:.2f} bytes/leaf, {:.3f} bytes/point; "
+      "accuracy RMS {:.3f}, max {:.3f} spacings\n",
+      double(r["peak_rss_bytes"].get<uint64_t>()) / 1048576.0,
+      r["octree"]["leaves"].get<uint64_t>(), r["file"]["bytes_per_leaf"].get<double>(),
+      r["file"]["bytes_per_point"].get<double>(), r["accuracy"]["rms_over_spacing"].get<double>(),
+      r["accuracy"]["max_over_spacing"].get<double>());
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   Config config;
-  const char* usage = "usage: iso-bench-build [--points N,N,...] [--shape NAME] [--no-normals] [--dir D]\n";
+  const char* usage =
+      "usage: iso-bench-build [--points N,N,...] [--shape NAME] [--no-normals] [--dir D]\n";
   try {
     for (int i = 1; i < argc; ++i) {
       const std::string option = argv[i];
@@ -77,7 +83,9 @@ int main(int argc, char** argv) {
         return 2;
       }
     }
-    fmt::print("in-core ISO construction benchmark (default options; stage times from the conversion report)\n");
+    fmt::print(
+        "in-core ISO construction benchmark (default options; stage times from the conversion "
+        "report)\n");
     for (uint64_t count : config.sizes) run(config, count);
   } catch (const std::exception& error) {
     fmt::print(stderr, "iso-bench-build: {}\n", error.what());

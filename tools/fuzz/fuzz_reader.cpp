@@ -1,5 +1,6 @@
 // libFuzzer target for the reader: any bytes must give a FileError or a reader whose every call
-// (verify, decode of every chunk) works, never a crash or undefined behaviour. Each input is also
+// (verify, decode of every chunk, surface chunks and the surface model with a ray and a
+// projection) works, never a crash or undefined behaviour. Each input is also
 // tried with its checksums recomputed, so the fuzzer reaches the structural checks behind them.
 #include <cstddef>
 #include <cstdint>
@@ -8,6 +9,8 @@
 
 #include "iso/error.h"
 #include "iso/reader.h"
+#include "iso/surface.h"
+#include "iso/surface_model.h"
 #include "iso/verify.h"
 #include "support/support.h"
 
@@ -27,6 +30,17 @@ void exercise(const std::vector<std::byte>& bytes) {
       }
     }
     (void)reader.metadata();
+    for (const iso::ChunkInfo& c : reader.chunks()) {
+      if (c.kind != iso::kSurfaceKind || c.rawSize > (1u << 20)) continue;
+      try {
+        iso::decodeSurfaceChunk(reader, c.id);
+      } catch (const iso::FileError&) {
+      }
+    }
+    const iso::SurfaceModel model = iso::SurfaceModel::load(reader);
+    // Queries on whatever was decoded must stay inside the model.
+    (void)model.intersect({-0.5, 0.3, 0.4}, {1.0, 0.1, 0.05}, 0.0, 10.0);
+    (void)model.project({0.4, 0.5, 0.6});
   } catch (const iso::FileError&) {
   }
 }

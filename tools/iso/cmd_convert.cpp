@@ -26,7 +26,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const uint64_t input = r["points"]["input"].get<uint64_t>();
   fmt::print("{}: {} points → {} leaves in {:.2f} s ({} points/s), peak memory {}\n", o.output,
              withSeparators(input), withSeparators(r["octree"]["leaves"].get<uint64_t>()),
-             r["seconds"].get<double>(), withSeparators(uint64_t(r["points_per_second"].get<double>())),
+             r["seconds"].get<double>(),
+             withSeparators(uint64_t(r["points_per_second"].get<double>())),
              humanBytes(r["peak_rss_bytes"].get<uint64_t>()));
   fmt::print("  {:<16} {:>8} {:>14}\n", "stage", "seconds", "points/s");
   for (const auto& s : r["stages"]) {
@@ -35,35 +36,43 @@ void printReport(const nlohmann::json& r, const Options& o) {
                seconds > 0 ? withSeparators(uint64_t(double(input) / seconds)) : "-");
   }
   const auto& p = r["points"];
-  fmt::print("  points: {} used ({} duplicates merged, {} outliers removed, {} non-finite dropped)\n",
-             withSeparators(p["used"].get<uint64_t>()), withSeparators(p["duplicates_merged"].get<uint64_t>()),
-             withSeparators(p["outliers_removed"].get<uint64_t>()), withSeparators(p["non_finite_dropped"].get<uint64_t>()));
-  fmt::print("  normals: {} from the input, {} estimated, {} flipped to agree with their neighbours\n",
-             withSeparators(r["normals"]["from_input"].get<uint64_t>()),
-             withSeparators(r["normals"]["estimated"].get<uint64_t>()),
-             withSeparators(r["normals"]["flipped_to_agree"].get<uint64_t>()));
+  fmt::print(
+      "  points: {} used ({} duplicates merged, {} outliers removed, {} non-finite dropped)\n",
+      withSeparators(p["used"].get<uint64_t>()),
+      withSeparators(p["duplicates_merged"].get<uint64_t>()),
+      withSeparators(p["outliers_removed"].get<uint64_t>()),
+      withSeparators(p["non_finite_dropped"].get<uint64_t>()));
+  fmt::print(
+      "  normals: {} from the input, {} estimated, {} flipped to agree with their neighbours\n",
+      withSeparators(r["normals"]["from_input"].get<uint64_t>()),
+      withSeparators(r["normals"]["estimated"].get<uint64_t>()),
+      withSeparators(r["normals"]["flipped_to_agree"].get<uint64_t>()));
   std::string perLevel;
   for (const auto& [level, count] : r["octree"]["leaves_per_level"].items())
     perLevel += fmt::format(" L{}:{}", level, withSeparators(count.get<uint64_t>()));
-  fmt::print("  leaves per level:{} ({} passive)\n", perLevel, withSeparators(r["octree"]["passive_leaves"].get<uint64_t>()));
+  fmt::print("  leaves per level:{} ({} passive)\n", perLevel,
+             withSeparators(r["octree"]["passive_leaves"].get<uint64_t>()));
   const auto& f = r["file"];
   fmt::print("  size: {} in {} chunks: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
              humanBytes(f["bytes_without_metadata"].get<uint64_t>()), f["chunks"].get<uint64_t>(),
              f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
   const auto& a = r["accuracy"];
-  fmt::print("  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
-             "(spacing {:.6g}; {} not projected)\n",
-             withSeparators(a["samples"].get<uint64_t>()), a["rms_over_spacing"].get<double>(),
-             a["max_over_spacing"].get<double>(), r["mean_spacing"].get<double>(),
-             withSeparators(a["unprojected"].get<uint64_t>()));
+  fmt::print(
+      "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
+      "(spacing {:.6g}; {} not projected)\n",
+      withSeparators(a["samples"].get<uint64_t>()), a["rms_over_spacing"].get<double>(),
+      a["max_over_spacing"].get<double>(), r["mean_spacing"].get<double>(),
+      withSeparators(a["unprojected"].get<uint64_t>()));
 }
 
 int run(Options& o) {
-  if (o.fit != "sphere" && o.fit != "plane") throw std::invalid_argument("--fit must be sphere or plane");
+  if (o.fit != "sphere" && o.fit != "plane")
+    throw std::invalid_argument("--fit must be sphere or plane");
   o.build.fit = o.fit == "plane" ? FitMode::Plane : FitMode::Sphere;
   const std::map<std::string, OrientMode> orients = {
       {"auto", OrientMode::Auto}, {"up", OrientMode::Up}, {"propagate", OrientMode::Propagate}};
-  if (!orients.contains(o.orient)) throw std::invalid_argument("--orient must be auto, up or propagate");
+  if (!orients.contains(o.orient))
+    throw std::invalid_argument("--orient must be auto, up or propagate");
   o.build.orient = orients.at(o.orient);
   o.build.removeOutliers = !o.keepOutliers;
   const std::filesystem::path output(o.output);
@@ -79,8 +88,9 @@ int run(Options& o) {
   read.columns = o.columns;
   LoadedPoints loaded = loadPoints(files, read);
   if (!o.quiet) {
-    fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n", withSeparators(loaded.cloud.size()),
-               files.size(), files.size() == 1 ? "" : "s", loaded.seconds);
+    fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n",
+               withSeparators(loaded.cloud.size()), files.size(), files.size() == 1 ? "" : "s",
+               loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
   ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}};
@@ -107,21 +117,36 @@ int run(Options& o) {
 
 void addConvertCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
-  CLI::App* c = app.add_subcommand("convert", "Convert point files (PLY, LAS, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
+  CLI::App* c = app.add_subcommand(
+      "convert", "Convert point files (PLY, LAS, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
   c->add_option("-o,--output", o->output, "The .iso file to write")->required();
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
-  c->add_option("--columns", o->columns, "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips)");
-  c->add_option("--neighbors", o->build.neighbors, "k of the k-nearest-neighbour radius of influence")->capture_default_str();
-  c->add_option("--smoothing", o->build.smoothing, "Scale of the radii of influence (σ = smoothing · r)")->capture_default_str();
-  c->add_option("--fit", o->fit, "Local surface fitted at corners: sphere or plane")->capture_default_str();
-  c->add_option("--orient", o->orient, "Orientation of estimated normals: auto, up or propagate")->capture_default_str();
-  c->add_option("--leaf-points", o->build.leafPoints, "Nodes with more points may be subdivided")->capture_default_str();
-  c->add_option("--max-depth", o->build.maxDepth, "Deepest octree level (1 to 20)")->capture_default_str();
-  c->add_option("--tolerance", o->build.tolerance, "Allowed patch error, in mean point spacings")->capture_default_str();
-  c->add_option("--normal-bits", o->build.normalBits, "Octahedral normal bits per component: 8 or 12")->capture_default_str();
-  c->add_option("--chunk-nodes", o->build.chunkNodes, "Octree nodes per file chunk, about")->capture_default_str();
-  c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")->capture_default_str();
+  c->add_option("--columns", o->columns,
+                "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips)");
+  c->add_option("--neighbors", o->build.neighbors,
+                "k of the k-nearest-neighbour radius of influence")
+      ->capture_default_str();
+  c->add_option("--smoothing", o->build.smoothing,
+                "Scale of the radii of influence (σ = smoothing · r)")
+      ->capture_default_str();
+  c->add_option("--fit", o->fit, "Local surface fitted at corners: sphere or plane")
+      ->capture_default_str();
+  c->add_option("--orient", o->orient, "Orientation of estimated normals: auto, up or propagate")
+      ->capture_default_str();
+  c->add_option("--leaf-points", o->build.leafPoints, "Nodes with more points may be subdivided")
+      ->capture_default_str();
+  c->add_option("--max-depth", o->build.maxDepth, "Deepest octree level (1 to 20)")
+      ->capture_default_str();
+  c->add_option("--tolerance", o->build.tolerance, "Allowed patch error, in mean point spacings")
+      ->capture_default_str();
+  c->add_option("--normal-bits", o->build.normalBits,
+                "Octahedral normal bits per component: 8 or 12")
+      ->capture_default_str();
+  c->add_option("--chunk-nodes", o->build.chunkNodes, "Octree nodes per file chunk, about")
+      ->capture_default_str();
+  c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
+      ->capture_default_str();
   c->add_flag("--keep-outliers", o->keepOutliers, "Keep far outliers instead of removing them");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");

@@ -25,14 +25,17 @@ struct Options {
 // The mean point spacing of the file's input, from its conversion report.
 double reportedSpacing(const Reader& reader) {
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
-  if (metadata.is_object() && metadata.contains("report") && metadata["report"].contains("mean_spacing"))
+  if (metadata.is_object() && metadata.contains("report") &&
+      metadata["report"].contains("mean_spacing"))
     return metadata["report"]["mean_spacing"].get<double>();
   return 0.0;
 }
 
 int run(Options& o) {
   const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty());
-  if (truths != 1) throw std::invalid_argument("give exactly one of --shape NAME, --mesh FILE.ply, --points FILE...");
+  if (truths != 1)
+    throw std::invalid_argument(
+        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE...");
   const Reader reader = Reader::open(o.file);
   const SurfaceModel surface = SurfaceModel::load(reader);
   nlohmann::json result;
@@ -57,12 +60,16 @@ int run(Options& o) {
 
 void addEvalCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
-  CLI::App* c = app.add_subcommand("eval", "Measure an .iso surface against a known answer; prints JSON");
+  CLI::App* c =
+      app.add_subcommand("eval", "Measure an .iso surface against a known answer; prints JSON");
   c->add_option("file", o->file, ".iso file")->required();
-  c->add_option("--shape", o->shape, "Analytic truth: sphere, torus, cube, plane or sheets (as iso gen)");
-  c->add_option("--points", o->points, "Measure the distance of these points (e.g. the input) to the surface");
+  c->add_option("--shape", o->shape,
+                "Analytic truth: sphere, torus, cube, plane or sheets (as iso gen)");
+  c->add_option("--points", o->points,
+                "Measure the distance of these points (e.g. the input) to the surface");
   c->add_option("--columns", o->columns, "Column spec of text point files");
-  c->add_option("--spacing", o->spacing, "Mean point spacing (default: the file's conversion report)");
+  c->add_option("--spacing", o->spacing,
+                "Mean point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
   c->add_option("--seed", o->eval.seed, "Random seed")->capture_default_str();

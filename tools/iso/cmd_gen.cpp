@@ -21,7 +21,8 @@ struct Options {
 
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
-    throw std::invalid_argument("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+    throw std::invalid_argument(
+        "name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
   if (std::filesystem::exists(o.output) && !o.force)
     throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
   if (o.truth.mesh.empty()) o.truth.params.name = o.shape;
@@ -33,9 +34,9 @@ int run(Options& o) {
   const PointCloud points = generateScan(*shape, o.generate);
   PlyWriteOptions write;
   write.binary = !o.ascii;
-  write.comments = {fmt::format("iso gen {}: {} points, noise {} spacings, density ratio {}, seed {}",
-                                shape->name(), o.generate.count, o.generate.noise, o.generate.densityRatio,
-                                o.generate.seed)};
+  write.comments = {fmt::format(
+      "iso gen {}: {} points, noise {} spacings, density ratio {}, seed {}", shape->name(),
+      o.generate.count, o.generate.noise, o.generate.densityRatio, o.generate.seed)};
   writePly(o.output, points, write);
   fmt::print("{}: {} points of a {} (area {:.6g}, expected spacing {:.6g})\n", o.output,
              withSeparators(points.size()), shape->name(), shape->area(),
@@ -51,8 +52,10 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   c->add_option("shape", o->shape, "sphere, torus, cube, plane or sheets (or --mesh)");
   c->add_option("-o,--output", o->output, "The PLY file to write")->required();
   c->add_option("-n,--count", o->generate.count, "Number of points")->capture_default_str();
-  c->add_option("--noise", o->generate.noise, "Noise along the normal, in point spacings (σ)")->capture_default_str();
-  c->add_option("--density-ratio", o->generate.densityRatio, "Densest to sparsest sampling along x")->capture_default_str();
+  c->add_option("--noise", o->generate.noise, "Noise along the normal, in point spacings (σ)")
+      ->capture_default_str();
+  c->add_option("--density-ratio", o->generate.densityRatio, "Densest to sparsest sampling along x")
+      ->capture_default_str();
   c->add_option("--seed", o->generate.seed, "Random seed")->capture_default_str();
   c->add_flag("--no-normals", o->noNormals, "Leave the normals out");
   c->add_flag("--ascii", o->ascii, "ASCII PLY instead of binary");

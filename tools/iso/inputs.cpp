@@ -11,7 +11,8 @@ namespace {
 
 bool isPointFileName(const std::filesystem::path& path) {
   std::string name = path.filename().string();
-  std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  std::transform(name.begin(), name.end(), name.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
   if (name.size() > 3 && name.ends_with(".gz")) name.resize(name.size() - 3);
   for (const char* ext : {".ply", ".las", ".laz", ".xyz", ".txt", ".pts", ".csv"})
     if (name.ends_with(ext)) return true;
@@ -39,7 +40,8 @@ std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& 
   return files;
 }
 
-LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options) {
+LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
+                        const ReadOptions& options) {
   const auto started = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<PointReader>> readers;
   bool normals = true, colors = true;
@@ -49,20 +51,28 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const R
     colors = colors && readers.back()->info().hasColors;
   }
   LoadedPoints loaded;
-  if (!normals && std::any_of(readers.begin(), readers.end(), [](const auto& r) { return r->info().hasNormals; }))
+  if (!normals && std::any_of(readers.begin(), readers.end(),
+                              [](const auto& r) { return r->info().hasNormals; }))
     loaded.notes.push_back("normals ignored: not every input has them");
-  if (!colors && std::any_of(readers.begin(), readers.end(), [](const auto& r) { return r->info().hasColors; }))
+  if (!colors && std::any_of(readers.begin(), readers.end(),
+                             [](const auto& r) { return r->info().hasColors; }))
     loaded.notes.push_back("colors ignored: not every input has them");
   PointCloud batch;
   for (auto& reader : readers) {
     const uint64_t before = loaded.cloud.size();
-    if (reader->info().declaredPoints) loaded.cloud.positions.reserve(before + *reader->info().declaredPoints);
+    if (reader->info().declaredPoints)
+      loaded.cloud.positions.reserve(before + *reader->info().declaredPoints);
     for (;;) {
       batch.clear();
       if (reader->read(batch, 1u << 20) == 0) break;
-      loaded.cloud.positions.insert(loaded.cloud.positions.end(), batch.positions.begin(), batch.positions.end());
-      if (normals) loaded.cloud.normals.insert(loaded.cloud.normals.end(), batch.normals.begin(), batch.normals.end());
-      if (colors) loaded.cloud.colors.insert(loaded.cloud.colors.end(), batch.colors.begin(), batch.colors.end());
+      loaded.cloud.positions.insert(loaded.cloud.positions.end(), batch.positions.begin(),
+                                    batch.positions.end());
+      if (normals)
+        loaded.cloud.normals.insert(loaded.cloud.normals.end(), batch.normals.begin(),
+                                    batch.normals.end());
+      if (colors)
+        loaded.cloud.colors.insert(loaded.cloud.colors.end(), batch.colors.begin(),
+                                   batch.colors.end());
     }
     loaded.nonFiniteDropped += reader->stats().droppedNonFinite;
     loaded.inputs.push_back({{"file", reader->info().path.string()},
@@ -70,7 +80,8 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const R
                              {"points", loaded.cloud.size() - before},
                              {"non_finite_dropped", reader->stats().droppedNonFinite}});
   }
-  loaded.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  loaded.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return loaded;
 }
 

@@ -24,6 +24,7 @@ struct LoadedPoints {
 std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& arguments);
 
 // Read every file into one cloud. Normals (colors) are kept only when every file has them.
-LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options);
+LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
+                        const ReadOptions& options);
 
 }  // namespace iso::cli

@@ -9,12 +9,15 @@ namespace iso::cli {
 
 void addShapeOptions(CLI::App& c, ShapeOptions& o) {
   c.add_option("--mesh", o.mesh, "A triangle mesh (PLY, .ply.gz) instead of an analytic shape");
-  c.add_option("--radius", o.params.radius, "Sphere radius; torus major radius")->capture_default_str();
+  c.add_option("--radius", o.params.radius, "Sphere radius; torus major radius")
+      ->capture_default_str();
   c.add_option("--minor-radius", o.params.minorRadius, "Torus tube radius")->capture_default_str();
-  c.add_option("--half-size", o.params.halfSize, "Cube half edge; plane and sheets half extent")->capture_default_str();
+  c.add_option("--half-size", o.params.halfSize, "Cube half edge; plane and sheets half extent")
+      ->capture_default_str();
   c.add_option("--gap", o.params.gap, "Distance between the two sheets")->capture_default_str();
   c.add_option("--center", o.center, "Shape centre x,y,z")->capture_default_str();
-  c.add_option("--offset", o.offset, "Added to every position, e.g. 500000,4900000,0 (UTM-like)")->capture_default_str();
+  c.add_option("--offset", o.offset, "Added to every position, e.g. 500000,4900000,0 (UTM-like)")
+      ->capture_default_str();
 }
 
 glm::dvec3 parseVector(const std::string& text, const char* option) {
@@ -23,9 +26,10 @@ glm::dvec3 parseVector(const std::string& text, const char* option) {
   const char* end = text.data() + text.size();
   for (int i = 0; i < 3; ++i) {
     const auto [next, error] = std::from_chars(p, end, v[i]);
-    if (error != std::errc() || (i < 2 && (next == end || *next != ',')) || (i == 2 && next != end) ||
-        !std::isfinite(v[i]))
-      throw std::invalid_argument(std::string(option) + " must be three numbers x,y,z, not '" + text + "'");
+    if (error != std::errc() || (i < 2 && (next == end || *next != ',')) ||
+        (i == 2 && next != end) || !std::isfinite(v[i]))
+      throw std::invalid_argument(std::string(option) + " must be three numbers x,y,z, not '" +
+                                  text + "'");
     p = next + 1;
   }
   return v;
