@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 
+#include "iso/check.h"
 #include "iso/writer.h"
 #include "stages.h"
 
@@ -48,6 +49,7 @@ class ChunkPlanner {
     if (node.kind == NodeKind::Internal)
       for (uint32_t c = 0; c < 8; ++c)
         if (tree_.nodes[node.firstChild + c].kind != NodeKind::Empty) mask |= uint8_t(1u << c);
+    ISO_CHECK(mask != 0 || node.isFilled());  // a node without children is a filled leaf
     return mask;
   }
 

@@ -79,13 +79,16 @@ uint32_t materialize(Octree& tree, const PointSet& points, uint8_t level, uint64
   }
 }
 
-// Fill the empty cells the surface runs into; returns how many.
-size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                 const CornerField& field) {
+// Fill the empty cells the surface runs into from the given leaves; returns the filled cells.
+std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                                const CornerField& field, const std::vector<uint32_t>& leaves) {
   std::vector<std::pair<uint8_t, uint64_t>> targets;
-  for (const OctreeNode& leaf : tree.nodes) {
+  for (uint32_t id : leaves) {
+    const OctreeNode& leaf = tree.nodes[id];
     if (!leaf.isFilled()) continue;
     const auto cell = mortonDecode(leaf.key);
+    const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf);
+    const int toward = lost ? faceTowardSurface(field, leaf) : -1;
     for (int face = 0; face < 6; ++face) {
       const int axis = face / 2, side = face % 2;
       std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
@@ -95,38 +98,44 @@ size_t fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
       if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
       // The zero set runs out through this face near the points, or the leaf holds points but no
       // zero set (a displaced estimate) and this face is the nearest to it.
-      const bool exit = crossesFaceNearPoints(field, leaf, axis, side, sdf, points);
-      const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf) &&
-                        face == faceTowardSurface(field, leaf);
-      if (exit || lost) targets.push_back({leaf.level, key});
+      if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points))
+        targets.push_back({leaf.level, key});
     }
   }
-  size_t filled = 0;
+  std::vector<uint32_t> filled;
   for (const auto& [level, key] : targets) {
     const uint32_t node = materialize(tree, points, level, key);
     if (tree.nodes[node].kind != NodeKind::Empty) continue;  // filled by an earlier target
     tree.nodes[node].kind = NodeKind::Passive;
-    ++filled;
+    filled.push_back(node);
   }
   return filled;
 }
 
 }  // namespace
 
-Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                            CornerCache& cache) {
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, CornerCache& cache) {
   Closure closure;
-  for (;;) {
-    closure.corners = sampleLeafCorners(tree, sdf, cache);
-    closure.hanging = findHangingCorners(tree, closure.corners);
-    snapHangingCorners(closure.corners, closure.hanging);
-    ++closure.passes;
-    if (closure.passes > kMaxPasses) break;
-    const size_t filled = fillExits(tree, points, sdf, closure.corners);
-    if (filled == 0) break;
-    closure.filled += filled;
-    balanceOctree(tree, points);
+  closure.corners = sampleLeafCorners(tree, sdf, cache);
+  std::vector<uint32_t> fresh;  // the leaves to look at in this pass
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
+    if (tree.nodes[i].isFilled()) fresh.push_back(i);
+  // Exits are found on the sampled values: snapping moves hanging corners very little.
+  for (closure.passes = 1; closure.passes <= kMaxPasses; ++closure.passes) {
+    std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
+    if (filled.empty()) break;
+    closure.filled += filled.size();
+    std::vector<uint32_t> created;
+    balanceAfter(tree, points, filled, created);
+    fresh = std::move(filled);
+    fresh.insert(fresh.end(), created.begin(), created.end());
+    addLeafCorners(closure.corners, tree, fresh, sdf, cache);
   }
+  // Splits left corners of leaves that are leaves no more: sample the final leaves afresh (every
+  // value is in the cache now), then snap.
+  closure.corners = sampleLeafCorners(tree, sdf, cache);
+  closure.hanging = findHangingCorners(tree, closure.corners);
+  snapHangingCorners(closure.corners, closure.hanging);
   return closure;
 }
 

@@ -1,6 +1,6 @@
 // Leaf corner sampling (specs/pipeline.md, "Corner sampling"): every distinct corner of the filled
-// leaves is evaluated once, so corners shared by up to 8 leaves agree by construction. A corner's
-// σ floor follows the coarsest leaf that uses it.
+// leaves is evaluated once, so corners shared by up to 8 leaves agree by construction; values
+// already evaluated (while building the octree) come from the cache.
 #include <tbb/parallel_for.h>
 
 #include <cmath>
@@ -15,9 +15,11 @@ uint32_t CornerField::find(const GridPoint& p) const {
   return found ? *found : kNoNode;
 }
 
-CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache) {
-  CornerField field;
-  for (const OctreeNode& node : tree.nodes) {
+void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
+                    const SdfEvaluator& sdf, CornerCache& cache) {
+  const size_t first = field.point.size();
+  for (uint32_t id : leaves) {
+    const OctreeNode& node = tree.nodes[id];
     if (!node.isFilled()) continue;
     for (int c = 0; c < kCorners; ++c) {
       const GridPoint p = cornerPoint(node.level, node.key, c);
@@ -32,21 +34,26 @@ CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, Corne
   }
   field.value.resize(field.point.size());
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, field.point.size(), 256),
-      [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
-          const GridPoint& p = field.point[i];
-          if (const CornerSample* known = cache.find(lodKey(field.coarsestLevel[i], p))) {
-            field.value[i] = *known;
-            continue;
-          }
-          const glm::dvec3 q(p.x * unit, p.y * unit, p.z * unit);
-          field.value[i] = sdf.evaluate(q, 0.0f);
-        }
-      });
-  for (size_t i = 0; i < field.point.size(); ++i)  // for later passes (closeSurface)
-    cache.insert(lodKey(field.coarsestLevel[i], field.point[i]), field.value[i]);
+  tbb::parallel_for(tbb::blocked_range<size_t>(first, field.point.size(), 256),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i) {
+                        const GridPoint& p = field.point[i];
+                        if (const CornerSample* known = cache.find(gridKey(p))) {
+                          field.value[i] = *known;
+                          continue;
+                        }
+                        field.value[i] = sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f);
+                      }
+                    });
+  for (size_t i = first; i < field.point.size(); ++i) cache.insert(gridKey(field.point[i]), field.value[i]);
+}
+
+CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache) {
+  CornerField field;
+  std::vector<uint32_t> leaves;
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
+    if (tree.nodes[i].isFilled()) leaves.push_back(i);
+  addLeafCorners(field, tree, leaves, sdf, cache);
   return field;
 }
 

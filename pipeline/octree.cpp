@@ -47,7 +47,7 @@ bool hasOpposingNormals(const PointSet& points, const OctreeNode& node) {
 Patch leafPatch(const OctreeNode& node, const CornerCache& cache) {
   Patch patch(node.level, node.key);
   for (int c = 0; c < 8; ++c) {
-    const float f = cache.find(lodKey(node.level, cornerPoint(node.level, node.key, c)))->distance;
+    const float f = cache.find(gridKey(cornerPoint(node.level, node.key, c)))->distance;
     patch.distance[size_t(c)] = roundTripDistance(f, node.level, kDistanceEncoding);
   }
   return patch;
@@ -78,7 +78,7 @@ void fillCache(const Octree& tree, const std::vector<uint32_t>& frontier,
     const OctreeNode& node = tree.nodes[frontier[i]];
     for (int c = 0; c < kCorners; ++c) {
       const GridPoint p = cornerPoint(node.level, node.key, c);
-      const Key128 key = lodKey(node.level, p);
+      const Key128 key = gridKey(p);
       if (cache.insert(key, CornerSample{}).second)
         missing.push_back({key, glm::dvec3(p.x, p.y, p.z) * std::ldexp(1.0, -kMaxLevel)});
     }

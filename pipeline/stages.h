@@ -23,6 +23,7 @@
 #include <functional>
 #include <glm/vec3.hpp>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -186,8 +187,8 @@ struct OctreeStats {
   size_t uncovered = 0;      // ... because the patch had surface where there are no points
   size_t thinSplits = 0;     // subdivisions below leafPoints for opposing normals
 };
-// Leaf corner samples evaluated while building, by (level of their σ floor, grid point): the
-// corners of a leaf at level L are evaluated with the same parameters later.
+// Leaf corner samples evaluated while building, by grid point: leaf corners are evaluated the same
+// way whatever the level, so the final corners reuse them.
 using CornerCache = FlatMap<Key128, CornerSample>;
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
                    const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
@@ -203,6 +204,10 @@ size_t markPassiveLeaves(Octree& tree, const PointSet& points);
 // Split filled leaves until face-, edge- and corner-adjacent filled leaves differ by at most one
 // level; returns the number of splits.
 size_t balanceOctree(Octree& tree, const PointSet& points);
+// The same after filling the leaves `added` in a balanced tree: only they and their neighbours are
+// checked. The filled leaves that splits create are appended to `created`.
+size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint32_t>& added,
+                    std::vector<uint32_t>& created);
 
 // ---- corners.cpp
 // Values of every distinct leaf corner, keyed by grid point.
@@ -216,6 +221,9 @@ struct CornerField {
 Key128 gridKey(const GridPoint& p);
 // Corners of the filled leaves; values found in the cache are reused, new ones are added to it.
 CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache);
+// Add the corners of more filled leaves to a field (their coarsest levels updated).
+void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
+                    const SdfEvaluator& sdf, CornerCache& cache);
 
 // ---- snap.cpp
 struct HangingCorner {
