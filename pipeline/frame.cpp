@@ -1,5 +1,7 @@
 // From world coordinates (double) to the frame: one global cube chosen in double, then float
 // frame units in [0, 1) and Morton keys (specs/pipeline.md, "Precision").
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -21,22 +23,29 @@ uint64_t keyOf(const glm::vec3& u) {
   return mortonEncode(c[0], c[1], c[2]);
 }
 
-// A stable LSD radix sort of (key, index) by key: 63-bit keys in 6 passes of 11 bits.
+struct KeyIndex {
+  uint64_t key;
+  uint32_t index;
+};
+
+// A stable LSD radix sort of (key, index) pairs by key: 63-bit keys in 6 passes of 11 bits, the
+// pairs moved together so that each pass reads them in order.
 std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
   const size_t n = keys.size();
-  std::vector<uint32_t> order(n), scratch(n);
-  std::iota(order.begin(), order.end(), 0u);
+  std::vector<KeyIndex> items(n), scratch(n);
+  for (size_t i = 0; i < n; ++i) items[i] = {keys[i], uint32_t(i)};
   constexpr int kBits = 11;
   constexpr size_t kBuckets = size_t{1} << kBits;
   for (int shift = 0; shift < 64; shift += kBits) {
     std::vector<size_t> count(kBuckets + 1, 0);
-    for (uint32_t i : order) ++count[((keys[i] >> shift) & (kBuckets - 1)) + 1];
-    if (count[1] == n || std::any_of(count.begin(), count.end(), [n](size_t c) { return c == n; }))
-      continue;
+    for (const KeyIndex& item : items) ++count[((item.key >> shift) & (kBuckets - 1)) + 1];
+    if (std::any_of(count.begin(), count.end(), [n](size_t c) { return c == n; })) continue;  // one digit
     std::partial_sum(count.begin(), count.end(), count.begin());
-    for (uint32_t i : order) scratch[count[(keys[i] >> shift) & (kBuckets - 1)]++] = i;
-    order.swap(scratch);
+    for (const KeyIndex& item : items) scratch[count[(item.key >> shift) & (kBuckets - 1)]++] = item;
+    items.swap(scratch);
   }
+  std::vector<uint32_t> order(n);
+  for (size_t i = 0; i < n; ++i) order[i] = items[i].index;
   return order;
 }
 
@@ -44,7 +53,9 @@ template <typename T>
 void permute(std::vector<T>& values, const std::vector<uint32_t>& order) {
   if (values.empty()) return;
   std::vector<T> out(order.size());
-  for (size_t i = 0; i < order.size(); ++i) out[i] = values[order[i]];
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, order.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) out[i] = values[order[i]];
+  });
   values.swap(out);
 }
 
@@ -86,14 +97,14 @@ PointSet makePointSet(const PointCloud& cloud, const Frame& frame) {
   points.weight.assign(n, 1.0f);
   points.source.resize(n);
   std::iota(points.source.begin(), points.source.end(), 0u);
-  for (size_t i = 0; i < n; ++i) {
-    points.position[i] = glm::vec3(toFrame(cloud.positions[i], frame));
-    points.key[i] = keyOf(points.position[i]);
-  }
-  if (cloud.hasNormals()) {
-    points.normal.resize(n);
-    for (size_t i = 0; i < n; ++i) points.normal[i] = unitOrZero(cloud.normals[i]);
-  }
+  if (cloud.hasNormals()) points.normal.resize(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      points.position[i] = glm::vec3(toFrame(cloud.positions[i], frame));
+      points.key[i] = keyOf(points.position[i]);
+      if (cloud.hasNormals()) points.normal[i] = unitOrZero(cloud.normals[i]);
+    }
+  });
   if (cloud.hasColors()) points.color = cloud.colors;
   return points;
 }
@@ -111,6 +122,16 @@ void sortByKey(PointSet& points) {
 
 size_t mergeDuplicates(PointSet& points) {
   const size_t n = points.size();
+  bool anyDuplicate = false;  // most scans have none: then nothing is copied
+  for (size_t i = 1; i < n && !anyDuplicate; ++i)
+    anyDuplicate = points.key[i] == points.key[i - 1] && points.position[i] == points.position[i - 1];
+  if (!anyDuplicate) {
+    for (size_t i = 1; i < n && !anyDuplicate; ++i)
+      if (points.key[i] == points.key[i - 1])
+        for (size_t j = i; j > 0 && points.key[j - 1] == points.key[i] && !anyDuplicate; --j)
+          anyDuplicate = points.position[j - 1] == points.position[i];
+    if (!anyDuplicate) return 0;
+  }
   std::vector<uint32_t> target(n);  // the point each one merges into
   std::vector<uint32_t> run;
   for (size_t begin = 0; begin < n;) {
