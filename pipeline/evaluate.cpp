@@ -142,6 +142,8 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
   return out;
 }
 
+constexpr double kGrazing = 0.3;  // cos 73°: rays this close to an open truth's tangent are not counted
+
 struct Rays {
   uint64_t truthHits = 0, holes = 0, spurious = 0;
 };
@@ -176,11 +178,14 @@ Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions
           }
           const double length = glm::length(target - origin);
           const glm::dvec3 direction = (target - origin) / length;
-          // Past an open truth the zero set may be hit a little later; how much later grows as the
-          // ray grazes the surface, so the allowance is the depth over the cosine of incidence.
-          const double cosine = std::max(std::abs(glm::dot(direction, aim.normal)), 0.05);
-          const double tMax = truth.isClosed() ? length : length + depth / cosine;
-          const bool truthHit = truth.intersect(origin, direction, 0.0, tMax).has_value();
+          // Past an open truth the zero set may be hit a little later: the allowance is the depth
+          // over the cosine of incidence. Rays grazing an open truth (within 17° of its tangent
+          // plane) are left out: there a miss is a silhouette a fraction of a spacing away, not a
+          // hole.
+          const double cosine = std::abs(glm::dot(direction, aim.normal));
+          const double tMax = truth.isClosed() ? length : length + depth / std::max(cosine, 0.05);
+          const bool grazing = !truth.isClosed() && cosine < kGrazing;
+          const bool truthHit = !grazing && truth.intersect(origin, direction, 0.0, tMax).has_value();
           const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
           const bool isoHit =
               surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();

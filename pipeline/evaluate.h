@@ -6,8 +6,8 @@
 //   truth → iso   uniform samples of the truth projected onto the zero set; a sample that finds
 //                 no zero set takes its distance to the nearest zero-set sample instead
 //   holes         rays from outside aimed through the truth (closed: at points just inside it,
-//                 which every ray must cross the surface to reach): the fraction that hit the
-//                 truth but not the zero set
+//                 which every ray must cross the surface to reach; open: at surface points, grazing
+//                 rays left out): the fraction that hit the truth but not the zero set
 // The combined "rms" is sqrt((rms_iso→truth² + rms_truth→iso²) / 2); "max" the larger max.
 #pragma once
 
