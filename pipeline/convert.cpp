@@ -192,7 +192,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   PointCloud filtered;
   Prepared prepared = prepare(*cloud);
   timer.end("prepare");
-  auto tree = std::make_unique<KdTree>(prepared.points.position);
+  auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   size_t outliers = 0;
   if (options.removeOutliers) {
@@ -202,7 +202,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
       filtered = withoutSources(*cloud, prepared.points, flagged);
       cloud = &filtered;
       prepared = prepare(*cloud);
-      tree = std::make_unique<KdTree>(prepared.points.position);
+      tree = std::make_unique<PointIndex>(prepared.points.position);
       neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
     }
   }

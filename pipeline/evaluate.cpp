@@ -79,7 +79,7 @@ struct TruthToIso {
 // zero-set sample when p lies in empty space, refined by moving along the tangent plane toward p
 // and projecting again (alternating projections converge to the closest point of a smooth patch).
 std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const glm::dvec3& p,
-                                           const KdTree& samples,
+                                           const PointIndex& samples,
                                            const std::vector<glm::vec3>& samplePositions) {
   std::optional<Vec3> x = surface.project({p.x, p.y, p.z});
   if (!x && samples.size() > 0) {
@@ -114,7 +114,7 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
   std::mt19937_64 rng(options.seed);
   std::vector<glm::dvec3> points(options.truthSamples);
   for (glm::dvec3& p : points) p = truth.sample(rng).position;
-  const KdTree tree(isoSamples);
+  const PointIndex tree(isoSamples);
   std::vector<double> distance(points.size());
   std::vector<uint8_t> projected(points.size());
   tbb::parallel_for(

@@ -28,6 +28,8 @@ struct KeyIndex {
   uint32_t index;
 };
 
+}  // namespace
+
 // A stable LSD radix sort of (key, index) pairs by key: 63-bit keys in 6 passes of 11 bits, the
 // pairs moved together so that each pass reads them in order.
 std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
@@ -48,6 +50,8 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
   for (size_t i = 0; i < n; ++i) order[i] = items[i].index;
   return order;
 }
+
+namespace {
 
 template <typename T>
 void permute(std::vector<T>& values, const std::vector<uint32_t>& order) {

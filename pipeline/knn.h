@@ -1,41 +1,63 @@
-// Nearest-neighbour queries over points in frame units (a k-d tree from nanoflann).
+// Nearest-neighbour queries over a fixed set of points: an octree of small buckets over the
+// points in Morton order, with tight bounding boxes (specs/pipeline.md, "Neighbour queries").
 //
-// Threading: queries may run from many threads at once; building is single-threaded.
+// Points in [0, 1)^3 (frame units) that are already in Morton order at kMaxLevel are indexed
+// without a copy of their order; other points are sorted into Morton order of their bounding cube.
+// Every query is exact and deterministic (ties resolved by index order of the scan, which does
+// not depend on threads).
+//
+// Threading: queries may run from many threads at once; building runs on the calling thread's
+// task arena.
 #pragma once
 
 #include <cstdint>
 #include <glm/vec3.hpp>
-#include <memory>
 #include <span>
 #include <utility>
 #include <vector>
 
 namespace iso {
 
-class KdTree {
+class PointIndex {
  public:
-  // The tree refers to the points, which must outlive it unchanged.
-  explicit KdTree(std::span<const glm::vec3> points);
-  ~KdTree();
-  KdTree(const KdTree&) = delete;
-  KdTree& operator=(const KdTree&) = delete;
+  // The index copies the positions; the span need not outlive it.
+  explicit PointIndex(std::span<const glm::vec3> points);
 
   // The k nearest points (a query point in the set finds itself first), nearest first; returns how
   // many were found (fewer than k only when the set is smaller).
   size_t nearest(const glm::vec3& query, size_t k, uint32_t* indices,
                  float* squaredDistances) const;
 
-  // All points within `radius`, unordered: (index, squared distance) pairs, replacing out's
-  // content.
+  // All points within `radius` (inclusive), unordered: (index, squared distance) pairs, replacing
+  // out's content.
   void withinRadius(const glm::vec3& query, float radius,
                     std::vector<std::pair<uint32_t, float>>& out) const;
 
-  size_t size() const { return points_.size(); }
+  // For every indexed point i, its k nearest other points, nearest first: indices[i·k + j] and
+  // their distances (not squared). Requires k < size().
+  void allNearest(size_t k, uint32_t* indices, float* distances) const;
+
+  size_t size() const { return x_.size(); }
 
  private:
-  struct Index;
-  std::span<const glm::vec3> points_;
-  std::unique_ptr<Index> index_;
+  struct Node {
+    float lo[3];
+    uint32_t begin;  // sorted points [begin, end)
+    float hi[3];
+    uint32_t end;
+    uint32_t firstChild;  // children are contiguous; none for a bucket
+    uint32_t childCount;
+  };
+  struct Search;
+
+  void build(const std::vector<uint64_t>& keys);
+  uint32_t original(uint32_t sorted) const { return order_.empty() ? sorted : order_[sorted]; }
+  void collectLeaves(const Node& from, float radius2, std::vector<uint32_t>& out) const;
+
+  std::vector<float> x_, y_, z_;  // positions in sorted order
+  std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
+  std::vector<Node> nodes_;       // nodes_[0] is the root
+  std::vector<uint32_t> leaves_;  // the buckets, in point order
 };
 
 }  // namespace iso

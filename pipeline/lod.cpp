@@ -61,7 +61,7 @@ class ProxyPyramid {
     if (it != levels_.end()) return *it->second.evaluator;
     Level& l = levels_[proxyLevel];
     l.proxies = makeProxies(points_, proxyLevel);
-    l.tree = std::make_unique<KdTree>(l.proxies.position);
+    l.tree = std::make_unique<PointIndex>(l.proxies.position);
     l.evaluator =
         std::make_unique<SdfEvaluator>(l.proxies, *l.tree, options_.smoothing, options_.fit);
     return *l.evaluator;
@@ -70,7 +70,7 @@ class ProxyPyramid {
  private:
   struct Level {
     PointSet proxies;
-    std::unique_ptr<KdTree> tree;
+    std::unique_ptr<PointIndex> tree;
     std::unique_ptr<SdfEvaluator> evaluator;
   };
   const PointSet& points_;

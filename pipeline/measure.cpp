@@ -58,7 +58,7 @@ double meanNearestSpacing(const PointCloud& cloud) {
   sortByKey(points);
   mergeDuplicates(points);
   if (points.size() < 2) return 0.0;
-  const KdTree tree(points.position);
+  const PointIndex tree(points.position);
   const Neighbors neighbors = findNeighbors(points, tree, 1);
   double sum = 0.0;
   for (float d : neighbors.distance) sum += d;

@@ -156,16 +156,9 @@ double Patch::value(const glm::dvec3& p, glm::dvec3* gradient) const {
   const std::array<double, 3> u = {std::clamp((p.x - origin.x) / size, 0.0, 1.0),
                                    std::clamp((p.y - origin.y) / size, 0.0, 1.0),
                                    std::clamp((p.z - origin.z) / size, 0.0, 1.0)};
-  const auto w = trilinearWeights(u);
-  double f = 0.0;
-  for (int c = 0; c < 8; ++c) f += w[size_t(c)] * distance[size_t(c)];
-  if (gradient) {
-    const auto dw = trilinearWeightGradients(u);
-    *gradient = glm::dvec3(0.0);
-    for (int a = 0; a < 3; ++a)
-      for (int c = 0; c < 8; ++c)
-        (*gradient)[a] += dw[size_t(a)][size_t(c)] * distance[size_t(c)] / size;
-  }
+  std::array<double, 3> g{};
+  const double f = trilinear(distance, u, gradient ? &g : nullptr);
+  if (gradient) *gradient = glm::dvec3(g[0], g[1], g[2]) / size;
   return f;
 }
 

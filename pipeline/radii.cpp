@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 #include "knn.h"
@@ -19,35 +20,26 @@ float medianOf(std::vector<float>& values) {
   return *middle;
 }
 
+// The median of a few values (k of them): insertion sort beats selection at this size.
+float smallMedian(float* values, size_t count) {
+  for (size_t i = 1; i < count; ++i) {
+    const float v = values[i];
+    size_t j = i;
+    for (; j > 0 && values[j - 1] > v; --j) values[j] = values[j - 1];
+    values[j] = v;
+  }
+  return values[count / 2];
+}
+
 }  // namespace
 
-Neighbors findNeighbors(const PointSet& points, const KdTree& tree, int k) {
+Neighbors findNeighbors(const PointSet& points, const PointIndex& index, int k) {
   Neighbors result;
   const size_t n = points.size();
   result.k = int(std::min<size_t>(size_t(k), n > 0 ? n - 1 : 0));
-  const size_t kk = size_t(result.k);
-  result.index.resize(n * kk);
-  result.distance.resize(n * kk);
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& range) {
-        std::vector<uint32_t> index(kk + 1);
-        std::vector<float> d2(kk + 1);
-        for (size_t i = range.begin(); i < range.end(); ++i) {
-          const size_t found = tree.nearest(points.position[i], kk + 1, index.data(), d2.data());
-          size_t out = 0;
-          for (size_t j = 0; j < found && out < kk; ++j) {
-            if (index[j] == i) continue;  // the point itself
-            result.index[i * kk + out] = index[j];
-            result.distance[i * kk + out] = std::sqrt(d2[j]);
-            ++out;
-          }
-          for (; out < kk;
-               ++out) {  // the point was not among the first k + 1 (ties): repeat the last
-            result.index[i * kk + out] = result.index[i * kk + out - 1];
-            result.distance[i * kk + out] = result.distance[i * kk + out - 1];
-          }
-        }
-      });
+  result.index.resize(n * size_t(result.k));
+  result.distance.resize(n * size_t(result.k));
+  index.allNearest(size_t(result.k), result.index.data(), result.distance.data());
   return result;
 }
 
@@ -69,8 +61,14 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors) {
       tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& range) {
         std::vector<float> local(k);
         for (size_t i = range.begin(); i < range.end(); ++i) {
-          for (size_t j = 0; j < k; ++j) local[j] = points.radius[neighbors.index[i * k + j]];
-          clamped[i] = std::max(std::min(points.radius[i], 4.0f * medianOf(local)), 1e-7f);
+          float smallest = std::numeric_limits<float>::max();
+          for (size_t j = 0; j < k; ++j) {
+            local[j] = points.radius[neighbors.index[i * k + j]];
+            smallest = std::min(smallest, local[j]);
+          }
+          float r = points.radius[i];
+          if (r > 4.0f * smallest) r = std::min(r, 4.0f * smallMedian(local.data(), k));  // rare
+          clamped[i] = std::max(r, 1e-7f);
         }
       });
   points.radius.swap(clamped);
@@ -88,11 +86,15 @@ std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neigh
                       std::vector<float> local(k);
                       for (size_t i = range.begin(); i < range.end(); ++i) {
                         const float own = neighbors.distance[i * k + k - 1];
+                        float smallest = std::numeric_limits<float>::max();
                         for (size_t j = 0; j < k; ++j) {
                           const size_t other = neighbors.index[i * k + j];
                           local[j] = neighbors.distance[other * k + k - 1];
+                          smallest = std::min(smallest, local[j]);
                         }
-                        flagged[i] = own > 10.0f * medianOf(local) ? 1 : 0;
+                        // The median is at least the smallest: most points need no median.
+                        flagged[i] =
+                            own > 10.0f * smallest && own > 10.0f * smallMedian(local.data(), k);
                       }
                     });
   return flagged;

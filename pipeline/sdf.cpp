@@ -80,32 +80,48 @@ struct FitSums {
     out.color = glm::vec3(color / weight);
     return out;
   }
+
+  FitSums operator+(const FitSums& o) const {
+    FitSums sum = *this;
+    sum.count += o.count;
+    sum.weight += o.weight;
+    sum.p += o.p;
+    sum.n += o.n;
+    sum.pn += o.pn;
+    sum.pp += o.pp;
+    sum.color += o.color;
+    return sum;
+  }
 };
 
 // The fit over the points whose normal is within 120° of the mean normal (a few wrong normals are
-// outvoted and left out).
+// outvoted and left out); weight[j] is 0 for truncated points.
 CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode fit,
                             const std::vector<std::pair<uint32_t, float>>& found,
-                            const std::vector<double>& logWeight, double best, const FitSums& all,
-                            double sigma, const glm::vec3& axis) {
+                            const std::vector<double>& weight, const FitSums& all, double sigma,
+                            const glm::vec3& axis) {
   const double length = glm::length(all.n);
   const glm::vec3 reference = length > 1e-9 * all.weight ? glm::vec3(all.n / length) : axis;
+  const auto opposes = [&](size_t j) {
+    return weight[j] > 0.0 && glm::dot(points.normal[found[j].first], reference) < kOpposingNormal;
+  };
+  bool anyOpposing = false;
+  for (size_t j = 0; j < found.size() && !anyOpposing; ++j) anyOpposing = opposes(j);
+  if (!anyOpposing) return all.sample(fit, sigma, reference);
   FitSums agreeing;
   for (size_t j = 0; j < found.size(); ++j) {
-    const double relative = logWeight[j] - best;
-    if (relative < -kTruncation) continue;
+    if (weight[j] == 0.0 || opposes(j)) continue;
     const uint32_t i = found[j].first;
-    if (glm::dot(points.normal[i], reference) < kOpposingNormal) continue;
     const glm::vec3* color = points.hasColors() ? &points.color[i] : nullptr;
-    agreeing.add(std::exp(relative) * double(points.weight[i]), glm::dvec3(points.position[i]) - q,
-                 glm::dvec3(points.normal[i]), color);
+    agreeing.add(weight[j], glm::dvec3(points.position[i]) - q, glm::dvec3(points.normal[i]),
+                 color);
   }
   return agreeing.sample(fit, sigma, reference);
 }
 
 }  // namespace
 
-SdfEvaluator::SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing,
+SdfEvaluator::SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing,
                            FitMode fit)
     : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {}
 
@@ -119,7 +135,7 @@ uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
 
 CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   thread_local std::vector<std::pair<uint32_t, float>> found;
-  thread_local std::vector<double> logWeight;
+  thread_local std::vector<double> logWeight, weight;
   const glm::vec3 qf(q);
   std::array<uint32_t, kProbe> probe{};
   std::array<float, kProbe> probeD2{};
@@ -156,17 +172,19 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   }
   // Split the points by the side their normal faces, relative to the dominant point's normal.
   const glm::vec3 axis = points_.normal[dominant];
-  FitSums with, against, all;
+  FitSums with, against;
+  weight.resize(found.size());
   for (size_t j = 0; j < found.size(); ++j) {
     const double relative = logWeight[j] - best;
+    weight[j] = 0.0;
     if (relative < -kTruncation) continue;
     const uint32_t i = found[j].first;
-    const double w = std::exp(relative) * double(points_.weight[i]);
+    weight[j] = std::exp(relative) * double(points_.weight[i]);
     const glm::dvec3 p = glm::dvec3(points_.position[i]) - q, n(points_.normal[i]);
     const glm::vec3* color = points_.hasColors() ? &points_.color[i] : nullptr;
-    all.add(w, p, n, color);
-    (glm::dot(points_.normal[i], axis) >= 0.0f ? with : against).add(w, p, n, color);
+    (glm::dot(points_.normal[i], axis) >= 0.0f ? with : against).add(weight[j], p, n, color);
   }
+  const FitSums all = with + against;
   const double sigma = sigmaOf(dominant);
   // Two sides when many points face against the dominant one and the two groups oppose each other
   // (two sheets closer than the radius). Counted, not weighted: far from the sheets the weights
@@ -174,7 +192,7 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   const bool twoSided =
       against.count >= kMinorGroup * double(with.count) &&
       glm::dot(with.n, against.n) < kOpposingNormal * glm::length(with.n) * glm::length(against.n);
-  if (!twoSided) return agreeingSample(points_, q, fit_, found, logWeight, best, all, sigma, axis);
+  if (!twoSided) return agreeingSample(points_, q, fit_, found, weight, all, sigma, axis);
   // The slab between sheets that face away from each other is inside (CSG intersection: the larger
   // distance), the gap between sheets that face each other is outside (union of the two solids:
   // the smaller).

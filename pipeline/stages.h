@@ -34,7 +34,7 @@
 
 namespace iso {
 
-class KdTree;
+class PointIndex;
 
 enum class OrientMode { Auto, Up, Propagate };
 // The local surface fitted at a corner: the paper's plane, or an algebraic sphere (APSS,
@@ -81,6 +81,8 @@ Frame chooseFrame(const PointCloud& cloud);
 PointSet makePointSet(const PointCloud& cloud, const Frame& frame);
 glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
 void sortByKey(PointSet& points);
+// The order that sorts the keys (stable): order[i] is the index of the i-th smallest.
+std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys);
 // Merge points with identical positions into one (weights add, normals and colors average);
 // returns how many were merged away. Requires sorted points.
 size_t mergeDuplicates(PointSet& points);
@@ -91,7 +93,7 @@ struct Neighbors {  // the k nearest other points of every point
   std::vector<uint32_t> index;  // k per point
   std::vector<float> distance;  // k per point, increasing
 };
-Neighbors findNeighbors(const PointSet& points, const KdTree& tree, int k);
+Neighbors findNeighbors(const PointSet& points, const PointIndex& index, int k);
 struct RadiusStats {
   double meanSpacing = 0.0;  // mean distance to the nearest other point
   double medianRadius = 0.0;
@@ -127,7 +129,7 @@ struct CornerSample {
 // f(Q) = (Q - p̄)·n̄ with truncated Gaussian weights (specs/pipeline.md, "Signed distance").
 class SdfEvaluator {
  public:
-  SdfEvaluator(const PointSet& points, const KdTree& tree, double smoothing, FitMode fit);
+  SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit);
   // minSigma widens every σ_i (level of detail: a fraction of the node size).
   CornerSample evaluate(const glm::dvec3& q, float minSigma) const;
   // The point nearest to q and its distance.
@@ -136,7 +138,7 @@ class SdfEvaluator {
 
  private:
   const PointSet& points_;
-  const KdTree& tree_;
+  const PointIndex& tree_;
   double smoothing_;
   FitMode fit_;
 };

@@ -21,27 +21,6 @@ using detail::storeLE;
 
 namespace {
 
-// Spread the low 21 bits of v so that bit j moves to bit 3j.
-uint64_t spreadBits(uint64_t v) {
-  v &= 0x1fffff;
-  v = (v | v << 32) & 0x1f00000000ffffull;
-  v = (v | v << 16) & 0x1f0000ff0000ffull;
-  v = (v | v << 8) & 0x100f00f00f00f00full;
-  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
-  v = (v | v << 2) & 0x1249249249249249ull;
-  return v;
-}
-
-uint32_t compactBits(uint64_t v) {
-  v &= 0x1249249249249249ull;
-  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ull;
-  v = (v ^ (v >> 4)) & 0x100f00f00f00f00full;
-  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffull;
-  v = (v ^ (v >> 16)) & 0x1f00000000ffffull;
-  v = (v ^ (v >> 32)) & 0x1fffffull;
-  return static_cast<uint32_t>(v);
-}
-
 Key128 leafCornerKey(const GridPoint& p) { return {p.x | uint64_t(p.y) << 32, p.z}; }
 Key128 lodCornerKey(const GridPoint& p, uint8_t level) {
   return {p.x | uint64_t(p.y) << 32, p.z | uint64_t(level) << 32};
@@ -243,14 +222,6 @@ std::array<std::array<double, 8>, 3> trilinearWeightGradients(const std::array<d
       g[size_t(a)][size_t(c)] = d;
     }
   return g;
-}
-
-std::array<uint32_t, 3> mortonDecode(uint64_t key) {
-  return {compactBits(key), compactBits(key >> 1), compactBits(key >> 2)};
-}
-
-uint64_t mortonEncode(uint32_t x, uint32_t y, uint32_t z) {
-  return spreadBits(x) | spreadBits(y) << 1 | spreadBits(z) << 2;
 }
 
 GridPoint cornerPoint(uint8_t level, uint64_t key, int corner) {

@@ -172,26 +172,41 @@ uint32_t SurfaceModel::findLeaf(const Vec3& p) const {
   return nodes_[node].leaf;
 }
 
-SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
+double SurfaceModel::distanceAt(uint32_t leafId, const Vec3& p,
+                                std::array<double, 3>* gradient) const {
   const Leaf& leaf = leaves_[leafId];
   const auto cell = mortonDecode(leaf.key);
   const double scale = std::ldexp(1.0, leaf.level);
   Vec3 u{};
   for (int a = 0; a < 3; ++a)
     u[size_t(a)] = std::clamp(p[size_t(a)] * scale - double(cell[size_t(a)]), 0.0, 1.0);
-  const std::array<double, 8> w = trilinearWeights(u);
-  const std::array<std::array<double, 8>, 3> dw = trilinearWeightGradients(u);
+  std::array<double, 8> f{};
+  for (int c = 0; c < 8; ++c) f[size_t(c)] = corners_.distance[leaf.corners[size_t(c)]];
+  const double value = trilinear(f, u, gradient);
+  if (gradient)
+    for (double& g : *gradient) g *= scale;
+  return value;
+}
+
+SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
   SurfaceEval e;
-  for (int c = 0; c < 8; ++c) {
-    const uint32_t corner = leaf.corners[size_t(c)];
-    const double f = corners_.distance[corner];
-    e.distance += w[size_t(c)] * f;
-    for (int a = 0; a < 3; ++a) e.gradient[size_t(a)] += dw[size_t(a)][size_t(c)] * f * scale;
-    for (int k = 0; k < 3; ++k) {
-      if (hasNormals())
-        e.normal[size_t(k)] += float(w[size_t(c)]) * corners_.normal[corner][size_t(k)];
-      if (hasColors())
-        e.color[size_t(k)] += float(w[size_t(c)]) * corners_.color[corner][size_t(k)];
+  e.distance = distanceAt(leafId, p, &e.gradient);
+  if (hasNormals() || hasColors()) {
+    const Leaf& leaf = leaves_[leafId];
+    const auto cell = mortonDecode(leaf.key);
+    const double scale = std::ldexp(1.0, leaf.level);
+    Vec3 u{};
+    for (int a = 0; a < 3; ++a)
+      u[size_t(a)] = std::clamp(p[size_t(a)] * scale - double(cell[size_t(a)]), 0.0, 1.0);
+    const std::array<double, 8> w = trilinearWeights(u);
+    for (int c = 0; c < 8; ++c) {
+      const uint32_t corner = leaf.corners[size_t(c)];
+      for (int k = 0; k < 3; ++k) {
+        if (hasNormals())
+          e.normal[size_t(k)] += float(w[size_t(c)]) * corners_.normal[corner][size_t(k)];
+        if (hasColors())
+          e.color[size_t(k)] += float(w[size_t(c)]) * corners_.color[corner][size_t(k)];
+      }
     }
   }
   if (!hasNormals())
@@ -309,7 +324,8 @@ std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
   for (int step = 0; step < 64; ++step) {
     const uint32_t leaf = findLeaf(x);
     if (leaf == kNoNode) return std::nullopt;
-    const SurfaceEval e = evaluate(leaf, x);
+    SurfaceEval e;
+    e.distance = distanceAt(leaf, x, &e.gradient);
     if (step > 0 && sign(e.distance) != sign(previousValue))
       return bisectSignChange(previous, x);  // stepped over the zero set, perhaps at a leaf face
     const double g2 = e.gradient[0] * e.gradient[0] + e.gradient[1] * e.gradient[1] +
@@ -328,27 +344,45 @@ std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
 }
 
 std::optional<Vec3> SurfaceModel::bisectSignChange(Vec3 a, Vec3 b) const {
-  const auto valueAt = [&](const Vec3& x) -> std::optional<double> {
+  // Regula falsi with the Illinois modification on the segment a→b, whose ends have opposite
+  // signs: superlinear on a smooth patch, and still bracketing where the sign changes at a jump
+  // between leaves (then the bracket shrinks to the jump).
+  const auto at = [&](double t) {
+    Vec3 x{};
+    for (int k = 0; k < 3; ++k) x[size_t(k)] = a[size_t(k)] + t * (b[size_t(k)] - a[size_t(k)]);
+    return x;
+  };
+  const auto valueAt = [&](const Vec3& x, double& cellSize) -> std::optional<double> {
     const uint32_t leaf = findLeaf(x);
     if (leaf == kNoNode) return std::nullopt;
-    return evaluate(leaf, x).distance;
+    cellSize = std::ldexp(1.0, -leaves_[leaf].level);
+    return distanceAt(leaf, x, nullptr);
   };
-  const std::optional<double> fa = valueAt(a);
-  if (!fa) return std::nullopt;
-  for (int i = 0; i < 60; ++i) {
-    Vec3 m{};
-    for (int k = 0; k < 3; ++k) m[size_t(k)] = 0.5 * (a[size_t(k)] + b[size_t(k)]);
-    const std::optional<double> fm = valueAt(m);
-    if (!fm) return std::nullopt;
-    if (sign(*fm) == sign(*fa)) {
-      a = m;
+  double cellSize = 0.0;
+  const std::optional<double> fa0 = valueAt(a, cellSize), fb0 = valueAt(b, cellSize);
+  if (!fa0 || !fb0) return std::nullopt;
+  double ta = 0.0, tb = 1.0, fa = *fa0, fb = *fb0;
+  int side = 0;  // which end was kept last: -1 a, +1 b
+  for (int i = 0; i < 200 && tb - ta > 1e-15; ++i) {
+    double t = fa != fb ? ta + (tb - ta) * fa / (fa - fb) : 0.5 * (ta + tb);
+    if (!(t > ta && t < tb)) t = 0.5 * (ta + tb);
+    const Vec3 x = at(t);
+    const std::optional<double> f = valueAt(x, cellSize);
+    if (!f) return std::nullopt;
+    if (std::abs(*f) <= 1e-7 * cellSize) return x;
+    if (sign(*f) == sign(fa)) {
+      ta = t;
+      fa = *f;
+      if (side == -1) fb *= 0.5;  // a moved twice: halve b's weight (Illinois)
+      side = -1;
     } else {
-      b = m;
+      tb = t;
+      fb = *f;
+      if (side == 1) fa *= 0.5;
+      side = 1;
     }
   }
-  Vec3 m{};
-  for (int k = 0; k < 3; ++k) m[size_t(k)] = 0.5 * (a[size_t(k)] + b[size_t(k)]);
-  return m;
+  return at(0.5 * (ta + tb));
 }
 
 std::vector<ZeroSetSample> SurfaceModel::sampleZeroSet(int linesPerEdge) const {

@@ -25,7 +25,7 @@ Built buildStages(const PointCloud& cloud) {
   b.points = makePointSet(cloud, frame);
   sortByKey(b.points);
   mergeDuplicates(b.points);
-  const KdTree tree(b.points.position);
+  const PointIndex tree(b.points.position);
   const Neighbors neighbors = findNeighbors(b.points, tree, 10);
   const RadiusStats radii = estimateRadii(b.points, neighbors);
   estimateRoughness(b.points, neighbors);

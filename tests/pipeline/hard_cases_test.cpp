@@ -128,7 +128,7 @@ TEST(HardCases, tenThousandFoldDensityVariationGivesAValidSurface) {
   const Frame& frame = c.surface.header().frame;
   std::vector<glm::vec3> input;
   for (const glm::dvec3& p : cloud.positions) input.push_back(glm::vec3(p));
-  const KdTree tree(input);
+  const PointIndex tree(input);
   std::mt19937_64 rng(2);
   double squares = 0.0, worst = 0.0;
   int samples = 0, leaks = 0;

@@ -82,7 +82,7 @@ TEST(Frame, exactDuplicatesMergeIntoWeightedPoints) {
 
 TEST(Radii, nearestNeighboursMatchBruteForce) {
   PointSet points = prepared(randomCloud(3000, 3));
-  const KdTree tree(points.position);
+  const PointIndex tree(points.position);
   const Neighbors neighbors = findNeighbors(points, tree, 10);
   estimateRadii(points, neighbors);
   for (size_t i = 0; i < points.size(); i += 37) {
@@ -100,14 +100,14 @@ TEST(Normals, pcaRecoversAPlaneAndPropagationOrientsASphere) {
   PointCloud plane = randomCloud(5000, 4);
   for (glm::dvec3& p : plane.positions) p.z = 0.3 * p.x - 0.2 * p.y;
   PointSet points = prepared(plane);
-  const KdTree tree(points.position);
+  const PointIndex tree(points.position);
   const Neighbors neighbors = findNeighbors(points, tree, 10);
   EXPECT_EQ(estimateNormals(points, neighbors), points.size());
   const glm::vec3 truth = glm::normalize(glm::vec3(-0.3f, 0.2f, 1.0f));
   for (const glm::vec3& n : points.normal) EXPECT_GT(std::abs(glm::dot(n, truth)), 0.99999f);
 
   PointSet sphere = prepared(test::scanOf("sphere", 50000, false));
-  const KdTree sphereTree(sphere.position);
+  const PointIndex sphereTree(sphere.position);
   const Neighbors sphereNeighbors = findNeighbors(sphere, sphereTree, 10);
   estimateNormals(sphere, sphereNeighbors);
   orientNormals(sphere, sphereNeighbors, OrientMode::Auto, std::vector<uint8_t>(sphere.size(), 1));
@@ -119,12 +119,12 @@ TEST(Normals, pcaRecoversAPlaneAndPropagationOrientsASphere) {
 
 struct Evaluated {
   PointSet points;
-  std::unique_ptr<KdTree> tree;
+  std::unique_ptr<PointIndex> tree;
 };
 
 Evaluated withRadii(const PointCloud& cloud) {
   Evaluated e{prepared(cloud), nullptr};
-  e.tree = std::make_unique<KdTree>(e.points.position);
+  e.tree = std::make_unique<PointIndex>(e.points.position);
   estimateRadii(e.points, findNeighbors(e.points, *e.tree, 10));
   return e;
 }
@@ -239,7 +239,7 @@ TEST(Passive, boxDiskTestMatchesDenseSampling) {
 TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
   const Evaluated e = withRadii(test::scanOf("cube", 40000));
   PointSet points = e.points;
-  const KdTree tree(points.position);
+  const PointIndex tree(points.position);
   estimateRoughness(points, findNeighbors(points, tree, 10));
   const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
   CornerCache cache;
@@ -275,7 +275,7 @@ TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
 TEST(Chunks, everyNodeIsInExactlyOneChunkWithinTheBudget) {
   const Evaluated e = withRadii(test::scanOf("torus", 60000));
   PointSet points = e.points;
-  const KdTree tree(points.position);
+  const PointIndex tree(points.position);
   estimateRoughness(points, findNeighbors(points, tree, 10));
   const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
   CornerCache cache;

@@ -110,8 +110,51 @@ std::array<std::array<double, 8>, 3> trilinearWeightGradients(const std::array<d
 // Grid position of corner c of the node (level, key).
 GridPoint cornerPoint(uint8_t level, uint64_t key, int corner);
 
+// The trilinear interpolation of corner values v (corner c at x = bit 0, y = bit 1, z = bit 2 of c)
+// at local coordinates u in [0, 1]^3, and its gradient in local units when asked. Exact at the
+// corners and on the faces: a face's value depends only on the face's 4 corners.
+inline double trilinear(const std::array<double, 8>& v, const std::array<double, 3>& u,
+                        std::array<double, 3>* gradient = nullptr) {
+  const auto lerp = [](double a, double b, double t) { return (1.0 - t) * a + t * b; };
+  const double a00 = lerp(v[0], v[1], u[0]), a10 = lerp(v[2], v[3], u[0]);
+  const double a01 = lerp(v[4], v[5], u[0]), a11 = lerp(v[6], v[7], u[0]);
+  const double b0 = lerp(a00, a10, u[1]), b1 = lerp(a01, a11, u[1]);
+  if (gradient) {
+    const double dy0 = lerp(v[1] - v[0], v[3] - v[2], u[1]);
+    const double dy1 = lerp(v[5] - v[4], v[7] - v[6], u[1]);
+    *gradient = {lerp(dy0, dy1, u[2]), lerp(a10 - a00, a11 - a01, u[2]), b1 - b0};
+  }
+  return lerp(b0, b1, u[2]);
+}
+
+namespace detail {
+// Spread the low 21 bits of v so that bit j moves to bit 3j, and back.
+inline uint64_t spreadBits(uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffull;
+  v = (v | v << 16) & 0x1f0000ff0000ffull;
+  v = (v | v << 8) & 0x100f00f00f00f00full;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ull;
+  v = (v | v << 2) & 0x1249249249249249ull;
+  return v;
+}
+inline uint32_t compactBits(uint64_t v) {
+  v &= 0x1249249249249249ull;
+  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ull;
+  v = (v ^ (v >> 4)) & 0x100f00f00f00f00full;
+  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffull;
+  v = (v ^ (v >> 16)) & 0x1f00000000ffffull;
+  v = (v ^ (v >> 32)) & 0x1fffffull;
+  return static_cast<uint32_t>(v);
+}
+}  // namespace detail
+
 // Cell coordinates of a Morton key and back.
-std::array<uint32_t, 3> mortonDecode(uint64_t key);
-uint64_t mortonEncode(uint32_t x, uint32_t y, uint32_t z);
+inline std::array<uint32_t, 3> mortonDecode(uint64_t key) {
+  return {detail::compactBits(key), detail::compactBits(key >> 1), detail::compactBits(key >> 2)};
+}
+inline uint64_t mortonEncode(uint32_t x, uint32_t y, uint32_t z) {
+  return detail::spreadBits(x) | detail::spreadBits(y) << 1 | detail::spreadBits(z) << 2;
+}
 
 }  // namespace iso

@@ -88,6 +88,8 @@ class SurfaceModel {
                      double t1, Traversal& state) const;
   bool intersectLeaf(uint32_t leaf, double t0, double t1, Traversal& state) const;
   std::optional<Vec3> bisectSignChange(Vec3 a, Vec3 b) const;
+  // The distance in a leaf at p (clamped into it), and its gradient in frame units when asked.
+  double distanceAt(uint32_t leaf, const Vec3& p, std::array<double, 3>* gradient) const;
 
   FileHeader header_;
   std::vector<Node> nodes_;  // node 0 is the root (level 0)
