@@ -10,9 +10,9 @@
 
 #include "stages.h"
 
-#include <atomic>
+#include <bit>
+
 namespace iso {
-std::atomic<uint64_t> gScanned{0}, gCand{0}, gLeaves{0};
 namespace {
 
 constexpr uint32_t kBucket = 16;  // most points in a leaf bucket
@@ -67,7 +67,6 @@ struct PointIndex::Search {
     const float* z = index.z_.data() + begin;
     if (end <= begin) return;
     const uint32_t n = end - begin;
-    gScanned.fetch_add(n, std::memory_order_relaxed);
     for (uint32_t j = 0; j < n; ++j) {
       const float dx = x[j] - qx, dy = y[j] - qy, dz = z[j] - qz;
       buffer[j] = dx * dx + dy * dy + dz * dz;
@@ -102,18 +101,12 @@ PointIndex::PointIndex(std::span<const glm::vec3> points) {
     size = std::max({double(hi.x) - lo.x, double(hi.y) - lo.y, double(hi.z) - lo.z, 1e-30}) *
            (1.0 + 1e-6);
   }
+  origin_ = origin;
+  cellsPerUnit_ = double(1u << kMaxLevel) / size;
   std::vector<uint64_t> keys(n);
-  const double cells = double(1u << kMaxLevel);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14),
                     [&](const tbb::blocked_range<size_t>& r) {
-                      for (size_t i = r.begin(); i < r.end(); ++i) {
-                        std::array<uint32_t, 3> c{};
-                        for (int a = 0; a < 3; ++a)
-                          c[size_t(a)] = uint32_t(std::clamp(
-                              std::floor((double(points[i][a]) - origin[a]) / size * cells), 0.0,
-                              cells - 1.0));
-                        keys[i] = mortonEncode(c[0], c[1], c[2]);
-                      }
+                      for (size_t i = r.begin(); i < r.end(); ++i) keys[i] = keyOf(points[i]);
                     });
   if (!std::is_sorted(keys.begin(), keys.end())) {
     order_ = sortedOrder(keys);
@@ -136,12 +129,45 @@ PointIndex::PointIndex(std::span<const glm::vec3> points) {
   build(keys);
 }
 
+uint64_t PointIndex::keyOf(const glm::vec3& p) const {
+  constexpr double kLast = double((1u << kMaxLevel) - 1);
+  std::array<uint32_t, 3> c{};
+  for (int a = 0; a < 3; ++a)
+    c[size_t(a)] =
+        uint32_t(std::clamp(std::floor((double(p[a]) - origin_[a]) * cellsPerUnit_), 0.0, kLast));
+  return mortonEncode(c[0], c[1], c[2]);
+}
+
+uint32_t PointIndex::startNode(const glm::vec3& lo, const glm::vec3& hi, float pad) const {
+  // The deepest level whose cell holds the whole box (grown by pad and a relative margin for the
+  // rounding of float distances), then the deepest node that is such a cell.
+  constexpr double kLast = double((1u << kMaxLevel) - 1);
+  int level = kMaxLevel;
+  std::array<uint32_t, 3> low{};
+  for (int a = 0; a < 3; ++a) {
+    const double margin = double(pad) * (1.0 + 1e-5) + 1e-6 * std::abs(double(lo[a])) + 1e-30;
+    const auto cell = [&](double v) {
+      return uint32_t(std::clamp(std::floor((v - origin_[a]) * cellsPerUnit_), 0.0, kLast));
+    };
+    low[size_t(a)] = cell(double(lo[a]) - margin);
+    const uint32_t high = cell(double(hi[a]) + margin);
+    const uint32_t differ = low[size_t(a)] ^ high;
+    if (differ != 0) level = std::min(level, kMaxLevel - (32 - std::countl_zero(differ)));
+  }
+  const uint64_t key = mortonEncode(low[0], low[1], low[2]);
+  for (int l = level; l > 0; --l)
+    if (const uint32_t* node = cells_.find(cellCode(uint8_t(l), key >> (3 * (kMaxLevel - l)))))
+      return *node;
+  return 0;
+}
+
 void PointIndex::build(const std::vector<uint64_t>& keys) {
   // Breadth first, so that children follow their parents: an octree of the keys down to
   // kMaxLevel, then halves of the remaining runs (points in one finest cell).
   std::vector<uint8_t> level;
   nodes_.push_back(Node{{}, 0, {}, uint32_t(keys.size()), 0, 0});
   level.push_back(0);
+  cells_.insert(cellCode(0, 0), 0);
   for (size_t i = 0; i < nodes_.size(); ++i) {
     const Node node = nodes_[i];
     if (node.end - node.begin <= kBucket) continue;
@@ -149,29 +175,34 @@ void PointIndex::build(const std::vector<uint64_t>& keys) {
     const uint8_t l = level[i];
     if (l < kMaxLevel) {
       const int shift = 3 * (kMaxLevel - l - 1);
-      // The octants' runs; consecutive ones that fit in a bucket together share it.
-      uint32_t begin = node.begin, groupBegin = node.begin;
+      // The octants' runs; consecutive ones that fit in a bucket together share it. A node of
+      // one octant is that octant's cell.
+      uint32_t begin = node.begin, groupBegin = node.begin, runs = 0;
+      const auto add = [&](uint32_t b, uint32_t e, bool oneOctant) {
+        if (oneOctant)
+          cells_.insert(cellCode(uint8_t(l + 1), keys[b] >> shift), uint32_t(nodes_.size()));
+        nodes_.push_back(Node{{}, b, {}, e, 0, 0});
+        level.push_back(uint8_t(l + 1));
+      };
       while (begin < node.end) {
         const uint64_t child = keys[begin] >> shift;
         const auto end = std::partition_point(keys.begin() + begin, keys.begin() + node.end,
                                               [&](uint64_t k) { return (k >> shift) <= child; });
         const uint32_t e = uint32_t(end - keys.begin());
         if (e - groupBegin > kBucket && begin > groupBegin) {  // close the group before this run
-          nodes_.push_back(Node{{}, groupBegin, {}, begin, 0, 0});
-          level.push_back(uint8_t(l + 1));
+          add(groupBegin, begin, runs == 1);
           groupBegin = begin;
+          runs = 0;
         }
+        ++runs;
         if (e - groupBegin > kBucket) {  // a run too large for a bucket: a node of its own
-          nodes_.push_back(Node{{}, groupBegin, {}, e, 0, 0});
-          level.push_back(uint8_t(l + 1));
+          add(groupBegin, e, true);
           groupBegin = e;
+          runs = 0;
         }
         begin = e;
       }
-      if (groupBegin < node.end) {
-        nodes_.push_back(Node{{}, groupBegin, {}, node.end, 0, 0});
-        level.push_back(uint8_t(l + 1));
-      }
+      if (groupBegin < node.end) add(groupBegin, node.end, runs == 1);
     } else {
       const uint32_t middle = node.begin + (node.end - node.begin) / 2;
       nodes_.push_back(Node{{}, node.begin, {}, middle, 0, 0});
@@ -186,6 +217,8 @@ void PointIndex::build(const std::vector<uint64_t>& keys) {
     if (nodes_[i].childCount == 0) leaves_.push_back(i);
   std::sort(leaves_.begin(), leaves_.end(),
             [&](uint32_t a, uint32_t b) { return nodes_[a].begin < nodes_[b].begin; });
+  leafKey_.resize(leaves_.size());
+  for (size_t j = 0; j < leaves_.size(); ++j) leafKey_[j] = keys[nodes_[leaves_[j]].begin];
   tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves_.size(), 1024),
                     [&](const tbb::blocked_range<size_t>& r) {
                       for (size_t j = r.begin(); j < r.end(); ++j) {
@@ -223,6 +256,19 @@ size_t PointIndex::nearest(const glm::vec3& query, size_t k, uint32_t* indices,
   if (nodes_.empty() || k == 0) return 0;
   Search search(*this, query);
   TopK best{squaredDistances, indices, k};
+  // The bucket where the query's Morton key falls, and its neighbours in Morton order, first:
+  // they bound the k-th distance, so the tree search below visits few nodes.
+  const uint32_t n = uint32_t(size());
+  const size_t leaf = size_t(
+      std::max<ptrdiff_t>(std::upper_bound(leafKey_.begin(), leafKey_.end(), keyOf(query)) -
+                              leafKey_.begin() - 1,
+                          0));
+  const uint32_t halfWindow = uint32_t(std::min<size_t>(k, kBucket));
+  const Node& home = nodes_[leaves_[leaf]];
+  const uint32_t ws = home.begin > halfWindow ? home.begin - halfWindow : 0;
+  const uint32_t we = std::min(n, home.end + halfWindow);
+  const auto push = [&](uint32_t s, float d2) { best.push(d2, s); };
+  search.scanRange(ws, we, push);
   struct Entry {
     uint32_t node;
     float d2;
@@ -230,27 +276,29 @@ size_t PointIndex::nearest(const glm::vec3& query, size_t k, uint32_t* indices,
   // Depth is at most kMaxLevel plus the halvings of one finest cell (< 32), 8 entries a level.
   std::array<Entry, 512> stack;
   size_t top = 0;
-  stack[top++] = {0, search.boxDistance2(nodes_[0])};
+  const uint32_t start = startNode(query, query, std::sqrt(best.worst()));
+  stack[top++] = {start, search.boxDistance2(nodes_[start])};
   while (top > 0) {
     const Entry e = stack[--top];
     if (!(e.d2 < best.worst())) continue;
     const Node& node = nodes_[e.node];
     if (node.childCount == 0) {
-      search.scan(node.begin, node.end, [&](uint32_t s, float d2) { best.push(d2, s); });
+      search.scan(node.begin, std::min(node.end, ws), push);
+      search.scan(std::max(node.begin, we), node.end, push);
       continue;
     }
     // Children farthest first onto the stack, so that the nearest is searched first.
+    const float worst = best.worst();
     std::array<Entry, 8> children;
-    const uint32_t count = node.childCount;
-    for (uint32_t c = 0; c < count; ++c) {
-      Entry child{node.firstChild + c, search.boxDistance2(nodes_[node.firstChild + c])};
-      uint32_t j = c;
+    uint32_t count = 0;
+    for (uint32_t c = node.firstChild; c < node.firstChild + node.childCount; ++c) {
+      const Entry child{c, search.boxDistance2(nodes_[c])};
+      if (!(child.d2 < worst)) continue;
+      uint32_t j = count++;
       for (; j > 0 && children[j - 1].d2 < child.d2; --j) children[j] = children[j - 1];
       children[j] = child;
     }
-    const float worst = best.worst();
-    for (uint32_t c = 0; c < count; ++c)
-      if (children[c].d2 < worst) stack[top++] = children[c];
+    for (uint32_t c = 0; c < count; ++c) stack[top++] = children[c];
   }
   for (size_t j = 0; j < best.count; ++j) indices[j] = original(indices[j]);
   return best.count;
@@ -264,7 +312,7 @@ void PointIndex::withinRadius(const glm::vec3& query, float radius,
   const float r2 = radius * radius;
   std::array<uint32_t, 512> stack;
   size_t top = 0;
-  stack[top++] = 0;
+  stack[top++] = startNode(query, query, radius);
   while (top > 0) {
     const Node& node = nodes_[stack[--top]];
     if (search.boxDistance2(node) > r2) continue;
@@ -282,7 +330,8 @@ void PointIndex::collectLeaves(const Node& from, float radius2, std::vector<uint
   out.clear();
   std::array<uint32_t, 512> stack;
   size_t top = 0;
-  stack[top++] = 0;
+  stack[top++] = startNode(glm::vec3(from.lo[0], from.lo[1], from.lo[2]),
+                           glm::vec3(from.hi[0], from.hi[1], from.hi[2]), std::sqrt(radius2));
   while (top > 0) {
     const uint32_t id = stack[--top];
     const Node& node = nodes_[id];
@@ -304,51 +353,78 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
   const uint32_t n = uint32_t(size());
   if (k == 0 || n == 0) return;
   if (k >= n) throw std::invalid_argument("allNearest: k must be below the number of points");
-  // Each bucket's points first search a window of their neighbours in Morton order (which bounds
-  // their k-th distance), then the buckets within that bound.
+  // For each bucket: a radius R that likely holds every point's k nearest (the previous bucket's
+  // largest k-th distance, or for the first bucket of a run the k-th distances within a window
+  // of Morton neighbours), the points of every bucket within R of this one gathered once, and
+  // every point's k nearest among those within R. A point with fewer than k points within R
+  // makes the bucket start over with 2R: the answer is exact, and as the gathered points are in
+  // index order whatever R is, ties resolve the same way on any number of threads.
   const uint32_t halfWindow = std::max<uint32_t>(4, uint32_t(k + 2) / 2);
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, leaves_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-        std::vector<float> d2(kBucket * k);
-        std::vector<uint32_t> found(kBucket * k);
-        std::vector<uint32_t> candidates;
-        std::vector<TopK> best;
+        std::vector<float> bestD2(k), gx, gy, gz, d2;
+        std::vector<uint32_t> bestIndex(k), gi, candidates;
+        float radius2 = 0.0f;  // R²; 0: not known yet
         for (size_t leafIndex = r.begin(); leafIndex < r.end(); ++leafIndex) {
           const Node& leaf = nodes_[leaves_[leafIndex]];
-          const uint32_t m = leaf.end - leaf.begin;
-          const uint32_t length = std::min(n, m + 2 * halfWindow);
-          const uint32_t ws =
-              std::min(leaf.begin > halfWindow ? leaf.begin - halfWindow : 0u, n - length);
-          const uint32_t we = ws + length;
-          best.clear();
-          float bound = 0.0f;
-          for (uint32_t q = 0; q < m; ++q) {
-            TopK& b = best.emplace_back(TopK{d2.data() + q * k, found.data() + q * k, k});
-            const uint32_t self = leaf.begin + q;
-            Search search(*this, glm::vec3(x_[self], y_[self], z_[self]));
-            search.scanRange(ws, we, [&](uint32_t s, float d) {
-              if (s != self) b.push(d, s);
-            });
-            bound = std::max(bound, b.worst());
-          }
-          collectLeaves(leaf, bound, candidates);
-          gCand += candidates.size(); gLeaves += 1;
-          for (uint32_t q = 0; q < m; ++q) {
-            TopK& b = best[q];
-            const uint32_t self = leaf.begin + q;
-            Search search(*this, glm::vec3(x_[self], y_[self], z_[self]));
-            const auto push = [&](uint32_t s, float d) { b.push(d, s); };
-            for (const uint32_t c : candidates) {
-              const Node& node = nodes_[c];
-              if (!(search.boxDistance2(node) < b.worst())) continue;
-              search.scan(node.begin, std::min(node.end, ws), push);
-              search.scan(std::max(node.begin, we), node.end, push);
+          bool fromWindow = radius2 == 0.0f;
+          for (;;) {
+            if (fromWindow) {  // every point has k points within its window's k-th distance
+              const uint32_t length = std::min(n, leaf.end - leaf.begin + 2 * halfWindow);
+              const uint32_t ws =
+                  std::min(leaf.begin > halfWindow ? leaf.begin - halfWindow : 0u, n - length);
+              radius2 = 0.0f;
+              for (uint32_t self = leaf.begin; self < leaf.end; ++self) {
+                TopK best{bestD2.data(), bestIndex.data(), k};
+                Search search(*this, glm::vec3(x_[self], y_[self], z_[self]));
+                search.scanRange(ws, ws + length, [&](uint32_t s, float d) {
+                  if (s != self) best.push(d, s);
+                });
+                radius2 = std::max(radius2, best.worst());
+              }
             }
-            const uint32_t out = original(self);
-            for (size_t j = 0; j < k; ++j) {
-              indices[size_t(out) * k + j] = original(b.index[j]);
-              distances[size_t(out) * k + j] = std::sqrt(b.d2[j]);
+            collectLeaves(leaf, radius2, candidates);
+            gx.clear();
+            gy.clear();
+            gz.clear();
+            gi.clear();
+            for (const uint32_t c : candidates)
+              for (uint32_t s = nodes_[c].begin; s < nodes_[c].end; ++s) {
+                gx.push_back(x_[s]);
+                gy.push_back(y_[s]);
+                gz.push_back(z_[s]);
+                gi.push_back(s);
+              }
+            d2.resize(gx.size());
+            float largest = 0.0f;
+            bool complete = true;
+            for (uint32_t self = leaf.begin; self < leaf.end && complete; ++self) {
+              const float qx = x_[self], qy = y_[self], qz = z_[self];
+              const size_t count = gx.size();
+              for (size_t j = 0; j < count; ++j) {
+                const float dx = gx[j] - qx, dy = gy[j] - qy, dz = gz[j] - qz;
+                d2[j] = dx * dx + dy * dy + dz * dz;
+              }
+              TopK best{bestD2.data(), bestIndex.data(), k};
+              for (size_t j = 0; j < count; ++j)
+                if (d2[j] <= radius2 && gi[j] != self) best.push(d2[j], gi[j]);
+              if (best.count < k) {
+                complete = false;
+                break;
+              }
+              largest = std::max(largest, best.d2[k - 1]);
+              const uint32_t out = original(self);
+              for (size_t j = 0; j < k; ++j) {
+                indices[size_t(out) * k + j] = original(best.index[j]);
+                distances[size_t(out) * k + j] = std::sqrt(best.d2[j]);
+              }
             }
+            if (complete) {
+              radius2 = largest * 1.5625f;  // (1.25 R)² for the next bucket
+              break;
+            }
+            if (fromWindow) throw std::logic_error("allNearest: the window bound failed");
+            fromWindow = true;
           }
         }
       });

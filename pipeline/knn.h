@@ -12,6 +12,8 @@
 
 #include <cstdint>
 #include <glm/vec3.hpp>
+
+#include "iso/flat_map.h"
 #include <span>
 #include <utility>
 #include <vector>
@@ -51,6 +53,12 @@ class PointIndex {
   struct Search;
 
   void build(const std::vector<uint64_t>& keys);
+  uint64_t keyOf(const glm::vec3& p) const;
+  // The deepest node that is a whole octree cell holding every point within pad of the box.
+  uint32_t startNode(const glm::vec3& lo, const glm::vec3& hi, float pad) const;
+  static uint64_t cellCode(uint8_t level, uint64_t prefix) {
+    return uint64_t(1) << (3 * level) | prefix;
+  }
   uint32_t original(uint32_t sorted) const { return order_.empty() ? sorted : order_[sorted]; }
   void collectLeaves(const Node& from, float radius2, std::vector<uint32_t>& out) const;
 
@@ -58,6 +66,10 @@ class PointIndex {
   std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
   std::vector<Node> nodes_;       // nodes_[0] is the root
   std::vector<uint32_t> leaves_;  // the buckets, in point order
+  std::vector<uint64_t> leafKey_;  // Morton key of each bucket's first point
+  FlatMap<uint64_t, uint32_t> cells_;  // cellCode → node, for nodes that are whole cells
+  glm::dvec3 origin_{0.0};         // the cube of the keys: origin and cells per unit
+  double cellsPerUnit_ = 1.0;
 };
 
 }  // namespace iso

@@ -50,6 +50,21 @@ double sphereDistance(const glm::dvec3& pMean, const glm::dvec3& nMean, double p
   return 2.0 * u0 / (gradient + std::sqrt(discriminant));
 }
 
+// e^x for x in [-kTruncation, 0], relative error below 1e-10: the Taylor polynomial of degree 8
+// of e^(x/8), raised to the 8th power by squaring three times. Branch-free, so that the weight
+// loop vectorizes.
+inline double expAbove(double x) {
+  constexpr std::array<double, 9> kTaylor = {1.0,         1.0,          1.0 / 2,
+                                             1.0 / 6,     1.0 / 24,     1.0 / 120,
+                                             1.0 / 720,   1.0 / 5040,   1.0 / 40320};
+  const double y = x * 0.125;
+  double e = kTaylor[8];
+  for (int j = 7; j >= 0; --j) e = e * y + kTaylor[size_t(j)];
+  e *= e;
+  e *= e;
+  return e * e;
+}
+
 // Weighted sums of one group of points (relative to Q) and the surface fitted to them.
 struct FitSums {
   double weight = 0.0, pn = 0.0, pp = 0.0;  // Σw, Σw p·n, Σw p·p
@@ -123,7 +138,13 @@ CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode
 
 SdfEvaluator::SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing,
                            FitMode fit)
-    : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {}
+    : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {
+  halfInverseSigma2_.resize(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const double sigma = smoothing * double(points.radius[i]);
+    halfInverseSigma2_[i] = sigma > 0.0 ? float(0.5 / (sigma * sigma)) : HUGE_VALF;
+  }
+}
 
 uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
   uint32_t index = 0;
@@ -157,32 +178,37 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   tree_.withinRadius(qf, float(radius), found);
   if (found.empty()) found.push_back({probe[0], probeD2[0]});
 
+  // Log-weights -d²/2σ_i² from the index's squared distances (float: relative error 1e-7, far
+  // below what changes a weight), with 1/2σ_i² = min(1/2(smoothing·r_i)², 1/2·floor²).
+  const double inverseFloor = floor > 0.0 ? 0.5 / (floor * floor) : HUGE_VAL;
   logWeight.resize(found.size());
-  double best = -1e300;
-  uint32_t dominant = found[0].first;
+  double best = -HUGE_VAL;
+  size_t dominantAt = 0;
   for (size_t j = 0; j < found.size(); ++j) {
-    const uint32_t i = found[j].first;
-    const glm::dvec3 d = glm::dvec3(points_.position[i]) - q;
-    const double sigma = sigmaOf(i);
-    logWeight[j] = -glm::dot(d, d) / (2.0 * sigma * sigma);
+    logWeight[j] = -double(found[j].second) *
+                   std::min(double(halfInverseSigma2_[found[j].first]), inverseFloor);
     if (logWeight[j] > best) {
       best = logWeight[j];
-      dominant = i;
+      dominantAt = j;
     }
+  }
+  const uint32_t dominant = found[dominantAt].first;
+  weight.resize(found.size());
+  for (size_t j = 0; j < found.size(); ++j) {
+    const double relative = logWeight[j] - best;
+    weight[j] = relative >= -kTruncation ? expAbove(relative) : 0.0;
   }
   // Split the points by the side their normal faces, relative to the dominant point's normal.
   const glm::vec3 axis = points_.normal[dominant];
   FitSums with, against;
-  weight.resize(found.size());
   for (size_t j = 0; j < found.size(); ++j) {
-    const double relative = logWeight[j] - best;
-    weight[j] = 0.0;
-    if (relative < -kTruncation) continue;
+    if (weight[j] == 0.0) continue;
     const uint32_t i = found[j].first;
-    weight[j] = std::exp(relative) * double(points_.weight[i]);
+    const double w = weight[j] * double(points_.weight[i]);
+    weight[j] = w;
     const glm::dvec3 p = glm::dvec3(points_.position[i]) - q, n(points_.normal[i]);
     const glm::vec3* color = points_.hasColors() ? &points_.color[i] : nullptr;
-    (glm::dot(points_.normal[i], axis) >= 0.0f ? with : against).add(weight[j], p, n, color);
+    (glm::dot(points_.normal[i], axis) >= 0.0f ? with : against).add(w, p, n, color);
   }
   const FitSums all = with + against;
   const double sigma = sigmaOf(dominant);

@@ -141,6 +141,7 @@ class SdfEvaluator {
   const PointIndex& tree_;
   double smoothing_;
   FitMode fit_;
+  std::vector<float> halfInverseSigma2_;  // 1 / 2(smoothing · r_i)² per point
 };
 
 // ---- octree.cpp
