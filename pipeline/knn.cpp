@@ -18,21 +18,25 @@ namespace {
 constexpr uint32_t kBucket = 16;  // most points in a leaf bucket
 constexpr float kInfinity = std::numeric_limits<float>::infinity();
 
-// The k best (squared distance, index) pairs seen so far, nearest first; ties keep the earlier.
+// The k best (squared distance, index) pairs seen so far, nearest first. Ties go to the lower
+// index, so that the answer does not depend on the order in which points are seen.
 struct TopK {
   float* d2;
   uint32_t* index;
   size_t k, count = 0;
 
   float worst() const { return count < k ? kInfinity : d2[k - 1]; }
+  static bool before(float da, uint32_t ia, float db, uint32_t ib) {
+    return da < db || (da == db && ia < ib);
+  }
   void push(float d, uint32_t i) {
     if (count < k) {
       ++count;
-    } else if (!(d < d2[k - 1])) {
+    } else if (!before(d, i, d2[k - 1], index[k - 1])) {
       return;
     }
     size_t j = count - 1;
-    for (; j > 0 && d2[j - 1] > d; --j) {
+    for (; j > 0 && before(d, i, d2[j - 1], index[j - 1]); --j) {
       d2[j] = d2[j - 1];
       index[j] = index[j - 1];
     }
@@ -280,7 +284,7 @@ size_t PointIndex::nearest(const glm::vec3& query, size_t k, uint32_t* indices,
   stack[top++] = {start, search.boxDistance2(nodes_[start])};
   while (top > 0) {
     const Entry e = stack[--top];
-    if (!(e.d2 < best.worst())) continue;
+    if (!(e.d2 <= best.worst())) continue;  // (equal: a tie with a lower index may be there)
     const Node& node = nodes_[e.node];
     if (node.childCount == 0) {
       search.scan(node.begin, std::min(node.end, ws), push);
@@ -293,7 +297,7 @@ size_t PointIndex::nearest(const glm::vec3& query, size_t k, uint32_t* indices,
     uint32_t count = 0;
     for (uint32_t c = node.firstChild; c < node.firstChild + node.childCount; ++c) {
       const Entry child{c, search.boxDistance2(nodes_[c])};
-      if (!(child.d2 < worst)) continue;
+      if (!(child.d2 <= worst)) continue;
       uint32_t j = count++;
       for (; j > 0 && children[j - 1].d2 < child.d2; --j) children[j] = children[j - 1];
       children[j] = child;
@@ -326,18 +330,20 @@ void PointIndex::withinRadius(const glm::vec3& query, float radius,
   }
 }
 
-void PointIndex::collectLeaves(const Node& from, float radius2, std::vector<uint32_t>& out) const {
+void PointIndex::collectLeaves(const float lo[3], const float hi[3], float radius2,
+                               std::vector<uint32_t>& out) const {
   out.clear();
+  if (nodes_.empty()) return;
   std::array<uint32_t, 512> stack;
   size_t top = 0;
-  stack[top++] = startNode(glm::vec3(from.lo[0], from.lo[1], from.lo[2]),
-                           glm::vec3(from.hi[0], from.hi[1], from.hi[2]), std::sqrt(radius2));
+  stack[top++] = startNode(glm::vec3(lo[0], lo[1], lo[2]), glm::vec3(hi[0], hi[1], hi[2]),
+                           std::sqrt(radius2));
   while (top > 0) {
     const uint32_t id = stack[--top];
     const Node& node = nodes_[id];
     float d2 = 0.0f;
     for (int a = 0; a < 3; ++a) {
-      const float d = std::max({node.lo[a] - from.hi[a], 0.0f, from.lo[a] - node.hi[a]});
+      const float d = std::max({node.lo[a] - hi[a], 0.0f, lo[a] - node.hi[a]});
       d2 += d * d;
     }
     if (d2 > radius2) continue;
@@ -357,8 +363,8 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
   // largest k-th distance, or for the first bucket of a run the k-th distances within a window
   // of Morton neighbours), the points of every bucket within R of this one gathered once, and
   // every point's k nearest among those within R. A point with fewer than k points within R
-  // makes the bucket start over with 2R: the answer is exact, and as the gathered points are in
-  // index order whatever R is, ties resolve the same way on any number of threads.
+  // makes the bucket start over with the window's bound, which always holds: the answer is exact
+  // and, with ties resolved by index, the same on any number of threads.
   const uint32_t halfWindow = std::max<uint32_t>(4, uint32_t(k + 2) / 2);
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, leaves_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
@@ -383,7 +389,7 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
                 radius2 = std::max(radius2, best.worst());
               }
             }
-            collectLeaves(leaf, radius2, candidates);
+            collectLeaves(leaf.lo, leaf.hi, radius2, candidates);
             gx.clear();
             gy.clear();
             gz.clear();

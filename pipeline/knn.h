@@ -3,8 +3,8 @@
 //
 // Points in [0, 1)^3 (frame units) that are already in Morton order at kMaxLevel are indexed
 // without a copy of their order; other points are sorted into Morton order of their bounding cube.
-// Every query is exact and deterministic (ties resolved by index order of the scan, which does
-// not depend on threads).
+// Every query is exact and deterministic: ties between equal distances go to the point earlier
+// in the index's Morton order, whatever order the search meets them in.
 //
 // Threading: queries may run from many threads at once; building runs on the calling thread's
 // task arena.
@@ -30,8 +30,8 @@ class PointIndex {
   size_t nearest(const glm::vec3& query, size_t k, uint32_t* indices,
                  float* squaredDistances) const;
 
-  // All points within `radius` (inclusive), unordered: (index, squared distance) pairs, replacing
-  // out's content.
+  // All points within `radius` (inclusive), in the index's Morton order: (index, squared distance)
+  // pairs, replacing out's content.
   void withinRadius(const glm::vec3& query, float radius,
                     std::vector<std::pair<uint32_t, float>>& out) const;
 
@@ -60,7 +60,9 @@ class PointIndex {
     return uint64_t(1) << (3 * level) | prefix;
   }
   uint32_t original(uint32_t sorted) const { return order_.empty() ? sorted : order_[sorted]; }
-  void collectLeaves(const Node& from, float radius2, std::vector<uint32_t>& out) const;
+  // The buckets within sqrt(radius2) of the box [lo, hi], in point order.
+  void collectLeaves(const float lo[3], const float hi[3], float radius2,
+                     std::vector<uint32_t>& out) const;
 
   std::vector<float> x_, y_, z_;  // positions in sorted order
   std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
