@@ -43,6 +43,21 @@ struct TopK {
     d2[j] = d;
     index[j] = i;
   }
+  // push() for indices that only grow: a tie never goes before an earlier point.
+  void pushGrowing(float d, uint32_t i) {
+    if (count < k) {
+      ++count;
+    } else if (!(d < d2[k - 1])) {
+      return;
+    }
+    size_t j = count - 1;
+    for (; j > 0 && d < d2[j - 1]; --j) {
+      d2[j] = d2[j - 1];
+      index[j] = index[j - 1];
+    }
+    d2[j] = d;
+    index[j] = i;
+  }
 };
 
 }  // namespace
@@ -369,8 +384,9 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, leaves_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
         std::vector<float> bestD2(k), gx, gy, gz, d2;
-        std::vector<uint32_t> bestIndex(k), gi, candidates;
+        std::vector<uint32_t> bestIndex(k), gi, candidates, selected;
         float radius2 = 0.0f;  // R²; 0: not known yet
+        float previous = kInfinity;  // the k-th squared distance of the point before
         for (size_t leafIndex = r.begin(); leafIndex < r.end(); ++leafIndex) {
           const Node& leaf = nodes_[leaves_[leafIndex]];
           bool fromWindow = radius2 == 0.0f;
@@ -402,6 +418,7 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
                 gi.push_back(s);
               }
             d2.resize(gx.size());
+            selected.resize(gx.size());
             float largest = 0.0f;
             bool complete = true;
             for (uint32_t self = leaf.begin; self < leaf.end && complete; ++self) {
@@ -411,14 +428,30 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
                 const float dx = gx[j] - qx, dy = gy[j] - qy, dz = gz[j] - qz;
                 d2[j] = dx * dx + dy * dy + dz * dz;
               }
+              // The candidates within a threshold, compacted without branches: the previous
+              // point's k-th distance (grown a little) when that is below R, else R.
               TopK best{bestD2.data(), bestIndex.data(), k};
-              for (size_t j = 0; j < count; ++j)
-                if (d2[j] <= radius2 && gi[j] != self) best.push(d2[j], gi[j]);
+              float threshold = std::min(radius2, previous * 1.21f);
+              for (int pass = 0; pass < 2 && best.count < k; ++pass) {
+                if (pass == 1) {
+                  if (threshold == radius2) break;
+                  threshold = radius2;
+                  best.count = 0;
+                }
+                size_t within = 0;
+                for (size_t j = 0; j < count; ++j) {
+                  selected[within] = uint32_t(j);
+                  within += d2[j] <= threshold;
+                }
+                for (size_t j = 0; j < within; ++j)
+                  if (gi[selected[j]] != self) best.pushGrowing(d2[selected[j]], gi[selected[j]]);
+              }
               if (best.count < k) {
                 complete = false;
                 break;
               }
-              largest = std::max(largest, best.d2[k - 1]);
+              previous = best.d2[k - 1];
+              largest = std::max(largest, previous);
               const uint32_t out = original(self);
               for (size_t j = 0; j < k; ++j) {
                 indices[size_t(out) * k + j] = original(best.index[j]);
