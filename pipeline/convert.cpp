@@ -232,7 +232,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.end("corners");
-  const LodField lod = sampleLodCorners(octree, points, options);
+  const LodField lod = sampleLodCorners(octree, points, sdf, options);
   timer.end("lod");
 
   const double spacing = radii.meanSpacing * frame.size;

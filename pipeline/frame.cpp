@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <limits>
@@ -30,24 +31,87 @@ struct KeyIndex {
 
 }  // namespace
 
-// A stable LSD radix sort of (key, index) pairs by key: 63-bit keys in 6 passes of 11 bits, the
-// pairs moved together so that each pass reads them in order.
-std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
-  const size_t n = keys.size();
-  std::vector<KeyIndex> items(n), scratch(n);
-  for (size_t i = 0; i < n; ++i) items[i] = {keys[i], uint32_t(i)};
+namespace {
+
+// Stable LSD radix sort of items[begin, end) by the key bits below `bits`, 11 bits a pass,
+// skipping passes where every item has the same digit; scratch is as large as items.
+void sortLow(std::vector<KeyIndex>& items, std::vector<KeyIndex>& scratch, size_t begin,
+             size_t end, int bits) {
+  const size_t n = end - begin;
+  if (n < 2) return;
+  if (n <= 64) {
+    std::stable_sort(items.begin() + ptrdiff_t(begin), items.begin() + ptrdiff_t(end),
+                     [](const KeyIndex& a, const KeyIndex& b) { return a.key < b.key; });
+    return;
+  }
   constexpr int kBits = 11;
   constexpr size_t kBuckets = size_t{1} << kBits;
-  for (int shift = 0; shift < 64; shift += kBits) {
-    std::vector<size_t> count(kBuckets + 1, 0);
-    for (const KeyIndex& item : items) ++count[((item.key >> shift) & (kBuckets - 1)) + 1];
-    if (std::any_of(count.begin(), count.end(), [n](size_t c) { return c == n; })) continue;  // one digit
+  KeyIndex* from = items.data() + begin;
+  KeyIndex* to = scratch.data() + begin;
+  std::vector<size_t> count(kBuckets + 1);
+  for (int shift = 0; shift < bits; shift += kBits) {
+    const uint64_t mask = (uint64_t{1} << std::min(kBits, bits - shift)) - 1;
+    std::fill(count.begin(), count.end(), 0);
+    for (size_t i = 0; i < n; ++i) ++count[((from[i].key >> shift) & mask) + 1];
+    if (std::any_of(count.begin(), count.end(), [n](size_t c) { return c == n; })) continue;
     std::partial_sum(count.begin(), count.end(), count.begin());
-    for (const KeyIndex& item : items) scratch[count[(item.key >> shift) & (kBuckets - 1)]++] = item;
-    items.swap(scratch);
+    for (size_t i = 0; i < n; ++i) to[count[(from[i].key >> shift) & mask]++] = from[i];
+    std::swap(from, to);
   }
+  if (from != items.data() + begin) std::copy(from, from + n, items.data() + begin);
+}
+
+}  // namespace
+
+// A stable radix sort of (key, index) pairs by key: one parallel pass on the highest 11 bits in
+// use (blocks of the input counted and scattered in parallel, in order), then each of those
+// buckets sorted on the remaining bits by an LSD radix sort, buckets in parallel.
+std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
+  const size_t n = keys.size();
   std::vector<uint32_t> order(n);
-  for (size_t i = 0; i < n; ++i) order[i] = items[i].index;
+  if (n == 0) return order;
+  if (n >= size_t(std::numeric_limits<uint32_t>::max()))
+    throw std::length_error("too many points to sort in one chunk");
+  uint64_t used = 0;
+  for (const uint64_t k : keys) used |= k;
+  const int top = 64 - std::countl_zero(used);
+  constexpr int kBits = 11;
+  constexpr size_t kBuckets = size_t{1} << kBits;
+  const int shift = std::max(0, top - kBits);
+  const auto digit = [&](uint64_t k) { return size_t(k >> shift) & (kBuckets - 1); };
+  std::vector<KeyIndex> items(n), scratch(n);
+  constexpr size_t kBlock = size_t{1} << 16;
+  const size_t blocks = (n + kBlock - 1) / kBlock;
+  std::vector<size_t> count(blocks * kBuckets, 0);
+  tbb::parallel_for(size_t{0}, blocks, [&](size_t b) {
+    size_t* c = count.data() + b * kBuckets;
+    for (size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i) ++c[digit(keys[i])];
+  });
+  std::vector<size_t> bucketStart(kBuckets + 1, 0);
+  size_t offset = 0;
+  for (size_t d = 0; d < kBuckets; ++d) {  // offsets in (digit, block) order: stable
+    bucketStart[d] = offset;
+    for (size_t b = 0; b < blocks; ++b) {
+      const size_t c = count[b * kBuckets + d];
+      count[b * kBuckets + d] = offset;
+      offset += c;
+    }
+  }
+  bucketStart[kBuckets] = n;
+  tbb::parallel_for(size_t{0}, blocks, [&](size_t b) {
+    size_t* next = count.data() + b * kBuckets;
+    for (size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
+      items[next[digit(keys[i])]++] = {keys[i], uint32_t(i)};
+  });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, kBuckets, 8),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t d = r.begin(); d < r.end(); ++d)
+                        sortLow(items, scratch, bucketStart[d], bucketStart[d + 1], shift);
+                    });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 16),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i) order[i] = items[i].index;
+                    });
   return order;
 }
 

@@ -1,6 +1,7 @@
 #include "knn.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -157,6 +158,54 @@ uint64_t PointIndex::keyOf(const glm::vec3& p) const {
   return mortonEncode(c[0], c[1], c[2]);
 }
 
+// The children of a node: [bound[c], bound[c + 1]) for c < count.
+struct PointIndex::Children {
+  uint32_t count = 0;
+  std::array<uint32_t, 9> bound{};
+  std::array<bool, 8> cell{};  // whether child c is a whole octant
+};
+
+PointIndex::Children PointIndex::split(const std::vector<uint64_t>& keys, const Node& node,
+                                       uint8_t l) {
+  Children out;
+  const auto add = [&](uint32_t begin, uint32_t end, bool cell) {
+    out.bound[out.count] = begin;
+    out.bound[out.count + 1] = end;
+    out.cell[out.count] = cell;
+    ++out.count;
+  };
+  if (l >= kMaxLevel) {  // points in one finest cell: halves by count
+    const uint32_t middle = node.begin + (node.end - node.begin) / 2;
+    add(node.begin, middle, false);
+    add(middle, node.end, false);
+    return out;
+  }
+  // The octants' runs; consecutive ones that fit in a bucket together share it. A node of one
+  // octant is that octant's cell.
+  const int shift = 3 * (kMaxLevel - l - 1);
+  uint32_t begin = node.begin, groupBegin = node.begin, runs = 0;
+  while (begin < node.end) {
+    const uint64_t child = keys[begin] >> shift;
+    const auto end = std::partition_point(keys.begin() + begin, keys.begin() + node.end,
+                                          [&](uint64_t k) { return (k >> shift) <= child; });
+    const uint32_t e = uint32_t(end - keys.begin());
+    if (e - groupBegin > kBucket && begin > groupBegin) {  // close the group before this run
+      add(groupBegin, begin, runs == 1);
+      groupBegin = begin;
+      runs = 0;
+    }
+    ++runs;
+    if (e - groupBegin > kBucket) {  // a run too large for a bucket: a node of its own
+      add(groupBegin, e, true);
+      groupBegin = e;
+      runs = 0;
+    }
+    begin = e;
+  }
+  if (groupBegin < node.end) add(groupBegin, node.end, runs == 1);
+  return out;
+}
+
 uint32_t PointIndex::startNode(const glm::vec3& lo, const glm::vec3& hi, float pad) const {
   // The deepest level whose cell holds the whole box (grown by pad and a relative margin for the
   // rounding of float distances), then the deepest node that is such a cell.
@@ -181,61 +230,45 @@ uint32_t PointIndex::startNode(const glm::vec3& lo, const glm::vec3& hi, float p
 }
 
 void PointIndex::build(const std::vector<uint64_t>& keys) {
-  // Breadth first, so that children follow their parents: an octree of the keys down to
-  // kMaxLevel, then halves of the remaining runs (points in one finest cell).
-  std::vector<uint8_t> level;
+  // Level by level, so that children follow their parents: an octree of the keys down to
+  // kMaxLevel, then halves of the remaining runs (points in one finest cell). The children of a
+  // level's nodes are found in parallel, then appended in order.
+  std::vector<uint8_t> level = {0};
   nodes_.push_back(Node{{}, 0, {}, uint32_t(keys.size()), 0, 0});
-  level.push_back(0);
   cells_.insert(cellCode(0, 0), 0);
-  for (size_t i = 0; i < nodes_.size(); ++i) {
-    const Node node = nodes_[i];
-    if (node.end - node.begin <= kBucket) continue;
-    const uint32_t first = uint32_t(nodes_.size());
-    const uint8_t l = level[i];
-    if (l < kMaxLevel) {
-      const int shift = 3 * (kMaxLevel - l - 1);
-      // The octants' runs; consecutive ones that fit in a bucket together share it. A node of
-      // one octant is that octant's cell.
-      uint32_t begin = node.begin, groupBegin = node.begin, runs = 0;
-      const auto add = [&](uint32_t b, uint32_t e, bool oneOctant) {
-        if (oneOctant)
-          cells_.insert(cellCode(uint8_t(l + 1), keys[b] >> shift), uint32_t(nodes_.size()));
-        nodes_.push_back(Node{{}, b, {}, e, 0, 0});
-        level.push_back(uint8_t(l + 1));
-      };
-      while (begin < node.end) {
-        const uint64_t child = keys[begin] >> shift;
-        const auto end = std::partition_point(keys.begin() + begin, keys.begin() + node.end,
-                                              [&](uint64_t k) { return (k >> shift) <= child; });
-        const uint32_t e = uint32_t(end - keys.begin());
-        if (e - groupBegin > kBucket && begin > groupBegin) {  // close the group before this run
-          add(groupBegin, begin, runs == 1);
-          groupBegin = begin;
-          runs = 0;
-        }
-        ++runs;
-        if (e - groupBegin > kBucket) {  // a run too large for a bucket: a node of its own
-          add(groupBegin, e, true);
-          groupBegin = e;
-          runs = 0;
-        }
-        begin = e;
+  std::vector<uint32_t> frontier = {0};
+  std::vector<Children> children;
+  while (!frontier.empty()) {
+    children.assign(frontier.size(), Children{});
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 256),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t f = r.begin(); f < r.end(); ++f)
+                          children[f] = split(keys, nodes_[frontier[f]], level[frontier[f]]);
+                      });
+    std::vector<uint32_t> next;
+    for (size_t f = 0; f < frontier.size(); ++f) {
+      const Children& c = children[f];
+      Node& parent = nodes_[frontier[f]];
+      const uint8_t l = level[frontier[f]];
+      parent.firstChild = uint32_t(nodes_.size());
+      parent.childCount = c.count;
+      const uint8_t childLevel = l < kMaxLevel ? uint8_t(l + 1) : l;
+      for (uint32_t j = 0; j < c.count; ++j) {
+        const uint32_t id = uint32_t(nodes_.size());
+        if (c.cell[j])
+          cells_.insert(cellCode(childLevel, keys[c.bound[j]] >> (3 * (kMaxLevel - childLevel))),
+                        id);
+        nodes_.push_back(Node{{}, c.bound[j], {}, c.bound[j + 1], 0, 0});
+        level.push_back(childLevel);
+        if (c.bound[j + 1] - c.bound[j] > kBucket) next.push_back(id);
       }
-      if (groupBegin < node.end) add(groupBegin, node.end, runs == 1);
-    } else {
-      const uint32_t middle = node.begin + (node.end - node.begin) / 2;
-      nodes_.push_back(Node{{}, node.begin, {}, middle, 0, 0});
-      nodes_.push_back(Node{{}, middle, {}, node.end, 0, 0});
-      level.push_back(l);
-      level.push_back(l);
     }
-    nodes_[i].firstChild = first;
-    nodes_[i].childCount = uint32_t(nodes_.size()) - first;
+    frontier.swap(next);
   }
   for (uint32_t i = 0; i < nodes_.size(); ++i)
     if (nodes_[i].childCount == 0) leaves_.push_back(i);
-  std::sort(leaves_.begin(), leaves_.end(),
-            [&](uint32_t a, uint32_t b) { return nodes_[a].begin < nodes_[b].begin; });
+  tbb::parallel_sort(leaves_.begin(), leaves_.end(),
+                     [&](uint32_t a, uint32_t b) { return nodes_[a].begin < nodes_[b].begin; });
   leafKey_.resize(leaves_.size());
   for (size_t j = 0; j < leaves_.size(); ++j) leafKey_[j] = keys[nodes_[leaves_[j]].begin];
   tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves_.size(), 1024),

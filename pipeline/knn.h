@@ -51,6 +51,8 @@ class PointIndex {
     uint32_t childCount;
   };
   struct Search;
+  struct Children;
+  static Children split(const std::vector<uint64_t>& keys, const Node& node, uint8_t level);
 
   void build(const std::vector<uint64_t>& keys);
   uint64_t keyOf(const glm::vec3& p) const;

@@ -3,12 +3,19 @@
 // σ >= kLodSigmaFraction · (its edge), a low-pass matched to its size, from proxies: the points
 // averaged over cells two levels finer than the node (weighted mean position, normal and colour;
 // weight scaled by how well the normals agree), which bounds the work per corner at every level.
+// Where cells that fine hold fewer than 4 points on average, proxies would save nothing: those
+// levels are evaluated from the points themselves.
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <array>
+#include <bit>
 
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <map>
 #include <memory>
+#include <set>
 
 #include "knn.h"
 #include "stages.h"
@@ -19,51 +26,142 @@ namespace {
 constexpr float kLodSigmaFraction = 0.5f;  // σ floor of level-of-detail corners, in node edges
 constexpr int kProxyLevels = 2;            // proxies are cells this many levels below the node
 
-// Aggregate points (sorted by key) into one proxy per occupied cell at `level`.
-PointSet makeProxies(const PointSet& points, int level) {
-  PointSet proxies;
+// The weighted sums of the points in one cell: Σw, Σw p, Σw n, Σw r, Σw c.
+struct CellSums {
+  uint64_t key = 0;  // Morton key (at kMaxLevel) of the cell's first point
+  double weight = 0.0;
+  glm::dvec3 position{0.0};
+  glm::vec3 normal{0.0f}, color{0.0f};
+  float radius = 0.0f;
+};
+
+// One CellSums per occupied cell at `level` of `count` items sorted by key, in parallel over
+// parts cut at cell boundaries; add(sums, i) adds item i.
+template <typename KeyAt, typename Add>
+std::vector<CellSums> aggregate(size_t count, int level, const KeyAt& keyAt, const Add& add) {
   const int shift = 3 * (kMaxLevel - level);
-  for (size_t begin = 0; begin < points.size();) {
-    const uint64_t cell = points.key[begin] >> shift;
-    size_t end = begin;
-    double weight = 0.0, radius = 0.0;
-    glm::dvec3 position(0.0), normal(0.0), color(0.0);
-    for (; end < points.size() && (points.key[end] >> shift) == cell; ++end) {
-      const double w = points.weight[end];
-      weight += w;
-      position += w * glm::dvec3(points.position[end]);
-      normal += w * glm::dvec3(points.normal[end]);
-      radius += w * points.radius[end];
-      if (points.hasColors()) color += w * glm::dvec3(points.color[end]);
+  constexpr size_t kPart = size_t{1} << 16;
+  const size_t parts = std::max<size_t>(1, count / kPart);
+  std::vector<size_t> cut(parts + 1, count);
+  cut[0] = 0;
+  for (size_t p = 1; p < parts; ++p) {  // move each cut to the start of a cell (binary search)
+    const size_t at = p * count / parts;
+    const uint64_t cell = keyAt(at - 1) >> shift;
+    size_t lo = at, hi = count;  // the first index in [at, count) past `cell`
+    while (lo < hi) {
+      const size_t mid = lo + (hi - lo) / 2;
+      if ((keyAt(mid) >> shift) == cell) lo = mid + 1; else hi = mid;
     }
-    const double coherence = glm::length(normal) / weight;  // 1: all normals agree
-    proxies.position.push_back(glm::vec3(position / weight));
-    proxies.normal.push_back(coherence > 1e-6 ? glm::vec3(glm::normalize(normal))
-                                              : glm::vec3(0.0f));
-    proxies.weight.push_back(float(weight * std::max(coherence, 1e-3)));
-    proxies.radius.push_back(float(radius / weight));
-    proxies.key.push_back(points.key[begin]);
-    if (points.hasColors()) proxies.color.push_back(glm::vec3(color / weight));
-    begin = end;
+    cut[p] = std::max(lo, cut[p - 1]);
   }
+  std::vector<std::vector<CellSums>> out(parts);
+  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
+    for (size_t i = cut[p]; i < cut[p + 1];) {
+      CellSums sums;
+      sums.key = keyAt(i);
+      const uint64_t cell = sums.key >> shift;
+      for (; i < cut[p + 1] && (keyAt(i) >> shift) == cell; ++i) add(sums, i);
+      out[p].push_back(sums);
+    }
+  });
+  std::vector<CellSums> all;
+  for (const auto& part : out) all.insert(all.end(), part.begin(), part.end());
+  return all;
+}
+
+// Proxies from cell sums: the weighted mean position, normal, radius and colour; the weight
+// scaled by how well the normals agree.
+PointSet proxiesOf(const std::vector<CellSums>& cells, bool colors) {
+  PointSet proxies;
+  const size_t m = cells.size();
+  proxies.position.resize(m);
+  proxies.normal.resize(m);
+  proxies.weight.resize(m);
+  proxies.radius.resize(m);
+  proxies.key.resize(m);
+  if (colors) proxies.color.resize(m);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const CellSums& c = cells[i];
+      const double coherence = glm::length(glm::dvec3(c.normal)) / c.weight;  // 1: all agree
+      proxies.position[i] = glm::vec3(c.position / c.weight);
+      proxies.normal[i] =
+          coherence > 1e-6 ? glm::normalize(c.normal) : glm::vec3(0.0f);
+      proxies.weight[i] = float(c.weight * std::max(coherence, 1e-3));
+      proxies.radius[i] = float(double(c.radius) / c.weight);
+      proxies.key[i] = c.key;
+      if (colors) proxies.color[i] = glm::vec3(glm::dvec3(c.color) / c.weight);
+    }
+  });
   return proxies;
 }
 
-// Evaluators over proxies for each proxy level, built on first use.
+// The number of occupied cells at every level of points sorted by key: from the level at which
+// each pair of neighbours in key order first differs.
+std::array<size_t, kMaxLevel + 1> occupiedCells(const PointSet& points) {
+  const size_t n = points.size();
+  const auto partAt = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(1, std::max<size_t>(n, 1), 1 << 16), std::array<size_t, kMaxLevel + 1>{},
+      [&](const tbb::blocked_range<size_t>& r, std::array<size_t, kMaxLevel + 1> c) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const uint64_t differ = points.key[i] ^ points.key[i - 1];
+          if (differ == 0) continue;
+          const int bit = 63 - std::countl_zero(differ);  // highest differing bit
+          ++c[size_t(kMaxLevel - bit / 3)];                // the level where they part
+        }
+        return c;
+      },
+      [](std::array<size_t, kMaxLevel + 1> a, const std::array<size_t, kMaxLevel + 1>& b) {
+        for (size_t l = 0; l <= kMaxLevel; ++l) a[l] += b[l];
+        return a;
+      });
+  std::array<size_t, kMaxLevel + 1> cells{};
+  size_t total = n > 0 ? 1 : 0;
+  for (size_t l = 0; l <= kMaxLevel; ++l) cells[l] = total += partAt[l];
+  return cells;
+}
+
+// Evaluators over proxies for the proxy level of each node level: the finest proxies summed
+// from the points, each coarser level from the one below (linear in the points, whatever the
+// depth).
 class ProxyPyramid {
  public:
-  ProxyPyramid(const PointSet& points, const BuildOptions& options)
-      : points_(points), options_(options) {}
+  ProxyPyramid(const PointSet& points, const BuildOptions& options, const std::set<int>& wanted)
+      : options_(options) {
+    if (wanted.empty()) return;
+    const int finest = *wanted.rbegin(), coarsest = *wanted.begin();
+    std::vector<CellSums> cells = aggregate(
+        points.size(), finest, [&](size_t i) { return points.key[i]; },
+        [&](CellSums& s, size_t i) {
+          const double w = points.weight[i];
+          s.weight += w;
+          s.position += w * glm::dvec3(points.position[i]);
+          s.normal += float(w) * points.normal[i];
+          s.radius += float(w) * points.radius[i];
+          if (points.hasColors()) s.color += float(w) * points.color[i];
+        });
+    for (int level = finest;; --level) {
+      if (wanted.count(level)) levels_[level].proxies = proxiesOf(cells, points.hasColors());
+      if (level == coarsest) break;
+      cells = aggregate(
+          cells.size(), level - 1, [&](size_t i) { return cells[i].key; },
+          [&](CellSums& s, size_t i) {
+            s.weight += cells[i].weight;
+            s.position += cells[i].position;
+            s.normal += cells[i].normal;
+            s.radius += cells[i].radius;
+            s.color += cells[i].color;
+          });
+    }
+  }
 
-  const SdfEvaluator& forNodeLevel(int level) {
-    const int proxyLevel = std::min(level + kProxyLevels, int(kMaxLevel));
-    auto it = levels_.find(proxyLevel);
-    if (it != levels_.end()) return *it->second.evaluator;
-    Level& l = levels_[proxyLevel];
-    l.proxies = makeProxies(points_, proxyLevel);
-    l.tree = std::make_unique<PointIndex>(l.proxies.position);
-    l.evaluator =
-        std::make_unique<SdfEvaluator>(l.proxies, *l.tree, options_.smoothing, options_.fit);
+  const SdfEvaluator& forProxyLevel(int level) {
+    Level& l = levels_.at(level);
+    if (!l.evaluator) {
+      l.tree = std::make_unique<PointIndex>(l.proxies.position);
+      l.evaluator =
+          std::make_unique<SdfEvaluator>(l.proxies, *l.tree, options_.smoothing, options_.fit);
+    }
     return *l.evaluator;
   }
 
@@ -73,7 +171,6 @@ class ProxyPyramid {
     std::unique_ptr<PointIndex> tree;
     std::unique_ptr<SdfEvaluator> evaluator;
   };
-  const PointSet& points_;
   const BuildOptions& options_;
   std::map<int, Level> levels_;
 };
@@ -89,7 +186,8 @@ uint32_t LodField::find(uint8_t level, const GridPoint& p) const {
   return found ? *found : kNoNode;
 }
 
-LodField sampleLodCorners(const Octree& tree, const PointSet& points, const BuildOptions& options) {
+LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
+                          const BuildOptions& options) {
   LodField field;
   std::map<int, std::vector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
   for (const OctreeNode& node : tree.nodes) {
@@ -103,10 +201,22 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const Buil
       byLevel[node.level].push_back({*entry, p});
     }
   }
-  ProxyPyramid pyramid(points, options);
+  // Proxies where they hold 4 points or more on average; at finer levels the points themselves.
+  const std::array<size_t, kMaxLevel + 1> cells = occupiedCells(points);
+  std::set<int> proxyLevels;
+  std::map<int, int> proxyLevelOf;  // node level → proxy level (absent: the points)
+  for (const auto& entry : byLevel) {
+    const int proxy = std::min(entry.first + kProxyLevels, int(kMaxLevel));
+    if (4 * cells[size_t(proxy)] > points.size()) continue;
+    proxyLevels.insert(proxy);
+    proxyLevelOf[entry.first] = proxy;
+  }
+  ProxyPyramid pyramid(points, options, proxyLevels);
   const double unit = std::ldexp(1.0, -kMaxLevel);
   for (const auto& [level, corners] : byLevel) {
-    const SdfEvaluator& sdf = pyramid.forNodeLevel(level);
+    const auto proxy = proxyLevelOf.find(level);
+    const SdfEvaluator& sdf =
+        proxy != proxyLevelOf.end() ? pyramid.forProxyLevel(proxy->second) : pointsSdf;
     const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
                       [&](const tbb::blocked_range<size_t>& r) {

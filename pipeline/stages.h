@@ -25,6 +25,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "io/point_cloud.h"
@@ -87,11 +88,31 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys);
 // returns how many were merged away. Requires sorted points.
 size_t mergeDuplicates(PointSet& points);
 
+// An allocator that leaves elements default-initialized (numbers: not zeroed) on resize, for
+// large buffers that parallel code fills right away.
+template <typename T>
+struct DefaultInitAllocator : std::allocator<T> {
+  template <typename U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  template <typename U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+template <typename T>
+using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
+
 // ---- radii.cpp
 struct Neighbors {  // the k nearest other points of every point
   int k = 0;
-  std::vector<uint32_t> index;  // k per point
-  std::vector<float> distance;  // k per point, increasing
+  UninitializedVector<uint32_t> index;  // k per point
+  UninitializedVector<float> distance;  // k per point, increasing
 };
 Neighbors findNeighbors(const PointSet& points, const PointIndex& index, int k);
 struct RadiusStats {
@@ -259,7 +280,8 @@ struct LodField {
   uint32_t find(uint8_t level, const GridPoint& p) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);
-LodField sampleLodCorners(const Octree& tree, const PointSet& points, const BuildOptions& options);
+LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
+                          const BuildOptions& options);
 // The largest distance of the points below an internal node to the node's own patch.
 float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
                      uint32_t node);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <numeric>
 #include <random>
 
 #include "knn.h"
@@ -39,6 +40,23 @@ TEST(Morton, encodeAndDecodeAreInverse) {
   EXPECT_EQ(mortonEncode(0, 1, 0), 2u);
   EXPECT_EQ(mortonEncode(0, 0, 1), 4u);
   EXPECT_EQ(mortonEncode(2, 0, 0), 8u);
+}
+
+TEST(Frame, sortedOrderIsAStableSortByKey) {
+  std::mt19937_64 rng(5);
+  // Sizes around the block and small-bucket thresholds; keys from all 63 bits, from few bits
+  // (many equal keys: stability shows), and all equal.
+  for (const size_t n : {size_t{0}, size_t{1}, size_t{70}, size_t{65536 * 3 + 17}}) {
+    for (const int bits : {63, 5, 0}) {
+      std::vector<uint64_t> keys(n);
+      for (uint64_t& k : keys) k = bits == 0 ? 42 : rng() >> (64 - bits);
+      std::vector<uint32_t> expected(n);
+      std::iota(expected.begin(), expected.end(), 0u);
+      std::stable_sort(expected.begin(), expected.end(),
+                       [&](uint32_t a, uint32_t b) { return keys[a] < keys[b]; });
+      EXPECT_EQ(sortedOrder(keys), expected) << n << " keys of " << bits << " bits";
+    }
+  }
 }
 
 TEST(Frame, pointsAreInsideTheCubeAndSortedByKey) {
