@@ -35,7 +35,7 @@ namespace {
 
 // Stable LSD radix sort of items[begin, end) by the key bits below `bits`, 11 bits a pass,
 // skipping passes where every item has the same digit; scratch is as large as items.
-void sortLow(std::vector<KeyIndex>& items, std::vector<KeyIndex>& scratch, size_t begin,
+void sortLow(UninitializedVector<KeyIndex>& items, UninitializedVector<KeyIndex>& scratch, size_t begin,
              size_t end, int bits) {
   const size_t n = end - begin;
   if (n < 2) return;
@@ -79,7 +79,7 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
   constexpr size_t kBuckets = size_t{1} << kBits;
   const int shift = std::max(0, top - kBits);
   const auto digit = [&](uint64_t k) { return size_t(k >> shift) & (kBuckets - 1); };
-  std::vector<KeyIndex> items(n), scratch(n);
+  UninitializedVector<KeyIndex> items(n), scratch(n);
   constexpr size_t kBlock = size_t{1} << 16;
   const size_t blocks = (n + kBlock - 1) / kBlock;
   std::vector<size_t> count(blocks * kBuckets, 0);

@@ -13,10 +13,12 @@
 #include <cstdint>
 #include <glm/vec3.hpp>
 
-#include "iso/flat_map.h"
 #include <span>
 #include <utility>
 #include <vector>
+
+#include "buffers.h"
+#include "iso/flat_map.h"
 
 namespace iso {
 
@@ -66,7 +68,7 @@ class PointIndex {
   void collectLeaves(const float lo[3], const float hi[3], float radius2,
                      std::vector<uint32_t>& out) const;
 
-  std::vector<float> x_, y_, z_;  // positions in sorted order
+  UninitializedVector<float> x_, y_, z_;  // positions in sorted order
   std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
   std::vector<Node> nodes_;       // nodes_[0] is the root
   std::vector<uint32_t> leaves_;  // the buckets, in point order

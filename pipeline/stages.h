@@ -1,5 +1,6 @@
 // The stages that turn points into an Implicit Surface Octree, one file each, in pipeline order:
 //
+//   buffers.cpp   large arrays without zeroing, on huge pages
 //   frame.cpp     world → frame units, Morton keys, sort, merge exact duplicates
 //   radii.cpp     radius of influence r_i from k nearest neighbours, outliers, mean spacing
 //   normals.cpp   PCA normals where the input has none (or invalid ones)
@@ -25,9 +26,9 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <type_traits>
 #include <vector>
 
+#include "buffers.h"
 #include "io/point_cloud.h"
 #include "iso/flat_map.h"
 #include "iso/format.h"
@@ -87,26 +88,6 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys);
 // Merge points with identical positions into one (weights add, normals and colors average);
 // returns how many were merged away. Requires sorted points.
 size_t mergeDuplicates(PointSet& points);
-
-// An allocator that leaves elements default-initialized (numbers: not zeroed) on resize, for
-// large buffers that parallel code fills right away.
-template <typename T>
-struct DefaultInitAllocator : std::allocator<T> {
-  template <typename U>
-  struct rebind {
-    using other = DefaultInitAllocator<U>;
-  };
-  template <typename U>
-  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <typename U, typename... Args>
-  void construct(U* p, Args&&... args) {
-    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-  }
-};
-template <typename T>
-using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
 
 // ---- radii.cpp
 struct Neighbors {  // the k nearest other points of every point
