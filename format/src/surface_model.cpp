@@ -172,14 +172,25 @@ uint32_t SurfaceModel::findLeaf(const Vec3& p) const {
   return nodes_[node].leaf;
 }
 
-double SurfaceModel::distanceAt(uint32_t leafId, const Vec3& p,
-                                std::array<double, 3>* gradient) const {
-  const Leaf& leaf = leaves_[leafId];
+namespace {
+
+// p in the leaf's local coordinates, clamped into [0, 1]^3.
+Vec3 localCoordinates(const SurfaceModel::Leaf& leaf, const Vec3& p) {
   const auto cell = mortonDecode(leaf.key);
   const double scale = std::ldexp(1.0, leaf.level);
   Vec3 u{};
   for (int a = 0; a < 3; ++a)
     u[size_t(a)] = std::clamp(p[size_t(a)] * scale - double(cell[size_t(a)]), 0.0, 1.0);
+  return u;
+}
+
+}  // namespace
+
+double SurfaceModel::distanceAt(uint32_t leafId, const Vec3& p,
+                                std::array<double, 3>* gradient) const {
+  const Leaf& leaf = leaves_[leafId];
+  const double scale = std::ldexp(1.0, leaf.level);
+  const Vec3 u = localCoordinates(leaf, p);
   std::array<double, 8> f{};
   for (int c = 0; c < 8; ++c) f[size_t(c)] = corners_.distance[leaf.corners[size_t(c)]];
   const double value = trilinear(f, u, gradient);
@@ -193,12 +204,7 @@ SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
   e.distance = distanceAt(leafId, p, &e.gradient);
   if (hasNormals() || hasColors()) {
     const Leaf& leaf = leaves_[leafId];
-    const auto cell = mortonDecode(leaf.key);
-    const double scale = std::ldexp(1.0, leaf.level);
-    Vec3 u{};
-    for (int a = 0; a < 3; ++a)
-      u[size_t(a)] = std::clamp(p[size_t(a)] * scale - double(cell[size_t(a)]), 0.0, 1.0);
-    const std::array<double, 8> w = trilinearWeights(u);
+    const std::array<double, 8> w = trilinearWeights(localCoordinates(leaf, p));
     for (int c = 0; c < 8; ++c) {
       const uint32_t corner = leaf.corners[size_t(c)];
       for (int k = 0; k < 3; ++k) {
