@@ -94,22 +94,8 @@ double loadPlyScalar(PlyType type, const std::byte* p) {
 // Decode a binary integer (a list count or index; the header guarantees an integer type).
 template <bool kBigEndian>
 int64_t loadPlyInteger(PlyType type, const std::byte* p) {
-  switch (type) {
-    case PlyType::Int8:
-      return loadPlyRaw<kBigEndian, int8_t>(p);
-    case PlyType::UInt8:
-      return loadPlyRaw<kBigEndian, uint8_t>(p);
-    case PlyType::Int16:
-      return loadPlyRaw<kBigEndian, int16_t>(p);
-    case PlyType::UInt16:
-      return loadPlyRaw<kBigEndian, uint16_t>(p);
-    case PlyType::Int32:
-      return loadPlyRaw<kBigEndian, int32_t>(p);
-    case PlyType::UInt32:
-      return loadPlyRaw<kBigEndian, uint32_t>(p);
-    default:
-      return -1;
-  }
+  if (type == PlyType::Float32 || type == PlyType::Float64) return -1;
+  return int64_t(loadPlyScalar<kBigEndian>(type, p));  // every integer type is exact in double
 }
 
 inline int64_t loadPlyInteger(PlyEncoding encoding, PlyType type, const std::byte* p) {

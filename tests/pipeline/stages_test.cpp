@@ -254,17 +254,28 @@ TEST(Passive, boxDiskTestMatchesDenseSampling) {
   EXPECT_GT(touching, 100);
 }
 
-TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
-  const Evaluated e = withRadii(test::scanOf("cube", 40000));
-  PointSet points = e.points;
-  const PointIndex tree(points.position);
-  estimateRoughness(points, findNeighbors(points, tree, 10));
-  const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
+// The octree of a generated scan with roughness, default options (fixed spacing and radius).
+struct BuiltOctree {
+  PointSet points;
+  Octree octree;
+};
+BuiltOctree buildTestOctree(const std::string& shape, size_t n) {
+  BuiltOctree b{withRadii(test::scanOf(shape, n)).points, {}};
+  const PointIndex tree(b.points.position);
+  estimateRoughness(b.points, findNeighbors(b.points, tree, 10));
+  const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
   CornerCache cache;
   RadiusStats radii;
   radii.meanSpacing = 1e-3;
   radii.medianRadius = 3e-3;
-  Octree octree = buildOctree(points, sdf, BuildOptions{}, radii, cache);
+  b.octree = buildOctree(b.points, sdf, BuildOptions{}, radii, cache);
+  return b;
+}
+
+TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
+  BuiltOctree built = buildTestOctree("cube", 40000);
+  PointSet& points = built.points;
+  Octree& octree = built.octree;
   markPassiveLeaves(octree, points);
   EXPECT_GT(balanceOctree(octree, points), 0u);
   std::vector<uint32_t> filled;
@@ -291,16 +302,8 @@ TEST(Balance, touchingFilledLeavesDifferByAtMostOneLevel) {
 }
 
 TEST(Chunks, everyNodeIsInExactlyOneChunkWithinTheBudget) {
-  const Evaluated e = withRadii(test::scanOf("torus", 60000));
-  PointSet points = e.points;
-  const PointIndex tree(points.position);
-  estimateRoughness(points, findNeighbors(points, tree, 10));
-  const SdfEvaluator sdf(points, tree, 1.0, FitMode::Sphere);
-  CornerCache cache;
-  RadiusStats radii;
-  radii.meanSpacing = 1e-3;
-  radii.medianRadius = 3e-3;
-  Octree octree = buildOctree(points, sdf, BuildOptions{}, radii, cache);
+  BuiltOctree built = buildTestOctree("torus", 60000);
+  const Octree& octree = built.octree;
   const std::vector<ChunkPlan> plans = planChunks(octree, 500);
   std::vector<int> seen(octree.nodes.size(), 0);
   for (size_t p = 0; p < plans.size(); ++p) {
