@@ -12,7 +12,8 @@ namespace iso {
 namespace {
 
 constexpr const char* kSupportedFormats =
-    "supported: PLY (.ply), LAS 1.0-1.4 (.las), text (.xyz .txt .pts .csv), each optionally "
+    "supported: PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
+    ".csv), each optionally "
     "gzip-compressed (.gz)";
 
 // Reservations follow the header's count only up to this many points, so that a hostile count
@@ -45,11 +46,14 @@ std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
   if (startsWith(head, "ply\n") || startsWith(head, "ply\r\n"))
     return io::makePlyReader(std::move(in));
   if (startsWith(head, "LASF")) return io::makeLasReader(std::move(in));
+  if (startsWith(head, "DRACO")) return io::makeDracoReader(std::move(in));
   const std::string extension = io::lowercaseExtension(path);
   if (extension == ".laz") throw FileError(in.name(), std::nullopt, io::kLazNotSupported);
   if (extension == ".ply")
     throw FileError(in.name(), 0, "not a PLY file: it does not start with 'ply'");
   if (extension == ".las") throw FileError(in.name(), 0, "not a LAS file: no LASF signature");
+  if (extension == ".pcd") return io::makePcdReader(std::move(in));
+  if (extension == ".drc") throw FileError(in.name(), 0, "not a Draco file: no DRACO signature");
   if (extension == ".xyz" || extension == ".txt" || extension == ".pts" || extension == ".csv")
     return io::makeTextReader(std::move(in), options);
   const std::string what = extension.empty() ? "a name without extension" : "'" + extension + "'";

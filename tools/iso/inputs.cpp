@@ -14,7 +14,7 @@ bool isPointFileName(const std::filesystem::path& path) {
   std::transform(name.begin(), name.end(), name.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (name.size() > 3 && name.ends_with(".gz")) name.resize(name.size() - 3);
-  for (const char* ext : {".ply", ".las", ".laz", ".xyz", ".txt", ".pts", ".csv"})
+  for (const char* ext : {".ply", ".las", ".laz", ".pcd", ".drc", ".xyz", ".txt", ".pts", ".csv"})
     if (name.ends_with(ext)) return true;
   return false;
 }
