@@ -14,6 +14,7 @@
 #include "iso/version.h"
 #include "knn.h"
 #include "measure.h"
+#include "progress.h"
 
 namespace iso {
 namespace {
@@ -22,13 +23,24 @@ using Clock = std::chrono::steady_clock;
 
 constexpr size_t kAccuracySamples = 100000;
 
+// Times the stages one after the other and shows their progress.
 class StageTimer {
  public:
   StageTimer(nlohmann::json& stages, const ConvertSource& source)
       : stages_(stages), source_(source) {}
-  void end(const std::string& name) {
+  ~StageTimer() {
+    if (source_.progress != nullptr) source_.progress->end();
+  }
+  // End the current stage (if any) and begin the next, of `total` units of work (0: unknown).
+  void next(const std::string& name, uint64_t total = 0) {
+    end();
+    name_ = name;
+    if (source_.progress != nullptr) source_.progress->begin(name, total);
+  }
+  void end() {
     const auto now = Clock::now();
-    add(name, std::chrono::duration<double>(now - start_).count());
+    if (!name_.empty()) add(name_, std::chrono::duration<double>(now - start_).count());
+    name_.clear();
     start_ = now;
   }
   void add(const std::string& name, double seconds) {
@@ -39,6 +51,7 @@ class StageTimer {
  private:
   nlohmann::json& stages_;
   const ConvertSource& source_;
+  std::string name_;
   Clock::time_point start_ = Clock::now();
 };
 
@@ -190,8 +203,9 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
 
   const PointCloud* cloud = &input;
   PointCloud filtered;
+  timer.next("prepare", input.size());
   Prepared prepared = prepare(*cloud);
-  timer.end("prepare");
+  timer.next("radii", input.size());
   auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   size_t outliers = 0;
@@ -209,7 +223,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   PointSet& points = prepared.points;
   const Frame& frame = prepared.frame;
   const RadiusStats radii = estimateRadii(points, neighbors);
-  timer.end("radii");
+  timer.next("normals", points.size());
 
   std::vector<uint8_t> wasEstimated(points.size(), 0);
   for (size_t i = 0; i < points.size(); ++i)
@@ -218,22 +232,22 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   const NormalStats normals = orientNormals(points, neighbors, options.orient, wasEstimated);
   estimateRoughness(points, neighbors);
   neighbors = Neighbors{};  // 80 bytes a point, not needed any more
-  timer.end("normals");
+  timer.next("octree");
 
   const SdfEvaluator sdf(points, *tree, options.smoothing, options.fit);
   OctreeStats octreeStats;
   CornerCache cornerCache(points.size() / 2);
   Octree octree = buildOctree(points, sdf, options, radii, cornerCache, &octreeStats);
-  timer.end("octree");
+  timer.next("passive+balance");
   const size_t passive = markPassiveLeaves(octree, points);
   const size_t splits = balanceOctree(octree, points);
-  timer.end("passive+balance");
+  timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, sdf, cornerCache);
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
-  timer.end("corners");
+  timer.next("lod");
   const LodField lod = sampleLodCorners(octree, points, sdf, options);
-  timer.end("lod");
+  timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
   report["points"] = {{"input", input.size() + source.nonFiniteDropped},
@@ -253,7 +267,11 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
 
   WriteInput write{&octree, &points, &corners,           &hanging, &lod,
                    frame,   "{}",    points.hasColors(), options};
-  const auto metadata = [&](const nlohmann::json& r) {
+  // The file keeps what the data and options determine, not timings or memory, so that the same
+  // input gives the same bytes on any machine and any number of threads.
+  const auto metadata = [&](nlohmann::json r) {
+    for (const char* key : {"stages", "seconds", "points_per_second", "peak_rss_bytes"})
+      r.erase(key);
     return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
                           {"inputs", source.inputs},
                           {"parameters", optionsJson(options)},
@@ -262,7 +280,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   write.metadata = metadata(report).dump();
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
-        timer.end("write");
+        timer.next("accuracy");
         const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
         report["file"] = {
             {"chunks", stats.chunks},
@@ -280,7 +298,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
                               {"mean", d.mean},
                               {"rms_over_spacing", d.rms / spacing},
                               {"max_over_spacing", d.max / spacing}};
-        timer.end("accuracy");
+        timer.end();
         const double seconds =
             std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;
         report["seconds"] = seconds;

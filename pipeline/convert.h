@@ -9,6 +9,7 @@
 #include <string>
 
 #include "io/point_cloud.h"
+#include "progress.h"
 #include "stages.h"
 
 namespace iso {
@@ -27,10 +28,13 @@ struct ConvertSource {
   uint64_t nonFiniteDropped = 0;  // points the readers dropped
   // Called when a stage ends, with its name and duration.
   std::function<void(const std::string& stage, double seconds)> onStage;
+  ProgressReporter* progress = nullptr;  // shows each stage's progress when set
 };
 
-// Convert the points into the .iso file at output (written atomically). Returns the report, which
-// the file's metadata also holds under "report" (with "inputs", "parameters" and "generator").
+// Convert the points into the .iso file at output (written atomically). Returns the report. The
+// file's metadata holds it under "report" (with "inputs", "parameters" and "generator") without
+// the parts that vary from run to run (stage times, points/s, peak memory): the output bytes
+// depend only on the input and the options.
 nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source = {});
 

@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "progress.h"
 #include "stages.h"
 
 namespace iso {
@@ -36,6 +37,7 @@ void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint
   const double unit = std::ldexp(1.0, -kMaxLevel);
   tbb::parallel_for(tbb::blocked_range<size_t>(first, field.point.size(), 256),
                     [&](const tbb::blocked_range<size_t>& r) {
+                      progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
                         const GridPoint& p = field.point[i];
                         if (const CornerSample* known = cache.find(gridKey(p))) {

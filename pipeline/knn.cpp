@@ -9,6 +9,7 @@
 #include <glm/common.hpp>
 #include <limits>
 
+#include "progress.h"
 #include "stages.h"
 
 #include <bit>
@@ -498,6 +499,7 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
             if (fromWindow) throw std::logic_error("allNearest: the window bound failed");
             fromWindow = true;
           }
+          progressAdvance(leaf.end - leaf.begin);
         }
       });
 }

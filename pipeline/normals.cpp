@@ -8,6 +8,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
+#include "progress.h"
 #include "stages.h"
 
 namespace iso {
@@ -60,6 +61,7 @@ size_t estimateNormals(PointSet& points, const Neighbors& neighbors) {
   std::vector<uint8_t> estimated(n, 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 2048),
                     [&](const tbb::blocked_range<size_t>& range) {
+                      progressAdvance(range.size());
                       for (size_t i = range.begin(); i < range.end(); ++i) {
                         if (points.normal[i] != glm::vec3(0.0f)) continue;
                         glm::dvec3 mean(points.position[i]);

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
+#include "progress.h"
 #include "stages.h"
 
 namespace iso {
@@ -86,6 +87,7 @@ void fillCache(const Octree& tree, const std::vector<uint32_t>& frontier,
   std::vector<CornerSample> values(missing.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, missing.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
+                      progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i)
                         values[i] = sdf.evaluate(missing[i].second, 0.0f);
                     });

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <sstream>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "cli_support.h"
@@ -52,6 +54,65 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
   run = runIso("eval " + quoted(dir_ / "sphere.iso") + " --points " + quoted(dir_ / "sphere.ply"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_EQ(nlohmann::json::parse(run.out)["points"], 20000);
+}
+
+TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
+  // Without input normals, so that estimation and orientation run too.
+  ASSERT_EQ(runIso("gen torus -n 30000 --seed 5 --no-normals -o " + quoted(dir_ / "t.ply")).exitCode,
+            0);
+  std::string bytes[3];
+  for (int threads : {1, 2, 0}) {
+    const auto out = dir_ / ("t" + std::to_string(threads) + ".iso");
+    const auto run = runIso("convert -q --threads " + std::to_string(threads) + " " +
+                            quoted(dir_ / "t.ply") + " -o " + quoted(out));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    bytes[threads] = test::slurp(out);
+  }
+  EXPECT_GT(bytes[1].size(), 1000u);
+  EXPECT_TRUE(bytes[1] == bytes[2]) << "1 thread and 2 threads differ";
+  EXPECT_TRUE(bytes[1] == bytes[0]) << "1 thread and all cores differ";
+}
+
+TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
+  const auto run = runIso("convert --progress json --report " + quoted(dir_ / "r.json") + " " +
+                          quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  std::istringstream lines(run.err);
+  std::string line;
+  std::vector<std::string> ended;
+  while (std::getline(lines, line)) {
+    const nlohmann::json j = nlohmann::json::parse(line);  // every line is one object
+    for (const char* key : {"stage", "done", "elapsed_seconds", "per_second", "rss_bytes"})
+      EXPECT_TRUE(j.contains(key)) << line;
+    EXPECT_GT(j["rss_bytes"].get<uint64_t>(), 0u);
+    if (j["event"] == "end") ended.push_back(j["stage"]);
+    if (j.contains("percent")) {
+      EXPECT_LE(j["percent"].get<double>(), 100.0);
+    }
+  }
+  const std::vector<std::string> stages = {"read",    "prepare", "radii",    "normals",
+                                           "octree",  "passive+balance", "corners", "lod",
+                                           "write",   "accuracy"};
+  EXPECT_EQ(ended, stages);
+  const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
+  EXPECT_EQ(report["points"]["input"], 20000);
+  EXPECT_GT(report["peak_rss_bytes"].get<uint64_t>(), 0u);
+  ASSERT_EQ(report["stages"].size(), stages.size());
+  // The file keeps the report without what varies from run to run.
+  const auto info = runIso("info --json " + quoted(dir_ / "s.iso"));
+  const nlohmann::json stored = nlohmann::json::parse(info.out)["metadata"]["report"];
+  EXPECT_FALSE(stored.contains("stages"));
+  EXPECT_FALSE(stored.contains("peak_rss_bytes"));
+  EXPECT_EQ(stored["accuracy"], report["accuracy"]);
+}
+
+TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
+  for (const char* options : {"--threads -1", "--progress sometimes"}) {
+    const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +
+                            " -o " + quoted(dir_ / "x.iso"));
+    EXPECT_EQ(run.exitCode, 2) << options << run.err;
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
+  }
 }
 
 TEST_F(CliPipeline, convertRefusesToReplaceAnExistingFileWithoutForce) {

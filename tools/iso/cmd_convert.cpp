@@ -1,7 +1,11 @@
 // `iso convert IN... -o OUT.iso`: points to an Implicit Surface Octree, with the conversion report.
 #include <fmt/core.h>
 
+#include <tbb/global_control.h>
+#include <unistd.h>
+
 #include <map>
+#include <optional>
 
 #include "commands.h"
 #include "convert.h"
@@ -18,6 +22,9 @@ struct Options {
   std::string columns;
   std::string fit = "sphere";
   std::string orient = "auto";
+  std::string report;              // --report FILE
+  std::string progress = "auto";   // auto, line, json, none
+  int threads = 0;                 // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
 };
@@ -84,17 +91,32 @@ int run(Options& o) {
     if (std::filesystem::equivalent(file, output, error))
       throw FileError(o.output, std::nullopt, "is also an input");
   }
+  const std::map<std::string, ProgressMode> progressModes = {
+      {"auto", isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None},
+      {"line", ProgressMode::Line},
+      {"json", ProgressMode::Json},
+      {"none", ProgressMode::None}};
+  if (!progressModes.contains(o.progress))
+    throw std::invalid_argument("--progress must be auto, line, json or none");
+  if (o.threads < 0) throw std::invalid_argument("--threads must be 0 (all cores) or more");
+  if (!o.report.empty() && std::filesystem::is_directory(o.report))
+    throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
+  std::optional<tbb::global_control> threads;
+  if (o.threads > 0)
+    threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
+  const ProgressMode mode = progressModes.at(o.progress);
+  ProgressReporter progress(mode);
   ReadOptions read;
   read.columns = o.columns;
-  LoadedPoints loaded = loadPoints(files, read);
-  if (!o.quiet) {
+  LoadedPoints loaded = loadPoints(files, read, &progress);
+  if (!o.quiet && mode != ProgressMode::Json) {
     fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n",
                withSeparators(loaded.cloud.size()), files.size(), files.size() == 1 ? "" : "s",
                loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
-  ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}};
-  if (!o.quiet)
+  ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
+  if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {
       if (stage != "read") fmt::print(stderr, "  {:<16} {:.3f} s\n", stage, seconds);
     };
@@ -106,6 +128,7 @@ int run(Options& o) {
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
     throw FileError(names, std::nullopt, error.what());
   }
+  if (!o.report.empty()) writeTextFile(o.report, report.dump(2) + "\n");
   if (o.json)
     fmt::print("{}\n", report.dump(2));
   else
@@ -148,6 +171,14 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
   c->add_flag("--keep-outliers", o->keepOutliers, "Keep far outliers instead of removing them");
+  c->add_option("--threads", o->threads, "Worker threads (0: all cores); the output is the same")
+      ->capture_default_str();
+  c->add_option("--progress", o->progress,
+                "Progress on stderr: auto (a live line on a terminal), line, json (one object per "
+                "update) or none")
+      ->capture_default_str();
+  c->add_option("--report", o->report,
+                "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
   c->callback([o, &exitCode] {

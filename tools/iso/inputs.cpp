@@ -41,7 +41,7 @@ std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& 
 }
 
 LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
-                        const ReadOptions& options) {
+                        const ReadOptions& options, ProgressReporter* progress) {
   const auto started = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<PointReader>> readers;
   bool normals = true, colors = true;
@@ -57,6 +57,17 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
   if (!colors && std::any_of(readers.begin(), readers.end(),
                              [](const auto& r) { return r->info().hasColors; }))
     loaded.notes.push_back("colors ignored: not every input has them");
+  if (progress != nullptr) {
+    uint64_t declared = 0;
+    for (const auto& reader : readers) {
+      if (!reader->info().declaredPoints) {
+        declared = 0;  // unknown for text files: no percent
+        break;
+      }
+      declared += *reader->info().declaredPoints;
+    }
+    progress->begin("read", declared);
+  }
   PointCloud batch;
   for (auto& reader : readers) {
     const uint64_t before = loaded.cloud.size();
@@ -65,6 +76,7 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
     for (;;) {
       batch.clear();
       if (reader->read(batch, 1u << 20) == 0) break;
+      progressAdvance(batch.size());
       loaded.cloud.positions.insert(loaded.cloud.positions.end(), batch.positions.begin(),
                                     batch.positions.end());
       if (normals)
@@ -80,6 +92,7 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
                              {"points", loaded.cloud.size() - before},
                              {"non_finite_dropped", reader->stats().droppedNonFinite}});
   }
+  if (progress != nullptr) progress->end();
   loaded.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   return loaded;

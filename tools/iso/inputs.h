@@ -8,6 +8,7 @@
 
 #include "io/point_cloud.h"
 #include "io/readers.h"
+#include "progress.h"
 
 namespace iso::cli {
 
@@ -24,7 +25,8 @@ struct LoadedPoints {
 std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& arguments);
 
 // Read every file into one cloud. Normals (colors) are kept only when every file has them.
+// Shows progress in points read when `progress` is set.
 LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
-                        const ReadOptions& options);
+                        const ReadOptions& options, ProgressReporter* progress = nullptr);
 
 }  // namespace iso::cli

@@ -2,6 +2,11 @@
 
 #include <fmt/core.h>
 
+#include <fstream>
+#include <optional>
+
+#include "iso/error.h"
+
 namespace iso::cli {
 
 std::string withSeparators(uint64_t value) {
@@ -28,6 +33,31 @@ std::string indentLines(const std::string& text, int columns) {
     if (c == '\n') out.append(size_t(columns), ' ');
   }
   return out;
+}
+
+}  // namespace iso::cli
+
+namespace iso::cli {
+
+void writeTextFile(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::path temporary = path;
+  temporary += ".tmp";
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.close();
+    if (!out) {
+      std::error_code ignored;
+      std::filesystem::remove(temporary, ignored);
+      throw FileError(path.string(), std::nullopt, "cannot write it");
+    }
+  }
+  std::error_code error;
+  std::filesystem::rename(temporary, path, error);
+  if (error) {
+    std::filesystem::remove(temporary, error);
+    throw FileError(path.string(), std::nullopt, "cannot write it: " + error.message());
+  }
 }
 
 }  // namespace iso::cli

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 
 namespace iso::cli {
@@ -9,5 +10,8 @@ namespace iso::cli {
 std::string withSeparators(uint64_t value);                     // 1234567 -> "1,234,567"
 std::string humanBytes(uint64_t bytes);                         // 1536 -> "1.5 KiB"
 std::string indentLines(const std::string& text, int columns);  // indent every line but the first
+
+// Write text to a file atomically (a temporary file renamed into place); throws iso::FileError.
+void writeTextFile(const std::filesystem::path& path, const std::string& text);
 
 }  // namespace iso::cli
