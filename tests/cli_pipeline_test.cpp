@@ -1,6 +1,10 @@
 // `iso gen`, `iso convert` and `iso eval` run as a user would: outputs, reports, exit codes, and
 // clear errors for bad input that leave nothing behind.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <fstream>
 #include <sstream>
@@ -113,6 +117,65 @@ TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
     EXPECT_EQ(run.exitCode, 2) << options << run.err;
     EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
   }
+}
+
+// Start `iso convert` and deliver `signal` as soon as its temporary output file exists; returns
+// the temporary file's name, empty if the run ended before one appeared.
+std::string interruptWhileWriting(const std::filesystem::path& input,
+                                  const std::filesystem::path& output, int signal) {
+  const std::string binary = ISO_BINARY;
+  std::vector<std::string> args = {binary, "convert", "-q", "-f", input.string(), "-o",
+                                   output.string()};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t child = 0;
+  if (posix_spawn(&child, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return "";
+  std::string temporary;
+  for (int status = 0; temporary.empty();) {
+    for (const auto& entry : std::filesystem::directory_iterator(output.parent_path()))
+      if (entry.path().extension() == ".isotmp") temporary = entry.path().filename().string();
+    if (!temporary.empty()) break;
+    if (waitpid(child, &status, WNOHANG) == child) return "";  // finished first
+    usleep(200);
+  }
+  kill(child, signal);
+  int status = 0;
+  waitpid(child, &status, 0);
+  return temporary;
+}
+
+TEST_F(CliPipeline, anInterruptedConversionLeavesTheOldFileAndNoTemporaryFiles) {
+  ASSERT_EQ(runIso("gen torus -n 300000 -o " + quoted(dir_ / "big.ply")).exitCode, 0);
+  ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso"))
+                .exitCode,
+            0);
+  const std::string old = test::slurp(dir_ / "out.iso");
+  const auto temporaries = [&] {
+    size_t n = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+      n += entry.path().extension() == ".isotmp";
+    return n;
+  };
+
+  // Ctrl-C: the handler removes the temporary file.
+  std::string temporary = interruptWhileWriting(dir_ / "big.ply", dir_ / "out.iso", SIGINT);
+  ASSERT_FALSE(temporary.empty()) << "the conversion ended before it could be interrupted";
+  EXPECT_EQ(temporaries(), 0u);
+  EXPECT_TRUE(test::slurp(dir_ / "out.iso") == old);
+
+  // kill -9: nothing can clean up, but the old file is intact and the next run removes the
+  // temporary file.
+  temporary = interruptWhileWriting(dir_ / "big.ply", dir_ / "out.iso", SIGKILL);
+  ASSERT_FALSE(temporary.empty());
+  EXPECT_EQ(temporaries(), 1u);
+  EXPECT_TRUE(test::slurp(dir_ / "out.iso") == old);
+  EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
+  const auto run = runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " +
+                          quoted(dir_ / "again.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.err.find("removed 1 temporary file"), std::string::npos) << run.err;
+  EXPECT_EQ(temporaries(), 0u);
 }
 
 TEST_F(CliPipeline, convertRefusesToReplaceAnExistingFileWithoutForce) {

@@ -39,6 +39,7 @@ AtomicFile::AtomicFile(std::filesystem::path path)
   if (path_.filename().empty()) fail("invalid output path", EISDIR);
   fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd_ < 0) fail("cannot create " + temporary_.string(), errno);
+  registration_ = TemporaryRegistration(temporary_);
 }
 
 AtomicFile::~AtomicFile() { discard(); }
@@ -110,6 +111,7 @@ void AtomicFile::commit() {
     fail("cannot rename " + temporary_.string() + " to the output path", error);
   }
   committed_ = true;
+  registration_ = TemporaryRegistration();
   // Make the rename durable; a failure here leaves a complete file, so it is not an error.
   const std::filesystem::path directory = path_.has_parent_path() ? path_.parent_path() : ".";
   const int dirFd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
@@ -128,6 +130,7 @@ void AtomicFile::discard() noexcept {
     ::unlink(temporary_.c_str());
     temporary_.clear();
   }
+  registration_ = TemporaryRegistration();
 }
 
 }  // namespace iso

@@ -11,6 +11,7 @@
 #include "convert.h"
 #include "inputs.h"
 #include "iso/error.h"
+#include "iso/temporary_files.h"
 #include "text.h"
 
 namespace iso::cli {
@@ -83,6 +84,11 @@ int run(Options& o) {
   o.build.orient = orients.at(o.orient);
   o.build.removeOutliers = !o.keepOutliers;
   const std::filesystem::path output(o.output);
+  // Temporary files of runs that were killed (kill -9, power loss) next to the output.
+  const size_t stale = removeStaleTemporaries(output.parent_path());
+  if (stale > 0 && !o.quiet)
+    fmt::print(stderr, "note: removed {} temporary file{} of an interrupted earlier run\n", stale,
+               stale == 1 ? "" : "s");
   if (std::filesystem::exists(output) && !o.force)
     throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
   const std::vector<std::filesystem::path> files = expandInputs(o.inputs);

@@ -7,6 +7,7 @@
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/format.h"
+#include "iso/temporary_files.h"
 #include "iso/version.h"
 
 namespace iso::cli {
@@ -42,6 +43,7 @@ int main(int argc, char** argv) {
   iso::cli::addGenCommand(app, exitCode);
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);
+  iso::installInterruptCleanup();  // Ctrl-C leaves no temporary file behind
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {

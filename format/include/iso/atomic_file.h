@@ -12,6 +12,8 @@
 #include <span>
 #include <string_view>
 
+#include "iso/temporary_files.h"
+
 namespace iso {
 
 class AtomicFile {
@@ -46,6 +48,7 @@ class AtomicFile {
 
   std::filesystem::path path_;
   std::filesystem::path temporary_;
+  TemporaryRegistration registration_;  // of temporary_: removed on Ctrl-C too
   int fd_ = -1;
   uint64_t position_ = 0;  // bytes written, buffered ones included
   uint64_t flushed_ = 0;   // bytes handed to the operating system

@@ -1,0 +1,41 @@
+// Temporary files that must not outlive an interrupted run.
+//
+// Every temporary file iso writes is named ".NAME.PID-N.isotmp" (PID: the writing process). Files
+// registered here are removed by the handlers installInterruptCleanup() puts on SIGINT, SIGTERM and
+// SIGHUP (Ctrl-C, kill, a closed terminal) before the process ends with that signal. A process
+// killed with SIGKILL cannot clean up: removeStaleTemporaries() then removes, on the next run, the
+// temporary files of processes that no longer exist.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+
+namespace iso {
+
+// Keeps `path` registered for removal on interruption while the object lives. Registration is
+// cheap (a fixed table, no allocation); when the table is full the path is simply not registered.
+class TemporaryRegistration {
+ public:
+  TemporaryRegistration() = default;
+  explicit TemporaryRegistration(const std::filesystem::path& path);
+  ~TemporaryRegistration();
+  TemporaryRegistration(TemporaryRegistration&& other) noexcept;
+  TemporaryRegistration& operator=(TemporaryRegistration&& other) noexcept;
+  TemporaryRegistration(const TemporaryRegistration&) = delete;
+  TemporaryRegistration& operator=(const TemporaryRegistration&) = delete;
+
+ private:
+  int slot_ = -1;
+};
+
+// Install the signal handlers (once per process; later calls do nothing).
+void installInterruptCleanup();
+
+// Remove the temporary files ".NAME.PID-N.isotmp" in `directory` whose process PID is gone; returns
+// how many were removed. Files of live processes (and anything else) are left alone.
+size_t removeStaleTemporaries(const std::filesystem::path& directory);
+
+// Whether a file name is one of iso's temporary names, and the process that wrote it.
+bool parseTemporaryName(const std::string& name, long& pid);
+
+}  // namespace iso
