@@ -37,7 +37,7 @@ TEST(OpenPointFile, rejectsUnknownFormatsListingTheSupportedOnes) {
   test::writeText(dir / "a.obj", "v 1 2 3\n");
   const std::string error = test::readError(dir / "a.obj");
   EXPECT_NE(error.find("unknown point file format: '.obj'"), std::string::npos) << error;
-  EXPECT_NE(error.find("PLY (.ply), LAS 1.0-1.4 (.las), text (.xyz .txt .pts .csv)"),
+  EXPECT_NE(error.find("PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts .csv)"),
             std::string::npos)
       << error;
   test::writeText(dir / "b.ply", "1 2 3\n");
