@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <glm/geometric.hpp>
 #include <random>
 
+#include "io/readers.h"
 #include "iso/verify.h"
 #include "knn.h"
 #include "pipeline_support.h"
@@ -109,6 +111,46 @@ TEST(HardCases, earthCentredOffsetsKeepMillimetreDetail) {
   EXPECT_LE(results[1]["rms_over_spacing"].get<double>(), 0.10);
   EXPECT_LT(results[1]["max"].get<double>(), 1e-3);  // below a millimetre everywhere
   EXPECT_NEAR(results[1]["rms"].get<double>(), results[0]["rms"].get<double>(), 0.05 * results[0]["rms"].get<double>());
+}
+
+TEST(HardCases, utmScanKeepsItsMillimetresThroughTheConversion) {
+  // The lone-star TLS scan at its UTM coordinates (x ≈ 515,000 m, y ≈ 4,918,000 m) and moved
+  // near the origin: the frame keeps the offset out of every stage, so both convert alike, and
+  // frame units in float still resolve a tenth of a millimetre.
+  const std::filesystem::path file =
+      std::filesystem::path(ISO_SHARED_DATA_DIR) / "lone_star_tls_utm.las";
+  if (!std::filesystem::exists(file)) GTEST_SKIP() << "no " << file;
+  PointCloud utm;
+  {
+    const PointCloud all = readPointFile(file);
+    for (size_t i = 0; i < all.size(); i += 4) utm.positions.push_back(all.positions[i]);
+  }
+  const glm::dvec3 offset(515000.0, 4918000.0, 2300.0);
+  PointCloud local = utm;
+  for (glm::dvec3& p : local.positions) p -= offset;
+
+  const Frame frame = chooseFrame(utm);
+  double worst = 0.0;
+  for (const glm::dvec3& p : utm.positions) {
+    const glm::dvec3 back =
+        glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) +
+        glm::dvec3(glm::vec3(toFrame(p, frame))) * frame.size;
+    worst = std::max(worst, glm::length(back - p));
+  }
+  EXPECT_LT(worst, 1e-4) << "float frame units lose detail at UTM coordinates";
+
+  test::TempDir dir;
+  const test::Converted a = test::convertAndLoad(utm, dir / "utm.iso");
+  const test::Converted b = test::convertAndLoad(local, dir / "local.iso");
+  const auto rms = [](const test::Converted& c) { return c.report["accuracy"]["rms"].get<double>(); };
+  EXPECT_NEAR(rms(a), rms(b), 0.005 * rms(b));
+  EXPECT_EQ(a.report["octree"]["leaves"], b.report["octree"]["leaves"]);
+  EXPECT_NEAR(a.surface.header().frame.origin[0] - b.surface.header().frame.origin[0], offset.x,
+              1e-6);
+  std::printf("lone star (every 4th point): spacing %.2f mm, RMS %.3f mm at UTM, %.3f mm at the "
+              "origin; float round trip %.4f mm\n",
+              a.report["mean_spacing"].get<double>() * 1e3, rms(a) * 1e3, rms(b) * 1e3,
+              worst * 1e3);
 }
 
 TEST(HardCases, tenThousandFoldDensityVariationGivesAValidSurface) {
