@@ -116,8 +116,12 @@ struct NormalStats {
 // PCA normals (in double, stable symmetric eigen solver) for every point whose normal is zero.
 size_t estimateNormals(PointSet& points, const Neighbors& neighbors);
 // Orient estimated normals consistently (mode) and repair isolated flipped input normals.
+// Propagation runs in blocks (the coarsest Morton cells of at most blockPoints key-sorted points),
+// then flips whole components to agree across blocks: local, so out-of-core chunks orient alike.
+inline constexpr size_t kOrientBlockPoints = size_t{1} << 16;
 NormalStats orientNormals(PointSet& points, const Neighbors& neighbors, OrientMode mode,
-                          const std::vector<uint8_t>& wasEstimated);
+                          const std::vector<uint8_t>& wasEstimated,
+                          size_t blockPoints = kOrientBlockPoints);
 // Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS
 // distance of its neighbours to the plane through their centroid with the point's normal.
 void estimateRoughness(PointSet& points, const Neighbors& neighbors);

@@ -135,6 +135,61 @@ TEST(Normals, pcaRecoversAPlaneAndPropagationOrientsASphere) {
   EXPECT_EQ(outward, sphere.size());
 }
 
+// The fraction of normals pointing out of a sphere or torus centred in the frame (the torus' core
+// circle lies in z = 0.5; its radius is the points' mean distance from the axis).
+double outwardFraction(const PointSet& points, bool torus) {
+  double ring = 0.0;
+  for (const glm::vec3& p : points.position)
+    ring += std::hypot(p.x - 0.5, p.y - 0.5) / double(points.size());
+  size_t outward = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const glm::vec3 p = points.position[i] - glm::vec3(0.5f);
+    glm::vec3 centre(0.0f);
+    if (torus) centre = glm::normalize(glm::vec3(p.x, p.y, 0.0f)) * float(ring);
+    outward += glm::dot(points.normal[i], p - centre) > 0.0f ? 1 : 0;
+  }
+  return double(outward) / double(points.size());
+}
+
+TEST(Normals, orientationInManySmallBlocksAgreesAcrossTheirBoundaries) {
+  // From 1 block to a few thousand: each block is oriented on its own (most lower blocks start
+  // from a wrong "top faces up" guess), then whole components flip to agree with their
+  // neighbours. Every normal of a sphere and of a torus must point out.
+  for (const char* shape : {"sphere", "torus"}) {
+    PointSet base = prepared(test::scanOf(shape, 60000, false));
+    const PointIndex tree(base.position);
+    const Neighbors neighbors = findNeighbors(base, tree, 10);
+    estimateNormals(base, neighbors);
+    for (size_t blockPoints : {size_t{1} << 20, size_t{4096}, size_t{300}, size_t{20}}) {
+      PointSet points = base;
+      orientNormals(points, neighbors, OrientMode::Auto, std::vector<uint8_t>(points.size(), 1),
+                    blockPoints);
+      EXPECT_EQ(outwardFraction(points, shape == std::string("torus")), 1.0)
+          << shape << ", blocks of " << blockPoints;
+    }
+  }
+}
+
+TEST(Normals, inputNormalsFixTheOrientationOfTheBlocksTheyReach) {
+  // A torus whose input normals point inward on the first 1% of the points (in key order) and
+  // are missing elsewhere: the anchored component decides, so every normal points inward.
+  PointSet points = prepared(test::scanOf("torus", 40000, true));
+  std::vector<uint8_t> estimated(points.size(), 1);
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (i < points.size() / 100) {
+      points.normal[i] = -points.normal[i];
+      estimated[i] = 0;
+    } else {
+      points.normal[i] = glm::vec3(0.0f);
+    }
+  }
+  const PointIndex tree(points.position);
+  const Neighbors neighbors = findNeighbors(points, tree, 10);
+  estimateNormals(points, neighbors);
+  orientNormals(points, neighbors, OrientMode::Auto, estimated, 500);
+  EXPECT_EQ(outwardFraction(points, true), 0.0);
+}
+
 struct Evaluated {
   PointSet points;
   std::unique_ptr<PointIndex> tree;
