@@ -44,7 +44,7 @@ std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
   io::InputStream in(path);
   const std::span<const std::byte> head = in.peek(5);
   if (startsWith(head, "ply\n") || startsWith(head, "ply\r\n"))
-    return io::makePlyReader(std::move(in));
+    return io::makePlyReader(std::move(in), options);
   if (startsWith(head, "LASF")) return io::makeLasReader(std::move(in));
   if (startsWith(head, "DRACO")) return io::makeDracoReader(std::move(in));
   const std::string extension = io::lowercaseExtension(path);
@@ -69,6 +69,7 @@ PointCloud readPointFile(const std::filesystem::path& path, const ReadOptions& o
   points.positions.reserve(expected);
   if (reader->info().hasNormals) points.normals.reserve(expected);
   if (reader->info().hasColors) points.colors.reserve(expected);
+  points.extras.reserve(expected * reader->info().extraNames.size());
   while (reader->read(points, kBatchPoints) > 0) {
   }
   if (stats != nullptr) *stats = reader->stats();

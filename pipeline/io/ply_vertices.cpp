@@ -10,6 +10,7 @@
 #include "io/color_table.h"
 #include "io/narrow.h"
 #include "io/text_fields.h"
+#include "iso/check.h"
 #include "iso/error.h"
 
 namespace iso::io {
@@ -64,6 +65,29 @@ bool parseValue(PlyType type, std::string_view text, double& value) {
   return true;
 }
 
+// Call f with a value of the C++ type of a PLY type, so that decoders dispatch once per column.
+template <typename F>
+void visitPlyType(PlyType type, F&& f) {
+  switch (type) {
+    case PlyType::Int8:
+      return f(int8_t{});
+    case PlyType::UInt8:
+      return f(uint8_t{});
+    case PlyType::Int16:
+      return f(int16_t{});
+    case PlyType::UInt16:
+      return f(uint16_t{});
+    case PlyType::Int32:
+      return f(int32_t{});
+    case PlyType::UInt32:
+      return f(uint32_t{});
+    case PlyType::Float32:
+      return f(float{});
+    case PlyType::Float64:
+      return f(double{});
+  }
+}
+
 // Decode one scalar property of `count` records (`stride` bytes apart from p) into a member of each
 // output vector. Decoding column by column dispatches on the type once per batch, not per value.
 template <bool kBigEndian, typename T, typename Vec>
@@ -83,24 +107,26 @@ void decodeColumnAs(const std::byte* p, size_t count, size_t stride, Vec* out,
 template <bool kBigEndian, typename Vec>
 void decodeColumn(PlyType type, const std::byte* p, size_t count, size_t stride, Vec* out,
                   typename Vec::value_type Vec::*member) {
-  switch (type) {
-    case PlyType::Int8:
-      return decodeColumnAs<kBigEndian, int8_t>(p, count, stride, out, member);
-    case PlyType::UInt8:
-      return decodeColumnAs<kBigEndian, uint8_t>(p, count, stride, out, member);
-    case PlyType::Int16:
-      return decodeColumnAs<kBigEndian, int16_t>(p, count, stride, out, member);
-    case PlyType::UInt16:
-      return decodeColumnAs<kBigEndian, uint16_t>(p, count, stride, out, member);
-    case PlyType::Int32:
-      return decodeColumnAs<kBigEndian, int32_t>(p, count, stride, out, member);
-    case PlyType::UInt32:
-      return decodeColumnAs<kBigEndian, uint32_t>(p, count, stride, out, member);
-    case PlyType::Float32:
-      return decodeColumnAs<kBigEndian, float>(p, count, stride, out, member);
-    case PlyType::Float64:
-      return decodeColumnAs<kBigEndian, double>(p, count, stride, out, member);
-  }
+  visitPlyType(type, [&](auto zero) {
+    decodeColumnAs<kBigEndian, decltype(zero)>(p, count, stride, out, member);
+  });
+}
+
+// Decode one scalar property of `count` records into floats `outStride` apart (an extra).
+template <bool kBigEndian>
+void decodeExtraColumn(PlyType type, const std::byte* p, size_t count, size_t stride, float* out,
+                       size_t outStride) {
+  visitPlyType(type, [&](auto zero) {
+    using T = decltype(zero);
+    for (size_t i = 0; i < count; ++i, p += stride, out += outStride) {
+      const T value = loadPlyRaw<kBigEndian, T>(p);
+      if constexpr (std::is_same_v<T, double>) {
+        *out = narrowToFloat(value);
+      } else {
+        *out = static_cast<float>(value);
+      }
+    }
+  });
 }
 
 // Decode one color channel of `count` records to linear values; integer codes through the table.
@@ -123,28 +149,32 @@ void decodeColorColumn(PlyType type, double fullScale, const std::byte* p, size_
 // Remove the points from `first` on whose position is not finite, keeping attributes aligned;
 // returns how many were removed.
 size_t removeNonFinite(PointCloud& out, size_t first) {
+  const size_t extraCount = out.extraCount();
   size_t written = first;
   for (size_t i = first; i < out.positions.size(); ++i) {
     if (!isFinite(out.positions[i])) continue;
     out.positions[written] = out.positions[i];
     if (out.hasNormals()) out.normals[written] = out.normals[i];
     if (out.hasColors()) out.colors[written] = out.colors[i];
+    std::copy_n(out.extras.begin() + ptrdiff_t(i * extraCount), extraCount,
+                out.extras.begin() + ptrdiff_t(written * extraCount));
     ++written;
   }
   const size_t removed = out.positions.size() - written;
   out.positions.resize(written);
   if (out.hasNormals()) out.normals.resize(written);
   if (out.hasColors()) out.colors.resize(written);
+  out.extras.resize(written * extraCount);
   return removed;
 }
 
 }  // namespace
 
 PlyVertexDecoder::PlyVertexDecoder(const InputStream& in, PlyEncoding encoding,
-                                   const PlyElement& vertex, bool keepNonFinite)
+                                   const PlyElement& vertex, bool keepNonFinite, bool keepExtras)
     : encoding_(encoding),
       element_(vertex),
-      slotOfProperty_(vertex.properties.size(), -1),
+      targetOfProperty_(vertex.properties.size(), -1),
       recordBytes_(vertex.scalarBytes()),
       keepNonFinite_(keepNonFinite),
       remaining_(vertex.count) {
@@ -170,8 +200,27 @@ PlyVertexDecoder::PlyVertexDecoder(const InputStream& in, PlyEncoding encoding,
     const size_t property = *found[slot];
     const PlyType type = vertex.properties[property].type;
     sources_[slot] = {type, offsets[property], colorFullScale(type)};
-    slotOfProperty_[property] = static_cast<int8_t>(slot);
+    targetOfProperty_[property] = static_cast<int32_t>(slot);
   }
+  if (keepExtras) findExtras(vertex, offsets);
+}
+
+void PlyVertexDecoder::findExtras(const PlyElement& vertex, const std::vector<size_t>& offsets) {
+  for (size_t i = 0; i < vertex.properties.size(); ++i) {
+    const PlyProperty& property = vertex.properties[i];
+    if (property.isList() || targetOfProperty_[i] >= 0) continue;
+    targetOfProperty_[i] = static_cast<int32_t>(kSlotCount + extraSources_.size());
+    extraSources_.push_back({property.type, offsets[i], 1.0});
+    extraNames_.push_back(property.name);
+  }
+}
+
+// The names describe the layout of out.extras, so they can change only while out holds no point.
+void PlyVertexDecoder::adoptExtraNames(PointCloud& out) const {
+  if (out.extraNames == extraNames_) return;
+  ISO_CHECK(out.size() == 0);
+  out.extraNames = extraNames_;
+  out.extras.clear();
 }
 
 void PlyVertexDecoder::failEndsEarly(const InputStream& in) const {
@@ -182,6 +231,7 @@ void PlyVertexDecoder::failEndsEarly(const InputStream& in) const {
 size_t PlyVertexDecoder::decode(InputStream& in, PointCloud& out, size_t maxRecords) {
   maxRecords = static_cast<size_t>(std::min<uint64_t>(maxRecords, remaining_));
   if (maxRecords == 0) return 0;
+  adoptExtraNames(out);
   if (encoding_ == PlyEncoding::Ascii) return decodeAscii(in, out, maxRecords);
   if (element_.hasLists()) return decodeBinaryWithLists(in, out, maxRecords);
   return decodeBinary(in, out, maxRecords);
@@ -257,11 +307,20 @@ void PlyVertexDecoder::appendRecordsAs(const std::byte* records, size_t count, P
                                     recordBytes_, out.colors.data() + first, kMembers[channel]);
     }
   }
+  const size_t extraCount = extraSources_.size();
+  if (extraCount > 0) {
+    out.extras.resize((first + count) * extraCount);
+    for (size_t extra = 0; extra < extraCount; ++extra) {
+      const SlotSource& source = extraSources_[extra];
+      decodeExtraColumn<kBigEndian>(source.type, records + source.offset, count, recordBytes_,
+                                    out.extras.data() + first * extraCount + extra, extraCount);
+    }
+  }
   if (!keepNonFinite_) dropped_ += removeNonFinite(out, first);
 }
 
 size_t PlyVertexDecoder::decodeAscii(InputStream& in, PointCloud& out, size_t maxRecords) {
-  std::array<double, kSlotCount> values{};
+  std::vector<double> values(kSlotCount + extraSources_.size());
   std::string_view line;
   std::string_view field;
   size_t done = 0;
@@ -284,7 +343,8 @@ size_t PlyVertexDecoder::decodeAscii(InputStream& in, PointCloud& out, size_t ma
             in.failLine(fmt::format("list '{}' ends early", property.name));
         continue;
       }
-      if (slotOfProperty_[i] >= 0 && !parseValue(property.type, field, values[slotOfProperty_[i]]))
+      const int32_t target = targetOfProperty_[i];
+      if (target >= 0 && !parseValue(property.type, field, values[size_t(target)]))
         in.failLine(fmt::format("property '{}' is not a number: '{}'", property.name, field));
     }
     if (nextField<isBlank>(rest, field))
@@ -297,7 +357,7 @@ size_t PlyVertexDecoder::decodeAscii(InputStream& in, PointCloud& out, size_t ma
   return done;
 }
 
-void PlyVertexDecoder::appendValues(const std::array<double, kSlotCount>& values, PointCloud& out) {
+void PlyVertexDecoder::appendValues(const std::vector<double>& values, PointCloud& out) {
   const glm::dvec3 position{values[kX], values[kY], values[kZ]};
   if (!keepNonFinite_ && !isFinite(position)) {
     ++dropped_;
@@ -313,6 +373,8 @@ void PlyVertexDecoder::appendValues(const std::array<double, kSlotCount>& values
     };
     out.colors.emplace_back(color(kRed), color(kGreen), color(kBlue));
   }
+  for (size_t extra = 0; extra < extraSources_.size(); ++extra)
+    out.extras.push_back(narrowToFloat(values[kSlotCount + extra]));
 }
 
 }  // namespace iso::io

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <string>
 #include <vector>
 
 namespace iso {
@@ -15,14 +16,21 @@ struct PointCloud {
   std::vector<glm::dvec3> positions;
   std::vector<glm::vec3> normals;  // as stored in the input (not necessarily unit length)
   std::vector<glm::vec3> colors;   // linear RGB in [0, 1] (inputs' sRGB is decoded on reading)
+  // Further per-point scalars carried from the input (ReadOptions::keepExtras), by name.
+  std::vector<std::string> extraNames;
+  std::vector<float> extras;  // extraNames.size() values per point, point-major
 
   size_t size() const { return positions.size(); }
   bool hasNormals() const { return !normals.empty(); }
   bool hasColors() const { return !colors.empty(); }
+  size_t extraCount() const { return extraNames.size(); }
+  // Remove every point and attribute, extra names included.
   void clear() {
     positions.clear();
     normals.clear();
     colors.clear();
+    extraNames.clear();
+    extras.clear();
   }
 };
 

@@ -10,7 +10,7 @@
 
 namespace iso::io {
 
-std::unique_ptr<PointReader> makePlyReader(InputStream in);
+std::unique_ptr<PointReader> makePlyReader(InputStream in, const ReadOptions& options);
 std::unique_ptr<PointReader> makeLasReader(InputStream in);
 std::unique_ptr<PointReader> makeTextReader(InputStream in, const ReadOptions& options);
 std::unique_ptr<PointReader> makePcdReader(InputStream in);

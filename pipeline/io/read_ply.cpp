@@ -10,22 +10,25 @@ namespace iso::io {
 namespace {
 
 // Skip the elements before the vertex element; the stream is then at its first record.
-PlyVertexDecoder seekVertices(InputStream& in, const PlyHeader& header) {
+PlyVertexDecoder seekVertices(InputStream& in, const PlyHeader& header, bool keepExtras) {
   const std::optional<size_t> vertex = header.find("vertex");
   if (!vertex) throw FileError(in.name(), std::nullopt, "the PLY file has no vertex element");
   for (size_t i = 0; i < *vertex; ++i) skipPlyElement(in, header.encoding, header.elements[i]);
-  return PlyVertexDecoder(in, header.encoding, header.elements[*vertex], false);
+  return PlyVertexDecoder(in, header.encoding, header.elements[*vertex], false, keepExtras);
 }
 
 class PlyPointReader final : public PointReader {
  public:
-  explicit PlyPointReader(InputStream in)
-      : in_(std::move(in)), header_(readPlyHeader(in_)), decoder_(seekVertices(in_, header_)) {
+  PlyPointReader(InputStream in, const ReadOptions& options)
+      : in_(std::move(in)),
+        header_(readPlyHeader(in_)),
+        decoder_(seekVertices(in_, header_, options.keepExtras)) {
     info_.path = in_.path();
     info_.format = plyFormatName(header_.encoding);
     info_.declaredPoints = decoder_.remainingRecords();
     info_.hasNormals = decoder_.hasNormals();
     info_.hasColors = decoder_.hasColors();
+    info_.extraNames = decoder_.extraNames();
   }
 
   const PointFileInfo& info() const override { return info_; }
@@ -53,8 +56,8 @@ class PlyPointReader final : public PointReader {
 
 }  // namespace
 
-std::unique_ptr<PointReader> makePlyReader(InputStream in) {
-  return std::make_unique<PlyPointReader>(std::move(in));
+std::unique_ptr<PointReader> makePlyReader(InputStream in, const ReadOptions& options) {
+  return std::make_unique<PlyPointReader>(std::move(in), options);
 }
 
 }  // namespace iso::io

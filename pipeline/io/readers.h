@@ -12,6 +12,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "io/point_cloud.h"
 
@@ -23,6 +24,10 @@ struct ReadOptions {
   // 7: xyz + intensity + rgb is NOT guessed; 9: xyz + normals + rgb). Colors in text files are
   // 0–255 when any value in the first line exceeds 1, else 0–1.
   std::string columns;
+  // PLY: carry every vertex scalar property that is not read as a position, normal or color
+  // (intensity, confidence, scalar_*, ...) as a float extra, in header order. Other formats have
+  // none. Off: such properties are skipped at no cost.
+  bool keepExtras = false;
 };
 
 struct PointFileInfo {
@@ -31,6 +36,7 @@ struct PointFileInfo {
   std::optional<uint64_t> declaredPoints;  // the header's count, when the format has one
   bool hasNormals = false;
   bool hasColors = false;
+  std::vector<std::string> extraNames;  // the extras read() appends (empty unless keepExtras)
 };
 
 struct ReadStats {
@@ -42,8 +48,9 @@ class PointReader {
  public:
   virtual ~PointReader() = default;
   virtual const PointFileInfo& info() const = 0;
-  // Append up to maxPoints points to out (whose attribute vectors match info()'s has* flags);
-  // returns how many were appended, 0 at the end of the file.
+  // Append up to maxPoints points to out (whose attribute vectors match info()'s has* flags, and
+  // whose extraNames become info().extraNames: out must be empty or hold earlier reads of this
+  // reader); returns how many were appended, 0 at the end of the file.
   virtual size_t read(PointCloud& out, size_t maxPoints) = 0;
   virtual const ReadStats& stats() const = 0;
 };

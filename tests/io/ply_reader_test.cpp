@@ -1,7 +1,9 @@
 // The PLY point reader: ASCII and binary encodings, properties in any order and of any type, lists
 // and other elements skipped, malformed and truncated files rejected with FileError.
 #include <cmath>
+#include <iomanip>
 #include <limits>
+#include <sstream>
 
 #include "io/color.h"
 #include "io_test_util.h"
@@ -220,6 +222,158 @@ TEST(PlyReader, ignoresIncompleteNormalsAndColors) {
   EXPECT_FALSE(reader->info().hasNormals);
   EXPECT_FALSE(reader->info().hasColors);
   EXPECT_EQ(readPointFile(dir / "p.ply").positions.at(0), glm::dvec3(1, 2, 3));
+}
+
+// A vertex element with extras between and after the standard properties, in each encoding.
+struct PropertySpec {
+  std::string type, name;
+};
+const std::vector<PropertySpec> kPropertiesWithExtras = {
+    {"float", "x"},        {"ushort", "intensity"}, {"float", "y"},    {"float", "confidence"},
+    {"double", "z"},       {"float", "nx"},         {"float", "ny"},   {"float", "nz"},
+    {"uchar", "red"},      {"uchar", "green"},      {"uchar", "blue"}, {"char", "scalar_class"},
+    {"double", "quality"}, {"int", "scalar_time"}};
+const std::vector<std::string> kExtraNames = {"intensity", "confidence", "scalar_class", "quality",
+                                              "scalar_time"};
+constexpr int kVerticesWithExtras = 5;
+
+double valueWithExtras(int vertex, const std::string& name) {
+  const double i = vertex;
+  if (name == "x") return i;
+  if (name == "y") return -i;
+  if (name == "z") return 1e6 + i;
+  if (name == "nz" || name == "blue") return 1;
+  if (name == "nx" || name == "ny") return 0;
+  if (name == "red" || name == "green") return 40 * i;
+  if (name == "intensity") return 1000 * i + 7;
+  if (name == "confidence") return 0.25 * i;
+  if (name == "scalar_class") return i - 3;
+  if (name == "quality") return 0.1 * i;
+  return 100000 * i - 7;  // scalar_time
+}
+
+void putValue(Bytes& bytes, const std::string& type, double value, bool isBigEndian) {
+  const auto put = [&](auto typed) { isBigEndian ? bytes.be(typed) : bytes.le(typed); };
+  if (type == "char") put(int8_t(value));
+  if (type == "uchar") put(uint8_t(value));
+  if (type == "ushort") put(uint16_t(value));
+  if (type == "int") put(int32_t(value));
+  if (type == "float") put(float(value));
+  if (type == "double") put(value);
+}
+
+// The file in `format` (ascii, binary_little_endian, binary_big_endian), with a list property
+// after y when withList (which moves binary decoding off the fixed-record path).
+Bytes fileWithExtras(const std::string& format, bool withList) {
+  Bytes file;
+  file.text("ply\nformat " + format + " 1.0\nelement vertex " +
+            std::to_string(kVerticesWithExtras) + "\n");
+  for (const PropertySpec& property : kPropertiesWithExtras) {
+    file.text("property " + property.type + " " + property.name + "\n");
+    if (withList && property.name == "y") file.text("property list uchar int ids\n");
+  }
+  file.text("end_header\n");
+  const bool isAscii = format == "ascii";
+  for (int vertex = 0; vertex < kVerticesWithExtras; ++vertex) {
+    for (const PropertySpec& property : kPropertiesWithExtras) {
+      const double value = valueWithExtras(vertex, property.name);
+      if (isAscii) {
+        std::ostringstream text;
+        text << std::setprecision(17) << value << ' ';
+        file.text(text.str());
+      } else {
+        putValue(file, property.type, value, format == "binary_big_endian");
+      }
+      if (withList && property.name == "y") {
+        if (isAscii) file.text("2 5 6 ");
+        if (!isAscii) putValue(file, "uchar", 2, format == "binary_big_endian");
+        if (!isAscii) file.fill(8, 0xAB);
+      }
+    }
+    if (isAscii) file.text("\n");
+  }
+  return file;
+}
+
+TEST(PlyReader, keepsExtrasInHeaderOrderInEveryEncoding) {
+  test::TempDir dir;
+  ReadOptions options;
+  options.keepExtras = true;
+  for (const std::string format : {"ascii", "binary_little_endian", "binary_big_endian"}) {
+    for (const bool withList : {false, true}) {
+      SCOPED_TRACE(format + (withList ? " with a list" : ""));
+      test::writeFile(dir / "e.ply", fileWithExtras(format, withList).bytes());
+      EXPECT_EQ(openPointFile(dir / "e.ply", options)->info().extraNames, kExtraNames);
+      const PointCloud points = test::readInBatches(dir / "e.ply", options, nullptr, 2);
+      ASSERT_EQ(points.size(), size_t(kVerticesWithExtras));
+      EXPECT_EQ(points.extraNames, kExtraNames);
+      ASSERT_EQ(points.extraCount(), kExtraNames.size());
+      ASSERT_EQ(points.extras.size(), points.size() * kExtraNames.size());
+      for (int vertex = 0; vertex < kVerticesWithExtras; ++vertex) {
+        EXPECT_EQ(points.positions[vertex], glm::dvec3(vertex, -vertex, 1e6 + vertex));
+        EXPECT_EQ(points.normals[vertex], glm::vec3(0, 0, 1));
+        for (size_t extra = 0; extra < kExtraNames.size(); ++extra)
+          EXPECT_EQ(points.extras[vertex * kExtraNames.size() + extra],
+                    float(valueWithExtras(vertex, kExtraNames[extra])))
+              << "vertex " << vertex << " " << kExtraNames[extra];
+      }
+    }
+  }
+}
+
+TEST(PlyReader, ignoresExtrasByDefault) {
+  test::TempDir dir;
+  for (const std::string format : {"ascii", "binary_little_endian"}) {
+    SCOPED_TRACE(format);
+    test::writeFile(dir / "e.ply", fileWithExtras(format, false).bytes());
+    EXPECT_TRUE(openPointFile(dir / "e.ply")->info().extraNames.empty());
+    const PointCloud points = readPointFile(dir / "e.ply");
+    ASSERT_EQ(points.size(), size_t(kVerticesWithExtras));
+    EXPECT_TRUE(points.extraNames.empty());
+    EXPECT_TRUE(points.extras.empty());
+    EXPECT_EQ(points.positions[4], glm::dvec3(4, -4, 1e6 + 4));
+  }
+}
+
+TEST(PlyReader, extrasStayWithTheirPointsWhenNonFinitePointsAreDropped) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  Bytes binary;
+  binary.text(
+      "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\n"
+      "property float y\nproperty float z\nproperty float intensity\nproperty uint id\n"
+      "end_header\n");
+  const std::array<float, 5> xs = {1, nan, 3, nan, 5};
+  for (size_t i = 0; i < xs.size(); ++i)
+    binary.le(xs[i]).le(0.0f).le(0.0f).le(float(i) / 2).le(uint32_t(i * 10));
+  test::TempDir dir;
+  test::writeFile(dir / "b.ply", binary.bytes());
+  test::writeText(dir / "a.ply",
+                  "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+                  "property float z\nproperty float intensity\nproperty uint id\nend_header\n"
+                  "1 0 0 0 0\nnan 0 0 0.5 10\n3 0 0 1 20\nnan 0 0 1.5 30\n5 0 0 2 40\n");
+  ReadOptions options;
+  options.keepExtras = true;
+  for (const char* name : {"b.ply", "a.ply"}) {
+    SCOPED_TRACE(name);
+    ReadStats stats;
+    const PointCloud points = test::readInBatches(dir / name, options, &stats, 2);
+    EXPECT_EQ(stats.droppedNonFinite, 2u);
+    ASSERT_EQ(points.size(), 3u);
+    EXPECT_EQ(points.extras, std::vector<float>({0, 0, 1, 20, 2, 40}));
+  }
+}
+
+TEST(PlyReader, carriesPropertiesOfIncompleteNormalsAndColorsAsExtras) {
+  test::TempDir dir;
+  test::writeText(dir / "p.ply",
+                  "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+                  "property float z\nproperty float nx\nproperty uchar red\nend_header\n"
+                  "1 2 3 4 5\n");
+  ReadOptions options;
+  options.keepExtras = true;
+  const PointCloud points = readPointFile(dir / "p.ply", options);
+  EXPECT_EQ(points.extraNames, std::vector<std::string>({"nx", "red"}));
+  EXPECT_EQ(points.extras, std::vector<float>({4, 5}));
 }
 
 TEST(PlyReader, dropsAndCountsPointsWithNonFiniteCoordinates) {
