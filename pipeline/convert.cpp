@@ -14,14 +14,13 @@
 #include "iso/version.h"
 #include "knn.h"
 #include "measure.h"
+#include "outofcore.h"
 #include "progress.h"
 
 namespace iso {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-constexpr size_t kAccuracySamples = 100000;
 
 // Times the stages one after the other and shows their progress.
 class StageTimer {
@@ -67,6 +66,7 @@ void validate(const BuildOptions& o) {
   require(o.normalBits == 8 || o.normalBits == 12, "--normal-bits must be 8 or 12");
   require(o.chunkNodes >= 64, "--chunk-nodes must be at least 64");
   require(o.zstdLevel >= 1 && o.zstdLevel <= 19, "--zstd-level must be 1 to 19");
+  require(o.orientBlockPoints >= 16, "--orient-block-points must be at least 16");
 }
 
 // Whether all points lie on one line (then they define no surface).
@@ -188,8 +188,59 @@ nlohmann::json optionsJson(const BuildOptions& o) {
           {"normal_bits", o.normalBits},
           {"chunk_nodes", o.chunkNodes},
           {"zstd_level", o.zstdLevel},
-          {"remove_outliers", o.removeOutliers}};
+          {"remove_outliers", o.removeOutliers},
+          {"orient_block_points", o.orientBlockPoints}};
 }
+
+namespace {
+
+nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
+                             const std::filesystem::path& output, const BuildOptions& options,
+                             const ConvertSource& source, StageTimer& timer,
+                             nlohmann::json& report, Clock::time_point started);
+
+// The point stages in core, timed.
+ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
+  ReadyPoints ready;
+  const PointCloud* cloud = &input;
+  PointCloud filtered;
+  timer.next("prepare", input.size());
+  Prepared prepared = prepare(*cloud);
+  timer.next("radii", input.size());
+  auto tree = std::make_unique<PointIndex>(prepared.points.position);
+  Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
+  if (options.removeOutliers) {
+    const std::vector<uint8_t> flagged = findOutliers(prepared.points, neighbors);
+    ready.outliers = size_t(std::count(flagged.begin(), flagged.end(), uint8_t{1}));
+    if (ready.outliers > 0) {  // choose the frame again without them: far outliers waste precision
+      filtered = withoutSources(*cloud, prepared.points, flagged);
+      cloud = &filtered;
+      prepared = prepare(*cloud);
+      tree = std::make_unique<PointIndex>(prepared.points.position);
+      neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
+    }
+  }
+  PointSet& points = prepared.points;
+  ready.radii = estimateRadii(points, neighbors);
+  timer.next("normals", points.size());
+
+  std::vector<uint8_t> wasEstimated(points.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i)
+    wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
+  estimateNormals(points, neighbors);
+  ready.normals =
+      orientNormals(points, neighbors, options.orient, wasEstimated, options.orientBlockPoints);
+  estimateRoughness(points, neighbors);
+  ready.frame = prepared.frame;
+  ready.duplicates = prepared.duplicates;
+  ready.points = std::move(prepared.points);
+  ready.index = std::move(tree);
+  const size_t step = sampleStep(cloud->size(), kAccuracySamples);
+  for (size_t i = 0; i < cloud->size(); i += step) ready.sample.push_back(cloud->positions[i]);
+  return ready;
+}
+
+}  // namespace
 
 nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source) {
@@ -200,38 +251,42 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   report["stages"] = nlohmann::json::array();
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
+  ReadyPoints ready = prepareInCore(input, options, timer);
+  return buildAndWrite(ready, input.size(), output, options, source, timer, report, started);
+}
 
-  const PointCloud* cloud = &input;
-  PointCloud filtered;
-  timer.next("prepare", input.size());
-  Prepared prepared = prepare(*cloud);
-  timer.next("radii", input.size());
-  auto tree = std::make_unique<PointIndex>(prepared.points.position);
-  Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
-  size_t outliers = 0;
-  if (options.removeOutliers) {
-    const std::vector<uint8_t> flagged = findOutliers(prepared.points, neighbors);
-    outliers = size_t(std::count(flagged.begin(), flagged.end(), uint8_t{1}));
-    if (outliers > 0) {  // choose the frame again without them: far outliers waste precision
-      filtered = withoutSources(*cloud, prepared.points, flagged);
-      cloud = &filtered;
-      prepared = prepare(*cloud);
-      tree = std::make_unique<PointIndex>(prepared.points.position);
-      neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
-    }
-  }
-  PointSet& points = prepared.points;
-  const Frame& frame = prepared.frame;
-  const RadiusStats radii = estimateRadii(points, neighbors);
-  timer.next("normals", points.size());
+nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
+                              uint64_t maxChunkPoints, const std::filesystem::path& output,
+                              const BuildOptions& options, const ConvertSource& source) {
+  validate(options);
+  if (raw.size() == 0) throw ConvertError("no points to convert");
+  const auto started = Clock::now();
+  nlohmann::json report;
+  report["stages"] = nlohmann::json::array();
+  StageTimer timer(report["stages"], source);
+  if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
+  ReadyPoints ready = prepareOutOfCore(
+      raw, directory, options, maxChunkPoints,
+      [&](const std::string& stage, uint64_t total) { timer.next(stage, total); });
+  if (ready.points.size() < 3)
+    throw ConvertError("a surface needs at least 3 distinct points; the input has " +
+                       std::to_string(ready.points.size()));
+  if (isCollinear(ready.points))
+    throw ConvertError("all points lie on one line: they define no surface");
+  return buildAndWrite(ready, raw.size(), output, options, source, timer, report, started);
+}
 
-  std::vector<uint8_t> wasEstimated(points.size(), 0);
-  for (size_t i = 0; i < points.size(); ++i)
-    wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
-  estimateNormals(points, neighbors);
-  const NormalStats normals = orientNormals(points, neighbors, options.orient, wasEstimated);
-  estimateRoughness(points, neighbors);
-  neighbors = Neighbors{};  // 80 bytes a point, not needed any more
+namespace {
+
+nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
+                             const std::filesystem::path& output, const BuildOptions& options,
+                             const ConvertSource& source, StageTimer& timer,
+                             nlohmann::json& report, Clock::time_point started) {
+  PointSet& points = ready.points;
+  const Frame& frame = ready.frame;
+  const RadiusStats& radii = ready.radii;
+  const NormalStats& normals = ready.normals;
+  const PointIndex* tree = ready.index.get();
   timer.next("octree");
 
   const SdfEvaluator sdf(points, *tree, options.smoothing, options.fit);
@@ -250,14 +305,15 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
-  report["points"] = {{"input", input.size() + source.nonFiniteDropped},
+  report["points"] = {{"input", inputPoints + source.nonFiniteDropped},
                       {"non_finite_dropped", source.nonFiniteDropped},
-                      {"duplicates_merged", prepared.duplicates},
-                      {"outliers_removed", outliers},
+                      {"duplicates_merged", ready.duplicates},
+                      {"outliers_removed", ready.outliers},
                       {"used", points.size()}};
   report["normals"] = {{"estimated", normals.estimated},
                        {"from_input", points.size() - normals.estimated},
                        {"flipped_to_agree", normals.flipped}};
+  if (!ready.outOfCore.is_null()) report["out_of_core"] = ready.outOfCore;
   report["mean_spacing"] = spacing;
   report["median_radius"] = radii.medianRadius * frame.size;
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
@@ -270,7 +326,8 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
   // The file keeps what the data and options determine, not timings or memory, so that the same
   // input gives the same bytes on any machine and any number of threads.
   const auto metadata = [&](nlohmann::json r) {
-    for (const char* key : {"stages", "seconds", "points_per_second", "peak_rss_bytes"})
+    for (const char* key :
+         {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core"})
       r.erase(key);
     return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
                           {"inputs", source.inputs},
@@ -287,9 +344,9 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
             {"bytes_without_metadata", stats.fileBytesWithoutMetadata},
             {"bytes_per_leaf",
              double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
-            {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(input.size())}};
+            {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
         const SurfaceModel surface = SurfaceModel::load(Reader::open(written));
-        const std::vector<glm::dvec3> sample = samplePoints(*cloud, kAccuracySamples);
+        const std::vector<glm::dvec3>& sample = ready.sample;
         const DistanceStats d = pointsToZeroSet(surface, frame, sample);
         report["accuracy"] = {{"samples", d.samples},
                               {"unprojected", d.unprojected},
@@ -302,11 +359,13 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
         const double seconds =
             std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;
         report["seconds"] = seconds;
-        report["points_per_second"] = double(input.size() + source.nonFiniteDropped) / seconds;
+        report["points_per_second"] = double(inputPoints + source.nonFiniteDropped) / seconds;
         report["peak_rss_bytes"] = peakRssBytes();
         return metadata(report).dump();
       });
   return report;
 }
+
+}  // namespace
 
 }  // namespace iso

@@ -38,6 +38,15 @@ struct ConvertSource {
 nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source = {});
 
+class RawSpill;
+class SpillDirectory;
+// The same for points streamed to disk (spill.h): the point stages run chunk by chunk, chunks of
+// at most maxChunkPoints points with their halos (the output is the same as convertToIso's for
+// the same points); the report adds "out_of_core" (chunks, halos, temporary bytes).
+nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
+                              uint64_t maxChunkPoints, const std::filesystem::path& output,
+                              const BuildOptions& options, const ConvertSource& source = {});
+
 // The options as JSON (the file's "parameters").
 nlohmann::json optionsJson(const BuildOptions& options);
 

@@ -16,14 +16,6 @@ namespace {
 
 constexpr double kFrameMargin = 0.05;  // of the extent, on each side
 
-uint64_t keyOf(const glm::vec3& u) {
-  const double cells = double(1u << kMaxLevel);
-  std::array<uint32_t, 3> c{};
-  for (int a = 0; a < 3; ++a)
-    c[size_t(a)] = uint32_t(std::clamp(std::floor(double(u[a]) * cells), 0.0, cells - 1.0));
-  return mortonEncode(c[0], c[1], c[2]);
-}
-
 struct KeyIndex {
   uint64_t key;
   uint32_t index;
@@ -140,8 +132,12 @@ Frame chooseFrame(const PointCloud& cloud) {
     lo = glm::min(lo, p);
     hi = glm::max(hi, p);
   }
+  return chooseFrame(lo, hi);
+}
+
+Frame chooseFrame(const glm::dvec3& lo, const glm::dvec3& hi) {
   Frame frame;
-  if (cloud.positions.empty()) return frame;
+  if (lo.x > hi.x) return frame;  // no points
   double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
   // A degenerate extent still needs a cube; relative to the coordinates' magnitude so that the
   // cube stays representable.
@@ -151,6 +147,14 @@ Frame chooseFrame(const PointCloud& cloud) {
   const glm::dvec3 center = 0.5 * (lo + hi);
   for (int a = 0; a < 3; ++a) frame.origin[size_t(a)] = center[a] - 0.5 * frame.size;
   return frame;
+}
+
+uint64_t keyOf(const glm::vec3& u) {
+  const double cells = double(1u << kMaxLevel);
+  std::array<uint32_t, 3> c{};
+  for (int a = 0; a < 3; ++a)
+    c[size_t(a)] = uint32_t(std::clamp(std::floor(double(u[a]) * cells), 0.0, cells - 1.0));
+  return mortonEncode(c[0], c[1], c[2]);
 }
 
 glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame) {

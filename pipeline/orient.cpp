@@ -74,36 +74,6 @@ class BucketQueue {
   size_t size_ = 0;
 };
 
-// Orientation blocks: the coarsest Morton cells holding at most maxPoints points, as ranges of the
-// key-sorted points. They depend only on the points, so an out-of-core conversion, whatever its
-// chunks, orients in the same blocks.
-std::vector<std::array<uint32_t, 2>> orientationBlocks(const PointSet& points, size_t maxPoints) {
-  const size_t n = points.size();
-  std::vector<std::array<uint32_t, 2>> blocks;
-  if (n <= maxPoints || points.key.size() != n ||
-      !std::is_sorted(points.key.begin(), points.key.end()))
-    return {{0u, uint32_t(n)}};
-  const auto split = [&](auto&& self, uint32_t begin, uint32_t end, int level) -> void {
-    if (end - begin <= maxPoints || level == kMaxLevel) {
-      blocks.push_back({begin, end});
-      return;
-    }
-    const int shift = 3 * (kMaxLevel - level - 1);
-    const uint64_t prefix = points.key[begin] >> (shift + 3) << (shift + 3);
-    uint32_t childBegin = begin;
-    for (uint64_t child = 0; child < 8; ++child) {
-      const uint64_t limit = prefix + ((child + 1) << shift);  // first key of the next child
-      const auto childEnd = uint32_t(
-          std::lower_bound(points.key.begin() + childBegin, points.key.begin() + end, limit) -
-          points.key.begin());
-      if (childEnd > childBegin) self(self, childBegin, childEnd, level + 1);
-      childBegin = childEnd;
-    }
-  };
-  split(split, 0, uint32_t(n), 0);
-  return blocks;
-}
-
 // Union-find over components with the parity (flip or not) of each relative to its set's root,
 // and whether the set's orientation is fixed by input normals.
 class ParityForest {
@@ -201,86 +171,15 @@ BlockComponents propagateInBlock(PointSet& points, const Graph& g,
   return found;
 }
 
-// Consistent orientation block by block (blocks propagate independently, in parallel), then whole
-// components flipped to agree across block boundaries: a maximum spanning forest over the
-// components, weighted by the summed agreement n_i·n_j of the edges between them, rooted at the
-// components holding input normals, else at the component with the highest seed (the one whose
-// "top faces up" rule is the most trustworthy). With one block this is Prim's algorithm over the
-// whole graph.
-void propagate(PointSet& points, const Graph& g, const std::vector<uint8_t>& wasEstimated,
-               size_t blockPoints) {
-  const size_t n = points.size();
-  const std::vector<std::array<uint32_t, 2>> blocks = orientationBlocks(points, blockPoints);
-  std::vector<uint32_t> component(n, kNoNode);
-  // Component ids per block start at the block's first point: unique without coordination.
-  std::vector<BlockComponents> found(blocks.size());
-  tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t b) {
-    const auto [begin, end] = blocks[b];
-    found[b] = propagateInBlock(points, g, wasEstimated, begin, end, begin, component);
-  });
-  if (blocks.size() == 1) return;
-
-  // Dense component ids: block b's components are blocks[b][0] + 0, 1, ...
-  std::vector<uint32_t> firstDense(blocks.size() + 1, 0);
-  for (size_t b = 0; b < blocks.size(); ++b)
-    firstDense[b + 1] = firstDense[b] + uint32_t(found[b].anchored.size());
-  std::vector<uint32_t> blockOfPoint(n);
-  for (size_t b = 0; b < blocks.size(); ++b)
-    std::fill(blockOfPoint.begin() + blocks[b][0], blockOfPoint.begin() + blocks[b][1],
-              uint32_t(b));
-  const auto dense = [&](uint32_t i) {
-    const uint32_t b = blockOfPoint[i];
-    return firstDense[b] + (component[i] - blocks[b][0]);
-  };
-  // Agreement between components, summed in fixed point so that the order does not matter.
-  std::map<std::pair<uint32_t, uint32_t>, int64_t> agreement;
-  for (uint32_t i = 0; i < n; ++i)
-    for (uint32_t e = g.offset[i]; e < g.offset[i + 1]; ++e) {
-      const uint32_t j = g.target[e];
-      if (j <= i || blockOfPoint[j] == blockOfPoint[i]) continue;
-      const auto a = dense(i), b = dense(j);
-      const auto key = std::minmax(a, b);
-      agreement[{key.first, key.second}] +=
-          std::llround(double(glm::dot(points.normal[i], points.normal[j])) * 65536.0);
-    }
-  std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges(agreement.begin(),
-                                                                       agreement.end());
-  std::stable_sort(edges.begin(), edges.end(), [](const auto& x, const auto& y) {
-    return std::llabs(x.second) > std::llabs(y.second);
-  });
-  const uint32_t components = firstDense.back();
-  ParityForest forest(components);
-  std::vector<float> seedHeight(components);
-  for (size_t b = 0; b < blocks.size(); ++b)
-    for (size_t c = 0; c < found[b].anchored.size(); ++c) {
-      if (found[b].anchored[c]) forest.fix(firstDense[b] + uint32_t(c));
-      seedHeight[firstDense[b] + c] = found[b].seedHeight[c];
-    }
-  for (const auto& [pair, sum] : edges)
-    if (sum != 0) forest.join(pair.first, pair.second, sum < 0 ? 1 : 0);
-  // A free set keeps the orientation of its highest seed.
-  std::vector<uint32_t> highest(components, kNoNode);
-  for (uint32_t c = 0; c < components; ++c) {
-    uint8_t parity = 0;
-    const uint32_t root = forest.find(c, parity);
-    if (highest[root] == kNoNode || seedHeight[c] > seedHeight[highest[root]]) highest[root] = c;
-  }
-  std::vector<uint8_t> flip(components, 0);
-  for (uint32_t c = 0; c < components; ++c) {
-    uint8_t parity = 0, rootParity = 0;
-    const uint32_t root = forest.find(c, parity);
-    if (!forest.isFixed(root)) forest.find(highest[root], rootParity);
-    flip[c] = parity ^ rootParity;
-  }
-  for (uint32_t i = 0; i < n; ++i)
-    if (flip[dense(i)]) points.normal[i] = -points.normal[i];
-}
+constexpr int kRepairPasses = 4;
 
 // Flip input normals that oppose at least 80% of their neighbours' (and at least 3 of them). Only
 // neighbours near the point's tangent plane count (within 30° of it): on two sheets closer than
 // the radius the other sheet's points lie along the normal, and their opposite normals are right.
+// One pass; returns how many flipped, and adds those among [countBegin, countEnd) to `counted`.
 size_t repairFlipped(PointSet& points, const Neighbors& neighbors,
-                     const std::vector<uint8_t>& wasEstimated) {
+                     const std::vector<uint8_t>& wasEstimated, uint32_t countBegin,
+                     uint32_t countEnd, size_t& counted) {
   const size_t n = points.size(), k = size_t(neighbors.k);
   std::vector<uint8_t> flip(n, 0);
   tbb::parallel_for(
@@ -304,31 +203,147 @@ size_t repairFlipped(PointSet& points, const Neighbors& neighbors,
     if (flip[i]) {
       points.normal[i] = -points.normal[i];
       ++count;
+      counted += i >= countBegin && i < countEnd ? 1 : 0;
     }
   return count;
 }
 
 }  // namespace
 
+OrientationBlocks orientationBlocks(const PointSet& points, size_t maxPoints, uint32_t begin,
+                                     uint32_t end, int level) {
+  OrientationBlocks blocks;
+  const bool sorted = points.key.size() == points.size() &&
+                      std::is_sorted(points.key.begin() + begin, points.key.begin() + end);
+  const auto split = [&](auto&& self, uint32_t first, uint32_t last, int depth) -> void {
+    if (last - first <= maxPoints || depth == kMaxLevel || !sorted) {
+      blocks.push_back({first, last});
+      return;
+    }
+    const int shift = 3 * (kMaxLevel - depth - 1);
+    const uint64_t prefix = points.key[first] >> (shift + 3) << (shift + 3);
+    uint32_t childBegin = first;
+    for (uint64_t child = 0; child < 8; ++child) {
+      const uint64_t limit = prefix + ((child + 1) << shift);  // first key of the next child
+      const auto childEnd = uint32_t(
+          std::lower_bound(points.key.begin() + childBegin, points.key.begin() + last, limit) -
+          points.key.begin());
+      if (childEnd > childBegin) self(self, childBegin, childEnd, depth + 1);
+      childBegin = childEnd;
+    }
+  };
+  if (end > begin) split(split, begin, end, level);
+  return blocks;
+}
+
+size_t repairFlippedNormals(PointSet& points, const Neighbors& neighbors,
+                            const std::vector<uint8_t>& wasEstimated, uint32_t countBegin,
+                            uint32_t countEnd) {
+  // Repeat: a flipped normal among several flipped neighbours is outvoted only once some of them
+  // are repaired.
+  size_t total = 0;
+  for (int pass = 0; pass < kRepairPasses; ++pass) {
+    if (repairFlipped(points, neighbors, wasEstimated, countBegin, countEnd, total) == 0) break;
+  }
+  return total;
+}
+
+void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
+                       const std::vector<uint8_t>& wasEstimated, const OrientationBlocks& blocks,
+                       OrientationComponents& components) {
+  const Graph g = symmetricGraph(neighbors, points.size());
+  // Component ids per block start at the block's first point: unique without coordination.
+  std::vector<uint32_t> local(points.size(), kNoNode);
+  std::vector<BlockComponents> found(blocks.size());
+  tbb::parallel_for(size_t{0}, blocks.size(), [&](size_t b) {
+    const auto [begin, end] = blocks[b];
+    found[b] = propagateInBlock(points, g, wasEstimated, begin, end, begin, local);
+  });
+  // Dense ids, continuing those already in `components`: block by block, seed by seed.
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const auto first = uint32_t(components.anchored.size());
+    for (uint32_t i = blocks[b][0]; i < blocks[b][1]; ++i)
+      components.of[i] = first + (local[i] - blocks[b][0]);
+    components.anchored.insert(components.anchored.end(), found[b].anchored.begin(),
+                               found[b].anchored.end());
+    components.seedHeight.insert(components.seedHeight.end(), found[b].seedHeight.begin(),
+                                 found[b].seedHeight.end());
+  }
+}
+
+void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+                     std::span<const uint32_t> neighborIndex, size_t k) {
+  const size_t n = normals.size();
+  const auto count = uint32_t(components.anchored.size());
+  // Agreement between components over every k-NN edge (i → j) joining two of them, summed in
+  // fixed point so that the order does not matter. Points of different components are in
+  // different blocks: inside a block, propagation reaches every neighbour.
+  std::map<std::pair<uint32_t, uint32_t>, int64_t> agreement;
+  for (size_t i = 0; i < n; ++i)
+    for (size_t e = 0; e < k; ++e) {
+      const uint32_t j = neighborIndex[i * k + e];
+      const uint32_t a = components.of[i], b = components.of[j];
+      if (a == b) continue;
+      agreement[std::minmax(a, b)] +=
+          std::llround(double(glm::dot(normals[i], normals[j])) * 65536.0);
+    }
+  std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges(agreement.begin(),
+                                                                       agreement.end());
+  std::stable_sort(edges.begin(), edges.end(), [](const auto& x, const auto& y) {
+    return std::llabs(x.second) > std::llabs(y.second);
+  });
+  ParityForest forest(count);
+  for (uint32_t c = 0; c < count; ++c)
+    if (components.anchored[c]) forest.fix(c);
+  for (const auto& [pair, sum] : edges)
+    if (sum != 0) forest.join(pair.first, pair.second, sum < 0 ? 1 : 0);
+  // A free set keeps the orientation of its highest seed.
+  std::vector<uint32_t> highest(count, kNoNode);
+  for (uint32_t c = 0; c < count; ++c) {
+    uint8_t parity = 0;
+    const uint32_t root = forest.find(c, parity);
+    if (highest[root] == kNoNode ||
+        components.seedHeight[c] > components.seedHeight[highest[root]])
+      highest[root] = c;
+  }
+  std::vector<uint8_t> flip(count, 0);
+  for (uint32_t c = 0; c < count; ++c) {
+    uint8_t parity = 0, rootParity = 0;
+    const uint32_t root = forest.find(c, parity);
+    if (!forest.isFixed(root)) forest.find(highest[root], rootParity);
+    flip[c] = parity ^ rootParity;
+  }
+  for (size_t i = 0; i < n; ++i)
+    if (flip[components.of[i]]) normals[i] = -normals[i];
+}
+
 NormalStats orientNormals(PointSet& points, const Neighbors& neighbors, OrientMode mode,
                           const std::vector<uint8_t>& wasEstimated, size_t blockPoints) {
   NormalStats stats;
   stats.estimated = size_t(std::count(wasEstimated.begin(), wasEstimated.end(), uint8_t{1}));
-  // Repeat: a flipped normal among several flipped neighbours is outvoted only once some of them
-  // are repaired.
-  for (int pass = 0; pass < 4; ++pass) {
-    const size_t flipped = repairFlipped(points, neighbors, wasEstimated);
-    stats.flipped += flipped;
-    if (flipped == 0) break;
-  }
+  stats.flipped = repairFlippedNormals(points, neighbors, wasEstimated);
   if (stats.estimated == 0) return stats;
   if (mode == OrientMode::Up) {
-    for (size_t i = 0; i < points.size(); ++i)
-      if (wasEstimated[i] && points.normal[i].z < 0.0f) points.normal[i] = -points.normal[i];
+    orientUp(points, wasEstimated, 0, uint32_t(points.size()));
     return stats;
   }
-  propagate(points, symmetricGraph(neighbors, points.size()), wasEstimated, blockPoints);
+  // Consistent orientation block by block (blocks propagate independently, in parallel), then
+  // whole components flipped to agree across block boundaries. With one block this is Prim's
+  // algorithm over the whole graph.
+  const OrientationBlocks blocks =
+      orientationBlocks(points, blockPoints, 0, uint32_t(points.size()), 0);
+  OrientationComponents components;
+  components.of.assign(points.size(), kNoNode);
+  propagateInBlocks(points, neighbors, wasEstimated, blocks, components);
+  if (blocks.size() > 1)
+    alignComponents(points.normal, components, neighbors.index, size_t(neighbors.k));
   return stats;
+}
+
+void orientUp(PointSet& points, const std::vector<uint8_t>& wasEstimated, uint32_t begin,
+              uint32_t end) {
+  for (uint32_t i = begin; i < end; ++i)
+    if (wasEstimated[i] && points.normal[i].z < 0.0f) points.normal[i] = -points.normal[i];
 }
 
 }  // namespace iso

@@ -13,13 +13,6 @@
 namespace iso {
 namespace {
 
-float medianOf(std::vector<float>& values) {
-  if (values.empty()) return 0.0f;
-  auto middle = values.begin() + ptrdiff_t(values.size() / 2);
-  std::nth_element(values.begin(), middle, values.end());
-  return *middle;
-}
-
 // The median of a few values (k of them): insertion sort beats selection at this size.
 float smallMedian(float* values, size_t count) {
   for (size_t i = 1; i < count; ++i) {
@@ -32,6 +25,13 @@ float smallMedian(float* values, size_t count) {
 }
 
 }  // namespace
+
+float medianOf(std::vector<float>& values) {
+  if (values.empty()) return 0.0f;
+  auto middle = values.begin() + ptrdiff_t(values.size() / 2);
+  std::nth_element(values.begin(), middle, values.end());
+  return *middle;
+}
 
 Neighbors findNeighbors(const PointSet& points, const PointIndex& index, int k) {
   Neighbors result;

@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <functional>
 #include <glm/vec3.hpp>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -59,6 +60,8 @@ struct BuildOptions {
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;
   bool removeOutliers = true;
+  // Points per orientation block (orientNormals); part of the result, so a parameter.
+  uint32_t orientBlockPoints = 1u << 16;
 };
 
 // The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
@@ -79,9 +82,13 @@ struct PointSet {
 // The cube around the points, grown so that surfaces reaching past the outermost points stay
 // inside; a degenerate extent (one point, a plane) still gives a positive size.
 Frame chooseFrame(const PointCloud& cloud);
+// The same from the bounds of the points (lo > hi: no points).
+Frame chooseFrame(const glm::dvec3& lo, const glm::dvec3& hi);
 // Frame-unit points with keys; normals copied (renormalized; invalid ones set to zero).
 PointSet makePointSet(const PointCloud& cloud, const Frame& frame);
 glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
+// The Morton key at kMaxLevel of a position in frame units (clamped into the cube).
+uint64_t keyOf(const glm::vec3& frameUnits);
 void sortByKey(PointSet& points);
 // The order that sorts the keys (stable): order[i] is the index of the i-th smallest.
 std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys);
@@ -105,6 +112,8 @@ struct RadiusStats {
 RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
 // Points whose radius exceeds 10 times the median radius of their neighbours (far outliers).
 std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors);
+// The median of values (reordered); 0 for none.
+float medianOf(std::vector<float>& values);
 // Keep the points not flagged (order kept).
 void removePoints(PointSet& points, const std::vector<uint8_t>& flagged);
 
@@ -118,10 +127,37 @@ size_t estimateNormals(PointSet& points, const Neighbors& neighbors);
 // Orient estimated normals consistently (mode) and repair isolated flipped input normals.
 // Propagation runs in blocks (the coarsest Morton cells of at most blockPoints key-sorted points),
 // then flips whole components to agree across blocks: local, so out-of-core chunks orient alike.
-inline constexpr size_t kOrientBlockPoints = size_t{1} << 16;
 NormalStats orientNormals(PointSet& points, const Neighbors& neighbors, OrientMode mode,
                           const std::vector<uint8_t>& wasEstimated,
-                          size_t blockPoints = kOrientBlockPoints);
+                          size_t blockPoints = BuildOptions{}.orientBlockPoints);
+// The phases of orientNormals, for the out-of-core conversion:
+// Orientation blocks among key-sorted points [begin, end), which lie in one cell of `level`.
+using OrientationBlocks = std::vector<std::array<uint32_t, 2>>;
+OrientationBlocks orientationBlocks(const PointSet& points, size_t maxPoints, uint32_t begin,
+                                    uint32_t end, int level);
+// Flip input normals that contradict their neighbours (repeated); returns how many flips there
+// were among points [countBegin, countEnd).
+size_t repairFlippedNormals(PointSet& points, const Neighbors& neighbors,
+                            const std::vector<uint8_t>& wasEstimated, uint32_t countBegin = 0,
+                            uint32_t countEnd = std::numeric_limits<uint32_t>::max());
+// Turn estimated normals of points [begin, end) up (--orient up).
+void orientUp(PointSet& points, const std::vector<uint8_t>& wasEstimated, uint32_t begin,
+              uint32_t end);
+// Components of the propagation: each block's parts, numbered block by block.
+struct OrientationComponents {
+  std::vector<uint32_t> of;       // per point: its component
+  std::vector<uint8_t> anchored;  // per component: holds input normals (never flipped)
+  std::vector<float> seedHeight;  // per component: height of its highest point (its seed)
+};
+// Propagate inside each block; points of the blocks get components numbered after those already
+// in `components` (whose `of` covers all points).
+void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
+                       const std::vector<uint8_t>& wasEstimated, const OrientationBlocks& blocks,
+                       OrientationComponents& components);
+// Flip whole components to agree across the k-NN edges between them (neighborIndex: k per
+// point): a maximum spanning forest rooted at anchored components, else at the highest seed.
+void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+                     std::span<const uint32_t> neighborIndex, size_t k);
 // Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS
 // distance of its neighbours to the plane through their centroid with the point's normal.
 void estimateRoughness(PointSet& points, const Neighbors& neighbors);

@@ -77,6 +77,43 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   EXPECT_TRUE(bytes[1] == bytes[0]) << "1 thread and all cores differ";
 }
 
+TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
+  ASSERT_EQ(runIso("gen torus -n 60000 --noise 0.3 --no-normals -o " + quoted(dir_ / "t.ply")).exitCode,
+            0);
+  std::string bytes[2];
+  nlohmann::json reports[2];
+  const char* budgets[2] = {"150K", "8G"};
+  for (int b = 0; b < 2; ++b) {
+    const auto out = dir_ / ("t" + std::to_string(b) + ".iso");
+    const auto run = runIso(std::string("convert -q --json --orient-block-points 256 --memory ") +
+                            budgets[b] + " --tmp " + quoted(dir_.path()) + " " +
+                            quoted(dir_ / "t.ply") + " -o " + quoted(out));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    reports[b] = nlohmann::json::parse(run.out);
+    bytes[b] = test::slurp(out);
+  }
+  EXPECT_GE(reports[0]["out_of_core"]["chunks"].get<int>(), 150);
+  EXPECT_EQ(reports[1]["out_of_core"]["chunks"].get<int>(), 1);
+  EXPECT_GT(reports[0]["out_of_core"]["temporary_bytes_peak"].get<uint64_t>(), 60000u * 24);
+  EXPECT_TRUE(bytes[0] == bytes[1]) << "the budget changed the output";
+  for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_NE(entry.path().extension(), ".isotmp") << "left behind: " << entry.path();
+}
+
+TEST_F(CliPipeline, badMemoryAndTemporaryDirectoriesAreRefused) {
+  for (const char* options : {"--memory lots", "--memory -2G", "--memory 0"}) {
+    const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +
+                            " -o " + quoted(dir_ / "x.iso"));
+    EXPECT_EQ(run.exitCode, 2) << options << run.err;
+    EXPECT_NE(run.err.find("--memory"), std::string::npos) << run.err;
+  }
+  const auto run = runIso("convert --tmp " + quoted(dir_ / "missing") + " " +
+                          quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "x.iso"));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("missing"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
+}
+
 TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
   const auto run = runIso("convert --progress json --report " + quoted(dir_ / "r.json") + " " +
                           quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"));
@@ -94,9 +131,9 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
       EXPECT_LE(j["percent"].get<double>(), 100.0);
     }
   }
-  const std::vector<std::string> stages = {"read",    "prepare", "radii",    "normals",
-                                           "octree",  "passive+balance", "corners", "lod",
-                                           "write",   "accuracy"};
+  const std::vector<std::string> stages = {"read",   "distribute",      "points",  "orient",
+                                           "octree", "passive+balance", "corners", "lod",
+                                           "write",  "accuracy"};
   EXPECT_EQ(ended, stages);
   const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
   EXPECT_EQ(report["points"]["input"], 20000);
@@ -133,8 +170,10 @@ std::string interruptWhileWriting(const std::filesystem::path& input,
   if (posix_spawn(&child, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return "";
   std::string temporary;
   for (int status = 0; temporary.empty();) {
+    const std::string prefix = "." + output.filename().string() + ".";
     for (const auto& entry : std::filesystem::directory_iterator(output.parent_path()))
-      if (entry.path().extension() == ".isotmp") temporary = entry.path().filename().string();
+      if (entry.path().filename().string().starts_with(prefix))
+        temporary = entry.path().filename().string();
     if (!temporary.empty()) break;
     if (waitpid(child, &status, WNOHANG) == child) return "";  // finished first
     usleep(200);
@@ -168,13 +207,13 @@ TEST_F(CliPipeline, anInterruptedConversionLeavesTheOldFileAndNoTemporaryFiles) 
   // temporary file.
   temporary = interruptWhileWriting(dir_ / "big.ply", dir_ / "out.iso", SIGKILL);
   ASSERT_FALSE(temporary.empty());
-  EXPECT_EQ(temporaries(), 1u);
+  EXPECT_EQ(temporaries(), 2u);  // the output's and the directory of spilled points
   EXPECT_TRUE(test::slurp(dir_ / "out.iso") == old);
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
   const auto run = runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " +
                           quoted(dir_ / "again.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
-  EXPECT_NE(run.err.find("removed 1 temporary file"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("removed 2 temporary files"), std::string::npos) << run.err;
   EXPECT_EQ(temporaries(), 0u);
 }
 

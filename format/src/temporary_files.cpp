@@ -26,6 +26,8 @@ std::array<Slot, kSlots> gSlots;
 extern "C" void removeAndReraise(int signal) {
   for (Slot& slot : gSlots)
     if (slot.state.load(std::memory_order_acquire) == 2) ::unlink(slot.path);
+  for (Slot& slot : gSlots)  // directories, once the files in them are gone
+    if (slot.state.load(std::memory_order_acquire) == 2) ::rmdir(slot.path);
   ::signal(signal, SIG_DFL);
   ::raise(signal);
 }

@@ -12,6 +12,7 @@
 #include "inputs.h"
 #include "iso/error.h"
 #include "iso/temporary_files.h"
+#include "spill.h"
 #include "text.h"
 
 namespace iso::cli {
@@ -23,6 +24,8 @@ struct Options {
   std::string columns;
   std::string fit = "sphere";
   std::string orient = "auto";
+  std::string memory = "auto";  // --memory
+  std::string tmp;              // --tmp; default: the output's directory
   std::string report;              // --report FILE
   std::string progress = "auto";   // auto, line, json, none
   int threads = 0;                 // 0: all cores
@@ -73,6 +76,30 @@ void printReport(const nlohmann::json& r, const Options& o) {
       withSeparators(a["unprojected"].get<uint64_t>()));
 }
 
+// Bytes from "2G", "512M", "1.5G", "100000" (binary units); "auto": half the physical memory.
+uint64_t parseBytes(const std::string& text, const char* option) {
+  if (text == "auto") return uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGE_SIZE)) / 2;
+  size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  const std::string unit = text.substr(used);
+  const std::map<std::string, double> units = {{"", 1.0},         {"K", 1024.0},
+                                               {"M", 1048576.0},  {"G", 1073741824.0},
+                                               {"T", 1099511627776.0}};
+  if (used == 0 || !units.contains(unit) || !(value > 0.0))
+    throw std::invalid_argument(std::string(option) + " must be a size like 2G, 512M or auto, not '" +
+                                text + "'");
+  return uint64_t(value * units.at(unit));
+}
+
+// Points per chunk for a memory budget: the point stages hold about 600 bytes per loaded point
+// (positions, attributes, neighbours, their graph), chunk and halo together.
+uint64_t chunkPointsFor(uint64_t memory) { return std::max<uint64_t>(memory / 600, 1); }
+
 int run(Options& o) {
   if (o.fit != "sphere" && o.fit != "plane")
     throw std::invalid_argument("--fit must be sphere or plane");
@@ -112,13 +139,29 @@ int run(Options& o) {
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
   const ProgressMode mode = progressModes.at(o.progress);
   ProgressReporter progress(mode);
+  const uint64_t memory = parseBytes(o.memory, "--memory");
+  const std::filesystem::path tmp =
+      o.tmp.empty() ? (output.has_parent_path() ? output.parent_path() : std::filesystem::path("."))
+                    : std::filesystem::path(o.tmp);
+  if (!std::filesystem::is_directory(tmp))
+    throw FileError(tmp.string(), std::nullopt, "is not a directory (--tmp)");
+  if (tmp != output.parent_path()) removeStaleTemporaries(tmp);
+  // The points go to disk as they are read (each file is parsed once); the point stages then
+  // run chunk by chunk.
+  SpillDirectory spill(tmp);
+  std::unique_ptr<RawSpill> raw;
   ReadOptions read;
   read.columns = o.columns;
-  LoadedPoints loaded = loadPoints(files, read, &progress);
+  const ReadSummary loaded = readPoints(
+      files, read, &progress,
+      [&](bool normals, bool colors) {
+        raw = std::make_unique<RawSpill>(spill, PointLayout{normals, colors});
+      },
+      [&](const PointCloud& batch) { raw->append(batch); });
+  raw->finish();
   if (!o.quiet && mode != ProgressMode::Json) {
-    fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n",
-               withSeparators(loaded.cloud.size()), files.size(), files.size() == 1 ? "" : "s",
-               loaded.seconds);
+    fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n", withSeparators(raw->size()),
+               files.size(), files.size() == 1 ? "" : "s", loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
   ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
@@ -128,7 +171,7 @@ int run(Options& o) {
     };
   nlohmann::json report;
   try {
-    report = convertToIso(loaded.cloud, output, o.build, source);
+    report = convertSpilled(*raw, spill, chunkPointsFor(memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
@@ -182,6 +225,15 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--progress", o->progress,
                 "Progress on stderr: auto (a live line on a terminal), line, json (one object per "
                 "update) or none")
+      ->capture_default_str();
+  c->add_option("--memory", o->memory,
+                "Memory for the point stages, which run chunk by chunk (e.g. 2G; auto: half the "
+                "RAM); the output does not depend on it")
+      ->capture_default_str();
+  c->add_option("--tmp", o->tmp,
+                "Directory for temporary files (default: the output's); removed afterwards");
+  c->add_option("--orient-block-points", o->build.orientBlockPoints,
+                "Points per block of normal orientation (a parameter of the result)")
       ->capture_default_str();
   c->add_option("--report", o->report,
                 "Also write the report (with stage times and memory) as JSON to this file");

@@ -40,8 +40,10 @@ std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& 
   return files;
 }
 
-LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
-                        const ReadOptions& options, ProgressReporter* progress) {
+ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                       ProgressReporter* progress,
+                       const std::function<void(bool normals, bool colors)>& begin,
+                       const std::function<void(const PointCloud&)>& add) {
   const auto started = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<PointReader>> readers;
   bool normals = true, colors = true;
@@ -50,13 +52,13 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
     normals = normals && readers.back()->info().hasNormals;
     colors = colors && readers.back()->info().hasColors;
   }
-  LoadedPoints loaded;
+  ReadSummary summary;
   if (!normals && std::any_of(readers.begin(), readers.end(),
                               [](const auto& r) { return r->info().hasNormals; }))
-    loaded.notes.push_back("normals ignored: not every input has them");
+    summary.notes.push_back("normals ignored: not every input has them");
   if (!colors && std::any_of(readers.begin(), readers.end(),
                              [](const auto& r) { return r->info().hasColors; }))
-    loaded.notes.push_back("colors ignored: not every input has them");
+    summary.notes.push_back("colors ignored: not every input has them");
   if (progress != nullptr) {
     uint64_t declared = 0;
     for (const auto& reader : readers) {
@@ -68,33 +70,45 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
     }
     progress->begin("read", declared);
   }
+  begin(normals, colors);
   PointCloud batch;
   for (auto& reader : readers) {
-    const uint64_t before = loaded.cloud.size();
-    if (reader->info().declaredPoints)
-      loaded.cloud.positions.reserve(before + *reader->info().declaredPoints);
+    uint64_t points = 0;
     for (;;) {
       batch.clear();
       if (reader->read(batch, 1u << 20) == 0) break;
       progressAdvance(batch.size());
-      loaded.cloud.positions.insert(loaded.cloud.positions.end(), batch.positions.begin(),
-                                    batch.positions.end());
-      if (normals)
-        loaded.cloud.normals.insert(loaded.cloud.normals.end(), batch.normals.begin(),
-                                    batch.normals.end());
-      if (colors)
-        loaded.cloud.colors.insert(loaded.cloud.colors.end(), batch.colors.begin(),
-                                   batch.colors.end());
+      if (!normals) batch.normals.clear();
+      if (!colors) batch.colors.clear();
+      points += batch.size();
+      add(batch);
     }
-    loaded.nonFiniteDropped += reader->stats().droppedNonFinite;
-    loaded.inputs.push_back({{"file", reader->info().path.string()},
-                             {"format", reader->info().format},
-                             {"points", loaded.cloud.size() - before},
-                             {"non_finite_dropped", reader->stats().droppedNonFinite}});
+    summary.nonFiniteDropped += reader->stats().droppedNonFinite;
+    summary.inputs.push_back({{"file", reader->info().path.string()},
+                              {"format", reader->info().format},
+                              {"points", points},
+                              {"non_finite_dropped", reader->stats().droppedNonFinite}});
   }
   if (progress != nullptr) progress->end();
-  loaded.seconds =
+  summary.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  return summary;
+}
+
+LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
+                        const ReadOptions& options, ProgressReporter* progress) {
+  LoadedPoints loaded;
+  PointCloud& cloud = loaded.cloud;
+  static_cast<ReadSummary&>(loaded) = readPoints(
+      files, options, progress, [](bool, bool) {},
+      [&](const PointCloud& batch) {
+        const auto append = [](auto& to, const auto& from) {
+          to.insert(to.end(), from.begin(), from.end());
+        };
+        append(cloud.positions, batch.positions);
+        append(cloud.normals, batch.normals);
+        append(cloud.colors, batch.colors);
+      });
   return loaded;
 }
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -12,20 +13,31 @@
 
 namespace iso::cli {
 
-struct LoadedPoints {
-  PointCloud cloud;
-  nlohmann::json inputs = nlohmann::json::array();  // per file: path, format, points, dropped
+// What reading found: per file its path, format, points and dropped points.
+struct ReadSummary {
+  nlohmann::json inputs = nlohmann::json::array();
   uint64_t nonFiniteDropped = 0;
   double seconds = 0.0;
   std::vector<std::string> notes;  // e.g. normals ignored because not every input has them
+};
+
+struct LoadedPoints : ReadSummary {
+  PointCloud cloud;
 };
 
 // The files to read: each argument itself, or a directory's point files (sorted by name).
 // Throws iso::FileError for a missing path or a directory without point files.
 std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& arguments);
 
-// Read every file into one cloud. Normals (colors) are kept only when every file has them.
-// Shows progress in points read when `progress` is set.
+// Read every file in order: `begin` learns whether the points carry normals and colors (kept only
+// when every file has them), then `add` gets them in batches. Shows progress in points read when
+// `progress` is set.
+ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                       ProgressReporter* progress,
+                       const std::function<void(bool normals, bool colors)>& begin,
+                       const std::function<void(const PointCloud&)>& add);
+
+// Read every file into one cloud.
 LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
                         const ReadOptions& options, ProgressReporter* progress = nullptr);
 

@@ -12,7 +12,8 @@
 
 namespace iso {
 
-// Keeps `path` registered for removal on interruption while the object lives. Registration is
+// Keeps `path` registered for removal on interruption while the object lives (a directory is
+// removed after the files registered, when they were all it held). Registration is
 // cheap (a fixed table, no allocation); when the table is full the path is simply not registered.
 class TemporaryRegistration {
  public:

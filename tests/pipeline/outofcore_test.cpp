@@ -1,0 +1,154 @@
+// The out-of-core conversion: the distribution of points into chunks checked against brute force,
+// and whole conversions with hundreds of chunks that must write the same bytes as in core.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <set>
+
+#include "outofcore.h"
+#include "pipeline_support.h"
+#include "spill.h"
+
+namespace iso {
+namespace {
+
+std::unique_ptr<RawSpill> spillOf(SpillDirectory& directory, const PointCloud& cloud) {
+  auto raw = std::make_unique<RawSpill>(directory,
+                                        PointLayout{cloud.hasNormals(), cloud.hasColors()});
+  raw->append(cloud);
+  raw->finish();
+  return raw;
+}
+
+TEST(Distribution, putsEveryPointInTheChunkWhoseCellHoldsItAndLoadsBoxesExactly) {
+  const PointCloud cloud = test::scanOf("torus", 30000, true, 0.3);
+  test::TempDir dir;
+  SpillDirectory spill(dir.path());
+  const auto raw = spillOf(spill, cloud);
+  const Frame frame = chooseFrame(cloud);
+  const Distribution distribution(spill, *raw, frame, 700);
+  ASSERT_GT(distribution.chunks().size(), 40u);
+
+  std::vector<int> seen(cloud.size(), 0);
+  uint64_t previousEnd = 0;
+  for (const SpillChunk& chunk : distribution.chunks()) {
+    EXPECT_EQ(chunk.begin, previousEnd);  // contiguous, in Morton order
+    previousEnd = chunk.end;
+    EXPECT_TRUE(chunk.size() <= 700 || chunk.level == Distribution::kFineLevel);
+    const LoadedPoints loaded = distribution.load(chunk);
+    ASSERT_EQ(loaded.source.size(), chunk.size());
+    for (size_t i = 0; i < loaded.source.size(); ++i) {
+      const uint32_t s = loaded.source[i];
+      ++seen[s];
+      EXPECT_EQ(loaded.cloud.positions[i], cloud.positions[s]);
+      EXPECT_EQ(loaded.cloud.normals[i], cloud.normals[s]);
+      const uint64_t key = keyOf(glm::vec3(toFrame(cloud.positions[s], frame)));
+      EXPECT_EQ(key >> (3 * (kMaxLevel - chunk.level)), chunk.key);
+    }
+  }
+  EXPECT_EQ(previousEnd, cloud.size());
+  EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](int n) { return n == 1; }));
+
+  // A box around one chunk: exactly the other points inside it, by brute force.
+  const SpillChunk& chunk = distribution.chunks()[distribution.chunks().size() / 2];
+  const glm::dvec3 lo(0.2, 0.3, 0.35), hi(0.6, 0.55, 0.7);
+  const LoadedPoints box = distribution.loadBox(lo, hi, chunk);
+  std::set<uint32_t> expected;
+  for (uint32_t s = 0; s < cloud.size(); ++s) {
+    const glm::vec3 u(toFrame(cloud.positions[s], frame));
+    const uint64_t key = keyOf(u);
+    const bool inChunk = key >> (3 * (kMaxLevel - chunk.level)) == chunk.key;
+    if (!inChunk && u.x >= lo.x && u.y >= lo.y && u.z >= lo.z && u.x <= hi.x && u.y <= hi.y &&
+        u.z <= hi.z)
+      expected.insert(s);
+  }
+  EXPECT_GT(expected.size(), 100u);
+  EXPECT_EQ(std::set<uint32_t>(box.source.begin(), box.source.end()), expected);
+  EXPECT_EQ(box.source.size(), expected.size());
+}
+
+// Convert in core and out of core (hundreds of chunks) and compare the files byte by byte.
+void expectSameFiles(const PointCloud& cloud, const BuildOptions& options, uint64_t chunkPoints,
+                     size_t minimumChunks) {
+  test::TempDir dir;
+  const nlohmann::json inCore = convertToIso(cloud, dir / "in.iso", options);
+  SpillDirectory spill(dir.path());
+  const auto raw = spillOf(spill, cloud);
+  const nlohmann::json streamed =
+      convertSpilled(*raw, spill, chunkPoints, dir / "out.iso", options);
+  EXPECT_GE(streamed["out_of_core"]["chunks"].get<size_t>(), minimumChunks);
+  if (minimumChunks > 1) {
+    EXPECT_GT(streamed["out_of_core"]["halo_points"].get<uint64_t>(), 0u);
+  }
+  EXPECT_EQ(streamed["points"], inCore["points"]);
+  EXPECT_EQ(streamed["normals"], inCore["normals"]);
+  EXPECT_EQ(streamed["octree"], inCore["octree"]);
+  EXPECT_EQ(streamed["accuracy"], inCore["accuracy"]);
+  const std::vector<std::byte> a = test::readFile(dir / "in.iso"), b = test::readFile(dir / "out.iso");
+  EXPECT_GT(a.size(), 1000u);
+  EXPECT_TRUE(a == b) << "the streamed file differs from the in-core one";
+}
+
+TEST(OutOfCore, hundredsOfChunksWriteTheSameFileAsInCoreWithoutNormals) {
+  // Orientation blocks of 256 points, so that chunks can be small: 100k points in ~300 chunks.
+  BuildOptions options;
+  options.orientBlockPoints = 256;
+  expectSameFiles(test::scanOf("torus", 100000, false, 0.3), options, 300, 200);
+}
+
+TEST(OutOfCore, sameFileWithInputNormalsSomeFlippedColorsAndDuplicates) {
+  PointCloud cloud = test::scanOf("sphere", 60000, true, 0.2, 7);
+  cloud.colors.resize(cloud.size());
+  std::mt19937 random(3);
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    cloud.colors[i] = glm::vec3(float(i % 7) / 7.0f, 0.5f, float(i % 3) / 3.0f);
+    if (random() % 50 == 0) cloud.normals[i] = -cloud.normals[i];  // to be repaired
+    if (random() % 20 == 0) cloud.normals[i] = glm::vec3(0.0f);    // to be estimated
+  }
+  for (size_t i = 0; i < 3000; ++i) {  // exact duplicates
+    cloud.positions.push_back(cloud.positions[i * 11]);
+    cloud.normals.push_back(cloud.normals[i * 11]);
+    cloud.colors.push_back(cloud.colors[i * 11]);
+  }
+  BuildOptions options;
+  options.orientBlockPoints = 256;
+  expectSameFiles(cloud, options, 400, 100);
+}
+
+TEST(OutOfCore, farOutliersChooseTheFrameAgainAsInCore) {
+  PointCloud cloud = test::scanOf("sphere", 40000, false, 0.0, 9);
+  cloud.positions.push_back(glm::dvec3(40.0, 3.0, -2.0));
+  cloud.positions.push_back(glm::dvec3(-25.0, 60.0, 1.0));
+  BuildOptions options;
+  options.orientBlockPoints = 128;
+  test::TempDir dir;
+  SpillDirectory spill(dir.path());
+  const auto raw = spillOf(spill, cloud);
+  const nlohmann::json streamed = convertSpilled(*raw, spill, 200, dir / "out.iso", options);
+  EXPECT_EQ(streamed["points"]["outliers_removed"], 2);
+  expectSameFiles(cloud, options, 200, 100);
+}
+
+TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {
+  BuildOptions options;
+  options.orient = OrientMode::Up;
+  options.orientBlockPoints = 512;
+  expectSameFiles(test::scanOf("plane", 30000, false, 0.2), options, 600, 20);
+  BuildOptions defaults;
+  expectSameFiles(test::scanOf("cube", 20000, false), defaults, 1u << 30, 1);
+}
+
+TEST(OutOfCore, theSpillDirectoryLeavesNothingBehind) {
+  test::TempDir dir;
+  {
+    SpillDirectory spill(dir.path());
+    const auto raw = spillOf(spill, test::scanOf("sphere", 1000, false));
+    EXPECT_GT(spill.bytes(), 0u);
+    EXPECT_FALSE(std::filesystem::is_empty(dir.path()));
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+}
+
+}  // namespace
+}  // namespace iso
