@@ -1,6 +1,7 @@
 // The readers on real scans from ../shared/data (skipped when that folder is absent). Expected
 // values were read from the files independently of the readers.
 #include <chrono>
+#include <glm/common.hpp>
 #include <set>
 
 #include "io/ply.h"
@@ -98,6 +99,29 @@ TEST(RealData, kittenXyzHasNormals) {
   ASSERT_TRUE(points.hasNormals());
   EXPECT_EQ(points.positions.front(), glm::dvec3(-0.0721898, -0.159749, -0.108444));
   EXPECT_EQ(points.normals.back(), glm::vec3(-0.224494f, 0.265859f, -0.937508f));
+}
+
+TEST(RealData, tableScenePcdIsBinaryCompressed) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const auto reader = openPointFile(sharedData("table_scene_lms400.pcd"));
+  EXPECT_EQ(reader->info().format, "pcd-binary-compressed");
+  EXPECT_EQ(reader->info().declaredPoints, 460400u);
+  const PointCloud points = readPointFile(sharedData("table_scene_lms400.pcd"));
+  ASSERT_EQ(points.size(), 460400u);  // no NaN points in this scan
+  EXPECT_FALSE(points.hasNormals() || points.hasColors());
+  glm::dvec3 lo(1e300), hi(-1e300);
+  for (const glm::dvec3& p : points.positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  // A table scene, a metre or a few across (a misread field would give nonsense extents).
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_LT(hi[a] - lo[a], 5.0) << a;
+    EXPECT_GT(hi[a] - lo[a], 0.5) << a;
+  }
+  // Batches of any size give the same points.
+  const PointCloud batched = test::readInBatches(sharedData("table_scene_lms400.pcd"));
+  EXPECT_TRUE(batched.positions == points.positions);
 }
 
 TEST(RealData, dragonMeshReadsQuickly) {
