@@ -69,7 +69,11 @@ class ChunkRunner {
     const double cell = std::ldexp(1.0, -chunk.level);
     const std::array<uint32_t, 3> c = mortonDecode(chunk.key);
     const glm::dvec3 cellLo(c[0] * cell, c[1] * cell, c[2] * cell);
-    double width = cell / 8.0;
+    // A first guess of the halo: the k-NN radius of points spread over twice the cell's face
+    // area, times the hops needed, with room to spare; widened when it is not enough.
+    const double radius = std::sqrt(double(options_.neighbors) * 2.0 * cell * cell /
+                                    (3.14159 * double(std::max<size_t>(own.source.size(), 1))));
+    double width = std::min(cell / 8.0, 2.0 * (hops_ + 1) * radius);
     for (;;) {
       const glm::dvec3 lo = glm::max(cellLo - width, glm::dvec3(0.0));
       const glm::dvec3 hi = glm::min(cellLo + cell + width, glm::dvec3(1.0));

@@ -190,7 +190,8 @@ int run(Options& o) {
 void addConvertCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
   CLI::App* c = app.add_subcommand(
-      "convert", "Convert point files (PLY, LAS, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
+      "convert",
+      "Convert point files (PLY, LAS, PCD, Draco, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
   c->add_option("-o,--output", o->output, "The .iso file to write")->required();
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
