@@ -54,6 +54,20 @@ void appendRange(PointSet& to, const PointSet& from, uint32_t begin, uint32_t en
   add(to.source, from.source);
 }
 
+// Room for n points (an upper bound: duplicates merge), so that appending never doubles.
+void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
+  PointSet& p = a.points;
+  p.position.reserve(n);
+  p.normal.reserve(n);  // estimated where the input has none
+  if (layout.colors) p.color.reserve(n);
+  p.weight.reserve(n);
+  p.radius.reserve(n);
+  p.key.reserve(n);
+  p.source.reserve(n);
+  a.components.of.reserve(n);
+  a.neighborSource.reserve(n * k);
+}
+
 class ChunkRunner {
  public:
   ChunkRunner(const Distribution& distribution, const Frame& frame, const BuildOptions& options,
@@ -214,6 +228,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     chunks = distribution.chunks().size();
     stage("points", distribution.size());
     done = Accumulated{};
+    reserveFor(done, distribution.size(), raw.layout(), size_t(options.neighbors));
     ChunkRunner runner(distribution, ready.frame, options, findingOutliers, raw.layout().normals);
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (done.outlierSources.empty()) break;

@@ -227,60 +227,56 @@ Distribution::Distribution(SpillDirectory& directory, const RawSpill& raw, const
   };
   plan(plan, 0, 0);
 
-  // Scatter in input order, through one buffer per chunk (64 MiB in all): a full buffer is
-  // ordered by fine cell (stably) and each cell's run written at that cell's cursor. Cells are
-  // then contiguous on disk, input order within each.
+  // Scatter in input order into each chunk's range, through one buffer per chunk (64 MiB in
+  // all, so that writes stay large whatever the input order); then place each chunk's records by
+  // fine cell, in memory, at the cells' offsets (input order within a cell).
   std::vector<uint32_t> chunkOf(kCells, 0);
   for (uint32_t c = 0; c < chunks_.size(); ++c) {
     const int shift = 3 * (kFineLevel - chunks_[c].level);
     std::fill(chunkOf.begin() + ptrdiff_t(chunks_[c].key << shift),
               chunkOf.begin() + ptrdiff_t((chunks_[c].key + 1) << shift), c);
   }
-  std::vector<uint64_t> cursor(start.begin(), start.end() - 1);
   const size_t perChunk = std::clamp<size_t>((size_t{64} << 20) / recordBytes / chunks_.size(),
                                              64, size_t{1} << 16);
-  struct Buffer {
-    std::vector<std::byte> records;
-    std::vector<uint32_t> cells;
-  };
-  std::vector<Buffer> buffers(chunks_.size());
-  std::vector<uint32_t> order;
-  std::vector<std::byte> run;
-  const auto flush = [&](Buffer& buffer) {
-    order.resize(buffer.cells.size());
-    std::iota(order.begin(), order.end(), 0u);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](uint32_t a, uint32_t b) { return buffer.cells[a] < buffer.cells[b]; });
-    for (size_t i = 0; i < order.size();) {
-      const uint32_t cell = buffer.cells[order[i]];
-      run.clear();
-      for (; i < order.size() && buffer.cells[order[i]] == cell; ++i) {
-        const std::byte* r = buffer.records.data() + size_t(order[i]) * recordBytes;
-        run.insert(run.end(), r, r + recordBytes);
-      }
-      file_->writeAt(cursor[cell], run);
-      cursor[cell] += run.size() / recordBytes;
-    }
-    buffer.records.clear();
-    buffer.cells.clear();
+  std::vector<std::vector<std::byte>> buffers(chunks_.size());
+  std::vector<uint64_t> fill(chunks_.size());
+  for (size_t c = 0; c < chunks_.size(); ++c) fill[c] = chunks_[c].begin;
+  const auto flush = [&](size_t c) {
+    file_->writeAt(fill[c], buffers[c]);
+    fill[c] += buffers[c].size() / recordBytes;
+    buffers[c].clear();
   };
   raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
     std::vector<std::byte> record(recordBytes);
     for (size_t i = 0; i < batch.size(); ++i) {
       if (!kept(first + i)) continue;
-      const auto cell = uint32_t(fineCellOf(batch.positions[i], frame));
-      Buffer& buffer = buffers[chunkOf[cell]];
+      const uint32_t c = chunkOf[fineCellOf(batch.positions[i], frame)];
       encodeRaw(batch, i, layout_, record.data());
       const auto index = uint32_t(first + i);
       std::memcpy(record.data() + rawBytes, &index, sizeof index);
-      buffer.records.insert(buffer.records.end(), record.begin(), record.end());
-      buffer.cells.push_back(cell);
-      if (buffer.cells.size() >= perChunk) flush(buffer);
+      buffers[c].insert(buffers[c].end(), record.begin(), record.end());
+      if (buffers[c].size() >= perChunk * recordBytes) flush(c);
     }
     progressAdvance(batch.size());
   });
-  for (Buffer& buffer : buffers)
-    if (!buffer.cells.empty()) flush(buffer);
+  for (size_t c = 0; c < chunks_.size(); ++c)
+    if (!buffers[c].empty()) flush(c);
+  buffers = {};
+  chunkOf = {};
+
+  std::vector<std::byte> records, placed;
+  for (const SpillChunk& chunk : chunks_) {
+    file_->read(chunk.begin, chunk.size(), records);
+    placed.resize(records.size());
+    for (uint64_t i = 0; i < chunk.size(); ++i) {
+      const std::byte* r = records.data() + i * recordBytes;
+      glm::dvec3 p;
+      std::memcpy(&p, r, 24);
+      const uint64_t slot = start[fineCellOf(p, frame)]++ - chunk.begin;
+      std::memcpy(placed.data() + slot * recordBytes, r, recordBytes);
+    }
+    file_->writeAt(chunk.begin, placed);
+  }
 }
 
 void Distribution::decode(const std::vector<std::byte>& records, LoadedPoints& out,
