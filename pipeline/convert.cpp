@@ -240,40 +240,42 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   return ready;
 }
 
-}  // namespace
-
-nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
-                            const BuildOptions& options, const ConvertSource& source) {
+// The conversion around its point stages (`prepare`, in or out of core): options checked, stages
+// timed, then the octree stages and the file.
+nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& output,
+                           const BuildOptions& options, const ConvertSource& source,
+                           const std::function<ReadyPoints(StageTimer&)>& prepare) {
   validate(options);
-  if (input.size() == 0) throw ConvertError("no points to convert");
+  if (inputPoints == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
   nlohmann::json report;
   report["stages"] = nlohmann::json::array();
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
-  ReadyPoints ready = prepareInCore(input, options, timer);
-  return buildAndWrite(ready, input.size(), output, options, source, timer, report, started);
-}
-
-nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
-                              uint64_t maxChunkPoints, const std::filesystem::path& output,
-                              const BuildOptions& options, const ConvertSource& source) {
-  validate(options);
-  if (raw.size() == 0) throw ConvertError("no points to convert");
-  const auto started = Clock::now();
-  nlohmann::json report;
-  report["stages"] = nlohmann::json::array();
-  StageTimer timer(report["stages"], source);
-  if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
-  ReadyPoints ready = prepareOutOfCore(
-      raw, directory, options, maxChunkPoints,
-      [&](const std::string& stage, uint64_t total) { timer.next(stage, total); });
+  ReadyPoints ready = prepare(timer);
   if (ready.points.size() < 3)
     throw ConvertError("a surface needs at least 3 distinct points; the input has " +
                        std::to_string(ready.points.size()));
   if (isCollinear(ready.points))
     throw ConvertError("all points lie on one line: they define no surface");
-  return buildAndWrite(ready, raw.size(), output, options, source, timer, report, started);
+  return buildAndWrite(ready, inputPoints, output, options, source, timer, report, started);
+}
+
+}  // namespace
+
+nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
+                            const BuildOptions& options, const ConvertSource& source) {
+  return convertWith(input.size(), output, options, source,
+                     [&](StageTimer& timer) { return prepareInCore(input, options, timer); });
+}
+
+nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
+                              uint64_t maxChunkPoints, const std::filesystem::path& output,
+                              const BuildOptions& options, const ConvertSource& source) {
+  return convertWith(raw.size(), output, options, source, [&](StageTimer& timer) {
+    return prepareOutOfCore(raw, directory, options, maxChunkPoints,
+                            [&](const std::string& stage, uint64_t total) { timer.next(stage, total); });
+  });
 }
 
 namespace {

@@ -9,6 +9,7 @@
 #include <cstring>
 
 #include "io/color_table.h"
+#include "io/little_endian.h"
 #include "io/point_readers.h"
 #include "iso/error.h"
 
@@ -46,14 +47,7 @@ constexpr size_t kColorProbeBytes = size_t{16} << 20;
 
 template <typename T>
 T load(const std::byte* p) {
-  T value;
-  std::memcpy(&value, p, sizeof(T));
-  if constexpr (std::endian::native == std::endian::big) {
-    auto bytes = std::bit_cast<std::array<std::byte, sizeof(T)>>(value);
-    std::reverse(bytes.begin(), bytes.end());
-    value = std::bit_cast<T>(bytes);
-  }
-  return value;
+  return loadLittleEndian<T>(p);
 }
 
 glm::dvec3 loadVector(const std::byte* p) {

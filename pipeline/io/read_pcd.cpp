@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "io/color_table.h"
+#include "io/little_endian.h"
 #include "io/narrow.h"
 #include "io/point_readers.h"
 #include "io/text_fields.h"
@@ -304,14 +305,7 @@ uint64_t unitsOf(const PcdField& field, PcdData data) {
 
 template <typename T>
 T load(const std::byte* p) {
-  T value;
-  std::memcpy(&value, p, sizeof(T));
-  if constexpr (std::endian::native == std::endian::big) {
-    auto bytes = std::bit_cast<std::array<std::byte, sizeof(T)>>(value);
-    std::reverse(bytes.begin(), bytes.end());
-    value = std::bit_cast<T>(bytes);
-  }
-  return value;
+  return loadLittleEndian<T>(p);
 }
 
 // Call visit with a value of the C++ type of `type`, so that loops are compiled per type.
