@@ -238,10 +238,16 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
       << "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
          "property float z\nend_header\n";
   test::writeFile(dir_ / "scan.laz", std::vector<std::byte>(400, std::byte{0}));
-  const std::vector<std::pair<std::string, std::string>> cases = {{"missing.ply", "missing.ply"},
-                                                                  {"cut.ply", "file ends after"},
-                                                                  {"empty.ply", "no points"},
-                                                                  {"scan.laz", "LAZ"}};
+  // Inputs that define no surface: one point, one point repeated, two points, a line.
+  std::ofstream(dir_ / "one.xyz") << "1 2 3\n";
+  std::ofstream(dir_ / "same.xyz") << "1 2 3\n1 2 3\n1 2 3\n1 2 3\n";
+  std::ofstream(dir_ / "two.xyz") << "1 2 3\n4 5 6\n";
+  std::ofstream(dir_ / "line.xyz") << "0 0 0\n1 1 1\n2 2 2\n3 3 3\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"missing.ply", "missing.ply"}, {"cut.ply", "file ends after"},
+      {"empty.ply", "no points"},     {"scan.laz", "LAZ"},
+      {"one.xyz", "at least 3 distinct points"}, {"same.xyz", "the input has 1"},
+      {"two.xyz", "the input has 2"}, {"line.xyz", "one line"}};
   for (const auto& [input, expected] : cases) {
     const auto run =
         runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));

@@ -139,6 +139,34 @@ TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {
   expectSameFiles(test::scanOf("cube", 20000, false), defaults, 1u << 30, 1);
 }
 
+TEST(OutOfCore, tinyInputsGiveTheSameFileOrTheSameError) {
+  std::mt19937 random(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (size_t n : {1, 2, 3, 4, 7, 12, 40}) {
+    PointCloud cloud;
+    for (size_t i = 0; i < n; ++i) cloud.positions.push_back({u(random), u(random), 0.1 * u(random)});
+    test::TempDir dir;
+    std::string inCoreError, streamedError;
+    try {
+      convertToIso(cloud, dir / "in.iso", {});
+    } catch (const ConvertError& e) {
+      inCoreError = e.what();
+    }
+    SpillDirectory spill(dir.path());
+    const auto raw = spillOf(spill, cloud);
+    try {
+      convertSpilled(*raw, spill, 1u << 20, dir / "out.iso", {});
+    } catch (const ConvertError& e) {
+      streamedError = e.what();
+    }
+    EXPECT_EQ(inCoreError, streamedError) << n << " points";
+    EXPECT_EQ(n < 3, !inCoreError.empty()) << n << " points: " << inCoreError;
+    if (inCoreError.empty()) {
+      EXPECT_TRUE(test::readFile(dir / "in.iso") == test::readFile(dir / "out.iso")) << n;
+    }
+  }
+}
+
 TEST(OutOfCore, theSpillDirectoryLeavesNothingBehind) {
   test::TempDir dir;
   {
