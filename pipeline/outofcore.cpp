@@ -122,12 +122,12 @@ class ChunkRunner {
         points.key.begin());
     const PointIndex index(points.position);
     Neighbors neighbors = findNeighbors(points, index, options_.neighbors);
+    if (!everything && !isExact(points, neighbors, ownBegin, ownEnd, lo, hi)) return false;
     if (neighbors.k == 0) {  // one distinct point in the whole input: no surface (said later)
       appendRange(out.points, points, ownBegin, ownEnd);
       out.components.of.insert(out.components.of.end(), ownEnd - ownBegin, kNoNode);
       return true;
     }
-    if (!everything && !isExact(points, neighbors, ownBegin, ownEnd, lo, hi)) return false;
 
     out.maxLoaded = std::max<uint64_t>(out.maxLoaded, points.size());
     out.haloPoints += points.size() - (ownEnd - ownBegin);

@@ -170,7 +170,8 @@ std::string interruptWhileWriting(const std::filesystem::path& input,
   if (posix_spawn(&child, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return "";
   std::string temporary;
   for (int status = 0; temporary.empty();) {
-    const std::string prefix = "." + output.filename().string() + ".";
+    const std::string prefix =
+        "." + output.filename().string() + "." + std::to_string(child) + "-";
     for (const auto& entry : std::filesystem::directory_iterator(output.parent_path()))
       if (entry.path().filename().string().starts_with(prefix))
         temporary = entry.path().filename().string();

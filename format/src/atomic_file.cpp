@@ -37,9 +37,10 @@ AtomicFile::AtomicFile(std::filesystem::path path)
       temporary_(temporaryPathFor(path_)),
       buffer_(new std::byte[kBufferSize]) {
   if (path_.filename().empty()) fail("invalid output path", EISDIR);
+  // Registered before it exists: an interrupt between the two would otherwise leave it behind.
+  registration_ = TemporaryRegistration(temporary_);
   fd_ = ::open(temporary_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd_ < 0) fail("cannot create " + temporary_.string(), errno);
-  registration_ = TemporaryRegistration(temporary_);
 }
 
 AtomicFile::~AtomicFile() { discard(); }
