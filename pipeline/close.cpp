@@ -133,6 +133,7 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
   }
   // Splits left corners of leaves that are leaves no more: sample the final leaves afresh (every
   // value is in the cache now), then snap.
+  closure.corners = CornerField{};  // not two fields at once
   closure.corners = sampleLeafCorners(tree, sdf, cache);
   closure.hanging = findHangingCorners(tree, closure.corners);
   snapHangingCorners(closure.corners, closure.hanging);

@@ -300,6 +300,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, sdf, cornerCache);
+  cornerCache = CornerCache(0);  // every value is in the corner field now
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.next("lod");
