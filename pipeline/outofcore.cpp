@@ -28,14 +28,21 @@ bool ballInside(const glm::vec3& p, float radius, const glm::dvec3& lo, const gl
   return true;
 }
 
+// What one chunk added to the accumulated results, so that it can be reused.
+struct ChunkRecord {
+  size_t pointBegin = 0, pointEnd = 0;          // in Accumulated::points
+  uint32_t componentBegin = 0, componentEnd = 0;
+  size_t duplicates = 0, blocks = 0;
+  NormalStats normals;
+  glm::dvec3 lo{0.0}, hi{0.0};  // the box it was loaded with
+};
+
 struct Accumulated {
   PointSet points;
+  std::vector<float> firstDistance;      // per point: distance to its nearest neighbour
   std::vector<uint32_t> neighborSource;  // k per point: input index of each neighbour
   OrientationComponents components;      // `of` per point in `points`
-  size_t blocks = 0;
-  double spacingSum = 0.0;
-  size_t duplicates = 0;
-  NormalStats normals;
+  std::vector<ChunkRecord> chunks;
   std::vector<uint32_t> outlierSources;
   uint64_t haloPoints = 0, widenings = 0, maxLoaded = 0;
 };
@@ -65,21 +72,69 @@ void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
   p.key.reserve(n);
   p.source.reserve(n);
   a.components.of.reserve(n);
+  a.firstDistance.reserve(n);
   a.neighborSource.reserve(n * k);
+}
+
+// Append the results of chunk c of `from` to `to`, its components renumbered.
+void copyChunk(const Accumulated& from, size_t c, Accumulated& to, size_t k) {
+  ChunkRecord record = from.chunks[c];
+  const auto firstComponent = uint32_t(to.components.anchored.size());
+  appendRange(to.points, from.points, uint32_t(record.pointBegin), uint32_t(record.pointEnd));
+  const auto copy = [](auto& dst, const auto& src, size_t begin, size_t end) {
+    dst.insert(dst.end(), src.begin() + ptrdiff_t(begin), src.begin() + ptrdiff_t(end));
+  };
+  copy(to.firstDistance, from.firstDistance, record.pointBegin, record.pointEnd);
+  copy(to.neighborSource, from.neighborSource, record.pointBegin * k, record.pointEnd * k);
+  for (size_t i = record.pointBegin; i < record.pointEnd; ++i) {
+    const uint32_t of = from.components.of[i];
+    to.components.of.push_back(of == kNoNode ? kNoNode
+                                             : of - record.componentBegin + firstComponent);
+  }
+  copy(to.components.anchored, from.components.anchored, record.componentBegin,
+       record.componentEnd);
+  copy(to.components.seedHeight, from.components.seedHeight, record.componentBegin,
+       record.componentEnd);
+  const size_t points = record.pointEnd - record.pointBegin;
+  record.pointBegin = to.points.size() - points;
+  record.pointEnd = to.points.size();
+  record.componentEnd = uint32_t(to.components.anchored.size());
+  record.componentBegin = firstComponent;
+  to.chunks.push_back(record);
+}
+
+// Drop the points that `keep` leaves out (far outliers found earlier).
+void dropExcluded(LoadedPoints& loaded, const std::vector<uint8_t>* keep) {
+  if (keep == nullptr) return;
+  size_t out = 0;
+  for (size_t i = 0; i < loaded.source.size(); ++i) {
+    if (!(*keep)[loaded.source[i]]) continue;
+    loaded.source[out] = loaded.source[i];
+    loaded.cloud.positions[out] = loaded.cloud.positions[i];
+    if (loaded.cloud.hasNormals()) loaded.cloud.normals[out] = loaded.cloud.normals[i];
+    if (loaded.cloud.hasColors()) loaded.cloud.colors[out] = loaded.cloud.colors[i];
+    ++out;
+  }
+  loaded.source.resize(out);
+  loaded.cloud.positions.resize(out);
+  if (loaded.cloud.hasNormals()) loaded.cloud.normals.resize(out);
+  if (loaded.cloud.hasColors()) loaded.cloud.colors.resize(out);
 }
 
 class ChunkRunner {
  public:
   ChunkRunner(const Distribution& distribution, const Frame& frame, const BuildOptions& options,
-              bool findingOutliers, bool inputNormals)
+              bool findingOutliers, bool inputNormals, const std::vector<uint8_t>* keep = nullptr)
       : distribution_(distribution),
         frame_(frame),
         options_(options),
         findingOutliers_(findingOutliers),
-        hops_(inputNormals ? 4 : 1) {}
+        hops_(inputNormals ? 4 : 1),
+        keep_(keep) {}
 
   void run(const SpillChunk& chunk, Accumulated& out) {
     LoadedPoints own = distribution_.load(chunk);
+    dropExcluded(own, keep_);
     const double cell = std::ldexp(1.0, -chunk.level);
     const std::array<uint32_t, 3> c = mortonDecode(chunk.key);
     const glm::dvec3 cellLo(c[0] * cell, c[1] * cell, c[2] * cell);
@@ -93,6 +148,7 @@ class ChunkRunner {
       const glm::dvec3 hi = glm::min(cellLo + cell + width, glm::dvec3(1.0));
       const bool everything = lo == glm::dvec3(0.0) && hi == glm::dvec3(1.0);
       LoadedPoints halo = distribution_.loadBox(lo, hi, chunk);
+      dropExcluded(halo, keep_);
       if (tryChunk(chunk, own, halo, lo, hi, everything, out)) return;
       ++out.widenings;
       width *= 2.0;
@@ -123,15 +179,23 @@ class ChunkRunner {
     const PointIndex index(points.position);
     Neighbors neighbors = findNeighbors(points, index, options_.neighbors);
     if (!everything && !isExact(points, neighbors, ownBegin, ownEnd, lo, hi)) return false;
+    ChunkRecord record;
+    record.pointBegin = out.points.size();
+    record.componentBegin = record.componentEnd = uint32_t(out.components.anchored.size());
+    record.lo = lo;
+    record.hi = hi;
     if (neighbors.k == 0) {  // one distinct point in the whole input: no surface (said later)
       appendRange(out.points, points, ownBegin, ownEnd);
+      out.firstDistance.insert(out.firstDistance.end(), ownEnd - ownBegin, 0.0f);
       out.components.of.insert(out.components.of.end(), ownEnd - ownBegin, kNoNode);
+      record.pointEnd = out.points.size();
+      out.chunks.push_back(record);
       return true;
     }
 
     out.maxLoaded = std::max<uint64_t>(out.maxLoaded, points.size());
     out.haloPoints += points.size() - (ownEnd - ownBegin);
-    out.duplicates += own.source.size() - (ownEnd - ownBegin);
+    record.duplicates = own.source.size() - (ownEnd - ownBegin);
     const size_t k = size_t(neighbors.k);
     if (findingOutliers_) {
       const std::vector<uint8_t> flagged = findOutliers(points, neighbors);
@@ -139,14 +203,16 @@ class ChunkRunner {
         if (flagged[i]) out.outlierSources.push_back(points.source[i]);
     }
     estimateRadii(points, neighbors);
-    for (uint32_t i = ownBegin; i < ownEnd; ++i) out.spacingSum += neighbors.distance[i * k];
+    for (uint32_t i = ownBegin; i < ownEnd; ++i)
+      out.firstDistance.push_back(neighbors.distance[i * k]);
     std::vector<uint8_t> wasEstimated(points.size(), 0);
     for (size_t i = 0; i < points.size(); ++i)
       wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
-    out.normals.estimated += size_t(std::count(wasEstimated.begin() + ownBegin,
-                                               wasEstimated.begin() + ownEnd, uint8_t{1}));
+    record.normals.estimated = size_t(std::count(wasEstimated.begin() + ownBegin,
+                                                 wasEstimated.begin() + ownEnd, uint8_t{1}));
     estimateNormals(points, neighbors);
-    out.normals.flipped += repairFlippedNormals(points, neighbors, wasEstimated, ownBegin, ownEnd);
+    record.normals.flipped =
+        repairFlippedNormals(points, neighbors, wasEstimated, ownBegin, ownEnd);
     OrientationComponents local;
     local.of.assign(points.size(), kNoNode);
     if (options_.orient == OrientMode::Up) {
@@ -159,7 +225,7 @@ class ChunkRunner {
       propagateInBlocks(points, neighbors, wasEstimated, blocks, local);
       local.anchored.swap(out.components.anchored);
       local.seedHeight.swap(out.components.seedHeight);
-      out.blocks += blocks.size();
+      record.blocks = blocks.size();
     }
 
     appendRange(out.points, points, ownBegin, ownEnd);
@@ -168,6 +234,9 @@ class ChunkRunner {
     for (uint32_t i = ownBegin; i < ownEnd; ++i)
       for (size_t e = 0; e < k; ++e)
         out.neighborSource.push_back(points.source[neighbors.index[i * k + e]]);
+    record.pointEnd = out.points.size();
+    record.componentEnd = uint32_t(out.components.anchored.size());
+    out.chunks.push_back(record);
     progressAdvance(own.source.size());
     return true;
   }
@@ -207,6 +276,7 @@ class ChunkRunner {
   const BuildOptions& options_;
   bool findingOutliers_;
   int hops_;
+  const std::vector<uint8_t>* keep_;
 };
 
 }  // namespace
@@ -224,7 +294,8 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   bool findingOutliers = options.removeOutliers;
   uint64_t peakTemporary = 0;
   Accumulated done;
-  size_t chunks = 0;
+  size_t chunks = 0, preparedAgain = 0;
+  const size_t k = size_t(options.neighbors);
   for (;;) {
     stage("distribute", 2 * raw.size());
     const Distribution distribution(directory, raw, ready.frame, maxChunkPoints,
@@ -233,52 +304,91 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     chunks = distribution.chunks().size();
     stage("points", distribution.size());
     done = Accumulated{};
-    reserveFor(done, distribution.size(), raw.layout(), size_t(options.neighbors));
+    reserveFor(done, distribution.size(), raw.layout(), k);
     ChunkRunner runner(distribution, ready.frame, options, findingOutliers, raw.layout().normals);
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (done.outlierSources.empty()) break;
-    // Far outliers waste the frame's precision: choose it again without them, as in core.
+    // Without the outliers the points are prepared again, as in core: with a new frame when they
+    // held the bounds (far outliers waste its precision), else only the chunks whose boxes held
+    // one (the others would load the same points and give the same results).
     ready.outliers = done.outlierSources.size();
     keep.assign(raw.size(), 1);
     for (uint32_t s : done.outlierSources) keep[s] = 0;
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    std::vector<glm::vec3> outliers;
     raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
-      for (size_t i = 0; i < batch.size(); ++i)
-        if (keep[first + i]) {
-          lo = glm::min(lo, batch.positions[i]);
-          hi = glm::max(hi, batch.positions[i]);
+      for (size_t i = 0; i < batch.size(); ++i) {
+        if (!keep[first + i]) {
+          outliers.push_back(glm::vec3(toFrame(batch.positions[i], ready.frame)));
+          continue;
         }
+        lo = glm::min(lo, batch.positions[i]);
+        hi = glm::max(hi, batch.positions[i]);
+      }
     });
-    ready.frame = chooseFrame(lo, hi);
     findingOutliers = false;
+    const Frame frame = chooseFrame(lo, hi);
+    if (frame.origin != ready.frame.origin || frame.size != ready.frame.size) {
+      ready.frame = frame;
+      continue;
+    }
+    stage("points", distribution.size());
+    Accumulated again;
+    reserveFor(again, distribution.size(), raw.layout(), k);
+    ChunkRunner rerun(distribution, ready.frame, options, false, raw.layout().normals, &keep);
+    for (size_t c = 0; c < distribution.chunks().size(); ++c) {
+      const ChunkRecord& record = done.chunks[c];
+      const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
+        return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
+               u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
+      });
+      if (touched) {
+        rerun.run(distribution.chunks()[c], again);
+        ++preparedAgain;
+      } else {
+        copyChunk(done, c, again, k);
+        progressAdvance(distribution.chunks()[c].size());
+      }
+    }
+    again.haloPoints += done.haloPoints;
+    again.widenings += done.widenings;
+    again.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
+    done = std::move(again);
+    break;
+  }
+  size_t blocks = 0;
+  for (const ChunkRecord& record : done.chunks) {
+    blocks += record.blocks;
+    ready.duplicates += record.duplicates;
+    ready.normals.estimated += record.normals.estimated;
+    ready.normals.flipped += record.normals.flipped;
   }
 
   stage("orient", done.points.size());
   PointSet& points = done.points;
   const size_t n = points.size();
-  const size_t k = n > 0 ? done.neighborSource.size() / n : 0;
   {
     // The neighbours as indices into the assembled points.
     std::vector<uint32_t> ordinal(raw.size(), kNoNode);
     for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
     Neighbors neighbors;
-    neighbors.k = int(k);
+    neighbors.k = int(n > 0 ? done.neighborSource.size() / n : 0);
     neighbors.index.resize(done.neighborSource.size());
     for (size_t e = 0; e < done.neighborSource.size(); ++e)
       neighbors.index[e] = ordinal[done.neighborSource[e]];
     done.neighborSource = {};
-    if (options.orient != OrientMode::Up && done.blocks > 1 && done.normals.estimated > 0)
-      alignComponents(points.normal, done.components, neighbors.index, k);
+    if (options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0)
+      alignComponents(points.normal, done.components, neighbors.index, size_t(neighbors.k));
     // Roughness compares a point's normal with its neighbours': after they are all oriented.
     estimateRoughness(points, neighbors);
   }
   progressAdvance(n);
 
-  ready.radii.meanSpacing = n > 0 ? done.spacingSum / double(n) : 0.0;
+  double spacingSum = 0.0;  // in key order, the additions of the in-core sum
+  for (const float d : done.firstDistance) spacingSum += d;
+  ready.radii.meanSpacing = n > 0 ? spacingSum / double(n) : 0.0;
   std::vector<float> radii = points.radius;
   ready.radii.medianRadius = medianOf(radii);
-  ready.normals = done.normals;
-  ready.duplicates = done.duplicates;
   ready.points = std::move(points);
   ready.index = std::make_unique<PointIndex>(ready.points.position);
 
@@ -297,6 +407,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                      {"largest_loaded_points", done.maxLoaded},
                      {"halo_points", done.haloPoints},
                      {"halo_widenings", done.widenings},
+                     {"chunks_prepared_again", preparedAgain},
                      {"temporary_bytes_peak", peakTemporary}};
   return ready;
 }

@@ -130,6 +130,25 @@ TEST(OutOfCore, farOutliersChooseTheFrameAgainAsInCore) {
   expectSameFiles(cloud, options, 200, 100);
 }
 
+TEST(OutOfCore, outliersInsideTheBoundsPrepareOnlyTheChunksAroundThemAgain) {
+  // Points at the centre of a sphere are outliers that do not hold the bounds: the frame stays,
+  // and only the chunks whose boxes held them run again; the file is still the in-core one.
+  PointCloud cloud = test::scanOf("sphere", 40000, false, 0.0, 11);
+  cloud.positions.push_back(glm::dvec3(0.01, 0.0, 0.0));
+  cloud.positions.push_back(glm::dvec3(-0.2, 0.3, 0.1));
+  BuildOptions options;
+  options.orientBlockPoints = 128;
+  test::TempDir dir;
+  SpillDirectory spill(dir.path());
+  const auto raw = spillOf(spill, cloud);
+  const nlohmann::json streamed = convertSpilled(*raw, spill, 200, dir / "out.iso", options);
+  EXPECT_EQ(streamed["points"]["outliers_removed"], 2);
+  const size_t again = streamed["out_of_core"]["chunks_prepared_again"].get<size_t>();
+  EXPECT_GE(again, 1u);
+  EXPECT_LT(again, streamed["out_of_core"]["chunks"].get<size_t>() / 2);
+  expectSameFiles(cloud, options, 200, 100);
+}
+
 TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {
   BuildOptions options;
   options.orient = OrientMode::Up;
