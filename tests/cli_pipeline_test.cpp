@@ -34,6 +34,8 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.out.find("bytes/leaf"), std::string::npos) << run.out;
   EXPECT_NE(run.out.find("accuracy"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("streamed: 1 chunk of at most"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("temporary disk"), std::string::npos) << run.out;
   EXPECT_NE(run.err.find("octree"), std::string::npos) << run.err;  // progress per stage
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "sphere.iso")).exitCode, 0);
 

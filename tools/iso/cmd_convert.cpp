@@ -64,9 +64,20 @@ void printReport(const nlohmann::json& r, const Options& o) {
   fmt::print("  leaves per level:{} ({} passive)\n", perLevel,
              withSeparators(r["octree"]["passive_leaves"].get<uint64_t>()));
   const auto& f = r["file"];
-  fmt::print("  size: {} in {} chunks: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
-             humanBytes(f["bytes_without_metadata"].get<uint64_t>()), f["chunks"].get<uint64_t>(),
+  const uint64_t fileChunks = f["chunks"].get<uint64_t>();
+  fmt::print("  size: {} in {} chunk{}: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
+             humanBytes(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
+             fileChunks == 1 ? "" : "s",
              f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
+  if (r.contains("out_of_core")) {
+    const auto& c = r["out_of_core"];
+    const uint64_t chunks = c["chunks"].get<uint64_t>();
+    fmt::print("  streamed: {} chunk{} of at most {} points, halos {} points, temporary disk {}\n",
+               withSeparators(chunks), chunks == 1 ? "" : "s",
+               withSeparators(c["max_chunk_points"].get<uint64_t>()),
+               withSeparators(c["halo_points"].get<uint64_t>()),
+               humanBytes(c["temporary_bytes_peak"].get<uint64_t>()));
+  }
   const auto& a = r["accuracy"];
   fmt::print(
       "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
