@@ -14,7 +14,7 @@ std::unique_ptr<PointReader> makePlyReader(InputStream in, const ReadOptions& op
 std::unique_ptr<PointReader> makeLasReader(InputStream in);
 std::unique_ptr<PointReader> makeTextReader(InputStream in, const ReadOptions& options);
 std::unique_ptr<PointReader> makePcdReader(InputStream in);
-// Draco decodes whole files: the reader takes the path and decodes on opening.
+// Draco decodes whole buffers: the reader reads the stream and decodes it on opening.
 std::unique_ptr<PointReader> makeDracoReader(InputStream in);
 
 // The extension in lower case with its dot, looking through a final ".gz" ("a.PLY.gz" -> ".ply").

@@ -1,6 +1,7 @@
 // Readers of point files: PLY (ASCII, binary little and big endian), XYZ-like text with a column
-// spec, LAS 1.2–1.4. Gzip-compressed files (.gz) are read transparently. Readers stream: they
-// hand out points in batches, so memory does not grow with the file.
+// spec, LAS 1.0–1.4, PCD (ascii, binary, binary_compressed) and Draco. Gzip-compressed files (.gz)
+// are read transparently. Readers stream: they hand out points in batches, so memory does not grow
+// with the file (except Draco, which decodes a whole file at once).
 //
 // Errors (unreadable, malformed, truncated, unsupported files) throw iso::FileError naming the file
 // and the byte offset (binary formats) or line (text formats). Points with a NaN or infinite
@@ -55,8 +56,9 @@ class PointReader {
   virtual const ReadStats& stats() const = 0;
 };
 
-// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF") and then by
-// extension (.xyz, .txt, .pts, .csv). LAZ files are refused with a clear message.
+// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF", "DRACO")
+// and then by extension (.pcd, .xyz, .txt, .pts, .csv). LAZ files are refused with a clear
+// message.
 std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
                                            const ReadOptions& options = {});
 
