@@ -263,6 +263,38 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
     EXPECT_EQ(entry.path().extension() == ".isotmp", false) << entry.path();
 }
 
+TEST_F(CliPipeline, aFullDiskIsAClearErrorThatLeavesNothingBehind) {
+  // A 1 MiB file system for the temporary files, then for the output (needs mount: as root).
+  const auto small = dir_ / "small";
+  std::filesystem::create_directory(small);
+  if (std::system(("mount -t tmpfs -o size=1m tmpfs " + quoted(small) + " 2>/dev/null").c_str()) !=
+      0)
+    GTEST_SKIP() << "cannot mount a small file system here (not root)";
+  struct Unmount {
+    std::string path;
+    ~Unmount() { (void)std::system(("umount " + path).c_str()); }
+  } unmount{quoted(small)};
+  ASSERT_EQ(runIso("gen torus -n 100000 -o " + quoted(dir_ / "t.ply")).exitCode, 0);
+  auto run = runIso("convert -q " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso") +
+                    " --tmp " + quoted(small));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("No space left on device"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("temporary file"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "t.iso"));
+  EXPECT_TRUE(std::filesystem::is_empty(small));
+  // The output on a full file system: an old file there stays as it was.
+  std::ofstream(small / "t.iso") << "old";
+  std::ofstream(small / "filler") << std::string((1u << 20) - (16u << 10), 'x');
+  run = runIso("convert -q -f " + quoted(dir_ / "t.ply") + " -o " + quoted(small / "t.iso") +
+               " --tmp " + quoted(dir_.path()));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("No space left on device"), std::string::npos) << run.err;
+  EXPECT_EQ(test::slurp(small / "t.iso"), "old");
+  size_t entries = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(small)) entries += entry.exists();
+  EXPECT_EQ(entries, 2u);  // the old file and the filler, nothing else
+}
+
 TEST_F(CliPipeline, nonFinitePointsAreDroppedAndCounted) {
   std::ofstream(dir_ / "nan.xyz")
       << "0 0 0\n1 0 0\nnan 1 0\n0 1 0\ninf 0 0\n1 1 0.01\n0.5 0.5 0.02\n0.2 0.7 0\n";
