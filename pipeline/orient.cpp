@@ -2,8 +2,9 @@
 // sign; they are oriented by propagation along a minimum spanning tree of the k-NN graph with
 // edge cost 1 - |n_i·n_j| (Hoppe et al. 1992), starting from points whose input normal is known,
 // else from the highest point of each connected part (whose normal points up), or all upward
-// (--orient up, aerial scans). Input normals that contradict nearly all of their neighbours are
-// flipped first.
+// (--orient up, aerial scans). The tree grows inside orientation blocks; whole components are
+// then flipped to agree across blocks. Input normals that contradict nearly all of their
+// neighbours are flipped first.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -115,7 +116,7 @@ class ParityForest {
 // part, whose normal is turned up. Component ids are from `nextComponent`, in block order.
 struct BlockComponents {
   std::vector<uint8_t> anchored;  // per component of the block: holds input normals
-  std::vector<float> seedHeight;  // per component: height of its seed (its highest point)
+  std::vector<float> seedVote;  // per component: its points times its seed normal's z
 };
 
 BlockComponents propagateInBlock(PointSet& points, const Graph& g,
@@ -125,8 +126,10 @@ BlockComponents propagateInBlock(PointSet& points, const Graph& g,
   BlockComponents found;
   BucketQueue queue;
   const auto inBlock = [&](uint32_t j) { return j >= begin && j < end; };
+  size_t reached = 0;
   const auto visit = [&](uint32_t i, uint32_t c) {
     component[i] = c;
+    ++reached;
     for (uint32_t e = g.offset[i]; e < g.offset[i + 1]; ++e) {
       const uint32_t j = g.target[e];
       if (inBlock(j) && component[j] == kNoNode)
@@ -152,7 +155,7 @@ BlockComponents propagateInBlock(PointSet& points, const Graph& g,
   if (anyAnchor) {
     drain(next++);
     found.anchored.push_back(1);
-    found.seedHeight.push_back(std::numeric_limits<float>::lowest());
+    found.seedVote.push_back(0.0f);  // fixed: takes no vote
   }
   std::vector<uint32_t> byHeight(end - begin);
   std::iota(byHeight.begin(), byHeight.end(), begin);
@@ -163,10 +166,11 @@ BlockComponents propagateInBlock(PointSet& points, const Graph& g,
     if (component[seed] != kNoNode) continue;
     if (points.normal[seed].z < 0.0f)
       points.normal[seed] = -points.normal[seed];  // the top faces up
+    const size_t before = reached;
     visit(seed, next);
     drain(next++);
     found.anchored.push_back(0);
-    found.seedHeight.push_back(points.position[seed].z);
+    found.seedVote.push_back(float(reached - before) * points.normal[seed].z);
   }
   return found;
 }
@@ -266,8 +270,8 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
       components.of[i] = first + (local[i] - blocks[b][0]);
     components.anchored.insert(components.anchored.end(), found[b].anchored.begin(),
                                found[b].anchored.end());
-    components.seedHeight.insert(components.seedHeight.end(), found[b].seedHeight.begin(),
-                                 found[b].seedHeight.end());
+    components.seedVote.insert(components.seedVote.end(), found[b].seedVote.begin(),
+                                 found[b].seedVote.end());
   }
 }
 
@@ -297,20 +301,20 @@ void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponent
     if (components.anchored[c]) forest.fix(c);
   for (const auto& [pair, sum] : edges)
     if (sum != 0) forest.join(pair.first, pair.second, sum < 0 ? 1 : 0);
-  // A free set keeps the orientation of its highest seed.
-  std::vector<uint32_t> highest(count, kNoNode);
+  // A free set takes the sign its components vote for: each component's own "top faces up" guess,
+  // weighted by its size and by how vertical its seed's normal is (a horizontal one tells
+  // nothing). Steadier than any single seed when the relative signs are only weakly known.
+  std::vector<double> vote(count, 0.0);
   for (uint32_t c = 0; c < count; ++c) {
     uint8_t parity = 0;
     const uint32_t root = forest.find(c, parity);
-    if (highest[root] == kNoNode ||
-        components.seedHeight[c] > components.seedHeight[highest[root]])
-      highest[root] = c;
+    vote[root] += parity ? -double(components.seedVote[c]) : double(components.seedVote[c]);
   }
   std::vector<uint8_t> flip(count, 0);
   for (uint32_t c = 0; c < count; ++c) {
-    uint8_t parity = 0, rootParity = 0;
+    uint8_t parity = 0;
     const uint32_t root = forest.find(c, parity);
-    if (!forest.isFixed(root)) forest.find(highest[root], rootParity);
+    const uint8_t rootParity = !forest.isFixed(root) && vote[root] < 0.0 ? 1 : 0;
     flip[c] = parity ^ rootParity;
   }
   for (size_t i = 0; i < n; ++i)

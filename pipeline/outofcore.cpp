@@ -93,7 +93,7 @@ void copyChunk(const Accumulated& from, size_t c, Accumulated& to, size_t k) {
   }
   copy(to.components.anchored, from.components.anchored, record.componentBegin,
        record.componentEnd);
-  copy(to.components.seedHeight, from.components.seedHeight, record.componentBegin,
+  copy(to.components.seedVote, from.components.seedVote, record.componentBegin,
        record.componentEnd);
   const size_t points = record.pointEnd - record.pointBegin;
   record.pointBegin = to.points.size() - points;
@@ -221,10 +221,10 @@ class ChunkRunner {
       const OrientationBlocks blocks =
           orientationBlocks(points, options_.orientBlockPoints, ownBegin, ownEnd, chunk.level);
       local.anchored.swap(out.components.anchored);
-      local.seedHeight.swap(out.components.seedHeight);
+      local.seedVote.swap(out.components.seedVote);
       propagateInBlocks(points, neighbors, wasEstimated, blocks, local);
       local.anchored.swap(out.components.anchored);
-      local.seedHeight.swap(out.components.seedHeight);
+      local.seedVote.swap(out.components.seedVote);
       record.blocks = blocks.size();
     }
 

@@ -147,7 +147,7 @@ void orientUp(PointSet& points, const std::vector<uint8_t>& wasEstimated, uint32
 struct OrientationComponents {
   std::vector<uint32_t> of;       // per point: its component
   std::vector<uint8_t> anchored;  // per component: holds input normals (never flipped)
-  std::vector<float> seedHeight;  // per component: height of its highest point (its seed)
+  std::vector<float> seedVote;  // per component: its points × its seed normal's z (0 if anchored)
 };
 // Propagate inside each block; points of the blocks get components numbered after those already
 // in `components` (whose `of` covers all points).
@@ -155,7 +155,8 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
                        const std::vector<uint8_t>& wasEstimated, const OrientationBlocks& blocks,
                        OrientationComponents& components);
 // Flip whole components to agree across the k-NN edges between them (neighborIndex: k per
-// point): a maximum spanning forest rooted at anchored components, else at the highest seed.
+// point): a maximum spanning forest; a forest with anchored components keeps their signs, any
+// other takes the sign its components vote for.
 void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
                      std::span<const uint32_t> neighborIndex, size_t k);
 // Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS
