@@ -61,7 +61,7 @@ struct BuildOptions {
   int zstdLevel = 3;
   bool removeOutliers = true;
   // Points per orientation block (orientNormals); part of the result, so a parameter.
-  uint32_t orientBlockPoints = 1u << 16;
+  uint32_t orientBlockPoints = 1u << 20;
 };
 
 // The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
