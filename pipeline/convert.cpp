@@ -273,8 +273,8 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               uint64_t maxChunkPoints, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source) {
   return convertWith(raw.size(), output, options, source, [&](StageTimer& timer) {
-    return prepareOutOfCore(raw, directory, options, maxChunkPoints,
-                            [&](const std::string& stage, uint64_t total) { timer.next(stage, total); });
+    const auto stage = [&](const std::string& name, uint64_t total) { timer.next(name, total); };
+    return prepareOutOfCore(raw, directory, options, maxChunkPoints, stage);
   });
 }
 

@@ -30,7 +30,7 @@ bool ballInside(const glm::vec3& p, float radius, const glm::dvec3& lo, const gl
 
 // What one chunk added to the accumulated results, so that it can be reused.
 struct ChunkRecord {
-  size_t pointBegin = 0, pointEnd = 0;          // in Accumulated::points
+  size_t pointBegin = 0, pointEnd = 0;  // in Accumulated::points
   uint32_t componentBegin = 0, componentEnd = 0;
   size_t duplicates = 0, blocks = 0;
   NormalStats normals;
@@ -159,7 +159,9 @@ class ChunkRunner {
   bool tryChunk(const SpillChunk& chunk, const LoadedPoints& own, const LoadedPoints& halo,
                 const glm::dvec3& lo, const glm::dvec3& hi, bool everything, Accumulated& out) {
     PointCloud cloud = own.cloud;
-    const auto append = [](auto& dst, const auto& src) { dst.insert(dst.end(), src.begin(), src.end()); };
+    const auto append = [](auto& dst, const auto& src) {
+      dst.insert(dst.end(), src.begin(), src.end());
+    };
     append(cloud.positions, halo.cloud.positions);
     append(cloud.normals, halo.cloud.normals);
     append(cloud.colors, halo.cloud.colors);
@@ -170,12 +172,12 @@ class ChunkRunner {
     mergeDuplicates(points);
     // The chunk's own points: its Morton key range.
     const int shift = 3 * (kMaxLevel - chunk.level);
-    const auto ownBegin = uint32_t(
-        std::lower_bound(points.key.begin(), points.key.end(), chunk.key << shift) -
-        points.key.begin());
-    const auto ownEnd = uint32_t(
-        std::lower_bound(points.key.begin(), points.key.end(), (chunk.key + 1) << shift) -
-        points.key.begin());
+    const auto ownBegin =
+        uint32_t(std::lower_bound(points.key.begin(), points.key.end(), chunk.key << shift) -
+                 points.key.begin());
+    const auto ownEnd =
+        uint32_t(std::lower_bound(points.key.begin(), points.key.end(), (chunk.key + 1) << shift) -
+                 points.key.begin());
     const PointIndex index(points.position);
     Neighbors neighbors = findNeighbors(points, index, options_.neighbors);
     if (!everything && !isExact(points, neighbors, ownBegin, ownEnd, lo, hi)) return false;
@@ -208,8 +210,8 @@ class ChunkRunner {
     std::vector<uint8_t> wasEstimated(points.size(), 0);
     for (size_t i = 0; i < points.size(); ++i)
       wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
-    record.normals.estimated = size_t(std::count(wasEstimated.begin() + ownBegin,
-                                                 wasEstimated.begin() + ownEnd, uint8_t{1}));
+    record.normals.estimated = size_t(
+        std::count(wasEstimated.begin() + ownBegin, wasEstimated.begin() + ownEnd, uint8_t{1}));
     estimateNormals(points, neighbors);
     record.normals.flipped =
         repairFlippedNormals(points, neighbors, wasEstimated, ownBegin, ownEnd);

@@ -91,12 +91,9 @@ void ProgressReporter::print(bool final) {
   const double eta = bounded && perSecond > 0.0 ? double(total_ - done) / perSecond : -1.0;
   const uint64_t rss = currentRssBytes();
   if (mode_ == ProgressMode::Json) {
-    nlohmann::json j = {{"event", final ? "end" : "progress"},
-                        {"stage", stage_},
-                        {"done", done},
-                        {"elapsed_seconds", elapsed},
-                        {"per_second", perSecond},
-                        {"rss_bytes", rss}};
+    nlohmann::json j = {
+        {"event", final ? "end" : "progress"}, {"stage", stage_},         {"done", done},
+        {"elapsed_seconds", elapsed},          {"per_second", perSecond}, {"rss_bytes", rss}};
     if (total_ > 0) j["total"] = total_;
     if (bounded) j["percent"] = 100.0 * fraction;
     if (eta >= 0.0 && !final) j["eta_seconds"] = eta;

@@ -65,8 +65,8 @@ uint64_t fineCellOf(const glm::dvec3& world, const Frame& frame) {
 SpillDirectory::SpillDirectory(const std::filesystem::path& parent) {
   static std::atomic<uint64_t> sequence{0};
   const std::filesystem::path base = parent.empty() ? "." : parent;
-  path_ = base / (".iso-spill." + std::to_string(::getpid()) + "-" +
-                  std::to_string(sequence++) + ".isotmp");
+  path_ = base / (".iso-spill." + std::to_string(::getpid()) + "-" + std::to_string(sequence++) +
+                  ".isotmp");
   registrations_.emplace_back(path_);  // unlinked (if empty) last, after the files
   std::error_code error;
   if (!std::filesystem::create_directory(path_, error) || error)
@@ -150,8 +150,8 @@ void RecordFile::read(uint64_t first, uint64_t count, std::vector<std::byte>& ou
   out.resize(count * recordBytes_);
   size_t done = 0;
   while (done < out.size()) {
-    const ssize_t n = ::pread(fd_, out.data() + done, out.size() - done,
-                              off_t(first * recordBytes_ + done));
+    const ssize_t n =
+        ::pread(fd_, out.data() + done, out.size() - done, off_t(first * recordBytes_ + done));
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) fail("cannot read back", n < 0 ? errno : EIO);
     done += size_t(n);
@@ -178,8 +178,7 @@ void RawSpill::append(const PointCloud& batch) {
 
 void RawSpill::finish() { file_->flush(); }
 
-void RawSpill::forEachBatch(
-    const std::function<void(const PointCloud&, uint64_t first)>& f) const {
+void RawSpill::forEachBatch(const std::function<void(const PointCloud&, uint64_t first)>& f) const {
   std::vector<std::byte> records;
   PointCloud batch;
   for (uint64_t first = 0; first < size(); first += kBatchPoints) {
@@ -236,8 +235,8 @@ Distribution::Distribution(SpillDirectory& directory, const RawSpill& raw, const
     std::fill(chunkOf.begin() + ptrdiff_t(chunks_[c].key << shift),
               chunkOf.begin() + ptrdiff_t((chunks_[c].key + 1) << shift), c);
   }
-  const size_t perChunk = std::clamp<size_t>((size_t{64} << 20) / recordBytes / chunks_.size(),
-                                             64, size_t{1} << 16);
+  const size_t perChunk =
+      std::clamp<size_t>((size_t{64} << 20) / recordBytes / chunks_.size(), 64, size_t{1} << 16);
   std::vector<std::vector<std::byte>> buffers(chunks_.size());
   std::vector<uint64_t> fill(chunks_.size());
   for (size_t c = 0; c < chunks_.size(); ++c) fill[c] = chunks_[c].begin;
@@ -310,8 +309,7 @@ LoadedPoints Distribution::loadBox(const glm::dvec3& lo, const glm::dvec3& hi,
   const int exceptShift = 3 * (kFineLevel - except.level);
   const auto accept = [&](const glm::dvec3& world) {
     const glm::vec3 u(toFrame(world, frame_));
-    return u.x >= lo.x && u.y >= lo.y && u.z >= lo.z && u.x <= hi.x && u.y <= hi.y &&
-           u.z <= hi.z;
+    return u.x >= lo.x && u.y >= lo.y && u.z >= lo.z && u.x <= hi.x && u.y <= hi.y && u.z <= hi.z;
   };
   std::vector<std::byte> records;
   uint64_t runBegin = 0, runEnd = 0;

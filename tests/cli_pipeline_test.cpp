@@ -64,8 +64,8 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
 
 TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   // Without input normals, so that estimation and orientation run too.
-  ASSERT_EQ(runIso("gen torus -n 30000 --seed 5 --no-normals -o " + quoted(dir_ / "t.ply")).exitCode,
-            0);
+  const auto gen = runIso("gen torus -n 30000 --seed 5 --no-normals -o " + quoted(dir_ / "t.ply"));
+  ASSERT_EQ(gen.exitCode, 0);
   std::string bytes[3];
   for (int threads : {1, 2, 0}) {
     const auto out = dir_ / ("t" + std::to_string(threads) + ".iso");
@@ -80,8 +80,9 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
 }
 
 TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
-  ASSERT_EQ(runIso("gen torus -n 60000 --noise 0.3 --no-normals -o " + quoted(dir_ / "t.ply")).exitCode,
-            0);
+  const auto gen =
+      runIso("gen torus -n 60000 --noise 0.3 --no-normals -o " + quoted(dir_ / "t.ply"));
+  ASSERT_EQ(gen.exitCode, 0);
   std::string bytes[2];
   nlohmann::json reports[2];
   const char* budgets[2] = {"150K", "8G"};

@@ -14,8 +14,8 @@ namespace iso {
 namespace {
 
 std::unique_ptr<RawSpill> spillOf(SpillDirectory& directory, const PointCloud& cloud) {
-  auto raw = std::make_unique<RawSpill>(directory,
-                                        PointLayout{cloud.hasNormals(), cloud.hasColors()});
+  auto raw =
+      std::make_unique<RawSpill>(directory, PointLayout{cloud.hasNormals(), cloud.hasColors()});
   raw->append(cloud);
   raw->finish();
   return raw;
@@ -85,7 +85,8 @@ void expectSameFiles(const PointCloud& cloud, const BuildOptions& options, uint6
   EXPECT_EQ(streamed["normals"], inCore["normals"]);
   EXPECT_EQ(streamed["octree"], inCore["octree"]);
   EXPECT_EQ(streamed["accuracy"], inCore["accuracy"]);
-  const std::vector<std::byte> a = test::readFile(dir / "in.iso"), b = test::readFile(dir / "out.iso");
+  const std::vector<std::byte> a = test::readFile(dir / "in.iso"),
+                               b = test::readFile(dir / "out.iso");
   EXPECT_GT(a.size(), 1000u);
   EXPECT_TRUE(a == b) << "the streamed file differs from the in-core one";
 }
@@ -163,7 +164,8 @@ TEST(OutOfCore, tinyInputsGiveTheSameFileOrTheSameError) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (size_t n : {1, 2, 3, 4, 7, 12, 40}) {
     PointCloud cloud;
-    for (size_t i = 0; i < n; ++i) cloud.positions.push_back({u(random), u(random), 0.1 * u(random)});
+    for (size_t i = 0; i < n; ++i)
+      cloud.positions.push_back({u(random), u(random), 0.1 * u(random)});
     test::TempDir dir;
     std::string inCoreError, streamedError;
     try {

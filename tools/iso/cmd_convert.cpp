@@ -89,7 +89,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
 
 // Bytes from "2G", "512M", "1.5G", "100000" (binary units); "auto": half the physical memory.
 uint64_t parseBytes(const std::string& text, const char* option) {
-  if (text == "auto") return uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGE_SIZE)) / 2;
+  if (text == "auto")
+    return uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGE_SIZE)) / 2;
   size_t used = 0;
   double value = 0.0;
   try {
@@ -102,8 +103,8 @@ uint64_t parseBytes(const std::string& text, const char* option) {
                                                {"M", 1048576.0},  {"G", 1073741824.0},
                                                {"T", 1099511627776.0}};
   if (used == 0 || !units.contains(unit) || !(value > 0.0))
-    throw std::invalid_argument(std::string(option) + " must be a size like 2G, 512M or auto, not '" +
-                                text + "'");
+    throw std::invalid_argument(std::string(option) +
+                                " must be a size like 2G, 512M or auto, not '" + text + "'");
   return uint64_t(value * units.at(unit));
 }
 
