@@ -5,6 +5,7 @@
 // (--orient up, aerial scans). The tree grows inside orientation blocks; whole components are
 // then flipped to agree across blocks. Input normals that contradict nearly all of their
 // neighbours are flipped first.
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -282,15 +283,23 @@ void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponent
   // Agreement between components over every k-NN edge (i → j) joining two of them, summed in
   // fixed point so that the order does not matter. Points of different components are in
   // different blocks: inside a block, propagation reaches every neighbour.
-  std::map<std::pair<uint32_t, uint32_t>, int64_t> agreement;
-  for (size_t i = 0; i < n; ++i)
-    for (size_t e = 0; e < k; ++e) {
-      const uint32_t j = neighborIndex[i * k + e];
-      const uint32_t a = components.of[i], b = components.of[j];
-      if (a == b) continue;
-      agreement[std::minmax(a, b)] +=
-          std::llround(double(glm::dot(normals[i], normals[j])) * 65536.0);
-    }
+  using Agreement = std::map<std::pair<uint32_t, uint32_t>, int64_t>;
+  tbb::enumerable_thread_specific<Agreement> partial;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 16),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      Agreement& local = partial.local();
+                      for (size_t i = r.begin(); i < r.end(); ++i)
+                        for (size_t e = 0; e < k; ++e) {
+                          const uint32_t j = neighborIndex[i * k + e];
+                          const uint32_t a = components.of[i], b = components.of[j];
+                          if (a == b) continue;
+                          local[std::minmax(a, b)] += std::llround(
+                              double(glm::dot(normals[i], normals[j])) * 65536.0);
+                        }
+                    });
+  Agreement agreement;
+  for (const Agreement& local : partial)
+    for (const auto& [pair, sum] : local) agreement[pair] += sum;
   std::vector<std::pair<std::pair<uint32_t, uint32_t>, int64_t>> edges(agreement.begin(),
                                                                        agreement.end());
   std::stable_sort(edges.begin(), edges.end(), [](const auto& x, const auto& y) {

@@ -7,6 +7,8 @@
 // components are aligned across blocks once all chunks are done.
 #include "outofcore.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <glm/common.hpp>
@@ -376,8 +378,11 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     Neighbors neighbors;
     neighbors.k = int(n > 0 ? done.neighborSource.size() / n : 0);
     neighbors.index.resize(done.neighborSource.size());
-    for (size_t e = 0; e < done.neighborSource.size(); ++e)
-      neighbors.index[e] = ordinal[done.neighborSource[e]];
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, done.neighborSource.size(), 1 << 16),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t e = r.begin(); e < r.end(); ++e)
+                          neighbors.index[e] = ordinal[done.neighborSource[e]];
+                      });
     done.neighborSource = {};
     if (options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0)
       alignComponents(points.normal, done.components, neighbors.index, size_t(neighbors.k));
