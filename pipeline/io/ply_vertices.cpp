@@ -9,6 +9,7 @@
 
 #include "io/color_table.h"
 #include "io/narrow.h"
+#include "io/non_finite.h"
 #include "io/text_fields.h"
 #include "iso/check.h"
 #include "iso/error.h"
@@ -50,10 +51,6 @@ std::optional<size_t> findScalar(const PlyElement& element,
         std::find(names.begin(), names.end(), element.properties[i].name) != names.end())
       return i;
   return std::nullopt;
-}
-
-bool isFinite(const glm::dvec3& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
 // Parse an ASCII value; a float property is rounded to float directly, as if it had been binary.
@@ -144,28 +141,6 @@ void decodeColorColumn(PlyType type, double fullScale, const std::byte* p, size_
     for (size_t i = 0; i < count; ++i, p += stride)
       out[i].*member = linearFromSrgbScaled(loadPlyScalar<kBigEndian>(type, p), fullScale);
   }
-}
-
-// Remove the points from `first` on whose position is not finite, keeping attributes aligned;
-// returns how many were removed.
-size_t removeNonFinite(PointCloud& out, size_t first) {
-  const size_t extraCount = out.extraCount();
-  size_t written = first;
-  for (size_t i = first; i < out.positions.size(); ++i) {
-    if (!isFinite(out.positions[i])) continue;
-    out.positions[written] = out.positions[i];
-    if (out.hasNormals()) out.normals[written] = out.normals[i];
-    if (out.hasColors()) out.colors[written] = out.colors[i];
-    std::copy_n(out.extras.begin() + ptrdiff_t(i * extraCount), extraCount,
-                out.extras.begin() + ptrdiff_t(written * extraCount));
-    ++written;
-  }
-  const size_t removed = out.positions.size() - written;
-  out.positions.resize(written);
-  if (out.hasNormals()) out.normals.resize(written);
-  if (out.hasColors()) out.colors.resize(written);
-  out.extras.resize(written * extraCount);
-  return removed;
 }
 
 }  // namespace

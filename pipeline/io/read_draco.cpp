@@ -18,6 +18,7 @@
 
 #include "io/color_table.h"
 #include "io/narrow.h"
+#include "io/non_finite.h"
 #include "io/point_readers.h"
 #include "iso/error.h"
 
@@ -169,10 +170,6 @@ const draco::PointAttribute& positionAttribute(const InputStream& in,
 double colorFullScale(const draco::PointAttribute& color) {
   if (!draco::IsDataTypeIntegral(color.data_type()) || color.normalized()) return 1.0;
   return draco::DataTypeLength(color.data_type()) == 2 ? 65535.0 : 255.0;
-}
-
-bool isFinite(const glm::dvec3& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
 }
 
 class DracoPointReader final : public PointReader {

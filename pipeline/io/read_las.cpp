@@ -10,6 +10,7 @@
 
 #include "io/color_table.h"
 #include "io/little_endian.h"
+#include "io/non_finite.h"
 #include "io/point_readers.h"
 #include "iso/error.h"
 
@@ -209,7 +210,7 @@ class LasPointReader final : public PointReader {
       const glm::dvec3 integer{load<int32_t>(record), load<int32_t>(record + 4),
                                load<int32_t>(record + 8)};
       const glm::dvec3 position = integer * header_.scale + header_.offset;
-      if (!std::isfinite(position.x) || !std::isfinite(position.y) || !std::isfinite(position.z)) {
+      if (!isFinite(position)) {
         ++stats_.droppedNonFinite;
         continue;
       }

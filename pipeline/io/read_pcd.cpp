@@ -22,6 +22,7 @@
 #include "io/color_table.h"
 #include "io/little_endian.h"
 #include "io/narrow.h"
+#include "io/non_finite.h"
 #include "io/point_readers.h"
 #include "io/text_fields.h"
 #include "iso/error.h"
@@ -406,10 +407,6 @@ void decodePackedColors(const Column& column, size_t count, glm::vec3* out) {
     out[i] = packedColor(load<uint32_t>(p), table);
 }
 
-bool isFinite(const glm::dvec3& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
-
 // Current PCL writes a packed color in text as the integer value of its bits, older versions wrote
 // the float whose bits hold it.
 bool parsePackedColor(std::string_view text, uint32_t& bits) {
@@ -642,30 +639,10 @@ class PcdPointReader final : public PointReader {
                              kMembers[channel]);
       }
     }
-    return count - removeNonFinite(out, first);
-  }
-
-  // Remove the points from `first` on whose position is not finite (PCL marks the invalid points
-  // of organized clouds with NaN), keeping attributes aligned; returns how many were removed.
-  size_t removeNonFinite(PointCloud& out, size_t first) {
-    const auto firstInvalid =
-        std::find_if(out.positions.begin() + static_cast<ptrdiff_t>(first), out.positions.end(),
-                     [](const glm::dvec3& p) { return !isFinite(p); });
-    if (firstInvalid == out.positions.end()) return 0;  // the common case: nothing to move
-    size_t written = static_cast<size_t>(firstInvalid - out.positions.begin());
-    for (size_t i = written; i < out.positions.size(); ++i) {
-      if (!isFinite(out.positions[i])) continue;
-      out.positions[written] = out.positions[i];
-      if (header_.hasNormals) out.normals[written] = out.normals[i];
-      if (header_.hasColors) out.colors[written] = out.colors[i];
-      ++written;
-    }
-    const size_t removed = out.positions.size() - written;
-    out.positions.resize(written);
-    if (header_.hasNormals) out.normals.resize(written);
-    if (header_.hasColors) out.colors.resize(written);
+    // PCL marks the invalid points of organized clouds with NaN.
+    const size_t removed = removeNonFinite(out, first);
     stats_.droppedNonFinite += removed;
-    return removed;
+    return count - removed;
   }
 
   // Record the slot of each value of an ascii line, -1 for values not read.

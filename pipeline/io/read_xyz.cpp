@@ -9,6 +9,7 @@
 
 #include "io/color_table.h"
 #include "io/narrow.h"
+#include "io/non_finite.h"
 #include "io/point_readers.h"
 #include "io/text_fields.h"
 #include "iso/error.h"
@@ -182,7 +183,7 @@ class TextPointReader final : public PointReader {
     if (column != spec_.columns.size())
       in_.failLine(fmt::format("expected {} numbers, found {}", spec_.columns.size(), column));
     const glm::dvec3 position{values[kX], values[kY], values[kZ]};
-    if (!std::isfinite(position.x) || !std::isfinite(position.y) || !std::isfinite(position.z)) {
+    if (!isFinite(position)) {
       ++stats_.droppedNonFinite;
       return false;
     }
