@@ -101,17 +101,22 @@ struct Prepared {
   size_t duplicates = 0;
 };
 
+// Throw ConvertError when the (merged) points define no surface.
+void requireSurface(const PointSet& points) {
+  if (points.size() < 3)
+    throw ConvertError("a surface needs at least 3 distinct points; the input has " +
+                       std::to_string(points.size()));
+  if (isCollinear(points))
+    throw ConvertError("all points lie on one line: they define no surface");
+}
+
 Prepared prepare(const PointCloud& cloud) {
   Prepared p;
   p.frame = chooseFrame(cloud);
   p.points = makePointSet(cloud, p.frame);
   sortByKey(p.points);
   p.duplicates = mergeDuplicates(p.points);
-  if (p.points.size() < 3)
-    throw ConvertError("a surface needs at least 3 distinct points; the input has " +
-                       std::to_string(p.points.size()));
-  if (isCollinear(p.points))
-    throw ConvertError("all points lie on one line: they define no surface");
+  requireSurface(p.points);  // before the neighbour search, which needs a few points
   return p;
 }
 
@@ -253,11 +258,6 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
   ReadyPoints ready = prepare(timer);
-  if (ready.points.size() < 3)
-    throw ConvertError("a surface needs at least 3 distinct points; the input has " +
-                       std::to_string(ready.points.size()));
-  if (isCollinear(ready.points))
-    throw ConvertError("all points lie on one line: they define no surface");
   return buildAndWrite(ready, inputPoints, output, options, source, timer, report, started);
 }
 
@@ -274,7 +274,9 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const BuildOptions& options, const ConvertSource& source) {
   return convertWith(raw.size(), output, options, source, [&](StageTimer& timer) {
     const auto stage = [&](const std::string& name, uint64_t total) { timer.next(name, total); };
-    return prepareOutOfCore(raw, directory, options, maxChunkPoints, stage);
+    ReadyPoints ready = prepareOutOfCore(raw, directory, options, maxChunkPoints, stage);
+    requireSurface(ready.points);  // known once every chunk's duplicates are merged
+    return ready;
   });
 }
 
