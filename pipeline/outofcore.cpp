@@ -151,7 +151,15 @@ class ChunkRunner {
       const bool everything = lo == glm::dvec3(0.0) && hi == glm::dvec3(1.0);
       LoadedPoints halo = distribution_.loadBox(lo, hi, chunk);
       dropExcluded(halo, keep_);
-      if (tryChunk(chunk, own, halo, lo, hi, everything, out)) return;
+      bool done = false;
+      {
+        const ProgressMute mute;  // the stage counts whole chunks, not its inner steps
+        done = tryChunk(chunk, own, halo, lo, hi, everything, out);
+      }
+      if (done) {
+        progressAdvance(own.source.size());
+        return;
+      }
       ++out.widenings;
       width *= 2.0;
     }
@@ -241,7 +249,6 @@ class ChunkRunner {
     record.pointEnd = out.points.size();
     record.componentEnd = uint32_t(out.components.anchored.size());
     out.chunks.push_back(record);
-    progressAdvance(own.source.size());
     return true;
   }
 

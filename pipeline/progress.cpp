@@ -10,6 +10,7 @@ namespace iso {
 namespace {
 
 std::atomic<uint64_t> gDone{0};
+std::atomic<int> gMuted{0};
 
 std::string rate(double perSecond) {
   if (perSecond >= 1e6) return fmt::format("{:.2f}M/s", perSecond / 1e6);
@@ -25,7 +26,13 @@ std::string clock(double seconds) {
 
 }  // namespace
 
-void progressAdvance(uint64_t amount) { gDone.fetch_add(amount, std::memory_order_relaxed); }
+void progressAdvance(uint64_t amount) {
+  if (gMuted.load(std::memory_order_relaxed) == 0)
+    gDone.fetch_add(amount, std::memory_order_relaxed);
+}
+
+ProgressMute::ProgressMute() { gMuted.fetch_add(1, std::memory_order_relaxed); }
+ProgressMute::~ProgressMute() { gMuted.fetch_sub(1, std::memory_order_relaxed); }
 
 uint64_t currentRssBytes() {
   std::FILE* f = std::fopen("/proc/self/statm", "r");

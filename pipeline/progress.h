@@ -20,6 +20,16 @@ namespace iso {
 // Count `amount` units of work (usually points) done in the current stage. Thread-safe.
 void progressAdvance(uint64_t amount);
 
+// While one lives, progressAdvance counts nothing: a stage that counts its own units (chunks of
+// points) runs inner steps that would count theirs too.
+class ProgressMute {
+ public:
+  ProgressMute();
+  ~ProgressMute();
+  ProgressMute(const ProgressMute&) = delete;
+  ProgressMute& operator=(const ProgressMute&) = delete;
+};
+
 // Resident memory of this process now, in bytes (VmRSS).
 uint64_t currentRssBytes();
 

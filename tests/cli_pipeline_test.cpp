@@ -135,6 +135,9 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
     if (j.contains("percent")) {
       EXPECT_LE(j["percent"].get<double>(), 100.0);
     }
+    if (j.contains("total")) {
+      EXPECT_LE(j["done"].get<uint64_t>(), j["total"].get<uint64_t>()) << line;
+    }
   }
   const std::vector<std::string> stages = {"read",   "distribute",      "points",  "orient",
                                            "octree", "passive+balance", "corners", "lod",
