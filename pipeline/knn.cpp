@@ -420,6 +420,7 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
         std::vector<float> bestD2(k), gx, gy, gz, d2;
         std::vector<uint32_t> bestIndex(k), gi, candidates, selected;
         float radius2 = 0.0f;  // R²; 0: not known yet
+        uint64_t counted = 0;  // points done, for progress
         float previous = kInfinity;  // the k-th squared distance of the point before
         for (size_t leafIndex = r.begin(); leafIndex < r.end(); ++leafIndex) {
           const Node& leaf = nodes_[leaves_[leafIndex]];
@@ -499,8 +500,9 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
             if (fromWindow) throw std::logic_error("allNearest: the window bound failed");
             fromWindow = true;
           }
-          progressAdvance(leaf.end - leaf.begin);
+          counted += leaf.end - leaf.begin;
         }
+        progressAdvance(counted);  // once per range: one shared counter, many threads
       });
 }
 
