@@ -1,6 +1,16 @@
 // 2:1 balance (specs/pipeline.md, "Balance"): filled leaves that touch (across a face, an edge or
 // a corner) differ by at most one level, so that every hanging corner lies on a face or an edge of
 // a leaf exactly one level coarser, where snapping makes the patches agree.
+//
+// Balance runs in rounds. A round reads the tree as it stands: every filled leaf on the work list
+// asks for the filled leaves more than one level coarser next to it to be split down to one level
+// above its own; then all the asked splits are made, in key order, and the filled leaves they
+// create are the next round's work. So the result does not depend on the order in which leaves are
+// visited (each round depends only on the one before, leaf by leaf on its 3×3×3 neighbourhood),
+// the look-ups of a round run in parallel, and the node numbering is the same on every run.
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <array>
 
 #include "stages.h"
@@ -8,52 +18,113 @@
 namespace iso {
 namespace {
 
-// Split a filled leaf without losing filled space: children are filled when they hold points or a
-// disk touches them; a passive leaf filled to close the surface may have no disk touching any of
-// its children, and then all of them stay filled.
-void splitFilled(Octree& tree, const PointSet& points, uint32_t node, std::vector<uint32_t>& work,
-                 std::vector<uint32_t>* created) {
-  const bool wasPassive = tree.nodes[node].kind == NodeKind::Passive;
-  tree.split(node, points);
-  const uint32_t first = tree.nodes[node].firstChild;
-  bool anyFilled = false;
-  for (uint32_t c = 0; c < 8; ++c) {
-    OctreeNode& child = tree.nodes[first + c];
-    if (child.kind == NodeKind::Empty && isCoveredByDisk(tree, points, first + c)) child.kind = NodeKind::Passive;
-    anyFilled = anyFilled || tree.nodes[first + c].isFilled();
-  }
-  for (uint32_t c = 0; c < 8; ++c) {
-    if (wasPassive && !anyFilled) tree.nodes[first + c].kind = NodeKind::Passive;
-    if (!tree.nodes[first + c].isFilled()) continue;
-    work.push_back(first + c);
-    if (created) created->push_back(first + c);
+// Split filled nodes on the path to the cell (level, key) until it is reached or the path ends in a
+// node that is not filled.
+struct Request {
+  uint8_t level;
+  uint64_t key;
+  auto operator<=>(const Request&) const = default;
+};
+
+// The requests of one filled leaf: the cells one level above it next to it whose path ends in a
+// filled leaf coarser than that.
+void requestsOf(const Octree& tree, uint32_t id, std::vector<Request>& out) {
+  const OctreeNode& leaf = tree.nodes[id];
+  if (!leaf.isFilled() || leaf.level < 2) return;
+  const uint8_t level = leaf.level;
+  const auto cell = mortonDecode(leaf.key);
+  const int64_t cells = int64_t{1} << level;
+  for (int d = 0; d < 27; ++d) {
+    if (d == 13) continue;  // the leaf itself
+    const std::array<int64_t, 3> n = {int64_t(cell[0]) + d % 3 - 1,
+                                      int64_t(cell[1]) + (d / 3) % 3 - 1,
+                                      int64_t(cell[2]) + d / 9 - 1};
+    if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells)
+      continue;
+    const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
+    const OctreeNode& other = tree.nodes[tree.find(level, key)];
+    if (other.isFilled() && other.level + 1 < level) out.push_back({uint8_t(level - 1), key >> 3});
   }
 }
 
-// Balance the leaves on the work list (and those their splits create).
-size_t balanceWork(Octree& tree, const PointSet& points, std::vector<uint32_t>& work, std::vector<uint32_t>* created) {
+// The requests of all leaves on the work list, sorted and without repeats (in parallel).
+std::vector<Request> requestsOf(const Octree& tree, const std::vector<uint32_t>& work) {
+  constexpr size_t kBlock = 4096;
+  std::vector<std::vector<Request>> parts((work.size() + kBlock - 1) / kBlock);
+  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
+    const size_t end = std::min(work.size(), (p + 1) * kBlock);
+    for (size_t i = p * kBlock; i < end; ++i) requestsOf(tree, work[i], parts[p]);
+  });
+  std::vector<Request> all;
+  for (const auto& part : parts) all.insert(all.end(), part.begin(), part.end());
+  std::sort(all.begin(), all.end());
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+  return all;
+}
+
+// Split the filled nodes (in the given order) without losing filled space: children are filled
+// when they hold points or a disk touches them; a passive node none of whose children a disk
+// touches keeps all of them filled. The filled children are appended to `created`.
+void splitFilled(Octree& tree, const PointSet& points, const std::vector<uint32_t>& nodes,
+                 std::vector<uint32_t>& created) {
+  std::vector<uint32_t> empty;  // children without points, to test against the disks
+  std::vector<uint8_t> wasPassive(nodes.size());
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    const uint32_t id = nodes[i];
+    wasPassive[i] = tree.nodes[id].kind == NodeKind::Passive;
+    tree.split(id, points);
+    const uint32_t first = tree.nodes[id].firstChild;
+    for (uint32_t c = 0; c < 8; ++c)
+      if (tree.nodes[first + c].kind == NodeKind::Empty) empty.push_back(first + c);
+  }
+  std::vector<uint8_t> covered(empty.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, empty.size(), 16),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i)
+                        covered[i] = isCoveredByDisk(tree, points, empty[i]);
+                    });
+  for (size_t i = 0; i < empty.size(); ++i)
+    if (covered[i]) tree.nodes[empty[i]].kind = NodeKind::Passive;
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    const uint32_t first = tree.nodes[nodes[i]].firstChild;
+    bool anyFilled = false;
+    for (uint32_t c = 0; c < 8; ++c) anyFilled = anyFilled || tree.nodes[first + c].isFilled();
+    for (uint32_t c = 0; c < 8; ++c) {
+      if (wasPassive[i] && !anyFilled) tree.nodes[first + c].kind = NodeKind::Passive;
+      if (tree.nodes[first + c].isFilled()) created.push_back(first + c);
+    }
+  }
+}
+
+// Balance the leaves on the work list and those their splits create, round by round.
+size_t balanceRounds(Octree& tree, const PointSet& points, std::vector<uint32_t> work,
+                     std::vector<uint32_t>* createdOut) {
   size_t splits = 0;
   while (!work.empty()) {
-    const uint32_t id = work.back();
-    work.pop_back();
-    if (!tree.nodes[id].isFilled()) continue;  // split since it was queued
-    const uint8_t level = tree.nodes[id].level;
-    const auto cell = mortonDecode(tree.nodes[id].key);
-    const int64_t cells = int64_t{1} << level;
-    for (int d = 0; d < 27; ++d) {
-      if (d == 13) continue;  // the leaf itself
-      const std::array<int64_t, 3> n = {int64_t(cell[0]) + d % 3 - 1, int64_t(cell[1]) + (d / 3) % 3 - 1,
-                                        int64_t(cell[2]) + d / 9 - 1};
-      if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells) continue;
-      const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
-      for (;;) {
-        const uint32_t neighbor = tree.find(level, key);
-        const OctreeNode& other = tree.nodes[neighbor];
-        if (!other.isFilled() || other.level + 1 >= level) break;
-        splitFilled(tree, points, neighbor, work, created);
-        ++splits;
+    const std::vector<Request> requests = requestsOf(tree, work);
+    std::vector<uint32_t> created;
+    // Walk down the requested paths one level at a time: the filled nodes at the ends of the
+    // paths are split together (in key order), then the paths are followed again.
+    for (;;) {
+      std::vector<uint32_t> ends;
+      for (const Request& r : requests) {
+        const uint32_t node = tree.find(r.level, r.key);
+        if (tree.nodes[node].isFilled() && tree.nodes[node].level < r.level) ends.push_back(node);
       }
+      if (ends.empty()) break;
+      const auto byCell = [&](uint32_t a, uint32_t b) {
+        const OctreeNode &x = tree.nodes[a], &y = tree.nodes[b];
+        return x.level != y.level ? x.level < y.level : x.key < y.key;
+      };
+      std::sort(ends.begin(), ends.end(), byCell);
+      ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+      splitFilled(tree, points, ends, created);
+      splits += ends.size();
     }
+    work.clear();
+    for (uint32_t id : created)
+      if (tree.nodes[id].isFilled()) work.push_back(id);  // not split again in this round
+    if (createdOut) createdOut->insert(createdOut->end(), work.begin(), work.end());
   }
   return splits;
 }
@@ -79,7 +150,7 @@ size_t balanceOctree(Octree& tree, const PointSet& points) {
   std::vector<uint32_t> work;
   for (uint32_t i = 0; i < tree.nodes.size(); ++i)
     if (tree.nodes[i].isFilled()) work.push_back(i);
-  return balanceWork(tree, points, work, nullptr);
+  return balanceRounds(tree, points, std::move(work), nullptr);
 }
 
 size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint32_t>& added,
@@ -89,19 +160,24 @@ size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint
   for (uint32_t id : added) {
     const OctreeNode& leaf = tree.nodes[id];
     const auto c = mortonDecode(leaf.key);
-    const std::array<int64_t, 3> lo = {int64_t(c[0]), int64_t(c[1]), int64_t(c[2])};  // the leaf's box
+    const std::array<int64_t, 3> lo = {int64_t(c[0]), int64_t(c[1]), int64_t(c[2])};  // its box
     const std::array<int64_t, 3> hi = {lo[0] + 1, lo[1] + 1, lo[2] + 1};
+    const int64_t cells = int64_t{1} << leaf.level;
     for (int d = 0; d < 27; ++d) {
-      const std::array<int64_t, 3> n = {lo[0] - 1 + d % 3, lo[1] - 1 + (d / 3) % 3, lo[2] - 1 + d / 9};
-      if (d == 13 || n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= (int64_t{1} << leaf.level) ||
-          n[1] >= (int64_t{1} << leaf.level) || n[2] >= (int64_t{1} << leaf.level))
+      const std::array<int64_t, 3> n = {lo[0] - 1 + d % 3, lo[1] - 1 + (d / 3) % 3,
+                                        lo[2] - 1 + d / 9};
+      if (d == 13 || n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells ||
+          n[2] >= cells)
         continue;
-      const uint32_t node = tree.find(leaf.level, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])));
+      const uint32_t node =
+          tree.find(leaf.level, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])));
       if (tree.nodes[node].kind == NodeKind::Internal && tree.nodes[node].level == leaf.level)
         touchingLeaves(tree, node, lo, hi, leaf.level, work);
     }
   }
-  return balanceWork(tree, points, work, &created);
+  std::sort(work.begin(), work.end());
+  work.erase(std::unique(work.begin(), work.end()), work.end());
+  return balanceRounds(tree, points, std::move(work), &created);
 }
 
 }  // namespace iso

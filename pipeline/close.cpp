@@ -7,6 +7,9 @@
 // the pass repeats until nothing is left to fill. A leaf that holds points but no zero set (its
 // estimate displaced, where sampling is sparse) gets its neighbour across the face nearest to the
 // zero set filled the same way.
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <cmath>
 
 #include "stages.h"
@@ -79,33 +82,48 @@ uint32_t materialize(Octree& tree, const PointSet& points, uint8_t level, uint64
   }
 }
 
+// The empty cells (level, key) the surface runs into from one leaf.
+void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+             const CornerField& field, uint32_t id, std::vector<std::pair<uint8_t, uint64_t>>& out) {
+  const OctreeNode& leaf = tree.nodes[id];
+  if (!leaf.isFilled()) return;
+  const auto cell = mortonDecode(leaf.key);
+  const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf);
+  const int toward = lost ? faceTowardSurface(field, leaf) : -1;
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, side = face % 2;
+    std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
+    n[size_t(axis)] += side ? 1 : -1;
+    if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
+    const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
+    if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
+    // The zero set runs out through this face near the points, or the leaf holds points but no
+    // zero set (a displaced estimate) and this face is the nearest to it.
+    if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points))
+      out.push_back({leaf.level, key});
+  }
+}
+
 // Fill the empty cells the surface runs into from the given leaves; returns the filled cells.
+// The cells are found in parallel on the tree as it stands and filled coarsest first, in key
+// order, so the result does not depend on the order of the leaves.
 std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                                 const CornerField& field, const std::vector<uint32_t>& leaves) {
+  constexpr size_t kBlock = 1024;
+  std::vector<std::vector<std::pair<uint8_t, uint64_t>>> parts((leaves.size() + kBlock - 1) /
+                                                               kBlock);
+  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
+    const size_t end = std::min(leaves.size(), (p + 1) * kBlock);
+    for (size_t i = p * kBlock; i < end; ++i) exitsOf(tree, points, sdf, field, leaves[i], parts[p]);
+  });
   std::vector<std::pair<uint8_t, uint64_t>> targets;
-  for (uint32_t id : leaves) {
-    const OctreeNode& leaf = tree.nodes[id];
-    if (!leaf.isFilled()) continue;
-    const auto cell = mortonDecode(leaf.key);
-    const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf);
-    const int toward = lost ? faceTowardSurface(field, leaf) : -1;
-    for (int face = 0; face < 6; ++face) {
-      const int axis = face / 2, side = face % 2;
-      std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
-      n[size_t(axis)] += side ? 1 : -1;
-      if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
-      const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
-      if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
-      // The zero set runs out through this face near the points, or the leaf holds points but no
-      // zero set (a displaced estimate) and this face is the nearest to it.
-      if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points))
-        targets.push_back({leaf.level, key});
-    }
-  }
+  for (const auto& part : parts) targets.insert(targets.end(), part.begin(), part.end());
+  std::sort(targets.begin(), targets.end());
+  targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
   std::vector<uint32_t> filled;
   for (const auto& [level, key] : targets) {
     const uint32_t node = materialize(tree, points, level, key);
-    if (tree.nodes[node].kind != NodeKind::Empty) continue;  // filled by an earlier target
+    if (tree.nodes[node].kind != NodeKind::Empty) continue;  // inside a cell filled before
     tree.nodes[node].kind = NodeKind::Passive;
     filled.push_back(node);
   }

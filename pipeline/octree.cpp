@@ -221,28 +221,31 @@ void Octree::updateMaxRadius(const PointSet& points) {
   }
 }
 
-void Octree::forEachPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
-                              const std::function<void(uint32_t)>& f) const {
+bool Octree::anyPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
+                          const std::function<bool(uint32_t)>& test) const {
   const auto boxDistance = [&](const glm::dvec3& a, const glm::dvec3& b) {
     const glm::dvec3 d = glm::max(glm::max(lo - b, a - hi), glm::dvec3(0.0));
     return glm::length(d);
   };
-  std::vector<uint32_t> stack = {0};
-  while (!stack.empty()) {
-    const OctreeNode& node = nodes[stack.back()];
-    stack.pop_back();
+  // Depth first: at most 7 waiting siblings per level besides the path.
+  std::array<uint32_t, 8 * (kMaxLevel + 2)> stack;
+  size_t top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const OctreeNode& node = nodes[stack[--top]];
     if (node.pointCount() == 0) continue;
     const glm::dvec3 origin = cellOrigin(node.level, node.key);
     if (boxDistance(origin, origin + cellSize(node.level)) > node.maxRadius) continue;
     if (node.kind == NodeKind::Internal) {
-      for (uint32_t c = 0; c < 8; ++c) stack.push_back(node.firstChild + c);
+      for (uint32_t c = 8; c-- > 0;) stack[top++] = node.firstChild + c;
       continue;
     }
     for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) {
       const glm::dvec3 p(points.position[i]);
-      if (boxDistance(p, p) <= points.radius[i]) f(i);
+      if (boxDistance(p, p) <= points.radius[i] && test(i)) return true;
     }
   }
+  return false;
 }
 
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,

@@ -75,11 +75,8 @@ bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node) 
   const auto cell = mortonDecode(n.key);
   const double size = std::ldexp(1.0, -n.level);
   const glm::dvec3 lo = glm::dvec3(cell[0], cell[1], cell[2]) * size, hi = lo + size;
-  bool covered = false;
-  tree.forEachPointNear(lo, hi, points, [&](uint32_t i) {
-    if (!covered) covered = diskTouchesBox(points, i, lo, hi);
-  });
-  return covered;
+  return tree.anyPointNear(lo, hi, points,
+                           [&](uint32_t i) { return diskTouchesBox(points, i, lo, hi); });
 }
 
 size_t markPassiveLeaves(Octree& tree, const PointSet& points) {

@@ -221,9 +221,10 @@ struct Octree {
   // Make a filled node Internal with 8 children over its points (kinds: Leaf with points, else
   // Empty).
   void split(uint32_t node, const PointSet& points);
-  // Call f(pointIndex) for every point whose disk of influence may touch the box (frame units).
-  void forEachPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
-                        const std::function<void(uint32_t)>& f) const;
+  // Whether test(pointIndex) holds for some point whose disk of influence may touch the box
+  // (frame units); the search stops at the first.
+  bool anyPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const PointSet& points,
+                    const std::function<bool(uint32_t)>& test) const;
   void updateMaxRadius(const PointSet& points);
 };
 
