@@ -2,6 +2,8 @@
 // specs/iso-format.md, "Surface chunks"). A chunk holds the nodes of one octree cell over a range
 // of levels, about `chunkNodes` of them: the top chunk holds the coarse levels, each chunk below it
 // refines the nodes at its parent's last level. Chunks are written parents first.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -196,7 +198,14 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
 
   Writer writer(output, header, {.zstdLevel = in.options.zstdLevel});
   WriteStats stats;
-  for (ChunkPlan& plan : planChunks(tree, in.options.chunkNodes)) {
+  // A file chunk: its description and payload, encoded from the plan.
+  struct Encoded {
+    ChunkDesc desc;
+    std::vector<std::byte> payload;
+    uint64_t leafCorners = 0, lodCorners = 0;
+  };
+  const auto encode = [&](ChunkPlan& plan) {
+    Encoded out;
     plan.pointCount = 0;
     for (uint64_t key : plan.topology.rootKeys) {
       const OctreeNode& root = tree.nodes[tree.find(plan.topology.startLevel, key)];
@@ -208,9 +217,8 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     const CornerValues leaf =
         leafValues(layout, *in.corners, hangingOf, *in.hanging, header.attributes[0], in.colors);
     const CornerValues lod = lodValues(layout, *in.lod, in.colors);
-    const std::vector<std::byte> payload =
-        encodeSurfaceChunk(plan.topology, layout, header.attributes, leaf, lod);
-    ChunkDesc desc;
+    out.payload = encodeSurfaceChunk(plan.topology, layout, header.attributes, leaf, lod);
+    ChunkDesc& desc = out.desc;
     desc.kind = kSurfaceKind;
     desc.level = plan.cellLevel;
     desc.key = plan.cellKey;
@@ -223,10 +231,23 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
           layout.nodes[i].firstChild == kNoNode)  // children in other chunks
         desc.geometricError =
             std::max(desc.geometricError, nodePatchError(tree, *in.points, *in.lod, plan.nodes[i]));
-    writer.addChunk(desc, payload);
-    ++stats.chunks;
-    stats.leafCorners += layout.leafCorners.size();
-    stats.lodCorners += layout.lodCorners.size();
+    out.leafCorners = layout.leafCorners.size();
+    out.lodCorners = layout.lodCorners.size();
+    return out;
+  };
+  // Encoded in parallel, a batch at a time, and written in plan order.
+  std::vector<ChunkPlan> plans = planChunks(tree, in.options.chunkNodes);
+  constexpr size_t kBatch = 64;
+  for (size_t first = 0; first < plans.size(); first += kBatch) {
+    const size_t count = std::min(kBatch, plans.size() - first);
+    std::vector<Encoded> batch(count);
+    tbb::parallel_for(size_t{0}, count, [&](size_t i) { batch[i] = encode(plans[first + i]); });
+    for (const Encoded& e : batch) {
+      writer.addChunk(e.desc, e.payload);
+      ++stats.chunks;
+      stats.leafCorners += e.leafCorners;
+      stats.lodCorners += e.lodCorners;
+    }
   }
   stats.fileBytesWithoutMetadata =
       writer.bytesWritten() + uint64_t(stats.chunks) * kChunkEntrySize + kTrailerSize;
