@@ -12,8 +12,7 @@ namespace iso {
 Key128 gridKey(const GridPoint& p) { return {p.x | uint64_t(p.y) << 32, p.z}; }
 
 uint32_t CornerField::find(const GridPoint& p) const {
-  const uint32_t* found = index.find(gridKey(p));
-  return found ? *found : kNoNode;
+  return index.find(gridKey(p));  // kNone is kNoNode
 }
 
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
@@ -24,12 +23,12 @@ void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint
     if (!node.isFilled()) continue;
     for (int c = 0; c < kCorners; ++c) {
       const GridPoint p = cornerPoint(node.level, node.key, c);
-      const auto [entry, inserted] = field.index.insert(gridKey(p), uint32_t(field.point.size()));
+      const auto [entry, inserted] = field.index.insert(gridKey(p));
       if (inserted) {
         field.point.push_back(p);
         field.coarsestLevel.push_back(node.level);
       } else {
-        field.coarsestLevel[*entry] = std::min(field.coarsestLevel[*entry], node.level);
+        field.coarsestLevel[entry] = std::min(field.coarsestLevel[entry], node.level);
       }
     }
   }

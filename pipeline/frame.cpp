@@ -16,7 +16,7 @@ namespace {
 
 constexpr double kFrameMargin = 0.05;  // of the extent, on each side
 
-struct KeyIndex {
+struct KeyedItem {
   uint64_t key;
   uint32_t index;
 };
@@ -27,19 +27,19 @@ namespace {
 
 // Stable LSD radix sort of items[begin, end) by the key bits below `bits`, 11 bits a pass,
 // skipping passes where every item has the same digit; scratch is as large as items.
-void sortLow(UninitializedVector<KeyIndex>& items, UninitializedVector<KeyIndex>& scratch, size_t begin,
+void sortLow(UninitializedVector<KeyedItem>& items, UninitializedVector<KeyedItem>& scratch, size_t begin,
              size_t end, int bits) {
   const size_t n = end - begin;
   if (n < 2) return;
   if (n <= 64) {
     std::stable_sort(items.begin() + ptrdiff_t(begin), items.begin() + ptrdiff_t(end),
-                     [](const KeyIndex& a, const KeyIndex& b) { return a.key < b.key; });
+                     [](const KeyedItem& a, const KeyedItem& b) { return a.key < b.key; });
     return;
   }
   constexpr int kBits = 11;
   constexpr size_t kBuckets = size_t{1} << kBits;
-  KeyIndex* from = items.data() + begin;
-  KeyIndex* to = scratch.data() + begin;
+  KeyedItem* from = items.data() + begin;
+  KeyedItem* to = scratch.data() + begin;
   std::vector<size_t> count(kBuckets + 1);
   for (int shift = 0; shift < bits; shift += kBits) {
     const uint64_t mask = (uint64_t{1} << std::min(kBits, bits - shift)) - 1;
@@ -71,7 +71,7 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
   constexpr size_t kBuckets = size_t{1} << kBits;
   const int shift = std::max(0, top - kBits);
   const auto digit = [&](uint64_t k) { return size_t(k >> shift) & (kBuckets - 1); };
-  UninitializedVector<KeyIndex> items(n), scratch(n);
+  UninitializedVector<KeyedItem> items(n), scratch(n);
   constexpr size_t kBlock = size_t{1} << 16;
   const size_t blocks = (n + kBlock - 1) / kBlock;
   std::vector<size_t> count(blocks * kBuckets, 0);

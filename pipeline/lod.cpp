@@ -182,8 +182,7 @@ Key128 lodKey(uint8_t level, const GridPoint& p) {
 }
 
 uint32_t LodField::find(uint8_t level, const GridPoint& p) const {
-  const uint32_t* found = index.find(lodKey(level, p));
-  return found ? *found : kNoNode;
+  return index.find(lodKey(level, p));  // kNone is kNoNode
 }
 
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
@@ -194,11 +193,10 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
     if (node.kind != NodeKind::Internal) continue;
     for (int c = 0; c < kCorners; ++c) {
       const GridPoint p = cornerPoint(node.level, node.key, c);
-      const auto [entry, inserted] =
-          field.index.insert(lodKey(node.level, p), uint32_t(field.value.size()));
+      const auto [entry, inserted] = field.index.insert(lodKey(node.level, p));
       if (!inserted) continue;
       field.value.emplace_back();
-      byLevel[node.level].push_back({*entry, p});
+      byLevel[node.level].push_back({entry, p});
     }
   }
   // Proxies where they hold 4 points or more on average; at finer levels the points themselves.

@@ -35,6 +35,8 @@
 #include "iso/format.h"
 #include "iso/surface.h"
 
+static_assert(iso::KeyIndex<iso::Key128>::kNone == iso::kNoNode);
+
 namespace iso {
 
 class PointIndex;
@@ -236,7 +238,28 @@ struct OctreeStats {
 };
 // Leaf corner samples evaluated while building, by grid point: leaf corners are evaluated the same
 // way whatever the level, so the final corners reuse them.
-using CornerCache = FlatMap<Key128, CornerSample>;
+class CornerCache {
+ public:
+  explicit CornerCache(size_t expected = 16) : index_(expected) {}
+  const CornerSample* find(const Key128& key) const {
+    const uint32_t entry = index_.find(key);
+    return entry == KeyIndex<Key128>::kNone ? nullptr : &values_[entry];
+  }
+  CornerSample* find(const Key128& key) {
+    return const_cast<CornerSample*>(std::as_const(*this).find(key));
+  }
+  // The sample at key, inserting `value` first when the key is new; second: whether inserted.
+  std::pair<CornerSample*, bool> insert(const Key128& key, const CornerSample& value) {
+    const auto [entry, inserted] = index_.insert(key);
+    if (inserted) values_.push_back(value);
+    return {&values_[entry], inserted};
+  }
+  size_t size() const { return values_.size(); }
+
+ private:
+  KeyIndex<Key128> index_;
+  std::vector<CornerSample> values_;
+};
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
                    const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
 
@@ -259,7 +282,7 @@ size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint
 // ---- corners.cpp
 // Values of every distinct leaf corner, keyed by grid point.
 struct CornerField {
-  FlatMap<Key128, uint32_t> index{1024};  // grid point → entry
+  KeyIndex<Key128> index{1024};  // grid point → entry
   std::vector<GridPoint> point;
   std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner
   std::vector<CornerSample> value;
@@ -298,7 +321,7 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
 struct LodField {
-  FlatMap<Key128, uint32_t> index{1024};
+  KeyIndex<Key128> index{1024};  // lodKey → entry
   std::vector<CornerSample> value;
   uint32_t find(uint8_t level, const GridPoint& p) const;
 };
