@@ -249,6 +249,7 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
       stats.lodCorners += e.lodCorners;
     }
   }
+  if (in.release) in.release();  // the measure below decodes the file: not two surfaces at once
   stats.fileBytesWithoutMetadata =
       writer.bytesWritten() + uint64_t(stats.chunks) * kChunkEntrySize + kTrailerSize;
   writer.setMetadata(in.metadata);

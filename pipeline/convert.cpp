@@ -307,7 +307,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.next("lod");
-  const LodField lod = sampleLodCorners(octree, points, sdf, options);
+  LodField lod = sampleLodCorners(octree, points, sdf, options);
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
@@ -328,7 +328,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
       {"leaf", corners.point.size()}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 
   WriteInput write{&octree, &points, &corners,           &hanging, &lod,
-                   frame,   "{}",    points.hasColors(), options};
+                   frame,   "{}",    points.hasColors(), options, {}};
   // The file keeps what the data and options determine, not timings or memory, so that the same
   // input gives the same bytes on any machine and any number of threads.
   const auto metadata = [&](nlohmann::json r) {
@@ -341,6 +341,13 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                           {"report", r}};
   };
   write.metadata = metadata(report).dump();
+  write.release = [&] {
+    octree = Octree{};
+    closure = Closure{};
+    lod = LodField{};
+    points = PointSet{};
+    ready.index.reset();
+  };
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
         timer.next("accuracy");

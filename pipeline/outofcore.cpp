@@ -42,7 +42,7 @@ struct ChunkRecord {
 struct Accumulated {
   PointSet points;
   std::vector<float> firstDistance;      // per point: distance to its nearest neighbour
-  std::vector<uint32_t> neighborSource;  // k per point: input index of each neighbour
+  UninitializedVector<uint32_t> neighborSource;  // k per point: input index of each neighbour
   OrientationComponents components;      // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
   std::vector<uint32_t> outlierSources;
@@ -382,15 +382,15 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     // The neighbours as indices into the assembled points.
     std::vector<uint32_t> ordinal(raw.size(), kNoNode);
     for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
-    Neighbors neighbors;
+    Neighbors neighbors;  // converted in place: not two arrays of k indices per point at once
     neighbors.k = int(n > 0 ? done.neighborSource.size() / n : 0);
-    neighbors.index.resize(done.neighborSource.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, done.neighborSource.size(), 1 << 16),
+    neighbors.index.swap(done.neighborSource);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, neighbors.index.size(), 1 << 16),
                       [&](const tbb::blocked_range<size_t>& r) {
                         for (size_t e = r.begin(); e < r.end(); ++e)
-                          neighbors.index[e] = ordinal[done.neighborSource[e]];
+                          neighbors.index[e] = ordinal[neighbors.index[e]];
                       });
-    done.neighborSource = {};
+    ordinal = {};
     if (options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0)
       alignComponents(points.normal, done.components, neighbors.index, size_t(neighbors.k));
     // Roughness compares a point's normal with its neighbours': after they are all oriented.

@@ -353,6 +353,7 @@ struct WriteInput {
   std::string metadata;  // JSON object
   bool colors = false;
   BuildOptions options;
+  std::function<void()> release;  // when set, called once every chunk is written (frees the above)
 };
 struct WriteStats {
   uint64_t chunks = 0, fileBytesWithoutMetadata = 0;
