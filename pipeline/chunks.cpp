@@ -131,7 +131,7 @@ CornerValues leafValues(const CornerLayout& layout, const CornerField& field,
   FlatMap<Key128, uint32_t> local(n);
   for (uint32_t i = 0; i < n; ++i) local.insert(gridKey(layout.leafCorners[i].point), i);
   const auto levelOf = [&](uint32_t entry) {  // the scale a reader of this chunk will use
-    const uint32_t* i = local.find(gridKey(field.point[entry]));
+    const uint32_t* i = local.find(field.index.key(entry));
     return i ? layout.leafCorners[*i].level : field.coarsestLevel[entry];
   };
   for (uint32_t i = 0; i < n; ++i) {
@@ -189,7 +189,7 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   for (const OctreeNode& node : tree.nodes)
     if (node.kind != NodeKind::Empty) maxLevel = std::max(maxLevel, node.level);
   const FileHeader header = surfaceHeader(in.frame, maxLevel, in.colors, in.options.normalBits);
-  std::vector<uint32_t> hangingOf(in.corners->point.size(), kNoNode);
+  std::vector<uint32_t> hangingOf(in.corners->size(), kNoNode);
   for (uint32_t i = 0; i < in.hanging->size(); ++i) hangingOf[(*in.hanging)[i].corner] = i;
 
   std::vector<double> weightPrefix(in.points->size() + 1, 0.0);  // input points per range

@@ -149,10 +149,9 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     fresh.insert(fresh.end(), created.begin(), created.end());
     addLeafCorners(closure.corners, tree, fresh, sdf, cache);
   }
-  // Splits left corners of leaves that are leaves no more: sample the final leaves afresh (every
-  // value is in the cache now), then snap.
-  closure.corners = CornerField{};  // not two fields at once
-  closure.corners = sampleLeafCorners(tree, sdf, cache);
+  // Splits left corners of leaves that are leaves no more: the levels are set from the final
+  // leaves (every corner they use is in the field), then hanging corners are snapped.
+  closure.cornersInUse = refreshCornerLevels(closure.corners, tree);
   closure.hanging = findHangingCorners(tree, closure.corners);
   snapHangingCorners(closure.corners, closure.hanging);
   return closure;

@@ -325,7 +325,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
   report["octree"]["closure_filled"] = closure.filled;
   report["corners"] = {
-      {"leaf", corners.point.size()}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
+      {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 
   WriteInput write{&octree, &points, &corners,           &hanging, &lod,
                    frame,   "{}",    points.hasColors(), options, {}};

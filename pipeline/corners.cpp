@@ -3,6 +3,8 @@
 // already evaluated (while building the octree) come from the cache.
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 
 #include "progress.h"
@@ -15,9 +17,14 @@ uint32_t CornerField::find(const GridPoint& p) const {
   return index.find(gridKey(p));  // kNone is kNoNode
 }
 
+GridPoint CornerField::point(uint32_t entry) const {
+  const Key128& k = index.key(entry);
+  return {uint32_t(k.a), uint32_t(k.a >> 32), uint32_t(k.b)};
+}
+
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
                     const SdfEvaluator& sdf, CornerCache& cache) {
-  const size_t first = field.point.size();
+  const size_t first = field.size();
   for (uint32_t id : leaves) {
     const OctreeNode& node = tree.nodes[id];
     if (!node.isFilled()) continue;
@@ -25,28 +32,48 @@ void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint
       const GridPoint p = cornerPoint(node.level, node.key, c);
       const auto [entry, inserted] = field.index.insert(gridKey(p));
       if (inserted) {
-        field.point.push_back(p);
         field.coarsestLevel.push_back(node.level);
       } else {
         field.coarsestLevel[entry] = std::min(field.coarsestLevel[entry], node.level);
       }
     }
   }
-  field.value.resize(field.point.size());
+  field.value.resize(field.size());
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  tbb::parallel_for(tbb::blocked_range<size_t>(first, field.point.size(), 256),
+  tbb::parallel_for(tbb::blocked_range<size_t>(first, field.size(), 256),
                     [&](const tbb::blocked_range<size_t>& r) {
                       progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const GridPoint& p = field.point[i];
-                        if (const CornerSample* known = cache.find(gridKey(p))) {
+                        const GridPoint p = field.point(uint32_t(i));
+                        if (const CornerSample* known = cache.find(field.index.key(uint32_t(i)))) {
                           field.value[i] = *known;
                           continue;
                         }
                         field.value[i] = sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f);
                       }
                     });
-  for (size_t i = first; i < field.point.size(); ++i) cache.insert(gridKey(field.point[i]), field.value[i]);
+  for (size_t i = first; i < field.size(); ++i)
+    cache.insert(field.index.key(uint32_t(i)), field.value[i]);
+}
+
+size_t refreshCornerLevels(CornerField& field, const Octree& tree) {
+  std::fill(field.coarsestLevel.begin(), field.coarsestLevel.end(), kUnusedCorner);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, tree.nodes.size(), 4096),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i < r.end(); ++i) {
+                        const OctreeNode& node = tree.nodes[i];
+                        if (!node.isFilled()) continue;
+                        for (int c = 0; c < kCorners; ++c) {
+                          std::atomic_ref<uint8_t> level(
+                              field.coarsestLevel[field.find(cornerPoint(node.level, node.key, c))]);
+                          uint8_t seen = level.load(std::memory_order_relaxed);
+                          while (node.level < seen && !level.compare_exchange_weak(seen, node.level))
+                            ;
+                        }
+                      }
+                    });
+  return size_t(std::count_if(field.coarsestLevel.begin(), field.coarsestLevel.end(),
+                              [](uint8_t l) { return l != kUnusedCorner; }));
 }
 
 CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache) {

@@ -3,6 +3,8 @@
 // (edge) interpolation of that leaf's corners there. Both trilinear patches then agree exactly on
 // the shared face, so the zero set has no cracks. After 2:1 balance only a leaf exactly one level
 // coarser can own such a face or edge.
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <glm/geometric.hpp>
 #include <numeric>
@@ -16,8 +18,8 @@ namespace {
 std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerField& field,
                                              uint32_t corner) {
   const uint8_t level = field.coarsestLevel[corner];
-  if (level == 0) return std::nullopt;
-  const GridPoint& p = field.point[corner];
+  if (level == 0 || level == kUnusedCorner) return std::nullopt;
+  const GridPoint p = field.point(corner);
   const uint32_t coarse = 1u << (kMaxLevel - level + 1);  // coarser cell size in grid units
   const std::array<uint32_t, 3> c = {p.x, p.y, p.z};
   std::array<bool, 3> onPlane{};
@@ -59,9 +61,15 @@ std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerFie
 }  // namespace
 
 std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field) {
+  constexpr size_t kBlock = 1 << 14;
+  std::vector<std::vector<HangingCorner>> parts((field.size() + kBlock - 1) / kBlock);
+  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
+    const size_t end = std::min(field.size(), (p + 1) * kBlock);
+    for (size_t i = p * kBlock; i < end; ++i)
+      if (auto h = hangingRelation(tree, field, uint32_t(i))) parts[p].push_back(*h);
+  });
   std::vector<HangingCorner> hanging;
-  for (uint32_t i = 0; i < field.point.size(); ++i)
-    if (auto h = hangingRelation(tree, field, i)) hanging.push_back(*h);
+  for (const auto& part : parts) hanging.insert(hanging.end(), part.begin(), part.end());
   // Coarse first: a source may itself hang from a leaf another level up.
   std::stable_sort(hanging.begin(), hanging.end(),
                    [&](const HangingCorner& a, const HangingCorner& b) {

@@ -281,16 +281,21 @@ size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint
 
 // ---- corners.cpp
 // Values of every distinct leaf corner, keyed by grid point.
+inline constexpr uint8_t kUnusedCorner = 0xff;  // coarsestLevel of a corner no filled leaf uses
 struct CornerField {
-  KeyIndex<Key128> index{1024};  // grid point → entry
-  std::vector<GridPoint> point;
-  std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner
+  KeyIndex<Key128> index{1024};        // gridKey → entry
+  std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner, or kUnusedCorner
   std::vector<CornerSample> value;
   uint32_t find(const GridPoint& p) const;
+  GridPoint point(uint32_t entry) const;
+  size_t size() const { return index.size(); }
 };
 Key128 gridKey(const GridPoint& p);
 // Corners of the filled leaves; values found in the cache are reused, new ones are added to it.
 CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache);
+// Set the coarsest levels of a field's corners from the tree's filled leaves now (kUnusedCorner
+// for corners of leaves split since); returns the number of corners in use.
+size_t refreshCornerLevels(CornerField& field, const Octree& tree);
 // Add the corners of more filled leaves to a field (their coarsest levels updated).
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
                     const SdfEvaluator& sdf, CornerCache& cache);
@@ -309,7 +314,8 @@ void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& ha
 struct Closure {
   CornerField corners;
   std::vector<HangingCorner> hanging;
-  size_t filled = 0;  // empty cells filled because the surface ran into them
+  size_t cornersInUse = 0;  // corners of the final filled leaves
+  size_t filled = 0;        // empty cells filled because the surface ran into them
   size_t passes = 0;
 };
 // Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
