@@ -192,9 +192,6 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   std::vector<uint32_t> hangingOf(in.corners->size(), kNoNode);
   for (uint32_t i = 0; i < in.hanging->size(); ++i) hangingOf[(*in.hanging)[i].corner] = i;
 
-  std::vector<double> weightPrefix(in.points->size() + 1, 0.0);  // input points per range
-  for (size_t i = 0; i < in.points->size(); ++i)
-    weightPrefix[i + 1] = weightPrefix[i] + in.points->weight[i];
 
   Writer writer(output, header, {.zstdLevel = in.options.zstdLevel});
   WriteStats stats;
@@ -206,12 +203,12 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   };
   const auto encode = [&](ChunkPlan& plan) {
     Encoded out;
-    plan.pointCount = 0;
+    double inputPoints = 0.0;  // weights count merged duplicates: whole numbers, summed exactly
     for (uint64_t key : plan.topology.rootKeys) {
       const OctreeNode& root = tree.nodes[tree.find(plan.topology.startLevel, key)];
-      plan.pointCount +=
-          uint64_t(std::llround(weightPrefix[root.pointEnd] - weightPrefix[root.pointBegin]));
+      for (uint32_t i = root.pointBegin; i < root.pointEnd; ++i) inputPoints += in.points->weight[i];
     }
+    plan.pointCount = uint64_t(std::llround(inputPoints));
     const CornerLayout layout =
         layoutSurface(plan.topology, plan.cellLevel, plan.cellKey, header.maxLevel);
     const CornerValues leaf =
