@@ -298,12 +298,14 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   OctreeStats octreeStats;
   CornerCache cornerCache(points.size() / 2);
   Octree octree = buildOctree(points, sdf, options, radii, cornerCache, &octreeStats);
+  points.roughness = {};  // only the octree's tolerance reads it
   timer.next("passive+balance");
   const size_t passive = markPassiveLeaves(octree, points);
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, sdf, cornerCache);
   cornerCache = CornerCache(0);  // every value is in the corner field now
+  octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.next("lod");

@@ -164,6 +164,8 @@ class ProxyPyramid {
     }
     return *l.evaluator;
   }
+  // Free a level once its corners are evaluated.
+  void release(int level) { levels_.erase(level); }
 
  private:
   struct Level {
@@ -224,6 +226,10 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
                               glm::dvec3(p.x * unit, p.y * unit, p.z * unit), minSigma);
                         }
                       });
+    // Coarse levels first, so a proxy level is done when the next node level uses another.
+    const auto next = proxyLevelOf.upper_bound(level);
+    if (proxy != proxyLevelOf.end() && (next == proxyLevelOf.end() || next->second != proxy->second))
+      pyramid.release(proxy->second);
   }
   return field;
 }
