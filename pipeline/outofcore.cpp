@@ -14,6 +14,7 @@
 #include <glm/common.hpp>
 #include <limits>
 
+#include "iso/check.h"
 #include "progress.h"
 
 namespace iso {
@@ -78,32 +79,82 @@ void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
   a.neighborSource.reserve(n * k);
 }
 
-// Append the results of chunk c of `from` to `to`, its components renumbered.
-void copyChunk(const Accumulated& from, size_t c, Accumulated& to, size_t k) {
-  ChunkRecord record = from.chunks[c];
-  const auto firstComponent = uint32_t(to.components.anchored.size());
-  appendRange(to.points, from.points, uint32_t(record.pointBegin), uint32_t(record.pointEnd));
-  const auto copy = [](auto& dst, const auto& src, size_t begin, size_t end) {
-    dst.insert(dst.end(), src.begin() + ptrdiff_t(begin), src.begin() + ptrdiff_t(end));
-  };
-  copy(to.firstDistance, from.firstDistance, record.pointBegin, record.pointEnd);
-  copy(to.neighborSource, from.neighborSource, record.pointBegin * k, record.pointEnd * k);
-  for (size_t i = record.pointBegin; i < record.pointEnd; ++i) {
-    const uint32_t of = from.components.of[i];
-    to.components.of.push_back(of == kNoNode ? kNoNode
-                                             : of - record.componentBegin + firstComponent);
+// Rebuilds accumulated results chunk by chunk in place: each chunk's results are written at a
+// cursor that never passes the chunk's old position (a chunk prepared again has its old points
+// less the outliers), so the old results and the new ones are never held twice.
+class InPlaceResults {
+ public:
+  InPlaceResults(Accumulated& target, size_t k) : to_(target), k_(k) {}
+
+  // Write the results of `record` in `from` (the target itself, or a chunk prepared again).
+  void place(const Accumulated& from, ChunkRecord record) {
+    const size_t begin = record.pointBegin, end = record.pointEnd, n = end - begin;
+    const auto put = [&](auto& dst, const auto& src, size_t stride) {
+      if (src.empty()) return;
+      ISO_CHECK(cursor_ * stride + n * stride <= dst.size());
+      std::copy(src.begin() + ptrdiff_t(begin * stride), src.begin() + ptrdiff_t(end * stride),
+                dst.begin() + ptrdiff_t(cursor_ * stride));  // forward: safe moving down
+    };
+    PointSet& to = to_.points;
+    const PointSet& p = from.points;
+    put(to.position, p.position, 1);
+    put(to.normal, p.normal, 1);
+    put(to.color, p.color, 1);
+    put(to.weight, p.weight, 1);
+    put(to.radius, p.radius, 1);
+    put(to.roughness, p.roughness, 1);
+    put(to.key, p.key, 1);
+    put(to.source, p.source, 1);
+    put(to_.firstDistance, from.firstDistance, 1);
+    put(to_.neighborSource, from.neighborSource, k_);
+    const auto firstComponent = uint32_t(anchored_.size());
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t of = from.components.of[begin + i];
+      to_.components.of[cursor_ + i] =
+          of == kNoNode ? kNoNode : of - record.componentBegin + firstComponent;
+    }
+    anchored_.insert(anchored_.end(), from.components.anchored.begin() + record.componentBegin,
+                     from.components.anchored.begin() + record.componentEnd);
+    seedVote_.insert(seedVote_.end(), from.components.seedVote.begin() + record.componentBegin,
+                     from.components.seedVote.begin() + record.componentEnd);
+    record.pointBegin = cursor_;
+    record.pointEnd = cursor_ + n;
+    record.componentBegin = firstComponent;
+    record.componentEnd = uint32_t(anchored_.size());
+    records_.push_back(record);
+    cursor_ += n;
   }
-  copy(to.components.anchored, from.components.anchored, record.componentBegin,
-       record.componentEnd);
-  copy(to.components.seedVote, from.components.seedVote, record.componentBegin,
-       record.componentEnd);
-  const size_t points = record.pointEnd - record.pointBegin;
-  record.pointBegin = to.points.size() - points;
-  record.pointEnd = to.points.size();
-  record.componentEnd = uint32_t(to.components.anchored.size());
-  record.componentBegin = firstComponent;
-  to.chunks.push_back(record);
-}
+
+  // Cut the target to the results placed.
+  void finish() {
+    const auto cut = [&](auto& v, size_t stride) {
+      if (!v.empty()) v.resize(cursor_ * stride);
+    };
+    PointSet& to = to_.points;
+    cut(to.position, 1);
+    cut(to.normal, 1);
+    cut(to.color, 1);
+    cut(to.weight, 1);
+    cut(to.radius, 1);
+    cut(to.roughness, 1);
+    cut(to.key, 1);
+    cut(to.source, 1);
+    cut(to_.firstDistance, 1);
+    cut(to_.neighborSource, k_);
+    cut(to_.components.of, 1);
+    to_.components.anchored = std::move(anchored_);
+    to_.components.seedVote = std::move(seedVote_);
+    to_.chunks = std::move(records_);
+  }
+
+ private:
+  Accumulated& to_;
+  size_t k_;
+  size_t cursor_ = 0;
+  std::vector<uint8_t> anchored_;
+  std::vector<float> seedVote_;
+  std::vector<ChunkRecord> records_;
+};
 
 // Drop the points that `keep` leaves out (far outliers found earlier).
 void dropExcluded(LoadedPoints& loaded, const std::vector<uint8_t>* keep) {
@@ -344,9 +395,11 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       continue;
     }
     stage("points", distribution.size());
+    // The touched chunks run again into a small set of results, then every chunk's results are
+    // placed in order over the old ones.
     Accumulated again;
-    reserveFor(again, distribution.size(), raw.layout(), k);
     ChunkRunner rerun(distribution, ready.frame, options, false, raw.layout().normals, &keep);
+    std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
     for (size_t c = 0; c < distribution.chunks().size(); ++c) {
       const ChunkRecord& record = done.chunks[c];
       const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
@@ -354,17 +407,24 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
       });
       if (touched) {
+        againOf[c] = again.chunks.size();
         rerun.run(distribution.chunks()[c], again);
         ++preparedAgain;
       } else {
-        copyChunk(done, c, again, k);
         progressAdvance(distribution.chunks()[c].size());
       }
     }
-    again.haloPoints += done.haloPoints;
-    again.widenings += done.widenings;
-    again.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
-    done = std::move(again);
+    const std::vector<ChunkRecord> old = done.chunks;
+    InPlaceResults results(done, k);
+    for (size_t c = 0; c < old.size(); ++c)
+      if (againOf[c] == kNoNode)
+        results.place(done, old[c]);
+      else
+        results.place(again, again.chunks[againOf[c]]);
+    results.finish();
+    done.haloPoints += again.haloPoints;
+    done.widenings += again.widenings;
+    done.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
     break;
   }
   size_t blocks = 0;
