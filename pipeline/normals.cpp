@@ -89,32 +89,33 @@ size_t estimateNormals(PointSet& points, const Neighbors& neighbors) {
   return count;
 }
 
+float roughnessOf(const PointSet& points, uint32_t i, const uint32_t* neighbors, size_t k) {
+  // Only neighbours of the same surface: a second sheet within reach (opposite normals) is shape,
+  // not noise.
+  thread_local std::vector<uint32_t> same;
+  same.assign(1, i);
+  for (size_t j = 0; j < k; ++j)
+    if (glm::dot(points.normal[i], points.normal[neighbors[j]]) > 0.5f) same.push_back(neighbors[j]);
+  glm::dvec3 mean(0.0);
+  for (uint32_t m : same) mean += glm::dvec3(points.position[m]);
+  mean /= double(same.size());
+  const glm::dvec3 normal(points.normal[i]);
+  double sum = 0.0;
+  for (uint32_t m : same) {
+    const double d = glm::dot(glm::dvec3(points.position[m]) - mean, normal);
+    sum += d * d;
+  }
+  return float(std::sqrt(sum / double(same.size())));
+}
+
 void estimateRoughness(PointSet& points, const Neighbors& neighbors) {
   const size_t n = points.size(), k = size_t(neighbors.k);
   points.roughness.assign(n, 0.0f);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
                     [&](const tbb::blocked_range<size_t>& range) {
-                      std::vector<uint32_t> same;
-                      for (size_t i = range.begin(); i < range.end(); ++i) {
-                        // Only neighbours of the same surface: a second sheet within reach
-                        // (opposite normals) is shape, not noise.
-                        same.assign(1, uint32_t(i));
-                        for (size_t j = 0; j < k; ++j) {
-                          const uint32_t other = neighbors.index[i * k + j];
-                          if (glm::dot(points.normal[i], points.normal[other]) > 0.5f)
-                            same.push_back(other);
-                        }
-                        glm::dvec3 mean(0.0);
-                        for (uint32_t m : same) mean += glm::dvec3(points.position[m]);
-                        mean /= double(same.size());
-                        const glm::dvec3 normal(points.normal[i]);
-                        double sum = 0.0;
-                        for (uint32_t m : same) {
-                          const double d = glm::dot(glm::dvec3(points.position[m]) - mean, normal);
-                          sum += d * d;
-                        }
-                        points.roughness[i] = float(std::sqrt(sum / double(same.size())));
-                      }
+                      for (size_t i = range.begin(); i < range.end(); ++i)
+                        points.roughness[i] =
+                            roughnessOf(points, uint32_t(i), neighbors.index.data() + i * k, k);
                     });
 }
 

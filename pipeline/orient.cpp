@@ -278,7 +278,14 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
 
 void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
                      std::span<const uint32_t> neighborIndex, size_t k) {
-  const size_t n = normals.size();
+  alignComponents(normals, components, {}, neighborIndex, k);
+}
+
+void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+                     std::span<const uint32_t> from, std::span<const uint32_t> neighborIndex,
+                     size_t k) {
+  const size_t n = k > 0 ? neighborIndex.size() / k : 0;  // points whose edges are given
+  const auto pointOf = [&](size_t m) { return from.empty() ? m : size_t(from[m]); };
   const auto count = uint32_t(components.anchored.size());
   // Agreement between components over every k-NN edge (i → j) joining two of them, summed in
   // fixed point so that the order does not matter. Points of different components are in
@@ -288,9 +295,10 @@ void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponent
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 16),
                     [&](const tbb::blocked_range<size_t>& r) {
                       Agreement& local = partial.local();
-                      for (size_t i = r.begin(); i < r.end(); ++i)
+                      for (size_t m = r.begin(); m < r.end(); ++m)
                         for (size_t e = 0; e < k; ++e) {
-                          const uint32_t j = neighborIndex[i * k + e];
+                          const size_t i = pointOf(m);
+                          const uint32_t j = neighborIndex[m * k + e];
                           const uint32_t a = components.of[i], b = components.of[j];
                           if (a == b) continue;
                           local[std::minmax(a, b)] += std::llround(
@@ -326,7 +334,7 @@ void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponent
     const uint8_t rootParity = !forest.isFixed(root) && vote[root] < 0.0 ? 1 : 0;
     flip[c] = parity ^ rootParity;
   }
-  for (size_t i = 0; i < n; ++i)
+  for (size_t i = 0; i < normals.size(); ++i)
     if (flip[components.of[i]]) normals[i] = -normals[i];
 }
 

@@ -35,6 +35,7 @@ bool ballInside(const glm::vec3& p, float radius, const glm::dvec3& lo, const gl
 struct ChunkRecord {
   size_t pointBegin = 0, pointEnd = 0;  // in Accumulated::points
   uint32_t componentBegin = 0, componentEnd = 0;
+  size_t boundaryBegin = 0, boundaryEnd = 0;  // in Accumulated::boundarySource
   size_t duplicates = 0, blocks = 0;
   NormalStats normals;
   glm::dvec3 lo{0.0}, hi{0.0};  // the box it was loaded with
@@ -42,9 +43,13 @@ struct ChunkRecord {
 
 struct Accumulated {
   PointSet points;
-  std::vector<float> firstDistance;      // per point: distance to its nearest neighbour
-  UninitializedVector<uint32_t> neighborSource;  // k per point: input index of each neighbour
-  OrientationComponents components;      // `of` per point in `points`
+  std::vector<float> firstDistance;  // per point: distance to its nearest neighbour
+  // Points with a neighbour in another orientation component (or loaded in a halo): their
+  // roughness is computed again, and their edges align the components, once all chunks are done.
+  std::vector<uint32_t> boundarySource;            // input index of each
+  UninitializedVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
+  size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
+  OrientationComponents components;                // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
   std::vector<uint32_t> outlierSources;
   uint64_t haloPoints = 0, widenings = 0, maxLoaded = 0;
@@ -65,7 +70,7 @@ void appendRange(PointSet& to, const PointSet& from, uint32_t begin, uint32_t en
 }
 
 // Room for n points (an upper bound: duplicates merge), so that appending never doubles.
-void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
+void reserveFor(Accumulated& a, size_t n, const PointLayout& layout) {
   PointSet& p = a.points;
   p.position.reserve(n);
   p.normal.reserve(n);  // estimated where the input has none
@@ -75,8 +80,8 @@ void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
   p.key.reserve(n);
   p.source.reserve(n);
   a.components.of.reserve(n);
+  p.roughness.reserve(n);
   a.firstDistance.reserve(n);
-  a.neighborSource.reserve(n * k);
 }
 
 // Rebuilds accumulated results chunk by chunk in place: each chunk's results are written at a
@@ -84,7 +89,7 @@ void reserveFor(Accumulated& a, size_t n, const PointLayout& layout, size_t k) {
 // less the outliers), so the old results and the new ones are never held twice.
 class InPlaceResults {
  public:
-  InPlaceResults(Accumulated& target, size_t k) : to_(target), k_(k) {}
+  explicit InPlaceResults(Accumulated& target) : to_(target) {}
 
   // Write the results of `record` in `from` (the target itself, or a chunk prepared again).
   void place(const Accumulated& from, ChunkRecord record) {
@@ -106,7 +111,16 @@ class InPlaceResults {
     put(to.key, p.key, 1);
     put(to.source, p.source, 1);
     put(to_.firstDistance, from.firstDistance, 1);
-    put(to_.neighborSource, from.neighborSource, k_);
+    const size_t firstBoundary = boundarySource_.size();
+    boundarySource_.insert(boundarySource_.end(),
+                           from.boundarySource.begin() + ptrdiff_t(record.boundaryBegin),
+                           from.boundarySource.begin() + ptrdiff_t(record.boundaryEnd));
+    boundaryNeighbor_.insert(
+        boundaryNeighbor_.end(),
+        from.boundaryNeighbor.begin() + ptrdiff_t(record.boundaryBegin * from.k),
+        from.boundaryNeighbor.begin() + ptrdiff_t(record.boundaryEnd * from.k));
+    record.boundaryBegin = firstBoundary;
+    record.boundaryEnd = boundarySource_.size();
     const auto firstComponent = uint32_t(anchored_.size());
     for (size_t i = 0; i < n; ++i) {
       const uint32_t of = from.components.of[begin + i];
@@ -140,7 +154,8 @@ class InPlaceResults {
     cut(to.key, 1);
     cut(to.source, 1);
     cut(to_.firstDistance, 1);
-    cut(to_.neighborSource, k_);
+    to_.boundarySource = std::move(boundarySource_);
+    to_.boundaryNeighbor = std::move(boundaryNeighbor_);
     cut(to_.components.of, 1);
     to_.components.anchored = std::move(anchored_);
     to_.components.seedVote = std::move(seedVote_);
@@ -149,11 +164,12 @@ class InPlaceResults {
 
  private:
   Accumulated& to_;
-  size_t k_;
   size_t cursor_ = 0;
   std::vector<uint8_t> anchored_;
   std::vector<float> seedVote_;
   std::vector<ChunkRecord> records_;
+  std::vector<uint32_t> boundarySource_;
+  UninitializedVector<uint32_t> boundaryNeighbor_;
 };
 
 // Drop the points that `keep` leaves out (far outliers found earlier).
@@ -247,7 +263,9 @@ class ChunkRunner {
     record.componentBegin = record.componentEnd = uint32_t(out.components.anchored.size());
     record.lo = lo;
     record.hi = hi;
+    record.boundaryBegin = record.boundaryEnd = out.boundarySource.size();
     if (neighbors.k == 0) {  // one distinct point in the whole input: no surface (said later)
+      points.roughness.assign(points.size(), 0.0f);  // as in core: no neighbours, no roughness
       appendRange(out.points, points, ownBegin, ownEnd);
       out.firstDistance.insert(out.firstDistance.end(), ownEnd - ownBegin, 0.0f);
       out.components.of.insert(out.components.of.end(), ownEnd - ownBegin, kNoNode);
@@ -260,6 +278,7 @@ class ChunkRunner {
     out.haloPoints += points.size() - (ownEnd - ownBegin);
     record.duplicates = own.source.size() - (ownEnd - ownBegin);
     const size_t k = size_t(neighbors.k);
+    out.k = k;
     if (findingOutliers_) {
       const std::vector<uint8_t> flagged = findOutliers(points, neighbors);
       for (uint32_t i = ownBegin; i < ownEnd; ++i)
@@ -291,12 +310,30 @@ class ChunkRunner {
       record.blocks = blocks.size();
     }
 
+    // Roughness compares normals: final here for neighbours in the point's own component (whole
+    // components flip together later); points with others keep their edges for later.
+    points.roughness.assign(points.size(), 0.0f);
+    std::vector<uint8_t> boundary(points.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(ownBegin, ownEnd, 4096),
+                      [&](const tbb::blocked_range<uint32_t>& r) {
+                        for (uint32_t i = r.begin(); i < r.end(); ++i) {
+                          const uint32_t* near = neighbors.index.data() + size_t(i) * k;
+                          for (size_t e = 0; e < k && !boundary[i]; ++e)
+                            boundary[i] = near[e] < ownBegin || near[e] >= ownEnd ||
+                                          local.of[near[e]] != local.of[i];
+                          if (!boundary[i]) points.roughness[i] = roughnessOf(points, i, near, k);
+                        }
+                      });
+    for (uint32_t i = ownBegin; i < ownEnd; ++i) {
+      if (!boundary[i]) continue;
+      out.boundarySource.push_back(points.source[i]);
+      for (size_t e = 0; e < k; ++e)
+        out.boundaryNeighbor.push_back(points.source[neighbors.index[i * k + e]]);
+    }
+    record.boundaryEnd = out.boundarySource.size();
     appendRange(out.points, points, ownBegin, ownEnd);
     out.components.of.insert(out.components.of.end(), local.of.begin() + ownBegin,
                              local.of.begin() + ownEnd);
-    for (uint32_t i = ownBegin; i < ownEnd; ++i)
-      for (size_t e = 0; e < k; ++e)
-        out.neighborSource.push_back(points.source[neighbors.index[i * k + e]]);
     record.pointEnd = out.points.size();
     record.componentEnd = uint32_t(out.components.anchored.size());
     out.chunks.push_back(record);
@@ -357,7 +394,6 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   uint64_t peakTemporary = 0;
   Accumulated done;
   size_t chunks = 0, preparedAgain = 0;
-  const size_t k = size_t(options.neighbors);
   for (;;) {
     stage("distribute", 2 * raw.size());
     const Distribution distribution(directory, raw, ready.frame, maxChunkPoints,
@@ -366,7 +402,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     chunks = distribution.chunks().size();
     stage("points", distribution.size());
     done = Accumulated{};
-    reserveFor(done, distribution.size(), raw.layout(), k);
+    reserveFor(done, distribution.size(), raw.layout());
     ChunkRunner runner(distribution, ready.frame, options, findingOutliers, raw.layout().normals);
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (done.outlierSources.empty()) break;
@@ -415,7 +451,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       }
     }
     const std::vector<ChunkRecord> old = done.chunks;
-    InPlaceResults results(done, k);
+    InPlaceResults results(done);
     for (size_t c = 0; c < old.size(); ++c)
       if (againOf[c] == kNoNode)
         results.place(done, old[c]);
@@ -439,22 +475,23 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   PointSet& points = done.points;
   const size_t n = points.size();
   {
-    // The neighbours as indices into the assembled points.
+    // The boundary points and their neighbours as indices into the assembled points.
     std::vector<uint32_t> ordinal(raw.size(), kNoNode);
     for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
-    Neighbors neighbors;  // converted in place: not two arrays of k indices per point at once
-    neighbors.k = int(n > 0 ? done.neighborSource.size() / n : 0);
-    neighbors.index.swap(done.neighborSource);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, neighbors.index.size(), 1 << 16),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t e = r.begin(); e < r.end(); ++e)
-                          neighbors.index[e] = ordinal[neighbors.index[e]];
-                      });
+    std::vector<uint32_t>& from = done.boundarySource;
+    UninitializedVector<uint32_t>& near = done.boundaryNeighbor;
+    for (uint32_t& s : from) s = ordinal[s];
+    for (uint32_t& s : near) s = ordinal[s];
     ordinal = {};
     if (options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0)
-      alignComponents(points.normal, done.components, neighbors.index, size_t(neighbors.k));
-    // Roughness compares a point's normal with its neighbours': after they are all oriented.
-    estimateRoughness(points, neighbors);
+      alignComponents(points.normal, done.components, from, near, done.k);
+    // Their roughness compares normals across components: after those are all oriented.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size(), 1024),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t b = r.begin(); b < r.end(); ++b)
+                          points.roughness[from[b]] =
+                              roughnessOf(points, from[b], near.data() + b * done.k, done.k);
+                      });
   }
   progressAdvance(n);
 
@@ -481,6 +518,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                      {"largest_loaded_points", done.maxLoaded},
                      {"halo_points", done.haloPoints},
                      {"halo_widenings", done.widenings},
+                     {"boundary_points", done.boundarySource.size()},
                      {"chunks_prepared_again", preparedAgain},
                      {"temporary_bytes_peak", peakTemporary}};
   return ready;

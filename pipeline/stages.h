@@ -161,9 +161,17 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
 // other takes the sign its components vote for.
 void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
                      std::span<const uint32_t> neighborIndex, size_t k);
+// The same over the edges of some points only (neighborIndex: k per point of `from`), which must
+// include every edge between two components (the sums are the same: edges inside a component
+// add nothing).
+void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+                     std::span<const uint32_t> from, std::span<const uint32_t> neighborIndex,
+                     size_t k);
 // Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS
 // distance of its neighbours to the plane through their centroid with the point's normal.
 void estimateRoughness(PointSet& points, const Neighbors& neighbors);
+// The roughness of point i from its k neighbours.
+float roughnessOf(const PointSet& points, uint32_t i, const uint32_t* neighbors, size_t k);
 
 // ---- sdf.cpp
 struct CornerSample {
