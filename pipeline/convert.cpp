@@ -220,7 +220,9 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
     if (ready.outliers > 0) {  // choose the frame again without them: far outliers waste precision
       filtered = withoutSources(*cloud, prepared.points, flagged);
       cloud = &filtered;
+      timer.next("prepare", cloud->size());  // both stages again, as their own entries
       prepared = prepare(*cloud);
+      timer.next("radii", cloud->size());
       tree = std::make_unique<PointIndex>(prepared.points.position);
       neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
     }

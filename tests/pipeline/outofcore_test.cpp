@@ -3,10 +3,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <map>
 #include <random>
 #include <set>
 
+#include "convert.h"
 #include "outofcore.h"
+#include "progress.h"
 #include "pipeline_support.h"
 #include "spill.h"
 
@@ -192,6 +196,43 @@ TEST(OutOfCore, theSpillDirectoryLeavesNothingBehind) {
     EXPECT_FALSE(std::filesystem::is_empty(dir.path()));
   }
   EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+}
+
+}  // namespace
+}  // namespace iso
+
+namespace iso {
+namespace {
+
+TEST(Progress, inCoreStagesNeverCountPastTheirTotalsWhenOutliersRunThemAgain) {
+  PointCloud cloud = test::scanOf("sphere", 40000, false, 0.0, 9);
+  cloud.positions.push_back(glm::dvec3(40.0, 3.0, -2.0));  // a far outlier: prepared again
+  test::TempDir dir;
+  std::FILE* log = std::tmpfile();
+  ASSERT_NE(log, nullptr);
+  {
+    ProgressReporter progress(ProgressMode::Json, log, std::chrono::milliseconds(1));
+    ConvertSource source;
+    source.progress = &progress;
+    const nlohmann::json report = convertToIso(cloud, dir / "out.iso", BuildOptions{}, source);
+    EXPECT_EQ(report["points"]["outliers_removed"], 1);
+  }
+  std::rewind(log);
+  std::map<std::string, int> ends;
+  size_t updates = 0;
+  char line[4096];
+  while (std::fgets(line, sizeof line, log)) {
+    const nlohmann::json event = nlohmann::json::parse(line);
+    ++updates;
+    if (event["event"] == "end") ++ends[event["stage"].get<std::string>()];
+    if (event.contains("total")) {  // known totals only
+      EXPECT_LE(event["done"].get<uint64_t>(), event["total"].get<uint64_t>()) << line;
+    }
+  }
+  std::fclose(log);
+  EXPECT_GT(updates, 10u);
+  EXPECT_EQ(ends["prepare"], 2);  // each stage run again is its own entry
+  EXPECT_EQ(ends["radii"], 2);
 }
 
 }  // namespace
