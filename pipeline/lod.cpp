@@ -54,18 +54,29 @@ std::vector<CellSums> aggregate(size_t count, int level, const KeyAt& keyAt, con
     }
     cut[p] = std::max(lo, cut[p - 1]);
   }
-  std::vector<std::vector<CellSums>> out(parts);
-  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
+  // Cells per part first, so that each part fills its own range of one array (no second copy).
+  const auto forEachCell = [&](size_t p, const auto& f) {
     for (size_t i = cut[p]; i < cut[p + 1];) {
-      CellSums sums;
-      sums.key = keyAt(i);
-      const uint64_t cell = sums.key >> shift;
-      for (; i < cut[p + 1] && (keyAt(i) >> shift) == cell; ++i) add(sums, i);
-      out[p].push_back(sums);
+      const size_t first = i;
+      const uint64_t cell = keyAt(i) >> shift;
+      while (i < cut[p + 1] && (keyAt(i) >> shift) == cell) ++i;
+      f(first, i);
     }
+  };
+  std::vector<size_t> offset(parts + 1, 0);
+  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
+    forEachCell(p, [&](size_t, size_t) { ++offset[p + 1]; });
   });
-  std::vector<CellSums> all;
-  for (const auto& part : out) all.insert(all.end(), part.begin(), part.end());
+  for (size_t p = 0; p < parts; ++p) offset[p + 1] += offset[p];
+  std::vector<CellSums> all(offset[parts]);
+  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
+    size_t at = offset[p];
+    forEachCell(p, [&](size_t begin, size_t end) {
+      CellSums& sums = all[at++];
+      sums.key = keyAt(begin);
+      for (size_t i = begin; i < end; ++i) add(sums, i);
+    });
+  });
   return all;
 }
 
