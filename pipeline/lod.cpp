@@ -15,7 +15,6 @@
 #include <glm/geometric.hpp>
 #include <map>
 #include <memory>
-#include <set>
 
 #include "knn.h"
 #include "stages.h"
@@ -28,17 +27,19 @@ constexpr int kProxyLevels = 2;            // proxies are cells this many levels
 
 // The weighted sums of the points in one cell: Σw, Σw p, Σw n, Σw r, Σw c.
 struct CellSums {
-  uint64_t key = 0;  // Morton key (at kMaxLevel) of the cell's first point
   double weight = 0.0;
   glm::dvec3 position{0.0};
   glm::vec3 normal{0.0f}, color{0.0f};
   float radius = 0.0f;
 };
 
-// One CellSums per occupied cell at `level` of `count` items sorted by key, in parallel over
-// parts cut at cell boundaries; add(sums, i) adds item i.
-template <typename KeyAt, typename Add>
-std::vector<CellSums> aggregate(size_t count, int level, const KeyAt& keyAt, const Add& add) {
+// Proxies of the points of each occupied cell at `level` (points sorted by key): the weighted
+// mean position, normal, radius and colour of the cell's points; the weight scaled by how well
+// the normals agree. In parallel over parts cut at cell boundaries; each part counts its cells
+// first and then fills its own range, and a cell's sums live only while its proxy is made.
+PointSet proxiesAt(const PointSet& points, int level) {
+  const size_t count = points.size();
+  const auto keyAt = [&](size_t i) { return points.key[i]; };
   const int shift = 3 * (kMaxLevel - level);
   constexpr size_t kPart = size_t{1} << 16;
   const size_t parts = std::max<size_t>(1, count / kPart);
@@ -54,7 +55,6 @@ std::vector<CellSums> aggregate(size_t count, int level, const KeyAt& keyAt, con
     }
     cut[p] = std::max(lo, cut[p - 1]);
   }
-  // Cells per part first, so that each part fills its own range of one array (no second copy).
   const auto forEachCell = [&](size_t p, const auto& f) {
     for (size_t i = cut[p]; i < cut[p + 1];) {
       const size_t first = i;
@@ -68,41 +68,36 @@ std::vector<CellSums> aggregate(size_t count, int level, const KeyAt& keyAt, con
     forEachCell(p, [&](size_t, size_t) { ++offset[p + 1]; });
   });
   for (size_t p = 0; p < parts; ++p) offset[p + 1] += offset[p];
-  std::vector<CellSums> all(offset[parts]);
-  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
-    size_t at = offset[p];
-    forEachCell(p, [&](size_t begin, size_t end) {
-      CellSums& sums = all[at++];
-      sums.key = keyAt(begin);
-      for (size_t i = begin; i < end; ++i) add(sums, i);
-    });
-  });
-  return all;
-}
-
-// Proxies from cell sums: the weighted mean position, normal, radius and colour; the weight
-// scaled by how well the normals agree.
-PointSet proxiesOf(const std::vector<CellSums>& cells, bool colors) {
+  const size_t m = offset[parts];
+  const bool colors = points.hasColors();
   PointSet proxies;
-  const size_t m = cells.size();
   proxies.position.resize(m);
   proxies.normal.resize(m);
   proxies.weight.resize(m);
   proxies.radius.resize(m);
   proxies.key.resize(m);
   if (colors) proxies.color.resize(m);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i < r.end(); ++i) {
-      const CellSums& c = cells[i];
+  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
+    size_t at = offset[p];
+    forEachCell(p, [&](size_t begin, size_t end) {
+      CellSums c;
+      for (size_t i = begin; i < end; ++i) {
+        const double w = points.weight[i];
+        c.weight += w;
+        c.position += w * glm::dvec3(points.position[i]);
+        c.normal += float(w) * points.normal[i];
+        c.radius += float(w) * points.radius[i];
+        if (colors) c.color += float(w) * points.color[i];
+      }
+      const size_t k = at++;
       const double coherence = glm::length(glm::dvec3(c.normal)) / c.weight;  // 1: all agree
-      proxies.position[i] = glm::vec3(c.position / c.weight);
-      proxies.normal[i] =
-          coherence > 1e-6 ? glm::normalize(c.normal) : glm::vec3(0.0f);
-      proxies.weight[i] = float(c.weight * std::max(coherence, 1e-3));
-      proxies.radius[i] = float(double(c.radius) / c.weight);
-      proxies.key[i] = c.key;
-      if (colors) proxies.color[i] = glm::vec3(glm::dvec3(c.color) / c.weight);
-    }
+      proxies.position[k] = glm::vec3(c.position / c.weight);
+      proxies.normal[k] = coherence > 1e-6 ? glm::normalize(c.normal) : glm::vec3(0.0f);
+      proxies.weight[k] = float(c.weight * std::max(coherence, 1e-3));
+      proxies.radius[k] = float(double(c.radius) / c.weight);
+      proxies.key[k] = points.key[begin];
+      if (colors) proxies.color[k] = glm::vec3(glm::dvec3(c.color) / c.weight);
+    });
   });
   return proxies;
 }
@@ -132,62 +127,6 @@ std::array<size_t, kMaxLevel + 1> occupiedCells(const PointSet& points) {
   return cells;
 }
 
-// Evaluators over proxies for the proxy level of each node level: the finest proxies summed
-// from the points, each coarser level from the one below (linear in the points, whatever the
-// depth).
-class ProxyPyramid {
- public:
-  ProxyPyramid(const PointSet& points, const BuildOptions& options, const std::set<int>& wanted)
-      : options_(options) {
-    if (wanted.empty()) return;
-    const int finest = *wanted.rbegin(), coarsest = *wanted.begin();
-    std::vector<CellSums> cells = aggregate(
-        points.size(), finest, [&](size_t i) { return points.key[i]; },
-        [&](CellSums& s, size_t i) {
-          const double w = points.weight[i];
-          s.weight += w;
-          s.position += w * glm::dvec3(points.position[i]);
-          s.normal += float(w) * points.normal[i];
-          s.radius += float(w) * points.radius[i];
-          if (points.hasColors()) s.color += float(w) * points.color[i];
-        });
-    for (int level = finest;; --level) {
-      if (wanted.count(level)) levels_[level].proxies = proxiesOf(cells, points.hasColors());
-      if (level == coarsest) break;
-      cells = aggregate(
-          cells.size(), level - 1, [&](size_t i) { return cells[i].key; },
-          [&](CellSums& s, size_t i) {
-            s.weight += cells[i].weight;
-            s.position += cells[i].position;
-            s.normal += cells[i].normal;
-            s.radius += cells[i].radius;
-            s.color += cells[i].color;
-          });
-    }
-  }
-
-  const SdfEvaluator& forProxyLevel(int level) {
-    Level& l = levels_.at(level);
-    if (!l.evaluator) {
-      l.tree = std::make_unique<PointIndex>(l.proxies.position);
-      l.evaluator =
-          std::make_unique<SdfEvaluator>(l.proxies, *l.tree, options_.smoothing, options_.fit);
-    }
-    return *l.evaluator;
-  }
-  // Free a level once its corners are evaluated.
-  void release(int level) { levels_.erase(level); }
-
- private:
-  struct Level {
-    PointSet proxies;
-    std::unique_ptr<PointIndex> tree;
-    std::unique_ptr<SdfEvaluator> evaluator;
-  };
-  const BuildOptions& options_;
-  std::map<int, Level> levels_;
-};
-
 }  // namespace
 
 Key128 lodKey(uint8_t level, const GridPoint& p) {
@@ -214,20 +153,32 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
   }
   // Proxies where they hold 4 points or more on average; at finer levels the points themselves.
   const std::array<size_t, kMaxLevel + 1> cells = occupiedCells(points);
-  std::set<int> proxyLevels;
   std::map<int, int> proxyLevelOf;  // node level → proxy level (absent: the points)
   for (const auto& entry : byLevel) {
     const int proxy = std::min(entry.first + kProxyLevels, int(kMaxLevel));
     if (4 * cells[size_t(proxy)] > points.size()) continue;
-    proxyLevels.insert(proxy);
     proxyLevelOf[entry.first] = proxy;
   }
-  ProxyPyramid pyramid(points, options, proxyLevels);
+  // The proxies of one level at a time, each summed from the points, made when a node level first
+  // needs them and freed when the next needs another.
+  int madeLevel = -1;
+  PointSet proxies;
+  std::unique_ptr<PointIndex> proxyIndex;
+  std::unique_ptr<SdfEvaluator> proxySdf;
   const double unit = std::ldexp(1.0, -kMaxLevel);
   for (const auto& [level, corners] : byLevel) {
     const auto proxy = proxyLevelOf.find(level);
-    const SdfEvaluator& sdf =
-        proxy != proxyLevelOf.end() ? pyramid.forProxyLevel(proxy->second) : pointsSdf;
+    if (proxy != proxyLevelOf.end() && proxy->second != madeLevel) {
+      proxySdf.reset();
+      proxyIndex.reset();
+      proxies = PointSet{};
+      proxies = proxiesAt(points, proxy->second);
+      proxyIndex = std::make_unique<PointIndex>(proxies.position);
+      proxySdf =
+          std::make_unique<SdfEvaluator>(proxies, *proxyIndex, options.smoothing, options.fit);
+      madeLevel = proxy->second;
+    }
+    const SdfEvaluator& sdf = proxy != proxyLevelOf.end() ? *proxySdf : pointsSdf;
     const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
                       [&](const tbb::blocked_range<size_t>& r) {
@@ -237,10 +188,6 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
                               glm::dvec3(p.x * unit, p.y * unit, p.z * unit), minSigma);
                         }
                       });
-    // Coarse levels first, so a proxy level is done when the next node level uses another.
-    const auto next = proxyLevelOf.upper_bound(level);
-    if (proxy != proxyLevelOf.end() && (next == proxyLevelOf.end() || next->second != proxy->second))
-      pyramid.release(proxy->second);
   }
   return field;
 }

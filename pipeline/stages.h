@@ -248,7 +248,7 @@ struct OctreeStats {
 // way whatever the level, so the final corners reuse them.
 class CornerCache {
  public:
-  explicit CornerCache(size_t expected = 16) : index_(expected) {}
+  explicit CornerCache(size_t expected = 16) : index_(expected) { values_.reserve(expected); }
   const CornerSample* find(const Key128& key) const {
     const uint32_t entry = index_.find(key);
     return entry == KeyIndex<Key128>::kNone ? nullptr : &values_[entry];

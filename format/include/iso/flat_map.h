@@ -105,7 +105,13 @@ class KeyIndex {
  public:
   static constexpr uint32_t kNone = 0xffffffffu;
 
-  explicit KeyIndex(size_t expected = 16) { rehash(capacityFor(expected)); }
+  // Room for `expected` keys: the table is made (4 bytes a slot), the key array only reserved.
+  explicit KeyIndex(size_t expected = 16) { reserve(expected); }
+
+  void reserve(size_t expected) {
+    keys_.reserve(expected);
+    if (capacityFor(expected) > slots_.size()) rehash(capacityFor(expected));
+  }
 
   // The number of key, which is added (as the next number) when new; second: whether it was.
   std::pair<uint32_t, bool> insert(const Key& key) {
