@@ -292,26 +292,28 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;
   const NormalStats& normals = ready.normals;
-  const PointIndex* tree = ready.index.get();
   points.source = {};  // the octree stages do not need it: 4 bytes a point
   timer.next("octree");
 
-  const SdfEvaluator sdf(points, *tree, options.smoothing, options.fit);
+  // The signed distance and its point index are needed until the level-of-detail corners.
+  auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
   OctreeStats octreeStats;
   CornerCache cornerCache(points.size() / 2);
-  Octree octree = buildOctree(points, sdf, options, radii, cornerCache, &octreeStats);
+  Octree octree = buildOctree(points, *sdf, options, radii, cornerCache, &octreeStats);
   points.roughness = {};  // only the octree's tolerance reads it
   timer.next("passive+balance");
   const size_t passive = markPassiveLeaves(octree, points);
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
-  Closure closure = sampleClosedSurface(octree, points, sdf, cornerCache);
+  Closure closure = sampleClosedSurface(octree, points, *sdf, cornerCache);
   cornerCache = CornerCache(0);  // every value is in the corner field now
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.next("lod");
-  LodField lod = sampleLodCorners(octree, points, sdf, options);
+  LodField lod = sampleLodCorners(octree, points, *sdf, options);
+  sdf.reset();
+  ready.index.reset();  // the writer reads points, not neighbours
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
@@ -350,7 +352,6 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     closure = Closure{};
     lod = LodField{};
     points = PointSet{};
-    ready.index.reset();
   };
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
