@@ -38,10 +38,17 @@ struct KeyHash {
   }
 };
 
+// Slots for `expected` keys in a table at most half full: a power of two, at least 16.
+inline size_t tableCapacity(size_t expected) {
+  size_t c = 16;
+  while (c < expected * 2) c *= 2;
+  return c;
+}
+
 template <typename Key, typename Value>
 class FlatMap {
  public:
-  explicit FlatMap(size_t expected = 16) { rehash(capacityFor(expected)); }
+  explicit FlatMap(size_t expected = 16) { rehash(tableCapacity(expected)); }
 
   // The value for key, inserting `value` first when the key is new; second is true when inserted.
   std::pair<Value*, bool> insert(const Key& key, const Value& value) {
@@ -76,12 +83,6 @@ class FlatMap {
   }
 
  private:
-  static size_t capacityFor(size_t expected) {
-    size_t c = 16;
-    while (c < expected * 2) c *= 2;
-    return c;
-  }
-
   void rehash(size_t capacity) {
     std::vector<std::pair<Key, Value>> old = std::move(slots_);
     std::vector<uint8_t> oldUsed = std::move(used_);
@@ -110,7 +111,7 @@ class KeyIndex {
 
   void reserve(size_t expected) {
     keys_.reserve(expected);
-    if (capacityFor(expected) > slots_.size()) rehash(capacityFor(expected));
+    if (tableCapacity(expected) > slots_.size()) rehash(tableCapacity(expected));
   }
 
   // The number of key, which is added (as the next number) when new; second: whether it was.
@@ -135,12 +136,6 @@ class KeyIndex {
   const Key& key(uint32_t number) const { return keys_[number]; }
 
  private:
-  static size_t capacityFor(size_t expected) {
-    size_t c = 16;
-    while (c < expected * 2) c *= 2;
-    return c;
-  }
-
   void rehash(size_t capacity) {
     slots_.assign(capacity, kNone);
     mask_ = capacity - 1;
