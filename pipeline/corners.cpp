@@ -81,9 +81,10 @@ CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, Corne
   std::vector<uint32_t> leaves;
   for (uint32_t i = 0; i < tree.nodes.size(); ++i)
     if (tree.nodes[i].isFilled()) leaves.push_back(i);
-  // About 2.5 distinct corners a leaf (neighbours share them): room made once, not by doubling.
+  // About 2.25 distinct corners a leaf (neighbours share them): the arrays are reserved (address
+  // space, not memory, where the estimate is high), not grown by copying.
   const size_t expected = leaves.size() * 5 / 2;
-  field.index.reserve(expected);
+  field.index.reserveKeys(expected);
   field.coarsestLevel.reserve(expected);
   addLeafCorners(field, tree, leaves, sdf, cache);
   return field;

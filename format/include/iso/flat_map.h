@@ -106,13 +106,15 @@ class KeyIndex {
  public:
   static constexpr uint32_t kNone = 0xffffffffu;
 
-  // Room for `expected` keys: the table is made (4 bytes a slot), the key array only reserved.
-  explicit KeyIndex(size_t expected = 16) { reserve(expected); }
-
-  void reserve(size_t expected) {
-    keys_.reserve(expected);
-    if (tableCapacity(expected) > slots_.size()) rehash(tableCapacity(expected));
+  // Room for `expected` keys: the table is made (4 bytes a slot), the key array reserved.
+  explicit KeyIndex(size_t expected = 16) {
+    reserveKeys(expected);
+    rehash(tableCapacity(expected));
   }
+
+  // Reserve the key array only (address space: pages count once written); the table still grows
+  // by doubling, so that an estimate too high never doubles its resident size.
+  void reserveKeys(size_t expected) { keys_.reserve(expected); }
 
   // The number of key, which is added (as the next number) when new; second: whether it was.
   std::pair<uint32_t, bool> insert(const Key& key) {
