@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 
+#include "collect.h"
 #include "stages.h"
 
 namespace iso {
@@ -49,14 +50,8 @@ void requestsOf(const Octree& tree, uint32_t id, std::vector<Request>& out) {
 
 // The requests of all leaves on the work list, sorted and without repeats (in parallel).
 std::vector<Request> requestsOf(const Octree& tree, const std::vector<uint32_t>& work) {
-  constexpr size_t kBlock = 4096;
-  std::vector<std::vector<Request>> parts((work.size() + kBlock - 1) / kBlock);
-  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
-    const size_t end = std::min(work.size(), (p + 1) * kBlock);
-    for (size_t i = p * kBlock; i < end; ++i) requestsOf(tree, work[i], parts[p]);
-  });
-  std::vector<Request> all;
-  for (const auto& part : parts) all.insert(all.end(), part.begin(), part.end());
+  std::vector<Request> all = collectInParallel<Request>(
+      work.size(), 4096, [&](size_t i, std::vector<Request>& out) { requestsOf(tree, work[i], out); });
   std::sort(all.begin(), all.end());
   all.erase(std::unique(all.begin(), all.end()), all.end());
   return all;

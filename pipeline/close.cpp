@@ -7,11 +7,10 @@
 // the pass repeats until nothing is left to fill. A leaf that holds points but no zero set (its
 // estimate displaced, where sampling is sparse) gets its neighbour across the face nearest to the
 // zero set filled the same way.
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <cmath>
 
+#include "collect.h"
 #include "stages.h"
 
 namespace iso {
@@ -109,15 +108,11 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
 // order, so the result does not depend on the order of the leaves.
 std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                                 const CornerField& field, const std::vector<uint32_t>& leaves) {
-  constexpr size_t kBlock = 1024;
-  std::vector<std::vector<std::pair<uint8_t, uint64_t>>> parts((leaves.size() + kBlock - 1) /
-                                                               kBlock);
-  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
-    const size_t end = std::min(leaves.size(), (p + 1) * kBlock);
-    for (size_t i = p * kBlock; i < end; ++i) exitsOf(tree, points, sdf, field, leaves[i], parts[p]);
-  });
-  std::vector<std::pair<uint8_t, uint64_t>> targets;
-  for (const auto& part : parts) targets.insert(targets.end(), part.begin(), part.end());
+  using Cell = std::pair<uint8_t, uint64_t>;
+  std::vector<Cell> targets =
+      collectInParallel<Cell>(leaves.size(), 1024, [&](size_t i, std::vector<Cell>& out) {
+        exitsOf(tree, points, sdf, field, leaves[i], out);
+      });
   std::sort(targets.begin(), targets.end());
   targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
   std::vector<uint32_t> filled;

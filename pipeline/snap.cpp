@@ -3,12 +3,11 @@
 // (edge) interpolation of that leaf's corners there. Both trilinear patches then agree exactly on
 // the shared face, so the zero set has no cracks. After 2:1 balance only a leaf exactly one level
 // coarser can own such a face or edge.
-#include <tbb/parallel_for.h>
-
 #include <algorithm>
 #include <glm/geometric.hpp>
 #include <numeric>
 
+#include "collect.h"
 #include "stages.h"
 
 namespace iso {
@@ -61,15 +60,10 @@ std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerFie
 }  // namespace
 
 std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field) {
-  constexpr size_t kBlock = 1 << 14;
-  std::vector<std::vector<HangingCorner>> parts((field.size() + kBlock - 1) / kBlock);
-  tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
-    const size_t end = std::min(field.size(), (p + 1) * kBlock);
-    for (size_t i = p * kBlock; i < end; ++i)
-      if (auto h = hangingRelation(tree, field, uint32_t(i))) parts[p].push_back(*h);
-  });
-  std::vector<HangingCorner> hanging;
-  for (const auto& part : parts) hanging.insert(hanging.end(), part.begin(), part.end());
+  std::vector<HangingCorner> hanging = collectInParallel<HangingCorner>(
+      field.size(), 1 << 14, [&](size_t i, std::vector<HangingCorner>& out) {
+        if (auto h = hangingRelation(tree, field, uint32_t(i))) out.push_back(*h);
+      });
   // Coarse first: a source may itself hang from a leaf another level up.
   std::stable_sort(hanging.begin(), hanging.end(),
                    [&](const HangingCorner& a, const HangingCorner& b) {

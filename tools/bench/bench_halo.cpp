@@ -24,12 +24,16 @@ namespace {
 using iso::NodeKind;
 using Leaves = std::map<std::pair<int, uint64_t>, NodeKind>;  // (level, key) → kind
 
+// Whether the cell (nodeLevel, nodeKey) lies inside the cell (level, key).
+bool isInside(int nodeLevel, uint64_t nodeKey, int level, uint64_t key) {
+  return nodeLevel >= level && (nodeKey >> (3 * (nodeLevel - level))) == key;
+}
+
 // The leaves (filled or empty) inside the cell (level, key) of a tree.
 Leaves leavesIn(const iso::Octree& tree, int level, uint64_t key) {
   Leaves out;
   for (const iso::OctreeNode& n : tree.nodes)
-    if (n.kind != NodeKind::Internal && n.level >= level &&
-        (n.key >> (3 * (n.level - level))) == key)
+    if (n.kind != NodeKind::Internal && isInside(n.level, n.key, level, key))
       out[{n.level, n.key}] = n.kind;
   return out;
 }
@@ -142,8 +146,7 @@ int main(int argc, char** argv) {
   const auto within = [](const Leaves& leaves, int level, uint64_t key) {
     Leaves out;
     for (const auto& [cell, kind] : leaves)
-      if (cell.first >= level && (cell.second >> (3 * (cell.first - level))) == key)
-        out[cell] = kind;
+      if (isInside(cell.first, cell.second, level, key)) out[cell] = kind;
     return out;
   };
   std::map<uint64_t, size_t> perCell;
