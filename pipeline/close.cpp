@@ -22,7 +22,7 @@ constexpr size_t kMaxPasses = 8;
 // points (within the radius of influence of the nearest one), if there is one: the crossings along
 // the face's 4 edges are tried.
 bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int axis, int side,
-                           const SdfEvaluator& sdf, const PointSet& points) {
+                           const SdfEvaluator& sdf, const PointSet& points, bool& exact) {
   std::array<int, 4> corners{};
   int count = 0;
   for (int c = 0; c < kCorners; ++c)
@@ -40,7 +40,9 @@ bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int
     const glm::dvec3 a(pa.x, pa.y, pa.z), b(pb.x, pb.y, pb.z);
     const glm::dvec3 x = (a + t * (b - a)) * unit;
     float distance = 0.0f;
-    const uint32_t nearest = sdf.nearest(x, distance);
+    bool found = true;
+    const uint32_t nearest = sdf.nearest(x, distance, &found);
+    exact = exact && found;
     if (distance <= points.radius[nearest]) return true;
   }
   return false;
@@ -72,20 +74,24 @@ bool hasSurface(const CornerField& field, const OctreeNode& leaf) {
   return negative != 0 && negative != kCorners;
 }
 
-// Make the cell (level, key) a node of the tree, splitting empty ancestors; returns it.
-uint32_t materialize(Octree& tree, const PointSet& points, uint8_t level, uint64_t key) {
-  for (;;) {
-    const uint32_t node = tree.find(level, key);
-    if (tree.nodes[node].level == level || tree.nodes[node].kind != NodeKind::Empty) return node;
-    tree.split(node, points);  // an empty node: its children are empty too
-  }
-}
+// An empty cell the surface runs into; inexact (in a chunk run): found only from what may differ
+// from the run on all points.
+struct Exit {
+  uint8_t level;
+  uint64_t key;
+  bool inexact;
+  auto operator<=>(const Exit&) const = default;
+};
 
-// The empty cells (level, key) the surface runs into from one leaf.
+// The empty cells the surface runs into from one leaf.
 void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-             const CornerField& field, uint32_t id, std::vector<std::pair<uint8_t, uint64_t>>& out) {
+             const CornerField& field, uint32_t id, std::vector<Exit>& out) {
   const OctreeNode& leaf = tree.nodes[id];
   if (!leaf.isFilled()) return;
+  bool exact = tree.isExact(id);
+  if (!field.inexact.empty())
+    for (int c = 0; c < kCorners; ++c)
+      exact = exact && !field.inexact[field.find(cornerPoint(leaf.level, leaf.key, c))];
   const auto cell = mortonDecode(leaf.key);
   const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf);
   const int toward = lost ? faceTowardSurface(field, leaf) : -1;
@@ -98,8 +104,9 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
     if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
     // The zero set runs out through this face near the points, or the leaf holds points but no
     // zero set (a displaced estimate) and this face is the nearest to it.
-    if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points))
-      out.push_back({leaf.level, key});
+    bool found = exact;
+    if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points, found))
+      out.push_back({leaf.level, key, !found});
   }
 }
 
@@ -108,18 +115,22 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
 // order, so the result does not depend on the order of the leaves.
 std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                                 const CornerField& field, const std::vector<uint32_t>& leaves) {
-  using Cell = std::pair<uint8_t, uint64_t>;
-  std::vector<Cell> targets =
-      collectInParallel<Cell>(leaves.size(), 1024, [&](size_t i, std::vector<Cell>& out) {
+  std::vector<Exit> targets =
+      collectInParallel<Exit>(leaves.size(), 1024, [&](size_t i, std::vector<Exit>& out) {
         exitsOf(tree, points, sdf, field, leaves[i], out);
       });
-  std::sort(targets.begin(), targets.end());
-  targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
+  std::sort(targets.begin(), targets.end());  // an exact exit before an inexact one
+  targets.erase(std::unique(targets.begin(), targets.end(),
+                            [](const Exit& a, const Exit& b) {
+                              return a.level == b.level && a.key == b.key;
+                            }),
+                targets.end());
   std::vector<uint32_t> filled;
-  for (const auto& [level, key] : targets) {
-    const uint32_t node = materialize(tree, points, level, key);
+  for (const auto& [level, key, inexact] : targets) {
+    const uint32_t node = tree.materialize(level, key, points);
     if (tree.nodes[node].kind != NodeKind::Empty) continue;  // inside a cell filled before
     tree.nodes[node].kind = NodeKind::Passive;
+    if (inexact) tree.markInexact(node);  // the run on all points may not fill it
     filled.push_back(node);
   }
   return filled;
@@ -136,6 +147,7 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
   // Exits are found on the sampled values: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxPasses; ++closure.passes) {
     std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
+    if (tree.box) spreadClosurePass(tree, points);
     if (filled.empty()) break;
     closure.filled += filled.size();
     std::vector<uint32_t> created;
@@ -143,6 +155,12 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     fresh = std::move(filled);
     fresh.insert(fresh.end(), created.begin(), created.end());
     addLeafCorners(closure.corners, tree, fresh, sdf, cache);
+  }
+  // A chunk run: the run on all points may go on filling and balancing next to inexact nodes
+  // for the passes left.
+  for (size_t pass = closure.passes; tree.box && pass <= kMaxPasses; ++pass) {
+    spreadRemainingBalanceRounds(tree, 1);
+    if (pass < kMaxPasses) spreadClosurePass(tree, points);
   }
   // Splits left corners of leaves that are leaves no more: the levels are set from the final
   // leaves (every corner they use is in the field), then hanging corners are snapped.

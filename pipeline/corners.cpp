@@ -39,21 +39,31 @@ void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint
     }
   }
   field.value.resize(field.size());
+  const bool chunk = tree.box != nullptr;
+  if (chunk) field.inexact.resize(field.size(), 0);
   const double unit = std::ldexp(1.0, -kMaxLevel);
   tbb::parallel_for(tbb::blocked_range<size_t>(first, field.size(), 256),
                     [&](const tbb::blocked_range<size_t>& r) {
                       progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
                         const GridPoint p = field.point(uint32_t(i));
-                        if (const CornerSample* known = cache.find(field.index.key(uint32_t(i)))) {
+                        const Key128& key = field.index.key(uint32_t(i));
+                        if (const CornerSample* known = cache.find(key)) {
                           field.value[i] = *known;
+                          if (chunk) field.inexact[i] = !cache.isExact(key);
                           continue;
                         }
-                        field.value[i] = sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f);
+                        bool exact = true;
+                        field.value[i] =
+                            sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f, &exact);
+                        if (chunk) field.inexact[i] = !exact;
                       }
                     });
-  for (size_t i = first; i < field.size(); ++i)
-    cache.insert(field.index.key(uint32_t(i)), field.value[i]);
+  for (size_t i = first; i < field.size(); ++i) {
+    const Key128& key = field.index.key(uint32_t(i));
+    if (cache.insert(key, field.value[i]).second && chunk && field.inexact[i])
+      cache.markInexact(key);
+  }
 }
 
 size_t refreshCornerLevels(CornerField& field, const Octree& tree) {

@@ -11,6 +11,7 @@
 //   balance.cpp   2:1 balance between face-, edge- and corner-adjacent filled leaves
 //   corners.cpp   leaf corner sampling: each distinct corner evaluated once
 //   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
+//   exact.cpp     chunk runs: what may differ from the run on all points, and the check
 //   lod.cpp       level of detail: corners of internal nodes from point proxies, chunk errors
 //   chunks.cpp    cutting the octree into file chunks, quantization, writing through format/
 //
@@ -19,6 +20,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -56,6 +58,9 @@ struct BuildOptions {
   FitMode fit = FitMode::Sphere;
   OrientMode orient = OrientMode::Auto;
   uint32_t leafPoints = 8;      // a node with more points may be subdivided
+  // A node with more points is subdivided without a patch test. Not a command-line option: tests
+  // lower it so that small scans have chunks many tested nodes wide, as large scans do.
+  uint32_t maxTestedPoints = 4096;
   int maxDepth = 20;            // deepest octree level (at most 20)
   double tolerance = 0.1;       // allowed patch error, in mean point spacings
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
@@ -173,6 +178,52 @@ void estimateRoughness(PointSet& points, const Neighbors& neighbors);
 // The roughness of point i from its k neighbours.
 float roughnessOf(const PointSet& points, uint32_t i, const uint32_t* neighbors, size_t k);
 
+// ---- exact.cpp (chunk runs of the octree stages, specs/pipeline.md §15)
+// What a chunk run knows of all points beforehand, for the cells of levels 1 to kCoarseLevel:
+// how many points each holds, and which ones the disk of a point outside them touches. So a chunk
+// run decides as the run on all points does a large cell that reaches past its box: whether it
+// is empty, holds too many points to be tested, or is a passive leaf.
+inline constexpr uint8_t kCoarseLevel = 7;
+struct CoarseCells {
+  FlatMap<uint64_t, uint32_t> points;  // cellCode → points, for cells that hold any
+  FlatMap<uint64_t, uint8_t> touched;  // cellCode → 1, for cells a disk from outside touches
+  static uint64_t cellCode(uint8_t level, uint64_t key) { return uint64_t{1} << (3 * level) | key; }
+  uint32_t pointsIn(uint8_t level, uint64_t key) const {
+    const uint32_t* n = points.find(cellCode(level, key));
+    return n ? *n : 0;
+  }
+  bool isTouched(uint8_t level, uint64_t key) const {
+    return touched.find(cellCode(level, key)) != nullptr;
+  }
+};
+// Add points [begin, end) of a set with radii and normals (all points, or chunk by chunk).
+void addCoarseCells(CoarseCells& cells, const PointSet& points, size_t begin, size_t end);
+
+// The box whose points a chunk run loaded: every point inside it (closed), none outside. Its
+// faces on the frame cube's faces lie at infinity (no point is beyond them), so the box of a run
+// on all points holds everything.
+struct LoadedBox {
+  glm::dvec3 lo{-HUGE_VAL}, hi{HUGE_VAL};
+  float maxRadius = 0.0f;  // the largest r_i of all points, loaded or not (disks reach this far)
+  // A bound on the whole run's leaf levels before balance (how fine a requester can be).
+  uint8_t maxLeafLevel = kMaxLevel;
+  // The chunk's own cell: the whole run subdivides its ancestors (the driver checks that they
+  // hold more than 4,096 points), so the chunk run does too, whatever it loaded of them.
+  uint8_t ownLevel = 0;
+  uint64_t ownKey = 0;
+  const CoarseCells* coarse = nullptr;
+  // Whether a query ball lies inside (with room for float rounding): then it sees exactly the
+  // points a run on all points would.
+  bool holdsBall(const glm::dvec3& center, double radius) const;
+  // Whether the cell, widened by margin, lies inside.
+  bool holdsCell(uint8_t level, uint64_t key, double margin = 0.0) const;
+  // Whether the cell and the box share any point.
+  bool meetsCell(uint8_t level, uint64_t key) const;
+  bool isOwnAncestor(uint8_t level, uint64_t key) const {
+    return level < ownLevel && (ownKey >> (3 * (ownLevel - level))) == key;
+  }
+};
+
 // ---- sdf.cpp
 struct CornerSample {
   float distance = 0.0f;
@@ -182,16 +233,21 @@ struct CornerSample {
 // f(Q) = (Q - p̄)·n̄ with truncated Gaussian weights (specs/pipeline.md, "Signed distance").
 class SdfEvaluator {
  public:
-  SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit);
+  // box: in a chunk run, the box the points were loaded from (then `exact` answers whether the
+  // points a query read are all the points a run on all points would read).
+  SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit,
+               const LoadedBox* box = nullptr);
   // minSigma widens every σ_i (level of detail: a fraction of the node size).
-  CornerSample evaluate(const glm::dvec3& q, float minSigma) const;
+  CornerSample evaluate(const glm::dvec3& q, float minSigma, bool* exact = nullptr) const;
   // The point nearest to q and its distance.
-  uint32_t nearest(const glm::dvec3& q, float& distance) const;
+  uint32_t nearest(const glm::dvec3& q, float& distance, bool* exact = nullptr) const;
   const PointSet& points() const { return points_; }
+  const LoadedBox* box() const { return box_; }
 
  private:
   const PointSet& points_;
   const PointIndex& tree_;
+  const LoadedBox* box_;
   double smoothing_;
   FitMode fit_;
   std::vector<float> halfInverseSigma2_;  // 1 / 2(smoothing · r_i)² per point
@@ -226,6 +282,24 @@ struct OctreeNode {
 
 struct Octree {
   std::vector<OctreeNode> nodes;  // node 0: the root (level 0)
+  // In a chunk run: the box of the loaded points, and per node whether it may differ from the run
+  // on all points (its kind, its points, anything below it; children inherit it, and a child
+  // whose cell leaves the box gets it). Null and empty in a run on all points.
+  // Per node in a chunk run: kInexact, and kComplete when every point of its cell was loaded.
+  static constexpr uint8_t kInexact = 1, kComplete = 2;
+  const LoadedBox* box = nullptr;
+  std::vector<uint8_t> flags;
+  bool isExact(uint32_t node) const { return flags.empty() || !(flags[node] & kInexact); }
+  bool isComplete(uint32_t node) const { return flags.empty() || (flags[node] & kComplete); }
+  void markInexact(uint32_t node) {
+    if (!flags.empty()) flags[node] |= kInexact;
+  }
+  // The flags of a new node in a chunk run: kComplete when it lies in the box or holds the
+  // points the coarse cells count.
+  uint8_t completeness(uint32_t node) const;
+  // Make the cell (level, key) a node, splitting empty nodes above it; returns the node there or
+  // the filled or internal node that holds it.
+  uint32_t materialize(uint8_t level, uint64_t key, const PointSet& points);
   // The deepest node on the path to cell (level, key), at most at that level.
   uint32_t find(uint8_t level, uint64_t key) const;
   // Make a filled node Internal with 8 children over its points (kinds: Leaf with points, else
@@ -263,10 +337,16 @@ class CornerCache {
     return {&values_[entry], inserted};
   }
   size_t size() const { return values_.size(); }
+  // In a chunk run: values that may differ from the run on all points.
+  void markInexact(const Key128& key) { inexact_.insert(key); }
+  bool isExact(const Key128& key) const {
+    return inexact_.size() == 0 || inexact_.find(key) == KeyIndex<Key128>::kNone;
+  }
 
  private:
   KeyIndex<Key128> index_;
   std::vector<CornerSample> values_;
+  KeyIndex<Key128> inexact_{1};
 };
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
                    const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
@@ -275,6 +355,9 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
 bool diskTouchesBox(const PointSet& points, uint32_t i, const glm::dvec3& lo, const glm::dvec3& hi);
 bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node);
+// The same for an empty node; in a chunk run, from the coarse cells where its disks may not all
+// be loaded, and marked inexact where neither tells.
+bool isEmptyCoveredByDisk(Octree& tree, const PointSet& points, uint32_t node);
 // Mark Empty children of Internal nodes Passive when a disk touches them; returns how many.
 size_t markPassiveLeaves(Octree& tree, const PointSet& points);
 
@@ -294,6 +377,7 @@ struct CornerField {
   KeyIndex<Key128> index{1024};        // gridKey → entry
   std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner, or kUnusedCorner
   std::vector<CornerSample> value;
+  std::vector<uint8_t> inexact;  // in a chunk run: per entry, the value may differ (else empty)
   uint32_t find(const GridPoint& p) const;
   GridPoint point(uint32_t entry) const;
   size_t size() const { return index.size(); }
@@ -331,6 +415,25 @@ struct Closure {
 // near the points the surface never leaves the filled leaves, so rays cannot slip out of it.
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerCache& cache);
+
+// ---- exact.cpp (continued)
+// Whether an inexact node lies in or touches the cell (level, key): shares a face, an edge or a
+// corner with it.
+bool touchesInexact(const Octree& tree, uint8_t level, uint64_t key);
+// After balance round `round` (from 1) of a chunk run: the same round of the run on all points
+// may split filled leaves next to inexact nodes (a finer leaf there may ask for it), if they are
+// coarse enough to be asked (level ≤ maxLeafLevel − round − 1): they are marked inexact.
+void spreadBalanceRound(Octree& tree, int round);
+// The balance rounds after a chunk run's balance ends, which the run on all points may still
+// make: spreadBalanceRound from `round` until no leaf is coarse enough.
+void spreadRemainingBalanceRounds(Octree& tree, int round);
+// After a closure pass of a chunk run: the same pass of the run on all points may fill (part of)
+// an empty cell next to an inexact node: such empty nodes are marked inexact.
+void spreadClosurePass(Octree& tree, const PointSet& points);
+// Whether the chunk's own cell (tree.box) comes out of a chunk run exactly as out of the run on
+// all points: no inexact node in or touching it, and every corner value its filled leaves use
+// (through hanging corners too) exact, with exact leaves around it.
+bool ownCellIsExact(const Octree& tree, const Closure& closure);
 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.

@@ -5,7 +5,9 @@
 // points of the cell widened by a halo (1/64, 1/32, ... of the cell) and compares, inside the
 // cell, the leaves after building and passive marking, after balance, after the closure, and the
 // final corner values (distance and normal, bit for bit). Prints, per cell, the narrowest halo at
-// which each of them first agrees. This measures; it does not check a chunk run at run time.
+// which each of them first agrees; then, for chunk runs that mark what may differ from the whole
+// run (halos 1/16, 1/8 and 1/4), the share of the cell's filled leaves they leave unmarked, or
+// "all" when the check accepts the cell.
 #include <fmt/core.h>
 
 #include <cmath>
@@ -43,23 +45,38 @@ struct Run {
   iso::Octree tree;
   iso::Closure closure;
   Leaves built, balanced, closed;
+  uint8_t maxLeafLevel = 0;  // before balance
 };
 
 Run runStages(const iso::PointSet& points, const iso::RadiusStats& radii, int level,
-              uint64_t key) {
+              uint64_t key, const iso::LoadedBox* box = nullptr) {
   Run r;
   r.index = std::make_unique<iso::PointIndex>(points.position);
   const iso::SdfEvaluator sdf(points, *r.index, iso::BuildOptions{}.smoothing,
-                              iso::BuildOptions{}.fit);
+                              iso::BuildOptions{}.fit, box);
   iso::CornerCache cache;
   r.tree = iso::buildOctree(points, sdf, iso::BuildOptions{}, radii, cache);
   iso::markPassiveLeaves(r.tree, points);
+  for (const iso::OctreeNode& n : r.tree.nodes)
+    if (n.isFilled()) r.maxLeafLevel = std::max(r.maxLeafLevel, n.level);
   r.built = leavesIn(r.tree, level, key);
   iso::balanceOctree(r.tree, points);
   r.balanced = leavesIn(r.tree, level, key);
   r.closure = iso::sampleClosedSurface(r.tree, points, sdf, cache);
   r.closed = leavesIn(r.tree, level, key);
   return r;
+}
+
+// The share of the filled leaves inside the cell (level, key) that a chunk run leaves unmarked.
+double unmarkedShare(const Run& r, int level, uint64_t key) {
+  size_t filled = 0, unmarked = 0;
+  for (uint32_t i = 0; i < r.tree.nodes.size(); ++i) {
+    const iso::OctreeNode& n = r.tree.nodes[i];
+    if (!n.isFilled() || !isInside(n.level, n.key, level, key)) continue;
+    ++filled;
+    unmarked += r.tree.isExact(i) ? 1 : 0;
+  }
+  return filled ? double(unmarked) / double(filled) : 1.0;
 }
 
 // The points of `all` inside the box [lo, hi] (their order kept).
@@ -143,6 +160,10 @@ int main(int argc, char** argv) {
   fmt::print("{}: {} points; cells of level {} with at least {} points\n", argv[1], all.size(),
              level, minPoints);
   const Run whole = runStages(all, radii, 0, 0);
+  iso::CoarseCells coarse;  // what chunk runs know of all points
+  iso::addCoarseCells(coarse, all, 0, all.size());
+  float maxRadius = 0.0f;
+  for (float r : all.radius) maxRadius = std::max(maxRadius, r);
   const auto within = [](const Leaves& leaves, int level, uint64_t key) {
     Leaves out;
     for (const auto& [cell, kind] : leaves)
@@ -152,10 +173,11 @@ int main(int argc, char** argv) {
   std::map<uint64_t, size_t> perCell;
   for (uint64_t key : all.key) ++perCell[key >> (3 * (iso::kMaxLevel - level))];
   const double cell = std::ldexp(1.0, -level);
-  fmt::print("{:>10} {:>9} | narrowest halo, in cell edges, at which the chunk agrees | {:>9}\n",
+  fmt::print("{:>10} {:>9} | narrowest halo, in cell edges, at which the chunk agrees | {:>9} |"
+             " chunk run's unmarked filled leaves in the cell\n",
              "cell", "points", "loaded");
-  fmt::print("{:>10} {:>9} | {:>9} {:>9} {:>9} {:>9} |\n", "", "", "octree", "balance",
-             "closure", "corners");
+  fmt::print("{:>10} {:>9} | {:>9} {:>9} {:>9} {:>9} | {:>9} | {:>7} {:>7} {:>7}\n", "", "",
+             "octree", "balance", "closure", "corners", "", "1/16", "1/8", "1/4");
   for (const auto& [key, count] : perCell) {
     if (count < minPoints) continue;
     const auto c = iso::mortonDecode(key);
@@ -176,8 +198,28 @@ int main(int argc, char** argv) {
       loaded = part.size();
       if (agree[3]) break;
     }
-    fmt::print("{:>10} {:>9} | {:>9} {:>9} {:>9} {:>9} | {:>9}\n", key, count, first[0],
-               first[1], first[2], first[3], loaded);
+    // Chunk runs that mark what may differ (specs/pipeline.md §15): how much of the cell they
+    // prove, and whether the check accepts it whole ("all").
+    std::vector<std::string> proven;
+    for (int denominator : {16, 8, 4}) {
+      const double halo = 1.0 / denominator;
+      iso::LoadedBox box;
+      for (int a = 0; a < 3; ++a) {
+        box.lo[a] = lo[a] - halo * cell <= 0.0 ? -HUGE_VAL : lo[a] - halo * cell;
+        box.hi[a] = hi[a] + halo * cell >= 1.0 ? HUGE_VAL : hi[a] + halo * cell;
+      }
+      box.maxRadius = maxRadius;
+      box.maxLeafLevel = whole.maxLeafLevel;
+      box.ownLevel = uint8_t(level);
+      box.ownKey = key;
+      box.coarse = &coarse;
+      const Run r = runStages(pointsIn(all, box.lo, box.hi), radii, level, key, &box);
+      proven.push_back(iso::ownCellIsExact(r.tree, r.closure)
+                           ? "all"
+                           : fmt::format("{:.1f}%", 100.0 * unmarkedShare(r, level, key)));
+    }
+    fmt::print("{:>10} {:>9} | {:>9} {:>9} {:>9} {:>9} | {:>9} | {:>7} {:>7} {:>7}\n", key, count,
+               first[0], first[1], first[2], first[3], loaded, proven[0], proven[1], proven[2]);
     std::fflush(stdout);
   }
   return 0;
