@@ -16,7 +16,6 @@
 namespace iso {
 namespace {
 
-constexpr size_t kMaxPasses = 8;
 
 // A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the
 // points (within the radius of influence of the nearest one), if there is one: the crossings along
@@ -144,10 +143,12 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
   std::vector<uint32_t> fresh;  // the leaves to look at in this pass
   for (uint32_t i = 0; i < tree.nodes.size(); ++i)
     if (tree.nodes[i].isFilled()) fresh.push_back(i);
+  // A chunk run spreads its marks as far as the passes of the run on all points that fill cells.
+  const size_t spreadPasses = tree.box ? std::min<size_t>(kMaxClosurePasses, tree.box->fillPasses) : 0;
   // Exits are found on the sampled values: snapping moves hanging corners very little.
-  for (closure.passes = 1; closure.passes <= kMaxPasses; ++closure.passes) {
+  for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
     std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
-    if (tree.box) spreadClosurePass(tree, points);
+    if (closure.passes <= spreadPasses) spreadClosurePass(tree, points);
     if (filled.empty()) break;
     closure.filled += filled.size();
     std::vector<uint32_t> created;
@@ -156,11 +157,11 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     fresh.insert(fresh.end(), created.begin(), created.end());
     addLeafCorners(closure.corners, tree, fresh, sdf, cache);
   }
-  // A chunk run: the run on all points may go on filling and balancing next to inexact nodes
-  // for the passes left.
-  for (size_t pass = closure.passes; tree.box && pass <= kMaxPasses; ++pass) {
+  // A chunk run: the run on all points may go on filling (and balancing after) next to inexact
+  // nodes in the passes left.
+  for (size_t pass = closure.passes; pass <= spreadPasses; ++pass) {
     spreadRemainingBalanceRounds(tree, 1);
-    if (pass < kMaxPasses) spreadClosurePass(tree, points);
+    if (pass < spreadPasses) spreadClosurePass(tree, points);
   }
   // Splits left corners of leaves that are leaves no more: the levels are set from the final
   // leaves (every corner they use is in the field), then hanging corners are snapped.

@@ -183,11 +183,26 @@ void spreadRemainingBalanceRounds(Octree& tree, int round) {
   }
 }
 
+namespace {
+
+// Whether the closure of a run on all points may fill part of the cell: its exits cross a face
+// within the radius of influence of the nearest point, so some point's radius must reach the cell
+// (a loaded one, or one beyond the box).
+bool mayBeFilled(const Octree& tree, const PointSet& points, uint8_t level, uint64_t key) {
+  if (!tree.box->holdsCell(level, key, tree.box->maxRadius)) return true;
+  const auto c = mortonDecode(key);
+  const double size = std::ldexp(1.0, -level);
+  const glm::dvec3 lo = glm::dvec3(c[0], c[1], c[2]) * size;
+  return tree.anyPointNear(lo, lo + size, points, [](uint32_t) { return true; });
+}
+
+}  // namespace
+
 void spreadClosurePass(Octree& tree, const PointSet& points) {
   // A leaf inside an inexact node X fills cells of its own level across its faces: they lie in X
   // or in the cells of X's level across X's faces. Empty nodes there are marked; a larger empty node is split
   // down to them first (empty nodes split or not are the same to every stage), so that what
-  // is marked stays near X.
+  // is marked stays near X. Only cells some point's radius reaches can be filled.
   std::vector<uint32_t> marked;
   std::vector<std::pair<uint8_t, uint64_t>> split;
   for (uint32_t root : inexactRoots(tree)) {
@@ -197,11 +212,16 @@ void spreadClosurePass(Octree& tree, const PointSet& points) {
       const uint32_t node = tree.find(x.level, around);
       const OctreeNode& n = tree.nodes[node];
       if (n.level < x.level) {
-        if (tree.isExact(node) && n.kind == NodeKind::Empty) split.push_back({x.level, around});
+        if (tree.isExact(node) && n.kind == NodeKind::Empty &&
+            mayBeFilled(tree, points, x.level, around))
+          split.push_back({x.level, around});
         continue;
       }
       visitMeeting(tree, node, box, [&](uint32_t id) {
-        if (tree.isExact(id) && tree.nodes[id].kind == NodeKind::Empty) marked.push_back(id);
+        const OctreeNode& e = tree.nodes[id];
+        if (tree.isExact(id) && e.kind == NodeKind::Empty &&
+            mayBeFilled(tree, points, e.level, e.key))
+          marked.push_back(id);
         return true;
       });
     }

@@ -61,8 +61,11 @@ struct ToleranceScale {
   double tolerance, meanSpacing, medianRadius;
 };
 
-Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const BuildOptions& options) {
+// maxEdge: the edge (frame units) above which nodes are subdivided without a test.
+Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const BuildOptions& options,
+                     double maxEdge) {
   if (node.level >= options.maxDepth) return Verdict::Leaf;
+  if (cellSize(node.level) > maxEdge) return Verdict::Subdivide;
   if (hasOpposingNormals(points, node)) return Verdict::Subdivide;
   if (node.pointCount() <= options.leafPoints) return Verdict::Leaf;
   if (node.pointCount() > options.maxTestedPoints) return Verdict::Subdivide;
@@ -308,6 +311,8 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   }
   const ToleranceScale tolerance{options.tolerance, radii.meanSpacing,
                                  std::max(radii.medianRadius, 1e-12)};
+  // Tested nodes are at most this wide, so that no test reads points much farther away.
+  const double maxEdge = options.maxTestedEdge * radii.meanSpacing;
   std::vector<uint32_t> frontier = {0};
   OctreeStats stats;
   while (!frontier.empty()) {  // one level at a time
@@ -321,7 +326,7 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                             verdict[i] = Verdict::Subdivide;
                             continue;
                           }
-                          verdict[i] = quickVerdict(node, points, options);
+                          verdict[i] = quickVerdict(node, points, options, maxEdge);
                           // A cell whose points were not all loaded is decided as with all of
                           // them only by its depth, or by holding more points than are tested.
                           if (box && !tree.isComplete(frontier[i]) &&

@@ -61,6 +61,10 @@ struct BuildOptions {
   // A node with more points is subdivided without a patch test. Not a command-line option: tests
   // lower it so that small scans have chunks many tested nodes wide, as large scans do.
   uint32_t maxTestedPoints = 4096;
+  // A node wider than this many mean spacings is subdivided without a patch test, so that no test
+  // reads points farther than about 64 spacings from its node (out-of-core chunks need reads of
+  // bounded reach). Not a command-line option.
+  double maxTestedEdge = 64.0;
   int maxDepth = 20;            // deepest octree level (at most 20)
   double tolerance = 0.1;       // allowed patch error, in mean point spacings
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
@@ -178,6 +182,8 @@ void estimateRoughness(PointSet& points, const Neighbors& neighbors);
 // The roughness of point i from its k neighbours.
 float roughnessOf(const PointSet& points, uint32_t i, const uint32_t* neighbors, size_t k);
 
+inline constexpr uint8_t kMaxClosurePasses = 8;  // close.cpp
+
 // ---- exact.cpp (chunk runs of the octree stages, specs/pipeline.md §15)
 // What a chunk run knows of all points beforehand, for the cells of levels 1 to kCoarseLevel:
 // how many points each holds, and which ones the disk of a point outside them touches. So a chunk
@@ -207,6 +213,8 @@ struct LoadedBox {
   float maxRadius = 0.0f;  // the largest r_i of all points, loaded or not (disks reach this far)
   // A bound on the whole run's leaf levels before balance (how fine a requester can be).
   uint8_t maxLeafLevel = kMaxLevel;
+  // A bound on the closure passes of the whole run that fill cells (how far fills chain).
+  uint8_t fillPasses = kMaxClosurePasses;
   // The chunk's own cell: the whole run subdivides its ancestors (the driver checks that they
   // hold more than 4,096 points), so the chunk run does too, whatever it loaded of them.
   uint8_t ownLevel = 0;

@@ -224,6 +224,7 @@ TEST(ChunkRun, whatAChunkRunLeavesUnmarkedIsAsInTheRunOnAllPoints) {
         LoadedBox box = boxAround(kLevel, key, halo);
         box.maxRadius = maxRadius;
         box.maxLeafLevel = whole.maxLeafLevel;
+        box.fillPasses = uint8_t(whole.closure.passes - 1);
         box.coarse = &coarse;
         StageRun chunk;
         chunk.points = pointsIn(prepared.points, box);

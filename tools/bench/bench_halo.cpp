@@ -1,4 +1,4 @@
-// iso-bench-halo SCAN [--level L] [--min-points N]: how wide a halo a chunk of the octree stages
+// iso-bench-halo SCAN [--level L] [--min-points N] [--marked-only]: how wide a halo a chunk of the octree stages
 // needs (specs/pipeline.md §15, "overlap and own"). Prepares the scan's points in core (frame,
 // radii, normals, orientation, roughness; no outlier removal), runs the octree stages on all of
 // them, then for every cell at level L holding at least N points runs the same stages on the
@@ -6,8 +6,8 @@
 // cell, the leaves after building and passive marking, after balance, after the closure, and the
 // final corner values (distance and normal, bit for bit). Prints, per cell, the narrowest halo at
 // which each of them first agrees; then, for chunk runs that mark what may differ from the whole
-// run (halos 1/16, 1/8 and 1/4), the share of the cell's filled leaves they leave unmarked, or
-// "all" when the check accepts the cell.
+// run (halos 1/8, 1/4 and 1/2), the share of the cell's filled leaves they leave unmarked, or
+// "all" when the check accepts the cell. --marked-only skips the search for agreement.
 #include <fmt/core.h>
 
 #include <cmath>
@@ -121,15 +121,20 @@ size_t differingCorners(const Leaves& leaves, const Run& a, const Run& b) {
 
 int main(int argc, char** argv) {
   if (argc < 2 || std::string(argv[1]) == "--help") {
-    fmt::print(stderr, "usage: iso-bench-halo SCAN [--level L (3)] [--min-points N (50000)]\n");
+    fmt::print(stderr,
+               "usage: iso-bench-halo SCAN [--level L (3)] [--min-points N (50000)] "
+               "[--marked-only]\n");
     return argc < 2 ? 2 : 0;
   }
   int level = 3;
   size_t minPoints = 50000;
-  for (int i = 2; i + 1 < argc; i += 2) {
+  bool markedOnly = false;  // skip the search for the narrowest agreeing halo
+  for (int i = 2; i < argc; ++i) {
     const std::string option = argv[i];
-    if (option == "--level") level = std::atoi(argv[i + 1]);
-    else if (option == "--min-points") minPoints = std::strtoull(argv[i + 1], nullptr, 10);
+    if (option == "--marked-only") markedOnly = true;
+    else if (option == "--level" && i + 1 < argc) level = std::atoi(argv[++i]);
+    else if (option == "--min-points" && i + 1 < argc)
+      minPoints = std::strtoull(argv[++i], nullptr, 10);
     else {
       fmt::print(stderr, "iso-bench-halo: unknown option '{}'\n", option);
       return 2;
@@ -177,7 +182,7 @@ int main(int argc, char** argv) {
              " chunk run's unmarked filled leaves in the cell\n",
              "cell", "points", "loaded");
   fmt::print("{:>10} {:>9} | {:>9} {:>9} {:>9} {:>9} | {:>9} | {:>7} {:>7} {:>7}\n", "", "",
-             "octree", "balance", "closure", "corners", "", "1/16", "1/8", "1/4");
+             "octree", "balance", "closure", "corners", "", "1/8", "1/4", "1/2");
   for (const auto& [key, count] : perCell) {
     if (count < minPoints) continue;
     const auto c = iso::mortonDecode(key);
@@ -187,7 +192,7 @@ int main(int argc, char** argv) {
     const Leaves closed = within(whole.closed, level, key);
     std::vector<std::string> first(4, "> 1/2");
     size_t loaded = 0;
-    for (int denominator = 64; denominator >= 2; denominator /= 2) {
+    for (int denominator = 64; denominator >= (markedOnly ? 128 : 2); denominator /= 2) {
       const double halo = 1.0 / denominator;
       const iso::PointSet part = pointsIn(all, lo - halo * cell, hi + halo * cell);
       const Run r = runStages(part, radii, level, key);
@@ -201,7 +206,7 @@ int main(int argc, char** argv) {
     // Chunk runs that mark what may differ (specs/pipeline.md §15): how much of the cell they
     // prove, and whether the check accepts it whole ("all").
     std::vector<std::string> proven;
-    for (int denominator : {16, 8, 4}) {
+    for (int denominator : {8, 4, 2}) {
       const double halo = 1.0 / denominator;
       iso::LoadedBox box;
       for (int a = 0; a < 3; ++a) {
@@ -210,6 +215,7 @@ int main(int argc, char** argv) {
       }
       box.maxRadius = maxRadius;
       box.maxLeafLevel = whole.maxLeafLevel;
+      box.fillPasses = uint8_t(whole.closure.passes - 1);
       box.ownLevel = uint8_t(level);
       box.ownKey = key;
       box.coarse = &coarse;
