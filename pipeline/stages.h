@@ -62,9 +62,9 @@ struct BuildOptions {
   // lower it so that small scans have chunks many tested nodes wide, as large scans do.
   uint32_t maxTestedPoints = 4096;
   // A node wider than this many mean spacings is subdivided without a patch test, so that no test
-  // reads points farther than about 64 spacings from its node (out-of-core chunks need reads of
-  // bounded reach). Not a command-line option.
-  double maxTestedEdge = 64.0;
+  // reads points much farther than that from its node (out-of-core chunks need reads of bounded
+  // reach). Not a command-line option.
+  double maxTestedEdge = 128.0;
   int maxDepth = 20;            // deepest octree level (at most 20)
   double tolerance = 0.1;       // allowed patch error, in mean point spacings
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
