@@ -137,12 +137,14 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
 
 }  // namespace
 
-Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, CornerCache& cache) {
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                            CornerField&& corners) {
   Closure closure;
-  closure.corners = sampleLeafCorners(tree, sdf, cache);
+  closure.corners = std::move(corners);
   std::vector<uint32_t> fresh;  // the leaves to look at in this pass
   for (uint32_t i = 0; i < tree.nodes.size(); ++i)
     if (tree.nodes[i].isFilled()) fresh.push_back(i);
+  addLeafCorners(closure.corners, tree, fresh, sdf);
   // A chunk run spreads its marks as far as the passes of the run on all points that fill cells.
   const size_t spreadPasses = tree.box ? std::min<size_t>(kMaxClosurePasses, tree.box->fillPasses) : 0;
   // Exits are found on the sampled values: snapping moves hanging corners very little.
@@ -155,7 +157,7 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     balanceAfter(tree, points, filled, created);
     fresh = std::move(filled);
     fresh.insert(fresh.end(), created.begin(), created.end());
-    addLeafCorners(closure.corners, tree, fresh, sdf, cache);
+    addLeafCorners(closure.corners, tree, fresh, sdf);
   }
   // A chunk run: the run on all points may go on filling (and balancing after) next to inexact
   // nodes in the passes left.

@@ -298,15 +298,17 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   // The signed distance and its point index are needed until the level-of-detail corners.
   auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
   OctreeStats octreeStats;
-  CornerCache cornerCache(points.size() / 2);
-  Octree octree = buildOctree(points, *sdf, options, radii, cornerCache, &octreeStats);
+  // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
+  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made for half a point (it
+  // doubles where there are more), the arrays reserved for one.
+  CornerField cornerField(points.size() / 2, points.size());
+  Octree octree = buildOctree(points, *sdf, options, radii, cornerField, &octreeStats);
   points.roughness = {};  // only the octree's tolerance reads it
   timer.next("passive+balance");
   const size_t passive = markPassiveLeaves(octree, points);
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
-  Closure closure = sampleClosedSurface(octree, points, *sdf, cornerCache);
-  cornerCache = CornerCache(0);  // every value is in the corner field now
+  Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;

@@ -1,6 +1,6 @@
 // Leaf corner sampling (specs/pipeline.md, "Corner sampling"): every distinct corner of the filled
 // leaves is evaluated once, so corners shared by up to 8 leaves agree by construction; values
-// already evaluated (while building the octree) come from the cache.
+// already evaluated while building the octree are reused (one field holds both).
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -22,48 +22,47 @@ GridPoint CornerField::point(uint32_t entry) const {
   return {uint32_t(k.a), uint32_t(k.a >> 32), uint32_t(k.b)};
 }
 
+CornerField::CornerField(size_t expected, size_t reserved) : index(expected) {
+  index.reserveKeys(reserved);
+  coarsestLevel.reserve(reserved);
+  value.reserve(reserved);
+}
+
+std::pair<uint32_t, bool> CornerField::insert(const Key128& key) {
+  const auto [entry, added] = index.insert(key);
+  if (added) {
+    coarsestLevel.push_back(kUnusedCorner);
+    value.emplace_back();
+    if (marksInexact) inexact.push_back(0);
+  }
+  return {entry, added};
+}
+
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
-                    const SdfEvaluator& sdf, CornerCache& cache) {
-  const size_t first = field.size();
+                    const SdfEvaluator& sdf) {
+  std::vector<uint32_t> added;  // entries to evaluate
   for (uint32_t id : leaves) {
     const OctreeNode& node = tree.nodes[id];
     if (!node.isFilled()) continue;
     for (int c = 0; c < kCorners; ++c) {
-      const GridPoint p = cornerPoint(node.level, node.key, c);
-      const auto [entry, inserted] = field.index.insert(gridKey(p));
-      if (inserted) {
-        field.coarsestLevel.push_back(node.level);
-      } else {
-        field.coarsestLevel[entry] = std::min(field.coarsestLevel[entry], node.level);
-      }
+      const auto [entry, isNew] = field.insert(gridKey(cornerPoint(node.level, node.key, c)));
+      if (isNew) added.push_back(entry);
+      field.coarsestLevel[entry] = std::min(field.coarsestLevel[entry], node.level);
     }
   }
-  field.value.resize(field.size());
-  const bool chunk = tree.box != nullptr;
-  if (chunk) field.inexact.resize(field.size(), 0);
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  tbb::parallel_for(tbb::blocked_range<size_t>(first, field.size(), 256),
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, added.size(), 256),
                     [&](const tbb::blocked_range<size_t>& r) {
                       progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const GridPoint p = field.point(uint32_t(i));
-                        const Key128& key = field.index.key(uint32_t(i));
-                        if (const CornerSample* known = cache.find(key)) {
-                          field.value[i] = *known;
-                          if (chunk) field.inexact[i] = !cache.isExact(key);
-                          continue;
-                        }
+                        const uint32_t entry = added[i];
+                        const GridPoint p = field.point(entry);
                         bool exact = true;
-                        field.value[i] =
+                        field.value[entry] =
                             sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f, &exact);
-                        if (chunk) field.inexact[i] = !exact;
+                        if (field.marksInexact) field.inexact[entry] = !exact;
                       }
                     });
-  for (size_t i = first; i < field.size(); ++i) {
-    const Key128& key = field.index.key(uint32_t(i));
-    if (cache.insert(key, field.value[i]).second && chunk && field.inexact[i])
-      cache.markInexact(key);
-  }
 }
 
 size_t refreshCornerLevels(CornerField& field, const Octree& tree) {
@@ -84,20 +83,6 @@ size_t refreshCornerLevels(CornerField& field, const Octree& tree) {
                     });
   return size_t(std::count_if(field.coarsestLevel.begin(), field.coarsestLevel.end(),
                               [](uint8_t l) { return l != kUnusedCorner; }));
-}
-
-CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache) {
-  CornerField field;
-  std::vector<uint32_t> leaves;
-  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
-    if (tree.nodes[i].isFilled()) leaves.push_back(i);
-  // About 2.25 distinct corners a leaf (neighbours share them): the arrays are reserved (address
-  // space, not memory, where the estimate is high), not grown by copying.
-  const size_t expected = leaves.size() * 5 / 2;
-  field.index.reserveKeys(expected);
-  field.coarsestLevel.reserve(expected);
-  addLeafCorners(field, tree, leaves, sdf, cache);
-  return field;
 }
 
 }  // namespace iso

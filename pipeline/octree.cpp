@@ -44,10 +44,10 @@ bool hasOpposingNormals(const PointSet& points, const OctreeNode& node) {
 
 // The patch a leaf would have in the file: its corners as quantized, so that the tolerance test
 // also covers the quantization step (a large leaf's step can exceed the tolerance by itself).
-Patch leafPatch(const OctreeNode& node, const CornerCache& cache) {
+Patch leafPatch(const OctreeNode& node, const CornerField& corners) {
   Patch patch(node.level, node.key);
   for (int c = 0; c < 8; ++c) {
-    const float f = cache.find(gridKey(cornerPoint(node.level, node.key, c)))->distance;
+    const float f = corners.value[corners.find(cornerPoint(node.level, node.key, c))].distance;
     patch.distance[size_t(c)] = roundTripDistance(f, node.level, kDistanceEncoding);
   }
   return patch;
@@ -72,35 +72,32 @@ Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const Build
   return Verdict::Test;
 }
 
-// Evaluate the corners of the nodes to be tested that the cache does not hold yet.
-void fillCache(const Octree& tree, const std::vector<uint32_t>& frontier,
-               const std::vector<Verdict>& verdict, const SdfEvaluator& sdf, CornerCache& cache) {
-  std::vector<std::pair<Key128, glm::dvec3>> missing;
+// Evaluate the corners of the nodes to be tested that the field does not hold yet.
+void evaluateTestedCorners(const Octree& tree, const std::vector<uint32_t>& frontier,
+                           const std::vector<Verdict>& verdict, const SdfEvaluator& sdf,
+                           CornerField& corners) {
+  std::vector<uint32_t> missing;
   for (size_t i = 0; i < frontier.size(); ++i) {
     if (verdict[i] != Verdict::Test) continue;
     const OctreeNode& node = tree.nodes[frontier[i]];
     for (int c = 0; c < kCorners; ++c) {
-      const GridPoint p = cornerPoint(node.level, node.key, c);
-      const Key128 key = gridKey(p);
-      if (cache.insert(key, CornerSample{}).second)
-        missing.push_back({key, glm::dvec3(p.x, p.y, p.z) * std::ldexp(1.0, -kMaxLevel)});
+      const auto [entry, added] = corners.insert(gridKey(cornerPoint(node.level, node.key, c)));
+      if (added) missing.push_back(entry);
     }
   }
-  std::vector<CornerSample> values(missing.size());
-  std::vector<uint8_t> exact(missing.size(), 1);
+  const double unit = std::ldexp(1.0, -kMaxLevel);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, missing.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
                       progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
-                        bool ok = true;
-                        values[i] = sdf.evaluate(missing[i].second, 0.0f, &ok);
-                        exact[i] = ok;
+                        const uint32_t entry = missing[i];
+                        const GridPoint p = corners.point(entry);
+                        bool exact = true;
+                        corners.value[entry] =
+                            sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f, &exact);
+                        if (corners.marksInexact) corners.inexact[entry] = !exact;
                       }
                     });
-  for (size_t i = 0; i < missing.size(); ++i) {
-    *cache.find(missing[i].first) = values[i];
-    if (!exact[i]) cache.markInexact(missing[i].first);
-  }
 }
 
 // Whether every zero crossing of the patch along a grid of lines lies within the radius of
@@ -148,10 +145,10 @@ double nodeTolerance(const OctreeNode& node, const PointSet& points, const Toler
 
 // exact: whether every value and query the test read is exact (always, on all points).
 Verdict patchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
-                  const CornerCache& cache, const ToleranceScale& tolerance, bool& exact) {
+                  const CornerField& corners, const ToleranceScale& tolerance, bool& exact) {
   for (int c = 0; c < kCorners; ++c)
-    exact = exact && cache.isExact(gridKey(cornerPoint(node.level, node.key, c)));
-  const Patch patch = leafPatch(node, cache);
+    exact = exact && corners.isExact(corners.find(cornerPoint(node.level, node.key, c)));
+  const Patch patch = leafPatch(node, corners);
   if (patch.maxPointDistance(points, node.pointBegin, node.pointEnd) >
       nodeTolerance(node, points, tolerance))
     return Verdict::TooFar;
@@ -296,7 +293,7 @@ bool Octree::anyPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const Poin
 }
 
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
-                   const RadiusStats& radii, CornerCache& cache, OctreeStats* statsOut) {
+                   const RadiusStats& radii, CornerField& corners, OctreeStats* statsOut) {
   Octree tree;
   OctreeNode root;
   root.pointEnd = uint32_t(points.size());
@@ -305,6 +302,8 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   const LoadedBox* box = sdf.box();
   if (box) {  // a chunk run
     tree.box = box;
+    corners.marksInexact = true;
+    corners.inexact.resize(corners.size(), 0);
     tree.flags.assign(1, 0);
     tree.flags[0] = tree.completeness(0);
     if (root.pointCount() == 0 && !tree.isComplete(0)) tree.markInexact(0);
@@ -345,14 +344,14 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                           }
                         }
                       });
-    fillCache(tree, frontier, verdict, sdf, cache);
+    evaluateTestedCorners(tree, frontier, verdict, sdf, corners);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
                       [&](const tbb::blocked_range<size_t>& r) {
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           if (verdict[i] != Verdict::Test) continue;
                           bool ok = exact[i];
                           verdict[i] =
-                              patchTest(tree.nodes[frontier[i]], points, sdf, cache, tolerance, ok);
+                              patchTest(tree.nodes[frontier[i]], points, sdf, corners, tolerance, ok);
                           exact[i] = ok;
                         }
                       });

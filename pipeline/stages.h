@@ -326,38 +326,11 @@ struct OctreeStats {
   size_t uncovered = 0;      // ... because the patch had surface where there are no points
   size_t thinSplits = 0;     // subdivisions below leafPoints for opposing normals
 };
-// Leaf corner samples evaluated while building, by grid point: leaf corners are evaluated the same
-// way whatever the level, so the final corners reuse them.
-class CornerCache {
- public:
-  explicit CornerCache(size_t expected = 16) : index_(expected) { values_.reserve(expected); }
-  const CornerSample* find(const Key128& key) const {
-    const uint32_t entry = index_.find(key);
-    return entry == KeyIndex<Key128>::kNone ? nullptr : &values_[entry];
-  }
-  CornerSample* find(const Key128& key) {
-    return const_cast<CornerSample*>(std::as_const(*this).find(key));
-  }
-  // The sample at key, inserting `value` first when the key is new; second: whether inserted.
-  std::pair<CornerSample*, bool> insert(const Key128& key, const CornerSample& value) {
-    const auto [entry, inserted] = index_.insert(key);
-    if (inserted) values_.push_back(value);
-    return {&values_[entry], inserted};
-  }
-  size_t size() const { return values_.size(); }
-  // In a chunk run: values that may differ from the run on all points.
-  void markInexact(const Key128& key) { inexact_.insert(key); }
-  bool isExact(const Key128& key) const {
-    return inexact_.size() == 0 || inexact_.find(key) == KeyIndex<Key128>::kNone;
-  }
-
- private:
-  KeyIndex<Key128> index_;
-  std::vector<CornerSample> values_;
-  KeyIndex<Key128> inexact_{1};
-};
+struct CornerField;
+// The corners of tested nodes are evaluated into `corners` (leaf corners are evaluated the same way
+// whatever the level, so the final leaf corners reuse them).
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
-                   const RadiusStats& radii, CornerCache& cache, OctreeStats* stats = nullptr);
+                   const RadiusStats& radii, CornerField& corners, OctreeStats* stats = nullptr);
 
 // ---- passive.cpp
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
@@ -379,26 +352,36 @@ size_t balanceAfter(Octree& tree, const PointSet& points, const std::vector<uint
                     std::vector<uint32_t>& created);
 
 // ---- corners.cpp
-// Values of every distinct leaf corner, keyed by grid point.
+// Values at grid points, each evaluated once: the corners of the nodes the octree tested, then of
+// every filled leaf.
 inline constexpr uint8_t kUnusedCorner = 0xff;  // coarsestLevel of a corner no filled leaf uses
+Key128 gridKey(const GridPoint& p);
 struct CornerField {
+  CornerField() = default;
+  // A table for about `expected` corners, and arrays reserved for `reserved` (address space:
+  // pages count once written; below that the arrays never grow by copying).
+  CornerField(size_t expected, size_t reserved);
   KeyIndex<Key128> index{1024};        // gridKey → entry
-  std::vector<uint8_t> coarsestLevel;  // of the leaves using the corner, or kUnusedCorner
+  std::vector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
   std::vector<CornerSample> value;
   std::vector<uint8_t> inexact;  // in a chunk run: per entry, the value may differ (else empty)
+  bool marksInexact = false;     // a chunk run: `inexact` has an entry per corner
   uint32_t find(const GridPoint& p) const;
+  uint32_t find(const Key128& key) const { return index.find(key); }
   GridPoint point(uint32_t entry) const;
   size_t size() const { return index.size(); }
+  // The entry of key, added when new (value to be set, no leaf using it); second: whether added.
+  std::pair<uint32_t, bool> insert(const Key128& key);
+  bool isExact(uint32_t entry) const { return inexact.empty() || !inexact[entry]; }
 };
-Key128 gridKey(const GridPoint& p);
-// Corners of the filled leaves; values found in the cache are reused, new ones are added to it.
-CornerField sampleLeafCorners(const Octree& tree, const SdfEvaluator& sdf, CornerCache& cache);
 // Set the coarsest levels of a field's corners from the tree's filled leaves now (kUnusedCorner
-// for corners of leaves split since); returns the number of corners in use.
+// for corners no filled leaf uses, such as those of leaves split since); returns the number of
+// corners in use.
 size_t refreshCornerLevels(CornerField& field, const Octree& tree);
-// Add the corners of more filled leaves to a field (their coarsest levels updated).
+// Add the corners of filled leaves to a field (their coarsest levels updated), evaluating those it
+// does not hold yet.
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
-                    const SdfEvaluator& sdf, CornerCache& cache);
+                    const SdfEvaluator& sdf);
 
 // ---- snap.cpp
 struct HangingCorner {
@@ -421,8 +404,9 @@ struct Closure {
 // Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
 // which the zero set of a filled leaf runs (sharp edges, repaired normals), until none is left:
 // near the points the surface never leaves the filled leaves, so rays cannot slip out of it.
+// `corners` holds the values evaluated while building; it becomes the closure's field.
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                            CornerCache& cache);
+                            CornerField&& corners);
 
 // ---- exact.cpp (continued)
 // Whether an inexact node lies in or touches the cell (level, key): shares a face, an edge or a

@@ -60,13 +60,13 @@ void runStages(StageRun& r, const RadiusStats& radii, const LoadedBox* box) {
   const BuildOptions options = chunkedOptions();
   r.index = std::make_unique<PointIndex>(r.points.position);
   const SdfEvaluator sdf(r.points, *r.index, options.smoothing, options.fit, box);
-  CornerCache cache;
-  r.tree = buildOctree(r.points, sdf, options, radii, cache);
+  CornerField corners;
+  r.tree = buildOctree(r.points, sdf, options, radii, corners);
   markPassiveLeaves(r.tree, r.points);
   for (const OctreeNode& n : r.tree.nodes)
     if (n.isFilled()) r.maxLeafLevel = std::max(r.maxLeafLevel, n.level);
   balanceOctree(r.tree, r.points);
-  r.closure = sampleClosedSurface(r.tree, r.points, sdf, cache);
+  r.closure = sampleClosedSurface(r.tree, r.points, sdf, std::move(corners));
 }
 
 bool isInside(uint8_t nodeLevel, uint64_t nodeKey, uint8_t level, uint64_t key) {

@@ -30,11 +30,11 @@ Built buildStages(const PointCloud& cloud) {
   const RadiusStats radii = estimateRadii(b.points, neighbors);
   estimateRoughness(b.points, neighbors);
   const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
-  CornerCache cache;
-  b.tree = buildOctree(b.points, sdf, BuildOptions{}, radii, cache);
+  CornerField corners;
+  b.tree = buildOctree(b.points, sdf, BuildOptions{}, radii, corners);
   markPassiveLeaves(b.tree, b.points);
   balanceOctree(b.tree, b.points);
-  b.corners = sampleClosedSurface(b.tree, b.points, sdf, cache).corners;
+  b.corners = sampleClosedSurface(b.tree, b.points, sdf, std::move(corners)).corners;
   return b;
 }
 

@@ -319,11 +319,11 @@ BuiltOctree buildTestOctree(const std::string& shape, size_t n) {
   const PointIndex tree(b.points.position);
   estimateRoughness(b.points, findNeighbors(b.points, tree, 10));
   const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
-  CornerCache cache;
+  CornerField corners;
   RadiusStats radii;
   radii.meanSpacing = 1e-3;
   radii.medianRadius = 3e-3;
-  b.octree = buildOctree(b.points, sdf, BuildOptions{}, radii, cache);
+  b.octree = buildOctree(b.points, sdf, BuildOptions{}, radii, corners);
   return b;
 }
 

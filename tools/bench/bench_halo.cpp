@@ -54,15 +54,15 @@ Run runStages(const iso::PointSet& points, const iso::RadiusStats& radii, int le
   r.index = std::make_unique<iso::PointIndex>(points.position);
   const iso::SdfEvaluator sdf(points, *r.index, iso::BuildOptions{}.smoothing,
                               iso::BuildOptions{}.fit, box);
-  iso::CornerCache cache;
-  r.tree = iso::buildOctree(points, sdf, iso::BuildOptions{}, radii, cache);
+  iso::CornerField corners;
+  r.tree = iso::buildOctree(points, sdf, iso::BuildOptions{}, radii, corners);
   iso::markPassiveLeaves(r.tree, points);
   for (const iso::OctreeNode& n : r.tree.nodes)
     if (n.isFilled()) r.maxLeafLevel = std::max(r.maxLeafLevel, n.level);
   r.built = leavesIn(r.tree, level, key);
   iso::balanceOctree(r.tree, points);
   r.balanced = leavesIn(r.tree, level, key);
-  r.closure = iso::sampleClosedSurface(r.tree, points, sdf, cache);
+  r.closure = iso::sampleClosedSurface(r.tree, points, sdf, std::move(corners));
   r.closed = leavesIn(r.tree, level, key);
   return r;
 }
