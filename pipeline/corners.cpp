@@ -50,12 +50,17 @@ void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint
       field.coarsestLevel[entry] = std::min(field.coarsestLevel[entry], node.level);
     }
   }
+  evaluateCorners(field, added, sdf);
+}
+
+void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
+                     const SdfEvaluator& sdf) {
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, added.size(), 256),
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, entries.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
                       progressAdvance(r.size());
                       for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const uint32_t entry = added[i];
+                        const uint32_t entry = entries[i];
                         const GridPoint p = field.point(entry);
                         bool exact = true;
                         field.value[entry] =

@@ -85,19 +85,7 @@ void evaluateTestedCorners(const Octree& tree, const std::vector<uint32_t>& fron
       if (added) missing.push_back(entry);
     }
   }
-  const double unit = std::ldexp(1.0, -kMaxLevel);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, missing.size(), 64),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      progressAdvance(r.size());
-                      for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const uint32_t entry = missing[i];
-                        const GridPoint p = corners.point(entry);
-                        bool exact = true;
-                        corners.value[entry] =
-                            sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f, &exact);
-                        if (corners.marksInexact) corners.inexact[entry] = !exact;
-                      }
-                    });
+  evaluateCorners(corners, missing, sdf);
 }
 
 // Whether every zero crossing of the patch along a grid of lines lies within the radius of

@@ -378,6 +378,9 @@ struct CornerField {
 // for corners no filled leaf uses, such as those of leaves split since); returns the number of
 // corners in use.
 size_t refreshCornerLevels(CornerField& field, const Octree& tree);
+// Evaluate the signed distance at the field's entries (in parallel).
+void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
+                     const SdfEvaluator& sdf);
 // Add the corners of filled leaves to a field (their coarsest levels updated), evaluating those it
 // does not hold yet.
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
