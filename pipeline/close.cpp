@@ -17,10 +17,12 @@ namespace iso {
 namespace {
 
 
+using Distances = std::array<float, kCorners>;  // at a leaf's corners, in corner order
+
 // A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the
 // points (within the radius of influence of the nearest one), if there is one: the crossings along
 // the face's 4 edges are tried.
-bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int axis, int side,
+bool crossesFaceNearPoints(const Distances& f, const OctreeNode& leaf, int axis, int side,
                            const SdfEvaluator& sdf, const PointSet& points, bool& exact) {
   std::array<int, 4> corners{};
   int count = 0;
@@ -32,8 +34,7 @@ bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int
   for (int e = 0; e < 4; ++e) {
     const GridPoint pa = cornerPoint(leaf.level, leaf.key, cycle[size_t(e)]);
     const GridPoint pb = cornerPoint(leaf.level, leaf.key, cycle[size_t((e + 1) % 4)]);
-    const double fa = field.value[field.find(pa)].distance,
-                 fb = field.value[field.find(pb)].distance;
+    const double fa = f[size_t(cycle[size_t(e)])], fb = f[size_t(cycle[size_t((e + 1) % 4)])];
     if ((fa < 0.0) == (fb < 0.0)) continue;
     const double t = fa / (fa - fb);
     const glm::dvec3 a(pa.x, pa.y, pa.z), b(pb.x, pb.y, pb.z);
@@ -48,15 +49,14 @@ bool crossesFaceNearPoints(const CornerField& field, const OctreeNode& leaf, int
 }
 
 // The face of a leaf whose corners are nearest the zero set (smallest mean |f|).
-int faceTowardSurface(const CornerField& field, const OctreeNode& leaf) {
+int faceTowardSurface(const Distances& f) {
   int best = 0;
   double bestMean = 1e300;
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2, side = face % 2;
     double sum = 0.0;
     for (int c = 0; c < kCorners; ++c)
-      if (((c >> axis) & 1) == side)
-        sum += std::abs(field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance);
+      if (((c >> axis) & 1) == side) sum += std::abs(f[size_t(c)]);
     if (sum < bestMean) {
       bestMean = sum;
       best = face;
@@ -65,11 +65,9 @@ int faceTowardSurface(const CornerField& field, const OctreeNode& leaf) {
   return best;
 }
 
-bool hasSurface(const CornerField& field, const OctreeNode& leaf) {
+bool hasSurface(const Distances& f) {
   int negative = 0;
-  for (int c = 0; c < kCorners; ++c)
-    negative +=
-        field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance < 0.0f ? 1 : 0;
+  for (float d : f) negative += d < 0.0f ? 1 : 0;
   return negative != 0 && negative != kCorners;
 }
 
@@ -88,12 +86,15 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
   const OctreeNode& leaf = tree.nodes[id];
   if (!leaf.isFilled()) return;
   bool exact = tree.isExact(id);
-  if (!field.inexact.empty())
-    for (int c = 0; c < kCorners; ++c)
-      exact = exact && !field.inexact[field.find(cornerPoint(leaf.level, leaf.key, c))];
+  Distances f{};
+  for (int c = 0; c < kCorners; ++c) {
+    const uint32_t entry = field.find(cornerPoint(leaf.level, leaf.key, c));
+    f[size_t(c)] = field.value[entry].distance;
+    exact = exact && field.isExact(entry);
+  }
   const auto cell = mortonDecode(leaf.key);
-  const bool lost = leaf.pointCount() > 0 && !hasSurface(field, leaf);
-  const int toward = lost ? faceTowardSurface(field, leaf) : -1;
+  const bool lost = leaf.pointCount() > 0 && !hasSurface(f);
+  const int toward = lost ? faceTowardSurface(f) : -1;
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2, side = face % 2;
     std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
@@ -104,7 +105,7 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
     // The zero set runs out through this face near the points, or the leaf holds points but no
     // zero set (a displaced estimate) and this face is the nearest to it.
     bool found = exact;
-    if (face == toward || crossesFaceNearPoints(field, leaf, axis, side, sdf, points, found))
+    if (face == toward || crossesFaceNearPoints(f, leaf, axis, side, sdf, points, found))
       out.push_back({leaf.level, key, !found});
   }
 }
