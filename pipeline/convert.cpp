@@ -313,9 +313,12 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const CornerField& corners = closure.corners;
   const std::vector<HangingCorner>& hanging = closure.hanging;
   timer.next("lod");
-  LodField lod = sampleLodCorners(octree, points, *sdf, options);
-  sdf.reset();
-  ready.index.reset();  // the writer reads points, not neighbours
+  // The points' signed distance and index go once the levels that read them are done: the writer
+  // reads points, not neighbours.
+  LodField lod = sampleLodCorners(octree, points, *sdf, options, [&] {
+    sdf.reset();
+    ready.index.reset();
+  });
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;

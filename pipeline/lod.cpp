@@ -12,6 +12,7 @@
 #include <bit>
 
 #include <cmath>
+#include <functional>
 #include <glm/geometric.hpp>
 #include <map>
 #include <memory>
@@ -35,7 +36,7 @@ struct CellSums {
 
 // Proxies of the points of each occupied cell at `level` (points sorted by key): the weighted
 // mean position, normal, radius and colour of the cell's points; the weight scaled by how well
-// the normals agree. In parallel over parts cut at cell boundaries; each part counts its cells
+// the normals agree. No keys: only the signed distance reads them. In parallel over parts cut at cell boundaries; each part counts its cells
 // first and then fills its own range, and a cell's sums live only while its proxy is made.
 PointSet proxiesAt(const PointSet& points, int level) {
   const size_t count = points.size();
@@ -75,7 +76,6 @@ PointSet proxiesAt(const PointSet& points, int level) {
   proxies.normal.resize(m);
   proxies.weight.resize(m);
   proxies.radius.resize(m);
-  proxies.key.resize(m);
   if (colors) proxies.color.resize(m);
   tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
     size_t at = offset[p];
@@ -95,7 +95,6 @@ PointSet proxiesAt(const PointSet& points, int level) {
       proxies.normal[k] = coherence > 1e-6 ? glm::normalize(c.normal) : glm::vec3(0.0f);
       proxies.weight[k] = float(c.weight * std::max(coherence, 1e-3));
       proxies.radius[k] = float(double(c.radius) / c.weight);
-      proxies.key[k] = points.key[begin];
       if (colors) proxies.color[k] = glm::vec3(glm::dvec3(c.color) / c.weight);
     });
   });
@@ -138,7 +137,8 @@ uint32_t LodField::find(uint8_t level, const GridPoint& p) const {
 }
 
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
-                          const BuildOptions& options) {
+                          const BuildOptions& options,
+                          const std::function<void()>& pointsSdfDone) {
   LodField field;
   std::map<int, std::vector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
   for (const OctreeNode& node : tree.nodes) {
@@ -159,26 +159,9 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
     if (4 * cells[size_t(proxy)] > points.size()) continue;
     proxyLevelOf[entry.first] = proxy;
   }
-  // The proxies of one level at a time, each summed from the points, made when a node level first
-  // needs them and freed when the next needs another.
-  int madeLevel = -1;
-  PointSet proxies;
-  std::unique_ptr<PointIndex> proxyIndex;
-  std::unique_ptr<SdfEvaluator> proxySdf;
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  for (const auto& [level, corners] : byLevel) {
-    const auto proxy = proxyLevelOf.find(level);
-    if (proxy != proxyLevelOf.end() && proxy->second != madeLevel) {
-      proxySdf.reset();
-      proxyIndex.reset();
-      proxies = PointSet{};
-      proxies = proxiesAt(points, proxy->second);
-      proxyIndex = std::make_unique<PointIndex>(proxies.position);
-      proxySdf =
-          std::make_unique<SdfEvaluator>(proxies, *proxyIndex, options.smoothing, options.fit);
-      madeLevel = proxy->second;
-    }
-    const SdfEvaluator& sdf = proxy != proxyLevelOf.end() ? *proxySdf : pointsSdf;
+  const auto evaluateLevel = [&](int level, const SdfEvaluator& sdf) {
+    const std::vector<std::pair<uint32_t, GridPoint>>& corners = byLevel[level];
     const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
                       [&](const tbb::blocked_range<size_t>& r) {
@@ -188,6 +171,30 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
                               glm::dvec3(p.x * unit, p.y * unit, p.z * unit), minSigma);
                         }
                       });
+  };
+  // The levels evaluated from the points first (each corner's value depends on its level alone),
+  // so that the points' signed distance and index can go before any proxies are made.
+  for (const auto& entry : byLevel)
+    if (!proxyLevelOf.contains(entry.first)) evaluateLevel(entry.first, pointsSdf);
+  if (pointsSdfDone) pointsSdfDone();
+  // The proxies of one level at a time, each summed from the points, made when a node level first
+  // needs them and freed when the next needs another.
+  int madeLevel = -1;
+  PointSet proxies;
+  std::unique_ptr<PointIndex> proxyIndex;
+  std::unique_ptr<SdfEvaluator> proxySdf;
+  for (const auto& [level, proxyLevel] : proxyLevelOf) {
+    if (proxyLevel != madeLevel) {
+      proxySdf.reset();
+      proxyIndex.reset();
+      proxies = PointSet{};
+      proxies = proxiesAt(points, proxyLevel);
+      proxyIndex = std::make_unique<PointIndex>(proxies.position);
+      proxySdf =
+          std::make_unique<SdfEvaluator>(proxies, *proxyIndex, options.smoothing, options.fit);
+      madeLevel = proxyLevel;
+    }
+    evaluateLevel(level, *proxySdf);
   }
   return field;
 }

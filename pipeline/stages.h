@@ -438,8 +438,11 @@ struct LodField {
   uint32_t find(uint8_t level, const GridPoint& p) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);
+// pointsSdfDone, when set, is called once pointsSdf is no longer needed (before any proxies are
+// made), so that it and its index can be freed.
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
-                          const BuildOptions& options);
+                          const BuildOptions& options,
+                          const std::function<void()>& pointsSdfDone = {});
 // The largest distance of the points below an internal node to the node's own patch.
 float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
                      uint32_t node);
