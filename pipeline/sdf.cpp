@@ -138,13 +138,7 @@ CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode
 
 SdfEvaluator::SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing,
                            FitMode fit, const LoadedBox* box)
-    : points_(points), tree_(tree), box_(box), smoothing_(smoothing), fit_(fit) {
-  halfInverseSigma2_.resize(points.size());
-  for (size_t i = 0; i < points.size(); ++i) {
-    const double sigma = smoothing * double(points.radius[i]);
-    halfInverseSigma2_[i] = sigma > 0.0 ? float(0.5 / (sigma * sigma)) : HUGE_VALF;
-  }
-}
+    : points_(points), tree_(tree), box_(box), smoothing_(smoothing), fit_(fit) {}
 
 uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance, bool* exact) const {
   uint32_t index = 0;
@@ -193,7 +187,7 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma, bool* e
   size_t dominantAt = 0;
   for (size_t j = 0; j < found.size(); ++j) {
     logWeight[j] = -double(found[j].second) *
-                   std::min(double(halfInverseSigma2_[found[j].first]), inverseFloor);
+                   std::min(double(halfInverseSigma2(found[j].first)), inverseFloor);
     if (logWeight[j] > best) {
       best = logWeight[j];
       dominantAt = j;

@@ -258,7 +258,11 @@ class SdfEvaluator {
   const LoadedBox* box_;
   double smoothing_;
   FitMode fit_;
-  std::vector<float> halfInverseSigma2_;  // 1 / 2(smoothing · r_i)² per point
+  // 1 / 2(smoothing · r_i)², in float (computed when needed rather than stored: 4 bytes a point).
+  float halfInverseSigma2(uint32_t i) const {
+    const double sigma = smoothing_ * double(points_.radius[i]);
+    return sigma > 0.0 ? float(0.5 / (sigma * sigma)) : HUGE_VALF;
+  }
 };
 
 // ---- octree.cpp
