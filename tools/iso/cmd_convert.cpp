@@ -177,7 +177,7 @@ int run(Options& o) {
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
   // The octree stages still hold every point in memory (specs/pipeline.md §15): say so before a
-  // long run rather than be killed at its end. About 123 to 140 bytes per point were measured
+  // long run rather than be killed at its end. About 119 to 135 bytes per point were measured
   // (100M and 10M points of a sampled scan without colors).
   const uint64_t octreeBytes = raw->size() * 140;
   if (octreeBytes > memory && !o.quiet && mode != ProgressMode::Json)
