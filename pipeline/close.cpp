@@ -16,7 +16,6 @@
 namespace iso {
 namespace {
 
-
 using Distances = std::array<float, kCorners>;  // at a leaf's corners, in corner order
 
 // A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the
@@ -147,7 +146,8 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     if (tree.nodes[i].isFilled()) fresh.push_back(i);
   addLeafCorners(closure.corners, tree, fresh, sdf);
   // A chunk run spreads its marks as far as the passes of the run on all points that fill cells.
-  const size_t spreadPasses = tree.box ? std::min<size_t>(kMaxClosurePasses, tree.box->fillPasses) : 0;
+  const size_t spreadPasses =
+      tree.box ? std::min<size_t>(kMaxClosurePasses, tree.box->fillPasses) : 0;
   // Exits are found on the sampled values: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
     std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);

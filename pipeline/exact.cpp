@@ -167,20 +167,16 @@ bool touchesInexact(const Octree& tree, uint8_t level, uint64_t key) {
   return !visitAround(tree, level, key, [&](uint32_t id) { return tree.isExact(id); });
 }
 
-void spreadBalanceRound(Octree& tree, int round) {
+bool spreadBalanceRound(Octree& tree, int round) {
   const int bound = int(tree.box->maxLeafLevel) - round - 1;
-  if (bound < 1) return;
-  markAroundInexact(tree, [&](const OctreeNode& n) { return n.isFilled() && n.level <= bound; });
+  if (bound < 1) return false;
+  return markAroundInexact(tree,
+                           [&](const OctreeNode& n) { return n.isFilled() && n.level <= bound; });
 }
 
 void spreadRemainingBalanceRounds(Octree& tree, int round) {
   // A round that marks nothing ends it: later rounds ask for coarser leaves only.
-  for (; int(tree.box->maxLeafLevel) - round - 1 >= 1; ++round) {
-    const int bound = int(tree.box->maxLeafLevel) - round - 1;
-    if (!markAroundInexact(
-            tree, [&](const OctreeNode& n) { return n.isFilled() && n.level <= bound; }))
-      return;
-  }
+  while (spreadBalanceRound(tree, round)) ++round;
 }
 
 namespace {
@@ -200,9 +196,9 @@ bool mayBeFilled(const Octree& tree, const PointSet& points, uint8_t level, uint
 
 void spreadClosurePass(Octree& tree, const PointSet& points) {
   // A leaf inside an inexact node X fills cells of its own level across its faces: they lie in X
-  // or in the cells of X's level across X's faces. Empty nodes there are marked; a larger empty node is split
-  // down to them first (empty nodes split or not are the same to every stage), so that what
-  // is marked stays near X. Only cells some point's radius reaches can be filled.
+  // or in the cells of X's level across X's faces. Empty nodes there are marked; a larger empty
+  // node is split down to them first (empty nodes split or not are the same to every stage), so
+  // that what is marked stays near X. Only cells some point's radius reaches can be filled.
   std::vector<uint32_t> marked;
   std::vector<std::pair<uint8_t, uint64_t>> split;
   for (uint32_t root : inexactRoots(tree)) {

@@ -36,8 +36,9 @@ struct CellSums {
 
 // Proxies of the points of each occupied cell at `level` (points sorted by key): the weighted
 // mean position, normal, radius and colour of the cell's points; the weight scaled by how well
-// the normals agree. No keys: only the signed distance reads them. In parallel over parts cut at cell boundaries; each part counts its cells
-// first and then fills its own range, and a cell's sums live only while its proxy is made.
+// the normals agree; no keys (only the signed distance reads proxies). In parallel over parts cut
+// at cell boundaries; each part counts its cells first and then fills its own range, and a cell's
+// sums live only while its proxy is made.
 PointSet proxiesAt(const PointSet& points, int level) {
   const size_t count = points.size();
   const auto keyAt = [&](size_t i) { return points.key[i]; };

@@ -338,8 +338,8 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           if (verdict[i] != Verdict::Test) continue;
                           bool ok = exact[i];
-                          verdict[i] =
-                              patchTest(tree.nodes[frontier[i]], points, sdf, corners, tolerance, ok);
+                          verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, corners,
+                                                 tolerance, ok);
                           exact[i] = ok;
                         }
                       });

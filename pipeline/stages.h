@@ -421,8 +421,9 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
 bool touchesInexact(const Octree& tree, uint8_t level, uint64_t key);
 // After balance round `round` (from 1) of a chunk run: the same round of the run on all points
 // may split filled leaves next to inexact nodes (a finer leaf there may ask for it), if they are
-// coarse enough to be asked (level ≤ maxLeafLevel − round − 1): they are marked inexact.
-void spreadBalanceRound(Octree& tree, int round);
+// coarse enough to be asked (level ≤ maxLeafLevel − round − 1): they are marked inexact. Returns
+// whether any was.
+bool spreadBalanceRound(Octree& tree, int round);
 // The balance rounds after a chunk run's balance ends, which the run on all points may still
 // make: spreadBalanceRound from `round` until no leaf is coarse enough.
 void spreadRemainingBalanceRounds(Octree& tree, int round);

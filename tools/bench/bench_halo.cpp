@@ -1,8 +1,8 @@
-// iso-bench-halo SCAN [--level L] [--min-points N] [--marked-only]: how wide a halo a chunk of the octree stages
-// needs (specs/pipeline.md §15, "overlap and own"). Prepares the scan's points in core (frame,
-// radii, normals, orientation, roughness; no outlier removal), runs the octree stages on all of
-// them, then for every cell at level L holding at least N points runs the same stages on the
-// points of the cell widened by a halo (1/64, 1/32, ... of the cell) and compares, inside the
+// iso-bench-halo SCAN [--level L] [--min-points N] [--marked-only]: how wide a halo a chunk of the
+// octree stages needs (specs/pipeline.md §15, "overlap and own"). Prepares the scan's points in
+// core (frame, radii, normals, orientation, roughness; no outlier removal), runs the octree stages
+// on all of them, then for every cell at level L holding at least N points runs the same stages on
+// the points of the cell widened by a halo (1/64, 1/32, ... of the cell) and compares, inside the
 // cell, the leaves after building and passive marking, after balance, after the closure, and the
 // final corner values (distance and normal, bit for bit). Prints, per cell, the narrowest halo at
 // which each of them first agrees; then, for chunk runs that mark what may differ from the whole
@@ -190,16 +190,17 @@ int main(int argc, char** argv) {
     const Leaves built = within(whole.built, level, key);
     const Leaves balanced = within(whole.balanced, level, key);
     const Leaves closed = within(whole.closed, level, key);
-    std::vector<std::string> first(4, "> 1/2");
+    std::vector<std::string> first(4, markedOnly ? "-" : "> 1/2");
     size_t loaded = 0;
-    for (int denominator = 64; denominator >= (markedOnly ? 128 : 2); denominator /= 2) {
+    for (int denominator = 64; !markedOnly && denominator >= 2; denominator /= 2) {
       const double halo = 1.0 / denominator;
       const iso::PointSet part = pointsIn(all, lo - halo * cell, hi + halo * cell);
       const Run r = runStages(part, radii, level, key);
       const bool agree[4] = {r.built == built, r.balanced == balanced, r.closed == closed,
                              r.closed == closed && differingCorners(closed, whole, r) == 0};
       for (int s = 0; s < 4; ++s)
-        if (agree[s] && first[size_t(s)][0] == '>') first[size_t(s)] = fmt::format("1/{}", denominator);
+        if (agree[s] && first[size_t(s)][0] == '>')
+          first[size_t(s)] = fmt::format("1/{}", denominator);
       loaded = part.size();
       if (agree[3]) break;
     }
