@@ -1,9 +1,20 @@
 #include "buffers.h"
 
+#include <fcntl.h>
 #include <sys/mman.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
 #include <cstdlib>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <thread>
 
 namespace iso {
 namespace {
@@ -28,6 +39,171 @@ void deallocateLarge(void* p, size_t bytes) noexcept {
   } else {
     munmap(p, bytes);
   }
+}
+
+// ---- Spilled arrays
+
+namespace {
+
+// The one active area's settings and every spilled mapping (they may outlive the area: a mapping
+// is known by its address until it is freed).
+struct SpillState {
+  std::mutex mutex;
+  bool active = false;
+  std::filesystem::path directory;
+  uint64_t residentLimit = 0, minBytes = 0;
+  std::map<void*, size_t> mappings;
+  SpillArea::Stats stats;
+  // The pager.
+  std::thread pager;
+  std::condition_variable wake;
+  bool stopping = false;
+};
+
+SpillState& state() {
+  static SpillState s;
+  return s;
+}
+
+size_t pageSize() {
+  static const size_t size = size_t(sysconf(_SC_PAGESIZE));
+  return size;
+}
+
+size_t roundToPages(size_t bytes) {
+  const size_t page = pageSize();
+  return (std::max<size_t>(bytes, 1) + page - 1) / page * page;
+}
+
+// Resident pages now, all and those mapped from files (and shared memory): /proc/self/statm.
+struct Resident {
+  uint64_t all = 0, files = 0;
+};
+Resident residentBytes() {
+  FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return {};
+  unsigned long long size = 0, resident = 0, shared = 0;
+  const int n = std::fscanf(f, "%llu %llu %llu", &size, &resident, &shared);
+  std::fclose(f);
+  if (n != 3) return {};
+  return {resident * pageSize(), shared * pageSize()};
+}
+
+void releaseLocked(SpillState& s) {
+  for (const auto& [p, bytes] : s.mappings) madvise(p, roundToPages(bytes), MADV_DONTNEED);
+  ++s.stats.releases;
+}
+
+void pagerLoop() {
+  SpillState& s = state();
+  std::unique_lock lock(s.mutex);
+  while (!s.stopping) {
+    s.wake.wait_for(lock, std::chrono::milliseconds(10));
+    if (s.stopping || s.mappings.empty()) continue;
+    lock.unlock();
+    const Resident resident = residentBytes();
+    lock.lock();
+    // Over the limit, with enough file pages resident that dropping them is worth the faults
+    // that map them again.
+    if (resident.all > s.residentLimit && resident.files > s.residentLimit / 8) releaseLocked(s);
+  }
+}
+
+// A file of `bytes` in the directory, mapped shared; nullptr when the area is not active.
+void* mapSpillFile(SpillState& s, size_t bytes) {
+  const std::string where = s.directory.string();
+  int fd = open(where.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+  if (fd < 0 && (errno == EOPNOTSUPP || errno == EISDIR || errno == EINVAL)) {
+    // No unnamed files on this file system: a named one, removed at once.
+    std::string name = (s.directory / ".iso-array.XXXXXX").string();
+    fd = mkostemp(name.data(), O_CLOEXEC);
+    if (fd >= 0) unlink(name.c_str());
+  }
+  const auto fail = [&](const char* what, int error) {
+    if (fd >= 0) close(fd);
+    throw std::runtime_error(where + ": cannot " + what + " " + std::to_string(bytes) +
+                             " bytes of temporary point data: " + std::strerror(error));
+  };
+  if (fd < 0) fail("create a file for", errno);
+  const size_t length = roundToPages(bytes);
+  if (const int error = posix_fallocate(fd, 0, off_t(length)); error != 0)
+    fail("reserve", error);  // a full disk: an error now rather than SIGBUS when a page is written
+  void* p = mmap(nullptr, length, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  if (p == MAP_FAILED) fail("map", errno);
+  close(fd);  // the mapping keeps the file; unmapping removes it
+  return p;
+}
+
+}  // namespace
+
+SpillArea::SpillArea(const std::filesystem::path& directory, uint64_t residentLimit,
+                     uint64_t minBytes) {
+  SpillState& s = state();
+  std::lock_guard lock(s.mutex);
+  if (s.active) throw std::logic_error("one spill area at a time");
+  s.active = true;
+  s.directory = directory;
+  s.residentLimit = residentLimit;
+  s.minBytes = std::max<uint64_t>(minBytes, 1);
+  s.stats = Stats{};
+  for (const auto& [p, bytes] : s.mappings) s.stats.bytes += bytes;
+  s.stats.peakBytes = s.stats.bytes;
+  s.stopping = false;
+  s.pager = std::thread(pagerLoop);
+}
+
+SpillArea::~SpillArea() {
+  SpillState& s = state();
+  {
+    std::lock_guard lock(s.mutex);
+    s.stopping = true;
+    s.active = false;
+  }
+  s.wake.notify_all();
+  s.pager.join();
+}
+
+SpillArea::Stats SpillArea::stats() {
+  SpillState& s = state();
+  std::lock_guard lock(s.mutex);
+  return s.stats;
+}
+
+void SpillArea::release() {
+  SpillState& s = state();
+  std::lock_guard lock(s.mutex);
+  releaseLocked(s);
+}
+
+void* allocateSpillable(size_t bytes) {
+  SpillState& s = state();
+  {
+    std::lock_guard lock(s.mutex);
+    if (s.active && bytes >= s.minBytes) {
+      void* p = mapSpillFile(s, bytes);
+      s.mappings.emplace(p, bytes);
+      s.stats.bytes += bytes;
+      s.stats.peakBytes = std::max(s.stats.peakBytes, s.stats.bytes);
+      ++s.stats.arrays;
+      return p;
+    }
+  }
+  return allocateLarge(bytes);
+}
+
+void deallocateSpillable(void* p, size_t bytes) noexcept {
+  if (!p) return;
+  SpillState& s = state();
+  {
+    std::lock_guard lock(s.mutex);
+    if (const auto it = s.mappings.find(p); it != s.mappings.end()) {
+      munmap(p, roundToPages(it->second));
+      s.stats.bytes -= it->second;
+      s.mappings.erase(it);
+      return;
+    }
+  }
+  deallocateLarge(p, bytes);
 }
 
 }  // namespace iso

@@ -5,6 +5,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <filesystem>
 #include <new>
 #include <type_traits>
 #include <utility>
@@ -39,5 +41,70 @@ struct DefaultInitAllocator {
 
 template <typename T>
 using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
+
+// ---- Spilled arrays (specs/pipeline.md §15, "Memory").
+// The per-point arrays of a conversion (SpillVector: the prepared points and their index) may live
+// in temporary files mapped into memory instead of anonymous memory. While a SpillArea exists,
+// such an array of at least `minBytes` is made a file of its own in the area's directory (opened
+// unnamed, O_TMPFILE, so that nothing is left behind whatever ends the process; its blocks
+// reserved up front, so that a full disk is an error here, not a crash later) and mapped shared.
+// A pager thread then keeps the process's resident memory near `residentLimit`: when it exceeds
+// the limit and more than an eighth of the limit is file pages, it drops every spilled array's
+// pages from the process (MADV_DONTNEED; the data stays in the file and the page cache, and the
+// next access maps it again), 100 times a second at most. So the stages, which read
+// the points in Morton order, keep only the neighbourhood they work on resident, and the kernel
+// keeps the rest in its page cache while memory allows or writes it to disk when not.
+class SpillArea {
+ public:
+  SpillArea(const std::filesystem::path& directory, uint64_t residentLimit,
+            uint64_t minBytes = uint64_t{2} << 20);
+  ~SpillArea();
+  SpillArea(const SpillArea&) = delete;
+  SpillArea& operator=(const SpillArea&) = delete;
+  struct Stats {
+    uint64_t bytes = 0;      // spilled bytes mapped now
+    uint64_t peakBytes = 0;  // the most at once since the area was made (temporary disk)
+    uint64_t arrays = 0;     // spilled arrays made
+    uint64_t releases = 0;   // times the pager dropped the resident pages
+  };
+  static Stats stats();
+  // Drop every spilled array's pages from the process now (what the pager does).
+  static void release();
+};
+
+void* allocateSpillable(size_t bytes);
+void deallocateSpillable(void* p, size_t bytes) noexcept;
+
+// Through allocateSpillable; elements value-initialized like std::allocator's, or left
+// default-initialized (numbers not zeroed) when `uninitialized`.
+template <typename T, bool uninitialized = false>
+struct SpillAllocator {
+  using value_type = T;
+  template <typename U>
+  struct rebind {
+    using other = SpillAllocator<U, uninitialized>;
+  };
+  SpillAllocator() = default;
+  template <typename U>
+  SpillAllocator(const SpillAllocator<U, uninitialized>&) {}
+  T* allocate(size_t n) { return static_cast<T*>(allocateSpillable(n * sizeof(T))); }
+  void deallocate(T* p, size_t n) noexcept { deallocateSpillable(p, n * sizeof(T)); }
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    if constexpr (uninitialized && sizeof...(Args) == 0)
+      ::new (static_cast<void*>(p)) U;
+    else
+      ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+  template <typename U>
+  bool operator==(const SpillAllocator<U, uninitialized>&) const {
+    return true;
+  }
+};
+
+template <typename T>
+using SpillVector = std::vector<T, SpillAllocator<T>>;
+template <typename T>
+using UninitializedSpillVector = std::vector<T, SpillAllocator<T, true>>;
 
 }  // namespace iso

@@ -271,12 +271,18 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
                      [&](StageTimer& timer) { return prepareInCore(input, options, timer); });
 }
 
+OutOfCoreBudget OutOfCoreBudget::forMemory(uint64_t memory) {
+  return {std::max<uint64_t>(memory / 600, 1), memory, std::max<uint64_t>(memory / 32, 4096)};
+}
+
 nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
-                              uint64_t maxChunkPoints, const std::filesystem::path& output,
+                              const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source) {
+  std::optional<SpillArea> area;
+  if (budget.memory > 0) area.emplace(directory.path(), budget.memory, budget.minSpilledBytes);
   return convertWith(raw.size(), output, options, source, [&](StageTimer& timer) {
     const auto stage = [&](const std::string& name, uint64_t total) { timer.next(name, total); };
-    ReadyPoints ready = prepareOutOfCore(raw, directory, options, maxChunkPoints, stage);
+    ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage);
     requireSurface(ready.points);  // known once every chunk's duplicates are merged
     return ready;
   });
@@ -384,6 +390,12 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
         report["seconds"] = seconds;
         report["points_per_second"] = double(inputPoints + source.nonFiniteDropped) / seconds;
         report["peak_rss_bytes"] = peakRssBytes();
+        if (!report["out_of_core"].is_null()) {
+          const SpillArea::Stats spilled = SpillArea::stats();
+          report["out_of_core"]["spilled_bytes_peak"] = spilled.peakBytes;
+          report["out_of_core"]["spilled_arrays"] = spilled.arrays;
+          report["out_of_core"]["page_releases"] = spilled.releases;
+        }
         return metadata(report).dump();
       });
   return report;

@@ -40,11 +40,25 @@ nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path
 
 class RawSpill;
 class SpillDirectory;
+// How an out-of-core conversion uses memory (specs/pipeline.md §15).
+struct OutOfCoreBudget {
+  uint64_t maxChunkPoints = 1u << 20;  // points per chunk of the point stages (with halos)
+  // Resident bytes the process is kept near by dropping spilled arrays' pages (SpillArea); 0:
+  // no array is spilled.
+  uint64_t memory = 0;
+  uint64_t minSpilledBytes = uint64_t{2} << 20;  // smaller arrays stay in memory
+  // The budget for `--memory`: chunks of memory / 600 points (the point stages hold about 600
+  // bytes per loaded point: positions, attributes, neighbours, their graph, chunk and halo
+  // together), and every per-point array of memory / 32 or more spilled.
+  static OutOfCoreBudget forMemory(uint64_t memory);
+};
 // The same for points streamed to disk (spill.h): the point stages run chunk by chunk, chunks of
-// at most maxChunkPoints points with their halos (the output is the same as convertToIso's for
-// the same points); the report adds "out_of_core" (chunks, halos, temporary bytes).
+// at most budget.maxChunkPoints points with their halos, and the prepared points (and their
+// index) live in spilled arrays that the octree stages read in Morton order (the output is the
+// same as convertToIso's for the same points); the report adds "out_of_core" (chunks, halos,
+// temporary and spilled bytes).
 nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
-                              uint64_t maxChunkPoints, const std::filesystem::path& output,
+                              const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
 
 // The options as JSON (the file's "parameters").

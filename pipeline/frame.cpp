@@ -58,7 +58,7 @@ void sortLow(UninitializedVector<KeyedItem>& items, UninitializedVector<KeyedIte
 // A stable radix sort of (key, index) pairs by key: one parallel pass on the highest 11 bits in
 // use (blocks of the input counted and scattered in parallel, in order), then each of those
 // buckets sorted on the remaining bits by an LSD radix sort, buckets in parallel.
-std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
+std::vector<uint32_t> sortedOrder(std::span<const uint64_t> keys) {
   const size_t n = keys.size();
   std::vector<uint32_t> order(n);
   if (n == 0) return order;
@@ -109,10 +109,10 @@ std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys) {
 
 namespace {
 
-template <typename T>
-void permute(std::vector<T>& values, const std::vector<uint32_t>& order) {
+template <typename Vector>
+void permute(Vector& values, const std::vector<uint32_t>& order) {
   if (values.empty()) return;
-  std::vector<T> out(order.size());
+  Vector out(order.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, order.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) out[i] = values[order[i]];
   });
@@ -177,7 +177,7 @@ PointSet makePointSet(const PointCloud& cloud, const Frame& frame) {
       if (cloud.hasNormals()) points.normal[i] = unitOrZero(cloud.normals[i]);
     }
   });
-  if (cloud.hasColors()) points.color = cloud.colors;
+  if (cloud.hasColors()) points.color.assign(cloud.colors.begin(), cloud.colors.end());
   return points;
 }
 

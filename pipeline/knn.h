@@ -68,9 +68,9 @@ class PointIndex {
   void collectLeaves(const float lo[3], const float hi[3], float radius2,
                      std::vector<uint32_t>& out) const;
 
-  UninitializedVector<float> x_, y_, z_;  // positions in sorted order
+  UninitializedSpillVector<float> x_, y_, z_;  // positions in sorted order
   std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
-  std::vector<Node> nodes_;       // nodes_[0] is the root
+  UninitializedSpillVector<Node> nodes_;  // nodes_[0] is the root
   std::vector<uint32_t> leaves_;  // the buckets, in point order
   std::vector<uint64_t> leafKey_;  // Morton key of each bucket's first point
   FlatMap<uint64_t, uint32_t> cells_;  // cellCode → node, for nodes that are whole cells

@@ -276,12 +276,12 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
   }
 }
 
-void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+void alignComponents(std::span<glm::vec3> normals, const OrientationComponents& components,
                      std::span<const uint32_t> neighborIndex, size_t k) {
   alignComponents(normals, components, {}, neighborIndex, k);
 }
 
-void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+void alignComponents(std::span<glm::vec3> normals, const OrientationComponents& components,
                      std::span<const uint32_t> from, std::span<const uint32_t> neighborIndex,
                      size_t k) {
   const size_t n = k > 0 ? neighborIndex.size() / k : 0;  // points whose edges are given

@@ -243,7 +243,7 @@ class ChunkRunner {
     append(cloud.normals, halo.cloud.normals);
     append(cloud.colors, halo.cloud.colors);
     PointSet points = makePointSet(cloud, frame_);
-    points.source = own.source;
+    points.source.assign(own.source.begin(), own.source.end());
     append(points.source, halo.source);
     sortByKey(points);
     mergeDuplicates(points);
@@ -498,7 +498,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   double spacingSum = 0.0;  // in key order, the additions of the in-core sum
   for (const float d : done.firstDistance) spacingSum += d;
   ready.radii.meanSpacing = n > 0 ? spacingSum / double(n) : 0.0;
-  std::vector<float> radii = points.radius;
+  SpillVector<float> radii = points.radius;
   ready.radii.medianRadius = medianOf(radii);
   ready.points = std::move(points);
   ready.index = std::make_unique<PointIndex>(ready.points.position);

@@ -26,7 +26,7 @@ float smallMedian(float* values, size_t count) {
 
 }  // namespace
 
-float medianOf(std::vector<float>& values) {
+float medianOf(std::span<float> values) {
   if (values.empty()) return 0.0f;
   auto middle = values.begin() + ptrdiff_t(values.size() / 2);
   std::nth_element(values.begin(), middle, values.end());
@@ -56,7 +56,7 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors) {
   stats.meanSpacing = spacingSum / double(n);
   // Clamp each radius to 4 times the median of its neighbours' so that one sparse point does not
   // spread a huge disk; keep it above a floor far below any cell.
-  std::vector<float> clamped(n);
+  SpillVector<float> clamped(n);
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& range) {
         std::vector<float> local(k);
@@ -72,7 +72,7 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors) {
         }
       });
   points.radius.swap(clamped);
-  std::vector<float> all = points.radius;
+  SpillVector<float> all = points.radius;
   stats.medianRadius = medianOf(all);
   return stats;
 }

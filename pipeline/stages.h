@@ -77,14 +77,15 @@ struct BuildOptions {
 
 // The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
 struct PointSet {
-  std::vector<glm::vec3> position;
-  std::vector<glm::vec3> normal;  // unit length, or zero where unknown; empty before normals exist
-  std::vector<glm::vec3> color;   // linear RGB; empty when the input has none
-  std::vector<float> weight;      // input points merged into this one (exact duplicates)
-  std::vector<float> radius;      // radius of influence r_i
-  std::vector<float> roughness;   // RMS distance of the neighbours to the point's tangent plane
-  std::vector<uint64_t> key;      // Morton key at kMaxLevel
-  std::vector<uint32_t> source;   // index of the (first) input point
+  // Spillable (buffers.h): out of core, the prepared points of a large input live in mapped files.
+  SpillVector<glm::vec3> position;
+  SpillVector<glm::vec3> normal;  // unit length, or zero where unknown; empty before normals exist
+  SpillVector<glm::vec3> color;   // linear RGB; empty when the input has none
+  SpillVector<float> weight;      // input points merged into this one (exact duplicates)
+  SpillVector<float> radius;      // radius of influence r_i
+  SpillVector<float> roughness;   // RMS distance of the neighbours to the point's tangent plane
+  SpillVector<uint64_t> key;      // Morton key at kMaxLevel
+  SpillVector<uint32_t> source;   // index of the (first) input point
   size_t size() const { return position.size(); }
   bool hasColors() const { return !color.empty(); }
 };
@@ -102,7 +103,7 @@ glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
 uint64_t keyOf(const glm::vec3& frameUnits);
 void sortByKey(PointSet& points);
 // The order that sorts the keys (stable): order[i] is the index of the i-th smallest.
-std::vector<uint32_t> sortedOrder(const std::vector<uint64_t>& keys);
+std::vector<uint32_t> sortedOrder(std::span<const uint64_t> keys);
 // Merge points with identical positions into one (weights add, normals and colors average);
 // returns how many were merged away. Requires sorted points.
 size_t mergeDuplicates(PointSet& points);
@@ -124,7 +125,7 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
 // Points whose radius exceeds 10 times the median radius of their neighbours (far outliers).
 std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors);
 // The median of values (reordered); 0 for none.
-float medianOf(std::vector<float>& values);
+float medianOf(std::span<float> values);
 // Keep the points not flagged (order kept).
 void removePoints(PointSet& points, const std::vector<uint8_t>& flagged);
 
@@ -168,12 +169,12 @@ void propagateInBlocks(PointSet& points, const Neighbors& neighbors,
 // Flip whole components to agree across the k-NN edges between them (neighborIndex: k per
 // point): a maximum spanning forest; a forest with anchored components keeps their signs, any
 // other takes the sign its components vote for.
-void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+void alignComponents(std::span<glm::vec3> normals, const OrientationComponents& components,
                      std::span<const uint32_t> neighborIndex, size_t k);
 // The same over the edges of some points only (neighborIndex: k per point of `from`), which must
 // include every edge between two components (the sums are the same: edges inside a component
 // add nothing).
-void alignComponents(std::vector<glm::vec3>& normals, const OrientationComponents& components,
+void alignComponents(std::span<glm::vec3> normals, const OrientationComponents& components,
                      std::span<const uint32_t> from, std::span<const uint32_t> neighborIndex,
                      size_t k);
 // Local roughness (noise, and curvature below the neighbourhood's scale) of every point: the RMS

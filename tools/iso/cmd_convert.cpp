@@ -108,10 +108,6 @@ uint64_t parseBytes(const std::string& text, const char* option) {
   return uint64_t(value * units.at(unit));
 }
 
-// Points per chunk for a memory budget: the point stages hold about 600 bytes per loaded point
-// (positions, attributes, neighbours, their graph), chunk and halo together.
-uint64_t chunkPointsFor(uint64_t memory) { return std::max<uint64_t>(memory / 600, 1); }
-
 int run(Options& o) {
   if (o.fit != "sphere" && o.fit != "plane")
     throw std::invalid_argument("--fit must be sphere or plane");
@@ -192,7 +188,7 @@ int run(Options& o) {
     };
   nlohmann::json report;
   try {
-    report = convertSpilled(*raw, spill, chunkPointsFor(memory), output, o.build, source);
+    report = convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();

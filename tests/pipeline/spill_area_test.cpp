@@ -1,0 +1,89 @@
+// Spilled arrays (pipeline/buffers.h): file-backed while an area exists, the same values after
+// their pages are dropped, nothing left in the directory, and a clear error when the file
+// cannot be made.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <numeric>
+
+#include "buffers.h"
+#include "support/support.h"
+
+namespace iso {
+namespace {
+
+// Resident pages mapped from files, in bytes (/proc/self/statm, third field).
+uint64_t residentFileBytes() {
+  FILE* f = std::fopen("/proc/self/statm", "r");
+  unsigned long long size = 0, resident = 0, shared = 0;
+  EXPECT_EQ(std::fscanf(f, "%llu %llu %llu", &size, &resident, &shared), 3);
+  std::fclose(f);
+  return shared * uint64_t(sysconf(_SC_PAGESIZE));
+}
+
+bool directoryIsEmpty(const std::filesystem::path& dir) {
+  return std::filesystem::directory_iterator(dir) == std::filesystem::directory_iterator();
+}
+
+TEST(SpillArea, largeArraysLiveInFilesAndKeepTheirValuesWhenTheirPagesAreDropped) {
+  test::TempDir dir;
+  constexpr size_t n = size_t{16} << 20;  // 128 MiB of uint64_t
+  {
+    // A limit no process meets, so that only release() drops pages here.
+    SpillArea area(dir.path(), uint64_t{1} << 50, uint64_t{1} << 20);
+    SpillVector<uint64_t> small(1000);  // below minBytes: in memory
+    EXPECT_EQ(SpillArea::stats().arrays, 0u);
+    EXPECT_EQ(small[999], 0u);  // value-initialized like std::vector's
+    const uint64_t before = residentFileBytes();
+    SpillVector<uint64_t> large(n);
+    EXPECT_EQ(SpillArea::stats().arrays, 1u);
+    EXPECT_GE(SpillArea::stats().bytes, n * sizeof(uint64_t));
+    for (size_t i = 0; i < n; ++i) large[i] = i * 2654435761u;
+    const uint64_t filled = residentFileBytes();
+    EXPECT_GE(filled, before + n * sizeof(uint64_t) * 9 / 10) << "the array is not file-backed";
+    SpillArea::release();
+    EXPECT_LT(residentFileBytes(), before + n * sizeof(uint64_t) / 10)
+        << "its pages are still resident";
+    EXPECT_GE(SpillArea::stats().releases, 1u);
+    uint64_t wrong = 0;
+    for (size_t i = 0; i < n; ++i) wrong += large[i] != i * 2654435761u;
+    EXPECT_EQ(wrong, 0u);
+    // Growing copies into a new file; the old one goes.
+    large.push_back(7);
+    EXPECT_EQ(large.back(), 7u);
+    EXPECT_EQ(large[n - 1], (n - 1) * 2654435761u);
+    EXPECT_EQ(SpillArea::stats().arrays, 2u);
+    EXPECT_TRUE(directoryIsEmpty(dir.path())) << "the files have no names";
+  }
+  EXPECT_TRUE(directoryIsEmpty(dir.path()));
+}
+
+TEST(SpillArea, thePagerKeepsTheProcessNearItsLimit) {
+  test::TempDir dir;
+  SpillArea area(dir.path(), 1, 4096);  // over the limit always: every look drops the pages
+  SpillVector<float> values(size_t{8} << 20);
+  std::iota(values.begin(), values.end(), 0.0f);
+  for (int i = 0; i < 200 && SpillArea::stats().releases == 0; ++i) usleep(10000);
+  EXPECT_GT(SpillArea::stats().releases, 0u);
+  for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], float(i));
+}
+
+TEST(SpillArea, aDirectoryThatCannotHoldTheFileIsAClearError) {
+  test::TempDir dir;
+  const std::filesystem::path missing = dir / "missing";
+  SpillArea area(missing, uint64_t{1} << 50, 4096);
+  try {
+    SpillVector<uint64_t> v(100000);
+    FAIL() << "no error";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(missing.string()), std::string::npos) << what;
+    EXPECT_NE(what.find("800000 bytes"), std::string::npos) << what;
+  }
+}
+
+}  // namespace
+}  // namespace iso
