@@ -294,7 +294,9 @@ struct OctreeNode {
 };
 
 struct Octree {
-  std::vector<OctreeNode> nodes;  // node 0: the root (level 0)
+  // Node 0: the root (level 0). Nodes are made a level at a time in key order, and balance and
+  // closure add theirs in key order: spillable (buffers.h).
+  SpillVector<OctreeNode> nodes;
   // In a chunk run: the box of the loaded points, and per node whether it may differ from the run
   // on all points (its kind, its points, anything below it; children inherit it, and a child
   // whose cell leaves the box gets it). Null and empty in a run on all points.
@@ -366,9 +368,11 @@ struct CornerField {
   // A table for about `expected` corners, and arrays reserved for `reserved` (address space:
   // pages count once written; below that the arrays never grow by copying).
   CornerField(size_t expected, size_t reserved);
-  KeyIndex<Key128> index{1024};        // gridKey → entry
-  std::vector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
-  std::vector<CornerSample> value;
+  // Spillable (buffers.h): the entries are made in the key order of the leaves using them, which
+  // the stages that read them follow; the hash table stays in memory.
+  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // gridKey → entry
+  SpillVector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
+  SpillVector<CornerSample> value;
   std::vector<uint8_t> inexact;  // in a chunk run: per entry, the value may differ (else empty)
   bool marksInexact = false;     // a chunk run: `inexact` has an entry per corner
   uint32_t find(const GridPoint& p) const;
@@ -439,8 +443,8 @@ bool ownCellIsExact(const Octree& tree, const Closure& closure);
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
 struct LodField {
-  KeyIndex<Key128> index{1024};  // lodKey → entry
-  std::vector<CornerSample> value;
+  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // lodKey → entry
+  SpillVector<CornerSample> value;
   uint32_t find(uint8_t level, const GridPoint& p) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);

@@ -100,8 +100,9 @@ class FlatMap {
   size_t size_ = 0;
 };
 
-// Keys numbered 0, 1, 2, ... in the order they were first inserted.
-template <typename Key>
+// Keys numbered 0, 1, 2, ... in the order they were first inserted. The key array's allocator is
+// a parameter (the pipeline keeps large ones in files, read in the order they were inserted).
+template <typename Key, typename KeyAllocator = std::allocator<Key>>
 class KeyIndex {
  public:
   static constexpr uint32_t kNone = 0xffffffffu;
@@ -149,7 +150,7 @@ class KeyIndex {
   }
 
   std::vector<uint32_t> slots_;
-  std::vector<Key> keys_;
+  std::vector<Key, KeyAllocator> keys_;
   size_t mask_ = 0;
 };
 
