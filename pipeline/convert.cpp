@@ -305,9 +305,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
   OctreeStats octreeStats;
   // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
-  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made for half a point (it
-  // doubles where there are more), the arrays reserved for one.
-  CornerField cornerField(points.size() / 2, points.size());
+  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made and the arrays are
+  // reserved for half a point (they double where there are more): out of core, reserved room is
+  // temporary disk.
+  CornerField cornerField(points.size() / 2, points.size() / 2);
   Octree octree = buildOctree(points, *sdf, options, radii, cornerField, &octreeStats);
   points.roughness = {};  // only the octree's tolerance reads it
   timer.next("passive+balance");

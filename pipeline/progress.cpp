@@ -34,13 +34,14 @@ void progressAdvance(uint64_t amount) {
 ProgressMute::ProgressMute() { gMuted.fetch_add(1, std::memory_order_relaxed); }
 ProgressMute::~ProgressMute() { gMuted.fetch_sub(1, std::memory_order_relaxed); }
 
-uint64_t currentRssBytes() {
+uint64_t currentRssBytes(uint64_t* fromFiles) {
   std::FILE* f = std::fopen("/proc/self/statm", "r");
   if (f == nullptr) return 0;
-  unsigned long long pages = 0, resident = 0;
-  const int read = std::fscanf(f, "%llu %llu", &pages, &resident);
+  unsigned long long pages = 0, resident = 0, shared = 0;
+  const int read = std::fscanf(f, "%llu %llu %llu", &pages, &resident, &shared);
   std::fclose(f);
-  return read == 2 ? resident * 4096ull : 0;
+  if (fromFiles) *fromFiles = read == 3 ? shared * 4096ull : 0;
+  return read >= 2 ? resident * 4096ull : 0;
 }
 
 ProgressReporter::ProgressReporter(ProgressMode mode, std::FILE* out,
@@ -96,11 +97,16 @@ void ProgressReporter::print(bool final) {
   const bool bounded = total_ > 0 && done <= total_;
   const double fraction = bounded ? double(done) / double(total_) : 0.0;
   const double eta = bounded && perSecond > 0.0 ? double(total_ - done) / perSecond : -1.0;
-  const uint64_t rss = currentRssBytes();
+  uint64_t rssFiles = 0;
+  const uint64_t rss = currentRssBytes(&rssFiles);
   if (mode_ == ProgressMode::Json) {
-    nlohmann::json j = {
-        {"event", final ? "end" : "progress"}, {"stage", stage_},         {"done", done},
-        {"elapsed_seconds", elapsed},          {"per_second", perSecond}, {"rss_bytes", rss}};
+    nlohmann::json j = {{"event", final ? "end" : "progress"},
+                        {"stage", stage_},
+                        {"done", done},
+                        {"elapsed_seconds", elapsed},
+                        {"per_second", perSecond},
+                        {"rss_bytes", rss},
+                        {"rss_file_bytes", rssFiles}};
     if (total_ > 0) j["total"] = total_;
     if (bounded) j["percent"] = 100.0 * fraction;
     if (eta >= 0.0 && !final) j["eta_seconds"] = eta;

@@ -30,8 +30,9 @@ class ProgressMute {
   ProgressMute& operator=(const ProgressMute&) = delete;
 };
 
-// Resident memory of this process now, in bytes (VmRSS).
-uint64_t currentRssBytes();
+// Resident memory of this process now, in bytes (VmRSS); fromFiles, when given, gets the part
+// mapped from files (spilled arrays among them; the rest is anonymous memory).
+uint64_t currentRssBytes(uint64_t* fromFiles = nullptr);
 
 enum class ProgressMode {
   None,  // report nothing
