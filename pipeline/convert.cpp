@@ -375,9 +375,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
             {"bytes_per_leaf",
              double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
             {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
-        const SurfaceModel surface = SurfaceModel::load(Reader::open(written));
-        const std::vector<glm::dvec3>& sample = ready.sample;
-        const DistanceStats d = pointsToZeroSet(surface, frame, sample);
+        const DistanceStats d = pointsToZeroSet(Reader::open(written), frame, ready.sample);
         report["accuracy"] = {{"samples", d.samples},
                               {"unprojected", d.unprojected},
                               {"rms", d.rms},

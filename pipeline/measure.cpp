@@ -4,26 +4,42 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <numeric>
 #include <glm/geometric.hpp>
 
+#include "iso/reader.h"
 #include "knn.h"
 #include "stages.h"
 
 namespace iso {
 
-DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
-                              std::span<const glm::dvec3> points, bool keepValues) {
-  std::vector<double> distance(points.size(), -1.0);
+namespace {
+
+// Distances (world units) of points to the zero set, -1 where none was found; escaped[i] set where
+// the projection left the model's region (then distance[i] is left alone).
+void project(const SurfaceModel& surface, const Frame& frame, std::span<const glm::dvec3> points,
+             std::span<const uint32_t> which, std::vector<double>& distance,
+             std::vector<uint8_t>* escaped) {
   tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, points.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
+      tbb::blocked_range<size_t>(0, which.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t j = r.begin(); j < r.end(); ++j) {
+          const uint32_t i = which[j];
           const glm::dvec3 p = toFrame(points[i], frame);
-          if (const std::optional<Vec3> x = surface.project({p.x, p.y, p.z}))
-            distance[i] = glm::length(glm::dvec3((*x)[0], (*x)[1], (*x)[2]) - p) * frame.size;
+          bool left = false;
+          const std::optional<Vec3> x = surface.project({p.x, p.y, p.z}, &left);
+          if (left) {
+            (*escaped)[i] = 1;
+            continue;
+          }
+          if (x) distance[i] = glm::length(glm::dvec3((*x)[0], (*x)[1], (*x)[2]) - p) * frame.size;
         }
       });
+}
+
+DistanceStats statsOf(const std::vector<double>& distance, bool keepValues) {
   DistanceStats stats;
-  stats.samples = points.size();
+  stats.samples = distance.size();
   double sum = 0.0, squares = 0.0;
   for (double d : distance) {
     if (d < 0.0) {
@@ -41,6 +57,52 @@ DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
     stats.rms = std::sqrt(squares / n);
   }
   return stats;
+}
+
+}  // namespace
+
+DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
+                              std::span<const glm::dvec3> points, bool keepValues) {
+  std::vector<double> distance(points.size(), -1.0);
+  std::vector<uint32_t> all(points.size());
+  std::iota(all.begin(), all.end(), 0u);
+  project(surface, frame, points, all, distance, nullptr);
+  return statsOf(distance, keepValues);
+}
+
+DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
+                              std::span<const glm::dvec3> points, bool keepValues,
+                              uint64_t regionLeaves) {
+  uint64_t leaves = 0;
+  for (const ChunkInfo& info : reader.chunks()) leaves += info.leafCount;
+  uint8_t level = 0;  // a surface meets about 4^level cells of a level
+  while (level < 7 && (uint64_t{1} << (2 * level)) * regionLeaves < leaves) ++level;
+  const double edge = std::ldexp(1.0, -level);
+  // The points of each cell, cells in key order.
+  std::map<uint64_t, std::vector<uint32_t>> cells;
+  for (uint32_t i = 0; i < points.size(); ++i) {
+    const glm::vec3 p(toFrame(points[i], frame));
+    cells[keyOf(p) >> (3 * (kMaxLevel - level))].push_back(i);
+  }
+  std::vector<double> distance(points.size(), -1.0);
+  std::vector<uint8_t> escaped(points.size(), 0);
+  for (auto& [key, which] : cells) {
+    const auto cell = mortonDecode(key);
+    for (double margin = edge / 16; !which.empty(); margin *= 2.0) {
+      SurfaceModel::Region region;
+      for (size_t a = 0; a < 3; ++a) {
+        region.lo[a] = double(cell[a]) * edge - margin;
+        region.hi[a] = double(cell[a] + 1) * edge + margin;
+      }
+      const bool whole = margin >= 1.0;  // the box holds the frame's cube: the whole model
+      const SurfaceModel surface =
+          SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region));
+      project(surface, frame, points, which, distance, &escaped);
+      std::erase_if(which, [&](uint32_t i) { return !escaped[i]; });
+      for (const uint32_t i : which) escaped[i] = 0;
+    }
+  }
+  return statsOf(distance, keepValues);
 }
 
 std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit) {

@@ -23,6 +23,16 @@ struct DistanceStats {
 DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
                               std::span<const glm::dvec3> points, bool keepValues = false);
 
+// The same from a file, region by region (specs/pipeline.md §10): the points are grouped by cell
+// of the coarsest level whose cells a surface meets hold about regionLeaves leaves (4^level cells
+// for the file's leaves), and each group is measured against the chunks that meet its cell
+// widened by 1/16 of it; a point whose projection leaves that box is measured again with the
+// margin doubled, and so on. So about a region's leaves are decoded at once, and every distance
+// is the one the whole model gives.
+DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
+                              std::span<const glm::dvec3> points, bool keepValues = false,
+                              uint64_t regionLeaves = 500000);
+
 // Every step-th point, at most `limit` of them, spread over the whole cloud.
 std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit);
 

@@ -89,9 +89,26 @@ struct SurfaceModel::Traversal {
   std::optional<RayHit> hit;
 };
 
-SurfaceModel SurfaceModel::load(const Reader& reader) {
+bool SurfaceModel::Region::contains(const Vec3& p) const {
+  for (size_t a = 0; a < 3; ++a)
+    if (!(p[a] >= lo[a] && p[a] <= hi[a])) return false;
+  return true;
+}
+
+bool SurfaceModel::Region::meetsCell(uint8_t level, uint64_t key) const {
+  const auto cell = mortonDecode(key);
+  const double size = std::ldexp(1.0, -level);
+  for (size_t a = 0; a < 3; ++a) {
+    const double origin = double(cell[a]) * size;
+    if (origin > hi[a] || origin + size < lo[a]) return false;
+  }
+  return true;
+}
+
+SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region>& region) {
   SurfaceModel model;
   model.header_ = reader.header();
+  model.region_ = region;
   model.nodes_.push_back({});
   model.nodes_[0].child.fill(kNoNode);
   FlatMap<uint64_t, uint32_t> index(1024);
@@ -108,11 +125,13 @@ SurfaceModel SurfaceModel::load(const Reader& reader) {
   };
   struct Cut {
     uint32_t chunk, node;
-    uint8_t mask;
+    uint8_t mask, level;
+    uint64_t key;
   };
   std::vector<Cut> cuts;
   for (const ChunkInfo& info : reader.chunks()) {
     if (info.kind != kSurfaceKind) continue;
+    if (region && !region->meetsCell(info.level, info.key)) continue;
     const SurfaceChunk chunk = decodeSurfaceChunk(reader, info.id);
     const uint32_t cornerBase = uint32_t(model.corners_.distance.size());
     const CornerValues& v = chunk.leafValues;
@@ -135,7 +154,7 @@ SurfaceModel SurfaceModel::load(const Reader& reader) {
         model.nodes_[id].leaf = uint32_t(model.leaves_.size());
         model.leaves_.push_back(leaf);
       } else if (node.firstChild == kNoNode) {
-        cuts.push_back({info.id, id, node.childMask});
+        cuts.push_back({info.id, id, node.childMask, node.level, node.key});
       }
     }
   }
@@ -146,7 +165,8 @@ SurfaceModel SurfaceModel::load(const Reader& reader) {
                       "a filled leaf also has children in another chunk");
   for (const Cut& cut : cuts)
     for (int o = 0; o < 8; ++o)
-      if ((cut.mask >> o & 1) && model.nodes_[cut.node].child[size_t(o)] == kNoNode)
+      if ((cut.mask >> o & 1) && model.nodes_[cut.node].child[size_t(o)] == kNoNode &&
+          (!region || region->meetsCell(uint8_t(cut.level + 1), cut.key << 3 | uint64_t(o))))
         throw FileError(
             reader.name(), reader.chunk(cut.chunk).offset,
             "chunk " + std::to_string(cut.chunk) + ": a node's children are in no chunk");
@@ -324,10 +344,14 @@ std::optional<RayHit> SurfaceModel::intersect(const Vec3& origin, const Vec3& di
   return state.hit;
 }
 
-std::optional<Vec3> SurfaceModel::project(const Vec3& p) const {
+std::optional<Vec3> SurfaceModel::project(const Vec3& p, bool* escaped) const {
   Vec3 x = p, previous = p;
   double previousValue = 0.0;
   for (int step = 0; step < 64; ++step) {
+    if (region_ && !region_->contains(x)) {  // the points between two inside are inside too
+      if (escaped) *escaped = true;
+      return std::nullopt;
+    }
     const uint32_t leaf = findLeaf(x);
     if (leaf == kNoNode) return std::nullopt;
     SurfaceEval e;

@@ -2,6 +2,7 @@
 // (specs/pipeline.md; iso eval's metric): 200k-point scans of a sphere and a torus.
 #include <gtest/gtest.h>
 
+#include "measure.h"
 #include "pipeline_support.h"
 
 namespace iso {
@@ -65,6 +66,46 @@ TEST(Accuracy, torusWithoutNormalsIsAccurateAndOrientedOutward) {
 TEST(Accuracy, noisySphereMeetsTheTarget) {
   const nlohmann::json e = measure({"sphere", true, 0.5});
   EXPECT_LE(e["rms_over_spacing"].get<double>(), 0.35);
+}
+
+// The conversion's accuracy measure decodes the file region by region: every distance must be the
+// one the whole model gives, including those of points whose projection leaves the first box.
+TEST(Accuracy, theRegionalMeasureGivesTheWholeModelsDistances) {
+  test::TempDir dir;
+  const PointCloud scan = test::scanOf("torus", 100000, false, 0.5);
+  BuildOptions options;
+  options.chunkNodes = 64;  // many small file chunks, so that a region loads few of them
+  const test::Converted converted = test::convertAndLoad(scan, dir / "scan.iso", options);
+  const Reader reader = Reader::open(dir / "scan.iso");
+  std::vector<glm::dvec3> sample;
+  for (size_t i = 0; i < scan.size(); i += 7) sample.push_back(scan.positions[i]);
+  const Frame& frame = reader.header().frame;
+  const DistanceStats whole = pointsToZeroSet(converted.surface, frame, sample, true);
+  ASSERT_GT(whole.values.size(), sample.size() * 9 / 10);
+  for (const uint64_t regionLeaves : {uint64_t{1} << 30, uint64_t{2000}, uint64_t{50}}) {
+    const DistanceStats regional = pointsToZeroSet(reader, frame, sample, true, regionLeaves);
+    EXPECT_EQ(regional.unprojected, whole.unprojected) << regionLeaves;
+    EXPECT_EQ(regional.values, whole.values) << regionLeaves;
+    EXPECT_EQ(regional.rms, whole.rms) << regionLeaves;
+    EXPECT_EQ(regional.max, whole.max) << regionLeaves;
+  }
+  // A region loads only the chunks that meet it, and answers inside it as the whole model does.
+  SurfaceModel::Region region{{0.25, 0.25, 0.25}, {0.5, 0.5, 0.75}};
+  const SurfaceModel part = SurfaceModel::load(reader, region);
+  EXPECT_LT(part.leaves().size(), converted.surface.leaves().size() / 2);
+  size_t inside = 0;
+  for (const SurfaceModel::Leaf& leaf : converted.surface.leaves()) {
+    if (!region.meetsCell(leaf.level, leaf.key)) continue;
+    ++inside;
+    const auto cell = mortonDecode(leaf.key);
+    const double size = std::ldexp(1.0, -leaf.level);
+    const Vec3 center = {(cell[0] + 0.5) * size, (cell[1] + 0.5) * size, (cell[2] + 0.5) * size};
+    const uint32_t found = part.findLeaf(center);
+    ASSERT_NE(found, kNoNode);
+    EXPECT_EQ(part.leaves()[found].key, leaf.key);
+    EXPECT_EQ(part.leaves()[found].level, leaf.level);
+  }
+  EXPECT_GT(inside, 100u);
 }
 
 TEST(Accuracy, hundredThousandRaysAtAClosedShapeNeverLeak) {

@@ -48,9 +48,18 @@ class SurfaceModel {
     std::array<uint32_t, kCorners> corners{};  // into the model's corner arrays
   };
 
+  // A box in frame units (closed).
+  struct Region {
+    Vec3 lo{}, hi{};
+    bool contains(const Vec3& p) const;
+    bool meetsCell(uint8_t level, uint64_t key) const;
+  };
+
   // Decode every surface chunk of the file and link them into one octree. Throws iso::FileError
-  // for invalid chunks and when chunks overlap or leave a cut node without its children.
-  static SurfaceModel load(const Reader& reader);
+  // for invalid chunks and when chunks overlap or leave a cut node without its children. With a
+  // region, only the chunks whose cells meet it: every leaf that meets the region is there, and
+  // the queries answer inside it as the whole model does (project() says when a query left it).
+  static SurfaceModel load(const Reader& reader, const std::optional<Region>& region = {});
 
   const FileHeader& header() const { return header_; }
   std::span<const Leaf> leaves() const { return leaves_; }
@@ -71,7 +80,9 @@ class SurfaceModel {
   // A point of the zero set near p, by Newton steps along the gradient, or where a step changes
   // the sign of f (found by bisection: a root inside a leaf or a sign change at a leaf face); none
   // when the steps leave the filled leaves or do not converge.
-  std::optional<Vec3> project(const Vec3& p) const;
+  // With a region (load), `escaped` is set when the steps left it: the answer may then differ from
+  // the whole model's.
+  std::optional<Vec3> project(const Vec3& p, bool* escaped = nullptr) const;
 
   // Points of the zero set: roots along axis-aligned lines, `linesPerEdge` per leaf edge, each kept
   // by the axis most aligned with the gradient and weighted by the area it stands for.
@@ -92,6 +103,7 @@ class SurfaceModel {
   double distanceAt(uint32_t leaf, const Vec3& p, std::array<double, 3>* gradient) const;
 
   FileHeader header_;
+  std::optional<Region> region_;
   std::vector<Node> nodes_;  // node 0 is the root (level 0)
   std::vector<Leaf> leaves_;
   CornerValues corners_;
