@@ -124,14 +124,14 @@ PointIndex::PointIndex(std::span<const glm::vec3> points) {
   }
   origin_ = origin;
   cellsPerUnit_ = double(1u << kMaxLevel) / size;
-  std::vector<uint64_t> keys(n);
+  UninitializedSpillVector<uint64_t> keys(n);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14),
                     [&](const tbb::blocked_range<size_t>& r) {
                       for (size_t i = r.begin(); i < r.end(); ++i) keys[i] = keyOf(points[i]);
                     });
   if (!std::is_sorted(keys.begin(), keys.end())) {
     order_ = sortedOrder(keys);
-    std::vector<uint64_t> sorted(n);
+    UninitializedSpillVector<uint64_t> sorted(n);
     for (size_t i = 0; i < n; ++i) sorted[i] = keys[order_[i]];
     keys.swap(sorted);
   }
@@ -166,7 +166,7 @@ struct PointIndex::Children {
   std::array<bool, 8> cell{};  // whether child c is a whole octant
 };
 
-PointIndex::Children PointIndex::split(const std::vector<uint64_t>& keys, const Node& node,
+PointIndex::Children PointIndex::split(std::span<const uint64_t> keys, const Node& node,
                                        uint8_t l) {
   Children out;
   const auto add = [&](uint32_t begin, uint32_t end, bool cell) {
@@ -230,7 +230,7 @@ uint32_t PointIndex::startNode(const glm::vec3& lo, const glm::vec3& hi, float p
   return 0;
 }
 
-void PointIndex::build(const std::vector<uint64_t>& keys) {
+void PointIndex::build(std::span<const uint64_t> keys) {
   // Level by level, so that children follow their parents: an octree of the keys down to
   // kMaxLevel, then halves of the remaining runs (points in one finest cell). The children of a
   // level's nodes are found in parallel, then appended in order.

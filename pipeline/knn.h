@@ -54,9 +54,9 @@ class PointIndex {
   };
   struct Search;
   struct Children;
-  static Children split(const std::vector<uint64_t>& keys, const Node& node, uint8_t level);
+  static Children split(std::span<const uint64_t> keys, const Node& node, uint8_t level);
 
-  void build(const std::vector<uint64_t>& keys);
+  void build(std::span<const uint64_t> keys);
   uint64_t keyOf(const glm::vec3& p) const;
   // The deepest node that is a whole octree cell holding every point within pad of the box.
   uint32_t startNode(const glm::vec3& lo, const glm::vec3& hi, float pad) const;
@@ -71,8 +71,8 @@ class PointIndex {
   UninitializedSpillVector<float> x_, y_, z_;  // positions in sorted order
   std::vector<uint32_t> order_;   // sorted → original index; empty when the input was sorted
   UninitializedSpillVector<Node> nodes_;  // nodes_[0] is the root
-  std::vector<uint32_t> leaves_;  // the buckets, in point order
-  std::vector<uint64_t> leafKey_;  // Morton key of each bucket's first point
+  UninitializedSpillVector<uint32_t> leaves_;  // the buckets, in point order
+  UninitializedSpillVector<uint64_t> leafKey_;  // Morton key of each bucket's first point
   FlatMap<uint64_t, uint32_t> cells_;  // cellCode → node, for nodes that are whole cells
   glm::dvec3 origin_{0.0};         // the cube of the keys: origin and cells per unit
   double cellsPerUnit_ = 1.0;

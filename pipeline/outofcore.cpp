@@ -43,7 +43,7 @@ struct ChunkRecord {
 
 struct Accumulated {
   PointSet points;
-  std::vector<float> firstDistance;  // per point: distance to its nearest neighbour
+  SpillVector<float> firstDistance;  // per point: distance to its nearest neighbour
   // Points with a neighbour in another orientation component (or loaded in a halo): their
   // roughness is computed again, and their edges align the components, once all chunks are done.
   std::vector<uint32_t> boundarySource;            // input index of each
@@ -476,7 +476,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   const size_t n = points.size();
   {
     // The boundary points and their neighbours as indices into the assembled points.
-    std::vector<uint32_t> ordinal(raw.size(), kNoNode);
+    SpillVector<uint32_t> ordinal(raw.size(), kNoNode);
     for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
     std::vector<uint32_t>& from = done.boundarySource;
     UninitializedVector<uint32_t>& near = done.boundaryNeighbor;

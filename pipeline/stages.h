@@ -157,7 +157,7 @@ void orientUp(PointSet& points, const std::vector<uint8_t>& wasEstimated, uint32
               uint32_t end);
 // Components of the propagation: each block's parts, numbered block by block.
 struct OrientationComponents {
-  std::vector<uint32_t> of;       // per point: its component
+  SpillVector<uint32_t> of;       // per point: its component
   std::vector<uint8_t> anchored;  // per component: holds input normals (never flipped)
   std::vector<float> seedVote;  // per component: its points × its seed normal's z (0 if anchored)
 };
