@@ -115,13 +115,13 @@ class ChunkPlanner {
 
   const Octree& tree_;
   uint32_t budget_;
-  std::vector<uint64_t> subtree_;
+  SpillVector<uint64_t> subtree_;  // per node, like the tree's nodes
   std::vector<ChunkPlan> plans_;
 };
 
 CornerValues leafValues(const CornerLayout& layout, const CornerField& field,
-                        const std::vector<uint32_t>& hangingOf,
-                        const std::vector<HangingCorner>& hanging, const AttributeDesc& distance,
+                        const SpillVector<uint32_t>& hangingOf,
+                        const HangingCorners& hanging, const AttributeDesc& distance,
                         bool colors) {
   CornerValues v;
   const size_t n = layout.leafCorners.size();
@@ -189,7 +189,7 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   for (const OctreeNode& node : tree.nodes)
     if (node.kind != NodeKind::Empty) maxLevel = std::max(maxLevel, node.level);
   const FileHeader header = surfaceHeader(in.frame, maxLevel, in.colors, in.options.normalBits);
-  std::vector<uint32_t> hangingOf(in.corners->size(), kNoNode);
+  SpillVector<uint32_t> hangingOf(in.corners->size(), kNoNode);  // per corner entry
   for (uint32_t i = 0; i < in.hanging->size(); ++i) hangingOf[(*in.hanging)[i].corner] = i;
 
 

@@ -11,15 +11,21 @@
 
 namespace iso {
 
-template <typename T, typename F>
-std::vector<T> collectInParallel(size_t count, size_t block, const F& f) {
+template <typename T, typename Out = std::vector<T>, typename F>
+Out collectInParallel(size_t count, size_t block, const F& f) {
   std::vector<std::vector<T>> parts((count + block - 1) / block);
   tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
     const size_t end = std::min(count, (p + 1) * block);
     for (size_t i = p * block; i < end; ++i) f(i, parts[p]);
   });
-  std::vector<T> all;
-  for (const std::vector<T>& part : parts) all.insert(all.end(), part.begin(), part.end());
+  size_t total = 0;
+  for (const std::vector<T>& part : parts) total += part.size();
+  Out all;
+  all.reserve(total);
+  for (std::vector<T>& part : parts) {
+    all.insert(all.end(), part.begin(), part.end());
+    part = {};
+  }
   return all;
 }
 

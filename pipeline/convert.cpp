@@ -318,7 +318,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
-  const std::vector<HangingCorner>& hanging = closure.hanging;
+  const HangingCorners& hanging = closure.hanging;
   timer.next("lod");
   // The points' signed distance and index go once the levels that read them are done: the writer
   // reads points, not neighbours.

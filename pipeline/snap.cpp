@@ -59,8 +59,8 @@ std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerFie
 
 }  // namespace
 
-std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field) {
-  std::vector<HangingCorner> hanging = collectInParallel<HangingCorner>(
+HangingCorners findHangingCorners(const Octree& tree, const CornerField& field) {
+  HangingCorners hanging = collectInParallel<HangingCorner, HangingCorners>(
       field.size(), 1 << 14, [&](size_t i, std::vector<HangingCorner>& out) {
         if (auto h = hangingRelation(tree, field, uint32_t(i))) out.push_back(*h);
       });
@@ -72,7 +72,7 @@ std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerFi
   return hanging;
 }
 
-void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& hanging) {
+void snapHangingCorners(CornerField& field, const HangingCorners& hanging) {
   for (const HangingCorner& h : hanging) {
     CornerSample sum;
     sum.distance = 0.0f;

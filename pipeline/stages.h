@@ -401,14 +401,15 @@ struct HangingCorner {
   std::array<uint32_t, 4> sources{};  // the coarser leaf's corners it interpolates
   uint8_t sourceCount = 0;            // 2 (edge) or 4 (face)
 };
-std::vector<HangingCorner> findHangingCorners(const Octree& tree, const CornerField& field);
+using HangingCorners = SpillVector<HangingCorner>;  // in the field's entry order, then by level
+HangingCorners findHangingCorners(const Octree& tree, const CornerField& field);
 // Set each hanging corner to the mean of its sources, coarse levels first.
-void snapHangingCorners(CornerField& field, const std::vector<HangingCorner>& hanging);
+void snapHangingCorners(CornerField& field, const HangingCorners& hanging);
 
 // ---- close.cpp
 struct Closure {
   CornerField corners;
-  std::vector<HangingCorner> hanging;
+  HangingCorners hanging;
   size_t cornersInUse = 0;  // corners of the final filled leaves
   size_t filled = 0;        // empty cells filled because the surface ran into them
   size_t passes = 0;
@@ -472,7 +473,7 @@ struct WriteInput {
   const Octree* tree;
   const PointSet* points;
   const CornerField* corners;
-  const std::vector<HangingCorner>* hanging;
+  const HangingCorners* hanging;
   const LodField* lod;
   Frame frame;
   std::string metadata;  // JSON object
