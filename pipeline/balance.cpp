@@ -50,16 +50,35 @@ void requestsOf(const Octree& tree, uint32_t id, std::vector<Request>& out) {
   }
 }
 
-// The requests of all leaves on the work list, sorted and without repeats (in parallel).
+// Sorted requests without repeats: the first for a cell (an exact one before an inexact one).
+void unique(std::vector<Request>& sorted) {
+  sorted.erase(std::unique(sorted.begin(), sorted.end(),
+                           [](const Request& a, const Request& b) {
+                             return a.level == b.level && a.key == b.key;
+                           }),
+               sorted.end());
+}
+
+// The requests of all leaves on the work list, sorted and without repeats (in parallel). Neighbours
+// ask for the same cells many times over: the requests are made and thinned out a million leaves
+// at a time, so that the repeats never pile up (the result is the same).
 std::vector<Request> requestsOf(const Octree& tree, const std::vector<uint32_t>& work) {
-  std::vector<Request> all = collectInParallel<Request>(
-      work.size(), 4096, [&](size_t i, std::vector<Request>& out) { requestsOf(tree, work[i], out); });
-  std::sort(all.begin(), all.end());  // an exact request before an inexact one for the same cell
-  all.erase(std::unique(all.begin(), all.end(),
-                        [](const Request& a, const Request& b) {
-                          return a.level == b.level && a.key == b.key;
-                        }),
-            all.end());
+  constexpr size_t kBatch = size_t{1} << 20;
+  std::vector<Request> all;
+  for (size_t begin = 0; begin < work.size(); begin += kBatch) {
+    const size_t count = std::min(kBatch, work.size() - begin);
+    std::vector<Request> batch = collectInParallel<Request>(
+        count, 4096, [&](size_t i, std::vector<Request>& out) {
+          requestsOf(tree, work[begin + i], out);
+        });
+    std::sort(batch.begin(), batch.end());
+    unique(batch);
+    std::vector<Request> merged(all.size() + batch.size());
+    merged.erase(std::merge(all.begin(), all.end(), batch.begin(), batch.end(), merged.begin()),
+                 merged.end());
+    all.swap(merged);
+    unique(all);
+  }
   return all;
 }
 

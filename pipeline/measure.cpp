@@ -84,6 +84,15 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
     const glm::vec3 p(toFrame(points[i], frame));
     cells[keyOf(p) >> (3 * (kMaxLevel - level))].push_back(i);
   }
+  // Chunks of cells coarser than the regions' meet many of them: decoded once.
+  std::map<uint32_t, std::shared_ptr<const SurfaceChunk>> coarse;
+  const SurfaceModel::ChunkSource source = [&](uint32_t id) {
+    if (reader.chunk(id).level >= level)
+      return std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
+    auto& cached = coarse[id];
+    if (!cached) cached = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
+    return cached;
+  };
   std::vector<double> distance(points.size(), -1.0);
   std::vector<uint8_t> escaped(points.size(), 0);
   for (auto& [key, which] : cells) {
@@ -96,7 +105,7 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
       }
       const bool whole = margin >= 1.0;  // the box holds the frame's cube: the whole model
       const SurfaceModel surface =
-          SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region));
+          SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region), source);
       project(surface, frame, points, which, distance, &escaped);
       std::erase_if(which, [&](uint32_t i) { return !escaped[i]; });
       for (const uint32_t i : which) escaped[i] = 0;

@@ -31,7 +31,7 @@ DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
 // is the one the whole model gives.
 DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
                               std::span<const glm::dvec3> points, bool keepValues = false,
-                              uint64_t regionLeaves = 500000);
+                              uint64_t regionLeaves = 2000000);
 
 // Every step-th point, at most `limit` of them, spread over the whole cloud.
 std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit);

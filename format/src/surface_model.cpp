@@ -105,7 +105,8 @@ bool SurfaceModel::Region::meetsCell(uint8_t level, uint64_t key) const {
   return true;
 }
 
-SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region>& region) {
+SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region>& region,
+                                const ChunkSource& source) {
   SurfaceModel model;
   model.header_ = reader.header();
   model.region_ = region;
@@ -132,7 +133,10 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
   for (const ChunkInfo& info : reader.chunks()) {
     if (info.kind != kSurfaceKind) continue;
     if (region && !region->meetsCell(info.level, info.key)) continue;
-    const SurfaceChunk chunk = decodeSurfaceChunk(reader, info.id);
+    const std::shared_ptr<const SurfaceChunk> decoded =
+        source ? source(info.id)
+               : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
+    const SurfaceChunk& chunk = *decoded;
     const uint32_t cornerBase = uint32_t(model.corners_.distance.size());
     const CornerValues& v = chunk.leafValues;
     model.corners_.distance.insert(model.corners_.distance.end(), v.distance.begin(),

@@ -77,6 +77,11 @@ void printReport(const nlohmann::json& r, const Options& o) {
                withSeparators(c["max_chunk_points"].get<uint64_t>()),
                withSeparators(c["halo_points"].get<uint64_t>()),
                humanBytes(c["temporary_bytes_peak"].get<uint64_t>()));
+    if (c.value("spilled_arrays", uint64_t{0}) > 0)
+      fmt::print("  spilled: {} arrays, {} of temporary disk at most, pages dropped {} times\n",
+                 withSeparators(c["spilled_arrays"].get<uint64_t>()),
+                 humanBytes(c["spilled_bytes_peak"].get<uint64_t>()),
+                 withSeparators(c["page_releases"].get<uint64_t>()));
   }
   const auto& a = r["accuracy"];
   fmt::print(
@@ -245,11 +250,13 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "update) or none")
       ->capture_default_str();
   c->add_option("--memory", o->memory,
-                "Memory for the point stages, which run chunk by chunk (e.g. 2G; auto: half the "
-                "RAM); the output does not depend on it")
+                "Memory budget (e.g. 2G; auto: half the RAM): the point stages run in chunks "
+                "that fit it, and the points' arrays live in temporary files whose pages are "
+                "dropped when the process exceeds it; the output does not depend on it")
       ->capture_default_str();
   c->add_option("--tmp", o->tmp,
-                "Directory for temporary files (default: the output's); removed afterwards");
+                "Directory for temporary files (default: the output's): the points as read, "
+                "sorted, and their arrays; removed afterwards");
   c->add_option("--orient-block-points", o->build.orientBlockPoints,
                 "Points per block of normal orientation (a parameter of the result)")
       ->capture_default_str();

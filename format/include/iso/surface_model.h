@@ -9,6 +9,8 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <span>
 #include <vector>
@@ -59,7 +61,10 @@ class SurfaceModel {
   // for invalid chunks and when chunks overlap or leave a cut node without its children. With a
   // region, only the chunks whose cells meet it: every leaf that meets the region is there, and
   // the queries answer inside it as the whole model does (project() says when a query left it).
-  static SurfaceModel load(const Reader& reader, const std::optional<Region>& region = {});
+  // `source`, when set, gives the decoded chunks (a cache of those that many regions share).
+  using ChunkSource = std::function<std::shared_ptr<const SurfaceChunk>(uint32_t id)>;
+  static SurfaceModel load(const Reader& reader, const std::optional<Region>& region = {},
+                           const ChunkSource& source = {});
 
   const FileHeader& header() const { return header_; }
   std::span<const Leaf> leaves() const { return leaves_; }
