@@ -109,13 +109,13 @@ void pagerLoop() {
   }
 }
 
-// A file of `bytes` in the directory, mapped shared; nullptr when the area is not active.
-void* mapSpillFile(SpillState& s, size_t bytes) {
-  const std::string where = s.directory.string();
+// A file of `bytes` in the directory, mapped shared.
+void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
+  const std::string where = directory.string();
   int fd = open(where.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
   if (fd < 0 && (errno == EOPNOTSUPP || errno == EISDIR || errno == EINVAL)) {
     // No unnamed files on this file system: a named one, removed at once.
-    std::string name = (s.directory / ".iso-array.XXXXXX").string();
+    std::string name = (directory / ".iso-array.XXXXXX").string();
     fd = mkostemp(name.data(), O_CLOEXEC);
     if (fd >= 0) unlink(name.c_str());
   }
@@ -175,35 +175,41 @@ void SpillArea::release() {
   releaseLocked(s);
 }
 
+// The file is made and mapped, and unmapped, outside the lock, so that the pager is never held up
+// by a large one.
 void* allocateSpillable(size_t bytes) {
   SpillState& s = state();
+  std::filesystem::path directory;
   {
     std::lock_guard lock(s.mutex);
-    if (s.active && bytes >= s.minBytes) {
-      void* p = mapSpillFile(s, bytes);
-      s.mappings.emplace(p, bytes);
-      s.stats.bytes += bytes;
-      s.stats.peakBytes = std::max(s.stats.peakBytes, s.stats.bytes);
-      ++s.stats.arrays;
-      return p;
-    }
+    if (!s.active || bytes < s.minBytes) return allocateLarge(bytes);
+    directory = s.directory;
   }
-  return allocateLarge(bytes);
+  void* p = mapSpillFile(directory, bytes);
+  std::lock_guard lock(s.mutex);
+  s.mappings.emplace(p, bytes);
+  s.stats.bytes += bytes;
+  s.stats.peakBytes = std::max(s.stats.peakBytes, s.stats.bytes);
+  ++s.stats.arrays;
+  return p;
 }
 
 void deallocateSpillable(void* p, size_t bytes) noexcept {
   if (!p) return;
   SpillState& s = state();
+  bool spilled = false;
   {
     std::lock_guard lock(s.mutex);
     if (const auto it = s.mappings.find(p); it != s.mappings.end()) {
-      munmap(p, roundToPages(it->second));
+      spilled = true;
       s.stats.bytes -= it->second;
       s.mappings.erase(it);
-      return;
     }
   }
-  deallocateLarge(p, bytes);
+  if (spilled)
+    munmap(p, roundToPages(bytes));
+  else
+    deallocateLarge(p, bytes);
 }
 
 }  // namespace iso

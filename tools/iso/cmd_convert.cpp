@@ -177,15 +177,15 @@ int run(Options& o) {
                files.size(), files.size() == 1 ? "" : "s", loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
-  // The octree stages still hold every point in memory (specs/pipeline.md §15): say so before a
-  // long run rather than be killed at its end. About 119 to 135 bytes per point were measured
-  // (100M and 10M points of a sampled scan without colors).
-  const uint64_t octreeBytes = raw->size() * 140;
-  if (octreeBytes > memory && !o.quiet && mode != ProgressMode::Json)
+  // The octree stages read the points from spilled arrays, but their hash tables and work lists
+  // stay in memory (specs/pipeline.md §15): about 17 bytes per point at 100M points of a sampled
+  // scan (1.62 GiB). Say so before a long run when that alone exceeds the budget.
+  const uint64_t tableBytes = raw->size() * 17;
+  if (tableBytes > memory && !o.quiet && mode != ProgressMode::Json)
     fmt::print(stderr,
-               "note: the octree stages are not out of core yet: they will need about {} for "
-               "{} points, more than --memory {}\n",
-               humanBytes(octreeBytes), withSeparators(raw->size()), humanBytes(memory));
+               "note: the octree's tables stay in memory: about {} for {} points, more than "
+               "--memory {}\n",
+               humanBytes(tableBytes), withSeparators(raw->size()), humanBytes(memory));
   ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
   if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {
