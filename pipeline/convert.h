@@ -56,7 +56,8 @@ struct OutOfCoreBudget {
 // at most budget.maxChunkPoints points with their halos, and the prepared points (and their
 // index) live in spilled arrays that the octree stages read in Morton order (the output is the
 // same as convertToIso's for the same points); the report adds "out_of_core" (chunks, halos,
-// temporary and spilled bytes).
+// temporary and spilled bytes). With budget.memory set, one such conversion runs at a time in a
+// process (the spill area and its pager are the process's).
 nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
