@@ -16,6 +16,8 @@
 #include <string>
 #include <thread>
 
+#include "progress.h"
+
 namespace iso {
 namespace {
 constexpr size_t kHugePage = size_t{2} << 20;
@@ -75,20 +77,6 @@ size_t roundToPages(size_t bytes) {
   return (std::max<size_t>(bytes, 1) + page - 1) / page * page;
 }
 
-// Resident pages now, all and those mapped from files (and shared memory): /proc/self/statm.
-struct Resident {
-  uint64_t all = 0, files = 0;
-};
-Resident residentBytes() {
-  FILE* f = std::fopen("/proc/self/statm", "r");
-  if (!f) return {};
-  unsigned long long size = 0, resident = 0, shared = 0;
-  const int n = std::fscanf(f, "%llu %llu %llu", &size, &resident, &shared);
-  std::fclose(f);
-  if (n != 3) return {};
-  return {resident * pageSize(), shared * pageSize()};
-}
-
 void releaseLocked(SpillState& s) {
   for (const auto& [p, bytes] : s.mappings) madvise(p, roundToPages(bytes), MADV_DONTNEED);
   ++s.stats.releases;
@@ -101,11 +89,12 @@ void pagerLoop() {
     s.wake.wait_for(lock, std::chrono::milliseconds(10));
     if (s.stopping || s.mappings.empty()) continue;
     lock.unlock();
-    const Resident resident = residentBytes();
+    uint64_t files = 0;
+    const uint64_t all = currentRssBytes(&files);
     lock.lock();
     // Over the limit, with enough file pages resident that dropping them is worth the faults
     // that map them again.
-    if (resident.all > s.residentLimit && resident.files > s.residentLimit / 8) releaseLocked(s);
+    if (all > s.residentLimit && files > s.residentLimit / 8) releaseLocked(s);
   }
 }
 

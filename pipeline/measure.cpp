@@ -103,7 +103,8 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
         region.lo[a] = double(cell[a]) * edge - margin;
         region.hi[a] = double(cell[a] + 1) * edge + margin;
       }
-      const bool whole = margin >= 1.0;  // the box holds the frame's cube: the whole model
+      bool whole = true;  // the box holds the frame's cube: the whole model, without checks
+      for (size_t a = 0; a < 3; ++a) whole = whole && region.lo[a] <= 0.0 && region.hi[a] >= 1.0;
       const SurfaceModel surface =
           SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region), source);
       project(surface, frame, points, which, distance, &escaped);
