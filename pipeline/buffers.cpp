@@ -5,9 +5,11 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <condition_variable>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <map>
@@ -42,6 +44,50 @@ void deallocateLarge(void* p, size_t bytes) noexcept {
     munmap(p, bytes);
   }
 }
+
+// ---- Temporary disk
+
+namespace {
+std::atomic<uint64_t> temporaryBytes{0}, temporaryPeak{0}, temporaryLimit{0};
+
+std::string sizeText(uint64_t bytes) {
+  char text[32];
+  if (bytes >= uint64_t{1} << 30)
+    std::snprintf(text, sizeof text, "%.2f GiB", double(bytes) / double(uint64_t{1} << 30));
+  else if (bytes >= uint64_t{1} << 20)
+    std::snprintf(text, sizeof text, "%.1f MiB", double(bytes) / double(uint64_t{1} << 20));
+  else
+    std::snprintf(text, sizeof text, "%llu bytes", static_cast<unsigned long long>(bytes));
+  return text;
+}
+}  // namespace
+
+void chargeTemporaryDisk(uint64_t bytes, const std::filesystem::path& where) {
+  const uint64_t limit = temporaryLimit.load();
+  uint64_t now = temporaryBytes.load();
+  do {
+    if (limit > 0 && now + bytes > limit)
+      throw std::runtime_error(where.string() + ": the temporary files would exceed --max-temp " +
+                               sizeText(limit) + " (" + sizeText(now) + " in use, " +
+                               sizeText(bytes) + " more needed)");
+  } while (!temporaryBytes.compare_exchange_weak(now, now + bytes));
+  uint64_t peak = temporaryPeak.load();
+  while (now + bytes > peak && !temporaryPeak.compare_exchange_weak(peak, now + bytes)) {
+  }
+}
+
+void refundTemporaryDisk(uint64_t bytes) noexcept { temporaryBytes -= bytes; }
+
+TemporaryDiskStats temporaryDiskStats() {
+  return {temporaryBytes.load(), temporaryPeak.load(), temporaryLimit.load()};
+}
+
+TemporaryDiskLimit::TemporaryDiskLimit(uint64_t bytes) {
+  temporaryLimit = bytes;
+  temporaryPeak = temporaryBytes.load();
+}
+
+TemporaryDiskLimit::~TemporaryDiskLimit() { temporaryLimit = 0; }
 
 // ---- Spilled arrays
 
@@ -85,16 +131,30 @@ void releaseLocked(SpillState& s) {
 void pagerLoop() {
   SpillState& s = state();
   std::unique_lock lock(s.mutex);
+  // The most the process grew between two looks, decaying by half in about 3 s.
+  double burst = 0.0;
+  uint64_t last = 0;
   while (!s.stopping) {
-    s.wake.wait_for(lock, std::chrono::milliseconds(10));
+    s.wake.wait_for(lock, std::chrono::milliseconds(2));
     if (s.stopping || s.mappings.empty()) continue;
     lock.unlock();
     uint64_t files = 0;
     const uint64_t all = currentRssBytes(&files);
     lock.lock();
-    // Over the limit, with enough file pages resident that dropping them is worth the faults
-    // that map them again.
-    if (all > s.residentLimit && files > s.residentLimit / 8) releaseLocked(s);
+    // A pass over arrays still in the page cache maps them again at memory speed (a fault maps
+    // a whole folio of the page cache: 512 MiB in 5 ms on ext4), and a busy machine may leave
+    // the pager unscheduled for tens of milliseconds. So it acts early, by twice the largest
+    // growth seen between two looks lately (at least a sixteenth of the limit, at most seven
+    // eighths), when more than a sixteenth of the limit is file pages. Dropping pages that are
+    // still cached costs little: mapping them again is as fast.
+    burst = std::max(burst * 0.9995, all > last ? double(all - last) : 0.0);
+    last = all;
+    const uint64_t margin = std::clamp<uint64_t>(uint64_t(2.0 * burst), s.residentLimit / 16,
+                                                 s.residentLimit / 8 * 7);
+    if (all > s.residentLimit - margin && files > s.residentLimit / 16) {
+      releaseLocked(s);
+      last = currentRssBytes();
+    }
   }
 }
 
@@ -115,10 +175,20 @@ void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
   };
   if (fd < 0) fail("create a file for", errno);
   const size_t length = roundToPages(bytes);
+  try {
+    chargeTemporaryDisk(length, directory);
+  } catch (...) {
+    close(fd);
+    throw;
+  }
+  const auto failCharged = [&](const char* what, int error) {
+    refundTemporaryDisk(length);
+    fail(what, error);
+  };
   if (const int error = posix_fallocate(fd, 0, off_t(length)); error != 0)
-    fail("reserve", error);  // a full disk: an error now rather than SIGBUS when a page is written
+    failCharged("reserve", error);  // a full disk: an error now rather than SIGBUS later
   void* p = mmap(nullptr, length, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
-  if (p == MAP_FAILED) fail("map", errno);
+  if (p == MAP_FAILED) failCharged("map", errno);
   close(fd);  // the mapping keeps the file; unmapping removes it
   return p;
 }
@@ -195,8 +265,10 @@ void deallocateSpillable(void* p, size_t bytes) noexcept {
       s.mappings.erase(it);
     }
   }
-  if (spilled)
+  if (spilled) {
     munmap(p, roundToPages(bytes));
+    refundTemporaryDisk(roundToPages(bytes));
+  }
   else
     deallocateLarge(p, bytes);
 }

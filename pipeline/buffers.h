@@ -48,12 +48,13 @@ using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
 // such an array of at least `minBytes` is made a file of its own in the area's directory (opened
 // unnamed, O_TMPFILE, so that nothing is left behind whatever ends the process; its blocks
 // reserved up front, so that a full disk is an error here, not a crash later) and mapped shared.
-// A pager thread then keeps the process's resident memory near `residentLimit`: when it exceeds
-// the limit and more than an eighth of the limit is file pages, it drops every spilled array's
-// pages from the process (MADV_DONTNEED; the data stays in the file and the page cache, and the
-// next access maps it again), 100 times a second at most. So the stages, which read
-// the points in Morton order, keep only the neighbourhood they work on resident, and the kernel
-// keeps the rest in its page cache while memory allows or writes it to disk when not.
+// A pager thread then keeps the process's resident memory under `residentLimit`: it looks 500
+// times a second and, when the process comes within a margin of the limit (twice the largest
+// growth it has seen between two looks lately) and more than a sixteenth of the limit is file
+// pages, drops every spilled array's pages from the process (MADV_DONTNEED; the data stays in the
+// file and the page cache, and the next access maps it again). So the stages, which read the
+// points in Morton order, keep only the neighbourhood they work on resident, and the kernel keeps
+// the rest in its page cache while memory allows or writes it to disk when not.
 class SpillArea {
  public:
   // One area at a time in a process (std::logic_error otherwise).
@@ -71,6 +72,28 @@ class SpillArea {
   static Stats stats();
   // Drop every spilled array's pages from the process now (what the pager does).
   static void release();
+};
+
+// ---- Temporary disk (specs/pipeline.md §15).
+// Every temporary file of a conversion (the points' record files, the spilled arrays) is charged
+// here as it grows and refunded when it goes. While a TemporaryDiskLimit exists, a charge that
+// would take the total past it throws std::runtime_error naming the place and the limit, before
+// anything is written: the conversion stops with a clear error rather than filling the disk.
+struct TemporaryDiskStats {
+  uint64_t bytes = 0;      // charged now
+  uint64_t peakBytes = 0;  // the most at once since the limit was set
+  uint64_t limit = 0;      // 0: none
+};
+void chargeTemporaryDisk(uint64_t bytes, const std::filesystem::path& where);
+void refundTemporaryDisk(uint64_t bytes) noexcept;
+TemporaryDiskStats temporaryDiskStats();
+
+class TemporaryDiskLimit {
+ public:
+  explicit TemporaryDiskLimit(uint64_t bytes);  // 0: none, the use is still counted
+  ~TemporaryDiskLimit();
+  TemporaryDiskLimit(const TemporaryDiskLimit&) = delete;
+  TemporaryDiskLimit& operator=(const TemporaryDiskLimit&) = delete;
 };
 
 void* allocateSpillable(size_t bytes);

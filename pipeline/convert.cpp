@@ -394,6 +394,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
           report["out_of_core"]["spilled_bytes_peak"] = spilled.peakBytes;
           report["out_of_core"]["spilled_arrays"] = spilled.arrays;
           report["out_of_core"]["page_releases"] = spilled.releases;
+          // All temporary files at once: the points' record files and the spilled arrays.
+          const TemporaryDiskStats disk = temporaryDiskStats();
+          report["out_of_core"]["temporary_disk_peak"] = disk.peakBytes;
+          if (disk.limit > 0) report["out_of_core"]["temporary_disk_limit"] = disk.limit;
         }
         return metadata(report).dump();
       });

@@ -40,7 +40,7 @@ std::pair<uint32_t, bool> CornerField::insert(const Key128& key) {
 
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
                     const SdfEvaluator& sdf) {
-  std::vector<uint32_t> added;  // entries to evaluate
+  SpillVector<uint32_t> added;  // entries to evaluate
   for (uint32_t id : leaves) {
     const OctreeNode& node = tree.nodes[id];
     if (!node.isFilled()) continue;

@@ -73,7 +73,8 @@ class PointIndex {
   UninitializedSpillVector<Node> nodes_;  // nodes_[0] is the root
   UninitializedSpillVector<uint32_t> leaves_;  // the buckets, in point order
   UninitializedSpillVector<uint64_t> leafKey_;  // Morton key of each bucket's first point
-  FlatMap<uint64_t, uint32_t> cells_;  // cellCode → node, for nodes that are whole cells
+  // cellCode → node, for nodes that are whole cells
+  FlatMap<uint64_t, uint32_t, SpillAllocator<std::pair<uint64_t, uint32_t>>> cells_;
   glm::dvec3 origin_{0.0};         // the cube of the keys: origin and cells per unit
   double cellsPerUnit_ = 1.0;
 };

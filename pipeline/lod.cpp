@@ -141,7 +141,7 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
                           const BuildOptions& options,
                           const std::function<void()>& pointsSdfDone) {
   LodField field;
-  std::map<int, std::vector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
+  std::map<int, SpillVector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
   for (const OctreeNode& node : tree.nodes) {
     if (node.kind != NodeKind::Internal) continue;
     for (int c = 0; c < kCorners; ++c) {
@@ -162,7 +162,7 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
   }
   const double unit = std::ldexp(1.0, -kMaxLevel);
   const auto evaluateLevel = [&](int level, const SdfEvaluator& sdf) {
-    const std::vector<std::pair<uint32_t, GridPoint>>& corners = byLevel[level];
+    const SpillVector<std::pair<uint32_t, GridPoint>>& corners = byLevel[level];
     const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
                       [&](const tbb::blocked_range<size_t>& r) {

@@ -46,8 +46,8 @@ struct Accumulated {
   SpillVector<float> firstDistance;  // per point: distance to its nearest neighbour
   // Points with a neighbour in another orientation component (or loaded in a halo): their
   // roughness is computed again, and their edges align the components, once all chunks are done.
-  std::vector<uint32_t> boundarySource;            // input index of each
-  UninitializedVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
+  SpillVector<uint32_t> boundarySource;            // input index of each
+  UninitializedSpillVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
   size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
   OrientationComponents components;                // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
@@ -168,8 +168,8 @@ class InPlaceResults {
   std::vector<uint8_t> anchored_;
   std::vector<float> seedVote_;
   std::vector<ChunkRecord> records_;
-  std::vector<uint32_t> boundarySource_;
-  UninitializedVector<uint32_t> boundaryNeighbor_;
+  SpillVector<uint32_t> boundarySource_;
+  UninitializedSpillVector<uint32_t> boundaryNeighbor_;
 };
 
 // Drop the points that `keep` leaves out (far outliers found earlier).
@@ -478,8 +478,8 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     // The boundary points and their neighbours as indices into the assembled points.
     SpillVector<uint32_t> ordinal(raw.size(), kNoNode);
     for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
-    std::vector<uint32_t>& from = done.boundarySource;
-    UninitializedVector<uint32_t>& near = done.boundaryNeighbor;
+    SpillVector<uint32_t>& from = done.boundarySource;
+    UninitializedSpillVector<uint32_t>& near = done.boundaryNeighbor;
     for (uint32_t& s : from) s = ordinal[s];
     for (uint32_t& s : near) s = ordinal[s];
     ordinal = {};

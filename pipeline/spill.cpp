@@ -11,6 +11,7 @@
 #include <limits>
 #include <numeric>
 
+#include "buffers.h"
 #include "iso/error.h"
 #include "progress.h"
 #include "stages.h"
@@ -106,6 +107,7 @@ RecordFile::RecordFile(std::filesystem::path path, size_t recordBytes)
 RecordFile::~RecordFile() {
   if (fd_ >= 0) ::close(fd_);
   ::unlink(path_.c_str());
+  refundTemporaryDisk(charged_);
 }
 
 void RecordFile::fail(const std::string& what, int error) const {
@@ -136,6 +138,10 @@ void RecordFile::flush() {
 
 void RecordFile::writeAt(uint64_t index, std::span<const std::byte> records) {
   uint64_t offset = index * recordBytes_;
+  if (const uint64_t end = offset + records.size(); end > charged_) {
+    chargeTemporaryDisk(end - charged_, path_);  // throws past --max-temp, before writing
+    charged_ = end;
+  }
   while (!records.empty()) {
     const ssize_t n = ::pwrite(fd_, records.data(), records.size(), off_t(offset));
     if (n < 0 && errno == EINTR) continue;

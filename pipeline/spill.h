@@ -68,6 +68,7 @@ class RecordFile {
   [[noreturn]] void fail(const std::string& what, int error) const;
   std::filesystem::path path_;
   size_t recordBytes_;
+  uint64_t charged_ = 0;  // bytes charged to the temporary disk (the file's size)
   int fd_ = -1;
   uint64_t count_ = 0;
   std::vector<std::byte> buffer_;

@@ -105,6 +105,33 @@ TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
     EXPECT_NE(entry.path().extension(), ".isotmp") << "left behind: " << entry.path();
 }
 
+TEST_F(CliPipeline, aTemporaryDiskLimitIsKeptOrTheConversionStopsWithNothingWritten) {
+  ASSERT_EQ(runIso("gen torus -n 100000 --noise 0.3 -o " + quoted(dir_ / "t.ply")).exitCode, 0);
+  const std::string convert = "convert -q --json --memory 150K --tmp " + quoted(dir_.path()) +
+                              " " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso");
+  auto run = runIso(convert + " --max-temp 1G");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json c = nlohmann::json::parse(run.out)["out_of_core"];
+  const uint64_t peak = c["temporary_disk_peak"].get<uint64_t>();
+  EXPECT_EQ(c["temporary_disk_limit"].get<uint64_t>(), uint64_t{1} << 30);
+  // The points' files and the spilled arrays together: at least each of them at its own peak.
+  EXPECT_GE(peak, c["temporary_bytes_peak"].get<uint64_t>());
+  EXPECT_GT(peak, c["spilled_bytes_peak"].get<uint64_t>());
+  EXPECT_LE(peak, uint64_t{1} << 30);
+  // Half of that: the conversion stops with an error naming the limit, the old output stays.
+  std::ofstream(dir_ / "t.iso", std::ios::trunc) << "old";
+  run = runIso(convert + " -f --max-temp " + std::to_string(peak / 2));
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("the temporary files would exceed --max-temp"), std::string::npos)
+      << run.err;
+  EXPECT_EQ(test::slurp(dir_ / "t.iso"), "old");
+  for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_NE(entry.path().extension(), ".isotmp") << "left behind: " << entry.path();
+  run = runIso(convert + " -f --max-temp lots");
+  EXPECT_EQ(run.exitCode, 2) << run.err;
+  EXPECT_NE(run.err.find("--max-temp"), std::string::npos) << run.err;
+}
+
 TEST_F(CliPipeline, badMemoryAndTemporaryDirectoriesAreRefused) {
   for (const char* options : {"--memory lots", "--memory -2G", "--memory 0"}) {
     const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +
@@ -281,11 +308,19 @@ TEST_F(CliPipeline, aFullDiskIsAClearErrorThatLeavesNothingBehind) {
     ~Unmount() { (void)std::system(("umount " + path).c_str()); }
   } unmount{quoted(small)};
   ASSERT_EQ(runIso("gen torus -n 100000 -o " + quoted(dir_ / "t.ply")).exitCode, 0);
-  auto run = runIso("convert -q " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso") +
-                    " --tmp " + quoted(small));
+  // (--max-temp auto would stop it first, at 90 % of the free space: the disk itself is tested.)
+  auto run = runIso("convert -q --max-temp 1G " + quoted(dir_ / "t.ply") + " -o " +
+                    quoted(dir_ / "t.iso") + " --tmp " + quoted(small));
   EXPECT_EQ(run.exitCode, 1);
   EXPECT_NE(run.err.find("No space left on device"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("temporary file"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "t.iso"));
+  EXPECT_TRUE(std::filesystem::is_empty(small));
+  // By default it stops at 90 % of the free space, before the disk is full.
+  run = runIso("convert -q " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso") +
+               " --tmp " + quoted(small));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("would exceed --max-temp 9"), std::string::npos) << run.err;
   EXPECT_FALSE(std::filesystem::exists(dir_ / "t.iso"));
   EXPECT_TRUE(std::filesystem::is_empty(small));
   // The output on a full file system: an old file there stays as it was.

@@ -10,6 +10,7 @@
 #include <numeric>
 
 #include "buffers.h"
+#include "spill.h"
 #include "support/support.h"
 
 namespace iso {
@@ -83,6 +84,40 @@ TEST(SpillArea, aDirectoryThatCannotHoldTheFileIsAClearError) {
     EXPECT_NE(what.find(missing.string()), std::string::npos) << what;
     EXPECT_NE(what.find("800000 bytes"), std::string::npos) << what;
   }
+}
+
+TEST(TemporaryDisk, everyTemporaryFileIsChargedAndALimitStopsBeforeWriting) {
+  test::TempDir dir;
+  const uint64_t before = temporaryDiskStats().bytes;
+  {
+    TemporaryDiskLimit limit(uint64_t{1} << 20);  // 1 MiB
+    SpillArea area(dir.path(), uint64_t{1} << 50, 4096);
+    SpillVector<uint64_t> a(65536);  // 512 KiB: charged
+    EXPECT_EQ(temporaryDiskStats().bytes, before + (512u << 10));
+    RecordFile records(dir / "records", 16);
+    const std::vector<std::byte> block(256u << 10);
+    records.append(block);
+    records.flush();
+    EXPECT_EQ(temporaryDiskStats().bytes, before + (768u << 10));
+    records.writeAt(0, block);  // within the file: nothing more
+    EXPECT_EQ(temporaryDiskStats().bytes, before + (768u << 10));
+    try {
+      SpillVector<uint64_t> b(65536);  // 512 KiB more: past the limit
+      FAIL() << "no error";
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(dir.path().string()), std::string::npos) << what;
+      EXPECT_NE(what.find("--max-temp 1.0 MiB"), std::string::npos) << what;
+    }
+    EXPECT_THROW(records.writeAt(32768, block), std::runtime_error);
+    EXPECT_EQ(std::filesystem::file_size(dir / "records"), 256u << 10) << "written past the limit";
+    EXPECT_EQ(temporaryDiskStats().bytes, before + (768u << 10)) << "a refused charge stays";
+    EXPECT_EQ(temporaryDiskStats().peakBytes, before + (768u << 10));
+    EXPECT_EQ(temporaryDiskStats().limit, uint64_t{1} << 20);
+  }
+  // Freed arrays and removed files are refunded.
+  EXPECT_EQ(temporaryDiskStats().bytes, before);
+  EXPECT_EQ(temporaryDiskStats().limit, 0u);
 }
 
 }  // namespace

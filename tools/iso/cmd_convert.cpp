@@ -26,6 +26,7 @@ struct Options {
   std::string orient = "auto";
   std::string memory = "auto";  // --memory
   std::string tmp;              // --tmp; default: the output's directory
+  std::string maxTemp = "auto"; // --max-temp
   std::string report;              // --report FILE
   std::string progress = "auto";   // auto, line, json, none
   int threads = 0;                 // 0: all cores
@@ -72,16 +73,21 @@ void printReport(const nlohmann::json& r, const Options& o) {
   if (r.contains("out_of_core")) {
     const auto& c = r["out_of_core"];
     const uint64_t chunks = c["chunks"].get<uint64_t>();
-    fmt::print("  streamed: {} chunk{} of at most {} points, halos {} points, temporary disk {}\n",
+    fmt::print("  streamed: {} chunk{} of at most {} points, halos {} points\n",
                withSeparators(chunks), chunks == 1 ? "" : "s",
                withSeparators(c["max_chunk_points"].get<uint64_t>()),
-               withSeparators(c["halo_points"].get<uint64_t>()),
-               humanBytes(c["temporary_bytes_peak"].get<uint64_t>()));
+               withSeparators(c["halo_points"].get<uint64_t>()));
+    std::string disk = "  temporary disk: " + humanBytes(c.value("temporary_disk_peak", uint64_t{0})) +
+                       " at most";
+    if (c.contains("temporary_disk_limit"))
+      disk += " (--max-temp " + humanBytes(c["temporary_disk_limit"].get<uint64_t>()) + ")";
+    disk += ": the points' files " + humanBytes(c["temporary_bytes_peak"].get<uint64_t>());
     if (c.value("spilled_arrays", uint64_t{0}) > 0)
-      fmt::print("  spilled: {} arrays, {} of temporary disk at most, pages dropped {} times\n",
-                 withSeparators(c["spilled_arrays"].get<uint64_t>()),
-                 humanBytes(c["spilled_bytes_peak"].get<uint64_t>()),
-                 withSeparators(c["page_releases"].get<uint64_t>()));
+      disk += fmt::format(", {} spilled arrays {} (pages dropped {} times)",
+                          withSeparators(c["spilled_arrays"].get<uint64_t>()),
+                          humanBytes(c["spilled_bytes_peak"].get<uint64_t>()),
+                          withSeparators(c["page_releases"].get<uint64_t>()));
+    fmt::print("{}\n", disk);
   }
   const auto& a = r["accuracy"];
   fmt::print(
@@ -111,6 +117,15 @@ uint64_t parseBytes(const std::string& text, const char* option) {
     throw std::invalid_argument(std::string(option) +
                                 " must be a size like 2G, 512M or auto, not '" + text + "'");
   return uint64_t(value * units.at(unit));
+}
+
+// --max-temp: a size, or auto: 90 % of the space free on the file system of the temporary files.
+uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path& tmp) {
+  if (text != "auto") return parseBytes(text, "--max-temp");
+  std::error_code error;
+  const std::filesystem::space_info space = std::filesystem::space(tmp, error);
+  if (error) throw FileError(tmp.string(), std::nullopt, "cannot tell its free space: " + error.message());
+  return std::max<uint64_t>(space.available / 10 * 9, 1);
 }
 
 int run(Options& o) {
@@ -159,6 +174,8 @@ int run(Options& o) {
   if (!std::filesystem::is_directory(tmp))
     throw FileError(tmp.string(), std::nullopt, "is not a directory (--tmp)");
   if (tmp != output.parent_path()) removeStaleTemporaries(tmp);
+  const uint64_t maxTemp = temporaryDiskLimit(o.maxTemp, tmp);
+  TemporaryDiskLimit temporaryLimit(maxTemp);
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
   SpillDirectory spill(tmp);
@@ -177,15 +194,15 @@ int run(Options& o) {
                files.size(), files.size() == 1 ? "" : "s", loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
-  // The octree stages read the points from spilled arrays, but their hash tables and work lists
-  // stay in memory (specs/pipeline.md §15): about 17 bytes per point at 100M points of a sampled
-  // scan (1.62 GiB). Say so before a long run when that alone exceeds the budget.
-  const uint64_t tableBytes = raw->size() * 17;
-  if (tableBytes > memory && !o.quiet && mode != ProgressMode::Json)
+  // The octree stages keep their arrays and hash tables in spilled files, but their work lists
+  // stay in memory (specs/pipeline.md §15): about 7 bytes per point at 100M points of a sampled
+  // scan (0.63 GiB). Say so before a long run when that alone exceeds the budget.
+  const uint64_t listBytes = raw->size() * 7;
+  if (listBytes > memory && !o.quiet && mode != ProgressMode::Json)
     fmt::print(stderr,
-               "note: the octree's tables stay in memory: about {} for {} points, more than "
-               "--memory {}\n",
-               humanBytes(tableBytes), withSeparators(raw->size()), humanBytes(memory));
+               "note: the octree stages' work lists stay in memory: about {} for {} points, "
+               "more than --memory {}\n",
+               humanBytes(listBytes), withSeparators(raw->size()), humanBytes(memory));
   ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
   if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {
@@ -257,6 +274,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--tmp", o->tmp,
                 "Directory for temporary files (default: the output's): the points as read, "
                 "sorted, and their arrays; removed afterwards");
+  c->add_option("--max-temp", o->maxTemp,
+                "Most temporary disk the conversion may use (e.g. 20G; auto: 90 % of the free "
+                "space in --tmp); it stops with an error, removing its files, before going past")
+      ->capture_default_str();
   c->add_option("--orient-block-points", o->build.orientBlockPoints,
                 "Points per block of normal orientation (a parameter of the result)")
       ->capture_default_str();

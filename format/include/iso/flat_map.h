@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -45,7 +46,8 @@ inline size_t tableCapacity(size_t expected) {
   return c;
 }
 
-template <typename Key, typename Value>
+// Both tables take an allocator for their arrays (the pipeline keeps large ones in files).
+template <typename Key, typename Value, typename Allocator = std::allocator<std::pair<Key, Value>>>
 class FlatMap {
  public:
   explicit FlatMap(size_t expected = 16) { rehash(tableCapacity(expected)); }
@@ -84,8 +86,8 @@ class FlatMap {
 
  private:
   void rehash(size_t capacity) {
-    std::vector<std::pair<Key, Value>> old = std::move(slots_);
-    std::vector<uint8_t> oldUsed = std::move(used_);
+    Slots old = std::move(slots_);
+    Used oldUsed = std::move(used_);
     slots_.assign(capacity, {});
     used_.assign(capacity, 0);
     mask_ = capacity - 1;
@@ -94,14 +96,19 @@ class FlatMap {
       if (oldUsed[i]) insert(old[i].first, old[i].second);
   }
 
-  std::vector<std::pair<Key, Value>> slots_;
-  std::vector<uint8_t> used_;
+  using Slots = std::vector<std::pair<Key, Value>,
+                            typename std::allocator_traits<Allocator>::template rebind_alloc<
+                                std::pair<Key, Value>>>;
+  using Used =
+      std::vector<uint8_t, typename std::allocator_traits<Allocator>::template rebind_alloc<uint8_t>>;
+  Slots slots_;
+  Used used_;
   size_t mask_ = 0;
   size_t size_ = 0;
 };
 
-// Keys numbered 0, 1, 2, ... in the order they were first inserted. The key array's allocator is
-// a parameter (the pipeline keeps large ones in files, read in the order they were inserted).
+// Keys numbered 0, 1, 2, ... in the order they were first inserted. The allocator serves the key
+// array and the table.
 template <typename Key, typename KeyAllocator = std::allocator<Key>>
 class KeyIndex {
  public:
@@ -149,7 +156,9 @@ class KeyIndex {
     }
   }
 
-  std::vector<uint32_t> slots_;
+  std::vector<uint32_t,
+              typename std::allocator_traits<KeyAllocator>::template rebind_alloc<uint32_t>>
+      slots_;
   std::vector<Key, KeyAllocator> keys_;
   size_t mask_ = 0;
 };
