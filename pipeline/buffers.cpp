@@ -128,6 +128,8 @@ void releaseLocked(SpillState& s) {
   ++s.stats.releases;
 }
 
+constexpr uint64_t kMinFilePages = uint64_t{64} << 20;
+
 void pagerLoop() {
   SpillState& s = state();
   std::unique_lock lock(s.mutex);
@@ -141,17 +143,16 @@ void pagerLoop() {
     uint64_t files = 0;
     const uint64_t all = currentRssBytes(&files);
     lock.lock();
-    // A pass over arrays still in the page cache maps them again at memory speed (a fault maps
-    // a whole folio of the page cache: 512 MiB in 5 ms on ext4), and a busy machine may leave
-    // the pager unscheduled for tens of milliseconds. So it acts early, by twice the largest
+    // Mapping cached pages again is fast (a page a fault, about 2.5 GB/s a thread), and a drop
+    // of a large resident set takes tens of milliseconds. So it acts early, by twice the largest
     // growth seen between two looks lately (at least a sixteenth of the limit, at most seven
-    // eighths), when more than a sixteenth of the limit is file pages. Dropping pages that are
-    // still cached costs little: mapping them again is as fast.
+    // eighths), when more than a sixteenth of the limit (64 MiB at least: below that, a drop
+    // saves less than the faults cost) is file pages.
     burst = std::max(burst * 0.9995, all > last ? double(all - last) : 0.0);
     last = all;
     const uint64_t margin = std::clamp<uint64_t>(uint64_t(2.0 * burst), s.residentLimit / 16,
                                                  s.residentLimit / 8 * 7);
-    if (all > s.residentLimit - margin && files > s.residentLimit / 16) {
+    if (all > s.residentLimit - margin && files > std::max(s.residentLimit / 16, kMinFilePages)) {
       releaseLocked(s);
       last = currentRssBytes();
     }
@@ -189,6 +190,9 @@ void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
     failCharged("reserve", error);  // a full disk: an error now rather than SIGBUS later
   void* p = mmap(nullptr, length, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
   if (p == MAP_FAILED) failCharged("map", errno);
+  // No readahead, and so page-cache folios of one page: a fault then maps 4 KiB, not a large
+  // folio (ext4 maps 512 MiB of cached large folios in 5 ms), and the pager keeps up.
+  madvise(p, length, MADV_RANDOM);
   close(fd);  // the mapping keeps the file; unmapping removes it
   return p;
 }
