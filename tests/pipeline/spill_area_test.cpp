@@ -64,12 +64,15 @@ TEST(SpillArea, largeArraysLiveInFilesAndKeepTheirValuesWhenTheirPagesAreDropped
 
 TEST(SpillArea, thePagerKeepsTheProcessNearItsLimit) {
   test::TempDir dir;
-  SpillArea area(dir.path(), 1, 4096);  // over the limit always: every look drops the pages
-  SpillVector<float> values(size_t{8} << 20);
-  std::iota(values.begin(), values.end(), 0.0f);
+  const uint64_t before = residentFileBytes();
+  SpillArea area(dir.path(), 1, 4096);  // over the limit always: every look may drop pages
+  // 128 MiB: more than the 64 MiB of file pages below which the pager leaves them.
+  SpillVector<uint32_t> values(size_t{32} << 20);
+  std::iota(values.begin(), values.end(), 0u);
   for (int i = 0; i < 200 && SpillArea::stats().releases == 0; ++i) usleep(10000);
   EXPECT_GT(SpillArea::stats().releases, 0u);
-  for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], float(i));
+  EXPECT_LT(residentFileBytes(), before + (uint64_t{64} << 20)) << "the array is still resident";
+  for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], uint32_t(i));
 }
 
 TEST(SpillArea, aDirectoryThatCannotHoldTheFileIsAClearError) {

@@ -195,9 +195,9 @@ int run(Options& o) {
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
   // The octree stages keep their arrays and hash tables in spilled files, but their work lists
-  // stay in memory (specs/pipeline.md §15): about 7 bytes per point at 100M points of a sampled
-  // scan (0.63 GiB). Say so before a long run when that alone exceeds the budget.
-  const uint64_t listBytes = raw->size() * 7;
+  // stay in memory (specs/pipeline.md §15): about 5 bytes per point at 100M points of a sampled
+  // scan (0.54 GiB). Say so before a long run when that alone exceeds the budget.
+  const uint64_t listBytes = raw->size() * 5;
   if (listBytes > memory && !o.quiet && mode != ProgressMode::Json)
     fmt::print(stderr,
                "note: the octree stages' work lists stay in memory: about {} for {} points, "
@@ -268,8 +268,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--memory", o->memory,
                 "Memory budget (e.g. 2G; auto: half the RAM): the point stages run in chunks "
-                "that fit it, and the points' arrays live in temporary files whose pages are "
-                "dropped when the process exceeds it; the output does not depend on it")
+                "that fit it, and the large arrays live in temporary files whose pages are "
+                "dropped when the process nears it; the output does not depend on it")
       ->capture_default_str();
   c->add_option("--tmp", o->tmp,
                 "Directory for temporary files (default: the output's): the points as read, "
