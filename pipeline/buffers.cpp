@@ -161,6 +161,8 @@ void pagerLoop() {
 
 // A file of `bytes` in the directory, mapped shared.
 void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
+  const size_t length = roundToPages(bytes);
+  chargeTemporaryDisk(length, directory);  // first: past --max-temp, nothing is made
   const std::string where = directory.string();
   int fd = open(where.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
   if (fd < 0 && (errno == EOPNOTSUPP || errno == EISDIR || errno == EINVAL)) {
@@ -171,25 +173,15 @@ void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
   }
   const auto fail = [&](const char* what, int error) {
     if (fd >= 0) close(fd);
+    refundTemporaryDisk(length);
     throw std::runtime_error(where + ": cannot " + what + " " + std::to_string(bytes) +
                              " bytes of temporary point data: " + std::strerror(error));
   };
   if (fd < 0) fail("create a file for", errno);
-  const size_t length = roundToPages(bytes);
-  try {
-    chargeTemporaryDisk(length, directory);
-  } catch (...) {
-    close(fd);
-    throw;
-  }
-  const auto failCharged = [&](const char* what, int error) {
-    refundTemporaryDisk(length);
-    fail(what, error);
-  };
   if (const int error = posix_fallocate(fd, 0, off_t(length)); error != 0)
-    failCharged("reserve", error);  // a full disk: an error now rather than SIGBUS later
+    fail("reserve", error);  // a full disk: an error now rather than SIGBUS when a page is written
   void* p = mmap(nullptr, length, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
-  if (p == MAP_FAILED) failCharged("map", errno);
+  if (p == MAP_FAILED) fail("map", errno);
   // No readahead, and so page-cache folios of one page: a fault then maps 4 KiB, not a large
   // folio (ext4 maps 512 MiB of cached large folios in 5 ms), and the pager keeps up.
   madvise(p, length, MADV_RANDOM);
@@ -272,9 +264,9 @@ void deallocateSpillable(void* p, size_t bytes) noexcept {
   if (spilled) {
     munmap(p, roundToPages(bytes));
     refundTemporaryDisk(roundToPages(bytes));
-  }
-  else
+  } else {
     deallocateLarge(p, bytes);
+  }
 }
 
 }  // namespace iso
