@@ -150,8 +150,8 @@ void pagerLoop() {
     // saves less than the faults cost) is file pages.
     burst = std::max(burst * 0.9995, all > last ? double(all - last) : 0.0);
     last = all;
-    const uint64_t margin = std::clamp<uint64_t>(uint64_t(2.0 * burst), s.residentLimit / 16,
-                                                 s.residentLimit / 8 * 7);
+    const uint64_t margin =
+        std::clamp<uint64_t>(uint64_t(2.0 * burst), s.residentLimit / 16, s.residentLimit / 8 * 7);
     if (all > s.residentLimit - margin && files > std::max(s.residentLimit / 16, kMinFilePages)) {
       releaseLocked(s);
       last = currentRssBytes();

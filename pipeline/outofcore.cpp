@@ -46,7 +46,7 @@ struct Accumulated {
   SpillVector<float> firstDistance;  // per point: distance to its nearest neighbour
   // Points with a neighbour in another orientation component (or loaded in a halo): their
   // roughness is computed again, and their edges align the components, once all chunks are done.
-  SpillVector<uint32_t> boundarySource;            // input index of each
+  SpillVector<uint32_t> boundarySource;                 // input index of each
   UninitializedSpillVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
   size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
   OrientationComponents components;                // `of` per point in `points`

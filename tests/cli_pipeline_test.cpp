@@ -107,8 +107,8 @@ TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
 
 TEST_F(CliPipeline, aTemporaryDiskLimitIsKeptOrTheConversionStopsWithNothingWritten) {
   ASSERT_EQ(runIso("gen torus -n 100000 --noise 0.3 -o " + quoted(dir_ / "t.ply")).exitCode, 0);
-  const std::string convert = "convert -q --json --memory 150K --tmp " + quoted(dir_.path()) +
-                              " " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso");
+  const std::string convert = "convert -q --json --memory 150K --tmp " + quoted(dir_.path()) + " " +
+                              quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso");
   auto run = runIso(convert + " --max-temp 1G");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json c = nlohmann::json::parse(run.out)["out_of_core"];

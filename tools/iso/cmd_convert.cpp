@@ -26,7 +26,7 @@ struct Options {
   std::string orient = "auto";
   std::string memory = "auto";  // --memory
   std::string tmp;              // --tmp; default: the output's directory
-  std::string maxTemp = "auto"; // --max-temp
+  std::string maxTemp = "auto";    // --max-temp
   std::string report;              // --report FILE
   std::string progress = "auto";   // auto, line, json, none
   int threads = 0;                 // 0: all cores
@@ -77,8 +77,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
                withSeparators(chunks), chunks == 1 ? "" : "s",
                withSeparators(c["max_chunk_points"].get<uint64_t>()),
                withSeparators(c["halo_points"].get<uint64_t>()));
-    std::string disk = "  temporary disk: " + humanBytes(c.value("temporary_disk_peak", uint64_t{0})) +
-                       " at most";
+    std::string disk =
+        "  temporary disk: " + humanBytes(c.value("temporary_disk_peak", uint64_t{0})) + " at most";
     if (c.contains("temporary_disk_limit"))
       disk += " (--max-temp " + humanBytes(c["temporary_disk_limit"].get<uint64_t>()) + ")";
     disk += ": the points' files " + humanBytes(c["temporary_bytes_peak"].get<uint64_t>());
@@ -124,7 +124,8 @@ uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path
   if (text != "auto") return parseBytes(text, "--max-temp");
   std::error_code error;
   const std::filesystem::space_info space = std::filesystem::space(tmp, error);
-  if (error) throw FileError(tmp.string(), std::nullopt, "cannot tell its free space: " + error.message());
+  if (error)
+    throw FileError(tmp.string(), std::nullopt, "cannot tell its free space: " + error.message());
   return std::max<uint64_t>(space.available / 10 * 9, 1);
 }
 

@@ -96,11 +96,12 @@ class FlatMap {
       if (oldUsed[i]) insert(old[i].first, old[i].second);
   }
 
-  using Slots = std::vector<std::pair<Key, Value>,
-                            typename std::allocator_traits<Allocator>::template rebind_alloc<
-                                std::pair<Key, Value>>>;
+  using Slots = std::vector<
+      std::pair<Key, Value>,
+      typename std::allocator_traits<Allocator>::template rebind_alloc<std::pair<Key, Value>>>;
   using Used =
-      std::vector<uint8_t, typename std::allocator_traits<Allocator>::template rebind_alloc<uint8_t>>;
+      std::vector<uint8_t,
+                  typename std::allocator_traits<Allocator>::template rebind_alloc<uint8_t>>;
   Slots slots_;
   Used used_;
   size_t mask_ = 0;
