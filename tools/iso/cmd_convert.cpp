@@ -98,25 +98,11 @@ void printReport(const nlohmann::json& r, const Options& o) {
       withSeparators(a["unprojected"].get<uint64_t>()));
 }
 
-// Bytes from "2G", "512M", "1.5G", "100000" (binary units); "auto": half the physical memory.
+// Bytes from a size (parseSize); "auto": half the physical memory.
 uint64_t parseBytes(const std::string& text, const char* option) {
   if (text == "auto")
     return uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGE_SIZE)) / 2;
-  size_t used = 0;
-  double value = 0.0;
-  try {
-    value = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  const std::string unit = text.substr(used);
-  const std::map<std::string, double> units = {{"", 1.0},         {"K", 1024.0},
-                                               {"M", 1048576.0},  {"G", 1073741824.0},
-                                               {"T", 1099511627776.0}};
-  if (used == 0 || !units.contains(unit) || !(value > 0.0))
-    throw std::invalid_argument(std::string(option) +
-                                " must be a size like 2G, 512M or auto, not '" + text + "'");
-  return uint64_t(value * units.at(unit));
+  return parseSize(text, option);
 }
 
 // --max-temp: a size, or auto: 90 % of the space free on the file system of the temporary files.

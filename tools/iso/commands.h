@@ -18,5 +18,6 @@ void addEvalCommand(CLI::App& app, int& exitCode);
 void addGenCommand(CLI::App& app, int& exitCode);
 void addInfoCommand(CLI::App& app, int& exitCode);
 void addVerifyCommand(CLI::App& app, int& exitCode);
+void addViewCommand(CLI::App& app, int& exitCode);
 
 }  // namespace iso::cli

@@ -43,6 +43,7 @@ int main(int argc, char** argv) {
   iso::cli::addGenCommand(app, exitCode);
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);
+  iso::cli::addViewCommand(app, exitCode);
   iso::installInterruptCleanup();  // Ctrl-C leaves no temporary file behind
   try {
     app.parse(argc, argv);

@@ -2,6 +2,10 @@
 
 #include <fmt/core.h>
 
+#include <cmath>
+#include <map>
+#include <stdexcept>
+
 #include <fstream>
 #include <optional>
 
@@ -58,6 +62,24 @@ void writeTextFile(const std::filesystem::path& path, const std::string& text) {
     std::filesystem::remove(temporary, error);
     throw FileError(path.string(), std::nullopt, "cannot write it: " + error.message());
   }
+}
+
+uint64_t parseSize(const std::string& text, const char* option) {
+  size_t used = 0;
+  double value = 0.0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  const std::string unit = text.substr(used);
+  const std::map<std::string, double> units = {{"", 1.0},         {"K", 1024.0},
+                                               {"M", 1048576.0},  {"G", 1073741824.0},
+                                               {"T", 1099511627776.0}};
+  if (used == 0 || !units.contains(unit) || !(value > 0.0) || !std::isfinite(value))
+    throw std::invalid_argument(std::string(option) +
+                                " must be a size like 2G, 512M or 100000, not '" + text + "'");
+  return uint64_t(value * units.at(unit));
 }
 
 }  // namespace iso::cli

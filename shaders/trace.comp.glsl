@@ -1,0 +1,66 @@
+// The viewer's compute shader: one invocation per pixel, 8×8 tiles visited in Z-order, tracing
+// the octree in the page pool with the shared tracer (trace.h). Layouts in shared.h and
+// specs/viewer.md.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+
+#define ISO_INOUT(T) inout T
+#include "shared.h"
+
+layout(local_size_x = 64) in;
+
+layout(std140, binding = 0) uniform Frame { FrameParams P; };
+layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
+layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
+layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
+layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
+// The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit and no
+// branch on which buffer a word is in).
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
+  uint words[];
+};
+
+uint poolWord(uint word) {
+  uint which = word >> P.pool.x;
+  uvec4 pair = P.poolAddress[which >> 1u];
+  uvec2 address = (which & 1u) == 0u ? uvec2(pair.x, pair.y) : uvec2(pair.z, pair.w);
+  PoolWords pool = PoolWords(packUint2x32(address));
+  return pool.words[word & ((1u << P.pool.x) - 1u)];
+}
+
+uvec4 chunkState(uint chunk) { return chunks[chunk].state; }
+
+void requestChunk(uint chunk) {
+  uint at = kFeedbackHeaderWords + chunk;
+  if (feedback[at] != P.image.w) feedback[at] = P.image.w;
+}
+
+void useChunk(uint chunk) {
+  uint at = kFeedbackHeaderWords + P.options.w + chunk;
+  if (feedback[at] != P.image.w) feedback[at] = P.image.w;
+}
+
+vec3 environmentTexel(uint x, uint y) {
+  uint at = 2u * (y * P.pool.z + x);
+  vec2 rg = unpackHalf2x16(environment[at]);
+  vec2 ba = unpackHalf2x16(environment[at + 1u]);
+  return vec3(rg.x, rg.y, ba.x);
+}
+
+#include "trace.h"
+
+void main() {
+  uint tilesX = (P.image.x + 7u) / 8u;
+  uint tile = gl_WorkGroupID.x;
+  uint i = gl_LocalInvocationIndex;  // Z-order inside the tile: x from even bits, y from odd
+  uint lx = (i & 1u) | ((i >> 1u) & 2u) | ((i >> 2u) & 4u);
+  uint ly = ((i >> 1u) & 1u) | ((i >> 2u) & 2u) | ((i >> 3u) & 4u);
+  uint x = (tile % tilesX) * 8u + lx;
+  uint y = (tile / tilesX) * 8u + ly;
+  if (x >= P.image.x || y >= P.image.y) return;
+  uint rays = 0u;
+  pixels[y * P.image.x + x] = renderPixel(x, y, rays);
+  atomicAdd(feedback[kFeedbackRays], rays);
+}

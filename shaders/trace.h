@@ -1,0 +1,501 @@
+// The ray tracer of the viewer, one source for the GPU (trace.comp.glsl) and the CPU reference
+// tracer (viewer/cpu_tracer.cpp): the same statements run in both (specs/viewer.md, "Tracing").
+//
+// The includer provides, before including this file:
+//   FrameParams P;                       the frame's parameters
+//   uint poolWord(uint word);            a word of the page pool (global word index)
+//   uvec4 chunkState(uint chunk);        the chunk table entry (ChunkEntry.state)
+//   void requestChunk(uint chunk);       a ray needs this chunk (streaming)
+//   void useChunk(uint chunk);           a ray went through this chunk (for the LRU)
+//   vec3 environmentTexel(uint x, uint y);  linear RGB of the environment map
+// and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`).
+//
+// All coordinates are frame units: the octree root is the cube [0, 1)^3.
+// Float literals carry an `f` so that the C++ build does the same single-precision arithmetic.
+
+// ---- Chunks in the page pool -------------------------------------------------------------
+
+uint blobWord(uint firstPage, uint word) {
+  uint page = word >> kPageWordsLog2;
+  uint physical = firstPage;
+  if (page != 0u) physical = poolWord(firstPage * kPageWords + kBlobPageList + page);
+  return poolWord(physical * kPageWords + (word & (kPageWords - 1u)));
+}
+
+// The surface cell (filled leaf, or a coarser node drawn in place of what is below it) or the
+// empty cell that contains a grid point.
+struct Cell {
+  bool filled;
+  uint level;
+  uvec3 coord;      // cell coordinates at level
+  uint page;        // first pool page of the chunk holding the node
+  uint record;      // word of the corner record (filled)
+};
+
+// Find the cell of grid point g, descending from the octree root through resident chunks. At a
+// cut node (children in other chunks) the node's own patch is drawn when the chunk's geometric
+// error covers less than P.lod.x pixels at distance `distance`, or when a child chunk is not
+// resident (which `request` then asks for).
+Cell locate(uvec3 g, float distance, bool request) {
+  Cell cell;
+  cell.filled = false;
+  uint chunk = P.options.z;
+  uint page = chunkState(chunk).x;
+  uint nodes = blobWord(page, kBlobNodes);
+  uint data = blobWord(page, kBlobData);
+  uint recordWords = kRecordDistanceWords;
+  if ((P.options.x & kOptionNormals) != 0u) recordWords += kRecordNormalWords;
+  if ((P.options.x & kOptionColors) != 0u) recordWords += kRecordColorWords;
+  useChunk(chunk);
+  uint node = 0u;
+  uint level = 0u;
+  for (; level < 21u; ++level) {
+    uint w0 = blobWord(page, nodes + 2u * node);
+    uint w1 = blobWord(page, nodes + 2u * node + 1u);
+    uint mask = w0 & 0xFFu;
+    if (mask == 0u) {  // a filled leaf
+      cell.filled = true;
+      cell.record = data + w1 * recordWords;
+      break;
+    }
+    uint shift = 20u - level;
+    uint octant = ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) |
+                  (((g.z >> shift) & 1u) << 2u);
+    if (((mask >> octant) & 1u) == 0u) {  // an empty child
+      level += 1u;
+      break;
+    }
+    uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
+    if ((w0 & kNodeCut) == 0u) {
+      node = w1 + before;
+      continue;
+    }
+    uint ownRecord = data + blobWord(page, w1) * recordWords;
+    uint childChunk = blobWord(page, w1 + 1u + 2u * before);
+    uint childRoot = blobWord(page, w1 + 2u + 2u * before);
+    float error = uintBitsToFloat(chunkState(chunk).z);
+    uvec4 child = chunkState(childChunk);
+    bool fineEnough = error <= P.lod.x * P.eye.w * distance;
+    if (fineEnough || child.x == kNotResident) {
+      if (!fineEnough && request) requestChunk(childChunk);
+      cell.filled = true;
+      cell.record = ownRecord;
+      break;
+    }
+    chunk = childChunk;
+    page = child.x;
+    nodes = blobWord(page, kBlobNodes);
+    data = blobWord(page, kBlobData);
+    node = childRoot;
+    useChunk(chunk);
+  }
+  cell.level = level;
+  cell.coord = g >> (21u - level);
+  cell.page = page;
+  return cell;
+}
+
+// The 8 corner distances of a surface cell (corner c = x + 2y + 4z: d0 holds 0-3, d1 holds 4-7),
+// in units of the cell's size.
+struct Corners {
+  vec4 d0;
+  vec4 d1;
+};
+
+Corners loadCorners(uint page, uint record) {
+  Corners c;
+  vec2 a = unpackHalf2x16(blobWord(page, record));
+  vec2 b = unpackHalf2x16(blobWord(page, record + 1u));
+  vec2 e = unpackHalf2x16(blobWord(page, record + 2u));
+  vec2 f = unpackHalf2x16(blobWord(page, record + 3u));
+  c.d0 = vec4(a.x, a.y, b.x, b.y);
+  c.d1 = vec4(e.x, e.y, f.x, f.y);
+  return c;
+}
+
+// The trilinear interpolation at local coordinates u in [0, 1]^3.
+float trilinear(Corners c, vec3 u) {
+  vec4 a = mix(c.d0, c.d1, u.z);                 // (x0y0, x1y0, x0y1, x1y1)
+  float x0 = mix(a.x, a.z, u.y);
+  float x1 = mix(a.y, a.w, u.y);
+  return mix(x0, x1, u.x);
+}
+
+// Its gradient (local units).
+vec3 trilinearGradient(Corners c, vec3 u) {
+  vec4 a = mix(c.d0, c.d1, u.z);
+  vec4 dz = c.d1 - c.d0;
+  float gx = mix(a.y - a.x, a.w - a.z, u.y);
+  float gy = mix(a.z - a.x, a.w - a.y, u.x);
+  float gz = mix(mix(dz.x, dz.y, u.x), mix(dz.z, dz.w, u.x), u.y);
+  return vec3(gx, gy, gz);
+}
+
+// ---- Rays through the octree ---------------------------------------------------------------
+
+struct Hit {
+  float t;
+  vec3 normal;   // unit, pointing outside (where the signed distance is positive)
+  vec3 color;    // linear RGB: the file's colors, or the material's
+};
+
+vec3 decodeOctahedral(vec2 e) {
+  vec3 n = vec3(e.x, e.y, 1.0f - abs(e.x) - abs(e.y));
+  if (n.z < 0.0f) {
+    float x = (1.0f - abs(n.y)) * (n.x >= 0.0f ? 1.0f : -1.0f);
+    float y = (1.0f - abs(n.x)) * (n.y >= 0.0f ? 1.0f : -1.0f);
+    n.x = x;
+    n.y = y;
+  }
+  return normalize(n);
+}
+
+vec3 srgbToLinear(vec3 c) {
+  vec3 lo = c / 12.92f;
+  vec3 hi = pow((c + 0.055f) / 1.055f, vec3(2.4f));
+  return vec3(c.x <= 0.04045f ? lo.x : hi.x, c.y <= 0.04045f ? lo.y : hi.y,
+              c.z <= 0.04045f ? lo.z : hi.z);
+}
+
+// Trilinear weight of corner k at u.
+float cornerWeight(uint k, vec3 u) {
+  float wx = (k & 1u) != 0u ? u.x : 1.0f - u.x;
+  float wy = (k & 2u) != 0u ? u.y : 1.0f - u.y;
+  float wz = (k & 4u) != 0u ? u.z : 1.0f - u.z;
+  return wx * wy * wz;
+}
+
+// Normal and color at local coordinates u of a surface cell.
+void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
+  uint word = cell.record + kRecordDistanceWords;
+  vec3 n = trilinearGradient(c, u);
+  if ((P.options.x & kOptionNormals) != 0u) {
+    vec3 sum = vec3(0.0f);
+    for (uint k = 0u; k < 8u; k += 2u) {
+      vec4 e = unpackSnorm4x8(blobWord(cell.page, word + k / 2u));
+      sum += cornerWeight(k, u) * decodeOctahedral(vec2(e.x, e.y));
+      sum += cornerWeight(k + 1u, u) * decodeOctahedral(vec2(e.z, e.w));
+    }
+    if (dot(sum, sum) > 1e-12f) n = sum;
+    word += kRecordNormalWords;
+  }
+  hit.normal = dot(n, n) > 0.0f ? normalize(n) : vec3(0.0f, 0.0f, 1.0f);
+  hit.color = vec3(P.albedo.x, P.albedo.y, P.albedo.z);
+  if ((P.options.x & kOptionColors) != 0u) {
+    vec3 sum = vec3(0.0f);
+    for (uint k = 0u; k < 8u; ++k) {
+      vec4 rgba = unpackUnorm4x8(blobWord(cell.page, word + k));
+      sum += cornerWeight(k, u) * srgbToLinear(vec3(rgba.x, rgba.y, rgba.z));
+    }
+    hit.color = sum;
+  }
+}
+
+// The first crossing of the surface by the ray o + t·d, t in [tMin, tMax], in the direction
+// that leaves the side the ray is on (`inside`: f < 0). Crossings the other way are ignored,
+// so a ray leaving a surface never hits that surface again (the front/back-face flag).
+// `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
+// ask for chunks it lacks. Counts one ray in `rays`.
+bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distance, bool request,
+               ISO_INOUT(Hit) hit, ISO_INOUT(uint) rays) {
+  rays += 1u;
+  float side = inside ? -1.0f : 1.0f;
+  vec3 dir = d;
+  if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
+  if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
+  if (abs(dir.z) < 1e-12f) dir.z = 1e-12f;
+  vec3 inv = vec3(1.0f) / dir;
+  // Clip to the root cube.
+  vec3 ta = (vec3(0.0f) - o) * inv;
+  vec3 tb = (vec3(1.0f) - o) * inv;
+  vec3 tNear = min(ta, tb);
+  vec3 tFar = max(ta, tb);
+  float t = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
+  float tEnd = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
+  if (t > tEnd) return false;
+  vec3 p = o + d * t;
+  uvec3 g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
+  bool havePrevious = false;
+  float previous = 0.0f;  // f × side at the end of the previous surface cell
+  for (uint step = 0u; step < kMaxSteps; ++step) {
+    Cell cell = locate(g, distance + t, request);
+    float size = 1.0f / float(1u << cell.level);
+    vec3 lo = vec3(cell.coord) * size;
+    vec3 c0 = (lo - o) * inv;
+    vec3 c1 = (lo + vec3(size) - o) * inv;
+    vec3 cFar = max(c0, c1);
+    float tExit = min(cFar.x, min(cFar.y, cFar.z));
+    float tStop = min(tExit, tEnd);
+    if (cell.filled) {
+      Corners c = loadCorners(cell.page, cell.record);
+      float ta0 = t;
+      float fa = side * trilinear(c, clamp((o + d * ta0 - lo) / size, vec3(0.0f), vec3(1.0f)));
+      bool found = false;
+      float tHit = t;
+      if (havePrevious && previous > 0.0f && fa <= 0.0f) {  // the sign changed at the face
+        found = true;
+      }
+      for (uint k = 1u; k <= kSamplesPerLeaf && !found; ++k) {
+        float tb0 = mix(t, tStop, float(k) / float(kSamplesPerLeaf));
+        float fb = side * trilinear(c, clamp((o + d * tb0 - lo) / size, vec3(0.0f), vec3(1.0f)));
+        if (fa > 0.0f && fb <= 0.0f) {
+          // Solve f(t) = 0 on [ta0, tb0]: regula falsi with the Illinois rule.
+          float lo_t = ta0, hi_t = tb0, flo = fa, fhi = fb;
+          int kept = 0;
+          for (int i = 0; i < 12; ++i) {
+            float m = (flo - fhi) != 0.0f ? lo_t + (hi_t - lo_t) * flo / (flo - fhi)
+                                          : 0.5f * (lo_t + hi_t);
+            m = clamp(m, lo_t, hi_t);
+            float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f),
+                                                 vec3(1.0f)));
+            if (fm > 0.0f) {
+              lo_t = m;
+              flo = fm;
+              if (kept == 1) fhi *= 0.5f;
+              kept = 1;
+            } else {
+              hi_t = m;
+              fhi = fm;
+              if (kept == -1) flo *= 0.5f;
+              kept = -1;
+            }
+          }
+          tHit = (flo - fhi) != 0.0f ? lo_t + (hi_t - lo_t) * flo / (flo - fhi) : hi_t;
+          found = true;
+        }
+        ta0 = tb0;
+        fa = fb;
+      }
+      if (found) {
+        hit.t = tHit;
+        vec3 u = clamp((o + d * tHit - lo) / size, vec3(0.0f), vec3(1.0f));
+        surfaceAttributes(cell, c, u, hit);
+        return true;
+      }
+      havePrevious = true;
+      previous = fa;
+    } else {
+      havePrevious = false;
+    }
+    if (tExit >= tEnd) return false;
+    // Step into the neighbour across the exit face: exact on the grid, so rays always progress.
+    t = tExit;
+    p = o + d * t;
+    uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
+    g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
+    uint shift = 21u - cell.level;
+    uint lower = cell.coord[axis] << shift;
+    uint upper = (cell.coord[axis] + 1u) << shift;
+    if (dir[axis] > 0.0f) {
+      if (upper > kGridMax) return false;
+      g[axis] = upper;
+    } else {
+      if (lower == 0u) return false;
+      g[axis] = lower - 1u;
+    }
+  }
+  return false;
+}
+
+// ---- Shading --------------------------------------------------------------------------------
+
+uint hashUint(uint x) {
+  x ^= x >> 16u;
+  x *= 0x7feb352du;
+  x ^= x >> 15u;
+  x *= 0x846ca68bu;
+  x ^= x >> 16u;
+  return x;
+}
+
+float randomUnit(ISO_INOUT(uint) state) {
+  state = hashUint(state + 0x9e3779b9u);
+  return float(state >> 8u) * (1.0f / 16777216.0f);
+}
+
+vec3 background(vec3 d) {
+  vec3 up = vec3(P.worldUp.x, P.worldUp.y, P.worldUp.z);
+  float h = dot(d, up);
+  if ((P.options.x & kOptionEnvironment) != 0u) {
+    // Equirectangular: longitude around `up`, latitude from it; bilinear filtering.
+    vec3 a = abs(up.x) < 0.9f ? vec3(1.0f, 0.0f, 0.0f) : vec3(0.0f, 1.0f, 0.0f);
+    vec3 e1 = normalize(cross(up, a));
+    vec3 e2 = cross(up, e1);
+    float phi = atan(dot(d, e2), dot(d, e1));
+    float theta = acos(clamp(h, -1.0f, 1.0f));
+    float w = float(P.pool.z), hgt = float(P.pool.w);
+    float x = (phi * 0.15915494f + 0.5f) * w - 0.5f;
+    float y = theta * 0.31830989f * hgt - 0.5f;
+    float fx = floor(x), fy = floor(y);
+    float ax = x - fx, ay = y - fy;
+    uint x0 = uint(int(fx) < 0 ? int(fx) + int(P.pool.z) : int(fx)) % P.pool.z;
+    uint x1 = (x0 + 1u) % P.pool.z;
+    uint y0 = uint(clamp(int(fy), 0, int(P.pool.w) - 1));
+    uint y1 = uint(clamp(int(fy) + 1, 0, int(P.pool.w) - 1));
+    vec3 top = mix(environmentTexel(x0, y0), environmentTexel(x1, y0), ax);
+    vec3 bottom = mix(environmentTexel(x0, y1), environmentTexel(x1, y1), ax);
+    return P.lod.z * mix(top, bottom, ay);
+  }
+  vec3 top = vec3(P.skyTop.x, P.skyTop.y, P.skyTop.z);
+  vec3 bottom = vec3(P.skyBottom.x, P.skyBottom.y, P.skyBottom.z);
+  return mix(bottom, top, clamp(0.5f + 0.5f * h, 0.0f, 1.0f));
+}
+
+// Phong lighting at p with the shading normal n seen from direction -d, with shadow rays.
+vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+  vec3 n = hit.normal;
+  vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
+  vec3 color = ambient * hit.color;
+  vec3 origin = p + n * P.lod.y;
+  for (uint i = 0u; i < kMaxLights; ++i) {
+    Light light = P.lights[i];
+    uint kind = uint(light.position.w);
+    if (kind == kLightNone) continue;
+    uint samples = kind == kLightArea ? max(uint(light.color.w), 1u) : 1u;
+    vec3 sum = vec3(0.0f);
+    for (uint s = 0u; s < samples; ++s) {
+      vec3 at = vec3(light.position.x, light.position.y, light.position.z);
+      if (kind == kLightArea) {
+        // Stratified over a near-square grid of cells, jittered per pixel.
+        uint columns = uint(ceil(sqrt(float(samples))));
+        float a = (float(s % columns) + randomUnit(rng)) / float(columns) - 0.5f;
+        float b = (float(s / columns) + randomUnit(rng)) / float((samples + columns - 1u) / columns) - 0.5f;
+        at += a * vec3(light.u.x, light.u.y, light.u.z) + b * vec3(light.v.x, light.v.y, light.v.z);
+      }
+      vec3 l = at - p;
+      float lengthL = length(l);
+      l = l / lengthL;
+      float lambert = dot(n, l);
+      if (lambert <= 0.0f) continue;
+      if ((P.options.x & kOptionShadows) != 0u) {
+        Hit blocker;
+        if (intersect(origin, l, 0.0f, lengthL, false, distance, false, blocker, rays)) continue;
+      }
+      vec3 r = reflect(-l, n);
+      float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
+      sum += P.material.x * lambert * hit.color + vec3(P.material.y * specular);
+    }
+    color += vec3(light.color.x, light.color.y, light.color.z) * sum / float(samples);
+  }
+  return color;
+}
+
+struct RayTask {
+  vec3 origin;
+  vec3 direction;
+  vec3 weight;
+  uint depth;
+  bool inside;
+  float distance;  // path length before origin
+};
+
+// The color seen along a camera ray, with reflection and refraction rays up to the bounce limit.
+vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+  RayTask stack[kRayStack];
+  uint count = 1u;
+  stack[0].origin = o;
+  stack[0].direction = d;
+  stack[0].weight = vec3(1.0f);
+  stack[0].depth = 0u;
+  stack[0].inside = false;
+  stack[0].distance = 0.0f;
+  vec3 color = vec3(0.0f);
+  float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
+  float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
+  float eta = P.medium.x;
+  float offset = P.lod.y;
+  while (count > 0u) {
+    count -= 1u;
+    RayTask task = stack[count];
+    Hit hit;
+    bool primary = task.depth == 0u;
+    if (!intersect(task.origin, task.direction, 0.0f, 1e30f, task.inside, task.distance,
+                   primary && (P.options.x & kOptionRequests) != 0u, hit, rays)) {
+      color += task.weight * background(task.direction);
+      continue;
+    }
+    vec3 p = task.origin + task.direction * hit.t;
+    vec3 n = hit.normal;
+    float distance = task.distance + hit.t;
+    bool more = task.depth < P.options.y;
+    if (!task.inside) {
+      // A front face: local shading, then the mirror and the transmitted rays.
+      color += task.weight * (1.0f - reflectivity - transparency) *
+               shade(p, task.direction, hit, distance, rng, rays);
+      float mirror = reflectivity;
+      if (more && transparency > 0.0f) {
+        vec3 r = refract(task.direction, n, 1.0f / eta);
+        if (dot(r, r) > 0.0f && count < kRayStack) {
+          stack[count].origin = p - n * offset;
+          stack[count].direction = normalize(r);
+          stack[count].weight = task.weight * transparency;
+          stack[count].depth = task.depth + 1u;
+          stack[count].inside = true;
+          stack[count].distance = distance;
+          count += 1u;
+        } else {
+          mirror += transparency;  // total internal reflection cannot happen entering; kept safe
+        }
+      }
+      if (more && mirror > 0.0f && count < kRayStack) {
+        stack[count].origin = p + n * offset;
+        stack[count].direction = reflect(task.direction, n);
+        stack[count].weight = task.weight * mirror;
+        stack[count].depth = task.depth + 1u;
+        stack[count].inside = false;
+        stack[count].distance = distance;
+        count += 1u;
+      }
+    } else {
+      // A back face from inside: absorption along the way, then out or totally reflected.
+      vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
+      vec3 weight = task.weight * exp(-absorption * hit.t);
+      if (more && count < kRayStack) {
+        vec3 r = refract(task.direction, -n, eta);
+        bool leaves = dot(r, r) > 0.0f;
+        stack[count].origin = leaves ? p + n * offset : p - n * offset;
+        stack[count].direction = leaves ? normalize(r) : reflect(task.direction, -n);
+        stack[count].weight = weight;
+        stack[count].depth = task.depth + 1u;
+        stack[count].inside = !leaves;
+        stack[count].distance = distance;
+        count += 1u;
+      }
+    }
+  }
+  return color;
+}
+
+float linearToSrgb(float c) {
+  c = clamp(c, 0.0f, 1.0f);
+  return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
+uint renderPixel(uint x, uint y, ISO_INOUT(uint) rays) {
+  uint samples = max(P.image.z, 1u);
+  uint rng = hashUint(x * 1973u + y * 9277u + P.image.w * 26699u);
+  vec3 sum = vec3(0.0f);
+  vec3 right = vec3(P.right.x, P.right.y, P.right.z);
+  vec3 up = vec3(P.up.x, P.up.y, P.up.z);
+  vec3 forward = vec3(P.forward.x, P.forward.y, P.forward.z);
+  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
+  for (uint s = 0u; s < samples; ++s) {
+    float jx = samples > 1u ? randomUnit(rng) : 0.5f;
+    float jy = samples > 1u ? randomUnit(rng) : 0.5f;
+    float sx = 2.0f * (float(x) + jx) / float(P.image.x) - 1.0f;
+    float sy = 1.0f - 2.0f * (float(y) + jy) / float(P.image.y);
+    vec3 d = normalize(forward + sx * right + sy * up);
+    sum += radiance(eye, d, rng, rays);
+  }
+  vec3 c = sum / float(samples);
+  uint r = uint(linearToSrgb(c.x) * 255.0f + 0.5f);
+  uint gc = uint(linearToSrgb(c.y) * 255.0f + 0.5f);
+  uint b = uint(linearToSrgb(c.z) * 255.0f + 0.5f);
+  if ((P.options.x & kOptionSwapRB) != 0u) {
+    uint swap = r;
+    r = b;
+    b = swap;
+  }
+  return r | (gc << 8u) | (b << 16u) | (255u << 24u);
+}

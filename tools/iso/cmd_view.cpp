@@ -1,0 +1,188 @@
+// `iso view FILE`: look at an .iso file in a window, or render it to a picture (--headless, --cpu)
+// or a benchmark (--bench), streaming its chunks under a GPU memory budget (specs/viewer.md).
+#include <fmt/core.h>
+
+#include "commands.h"
+#include "text.h"
+#include "view.h"
+
+namespace iso::cli {
+namespace {
+
+struct ViewArgs {
+  viewer::ViewOptions view;
+  bool headless = false, cpu = false, bench = false;
+  std::string vram = "1G", upload = "16M", camera, up, color, environment;
+  double fov = 0;
+  std::vector<std::string> lights;
+  std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
+  std::optional<int> bounces, samples;
+  bool noShadows = false, noReflections = false, noRefractions = false;
+};
+
+viewer::Vec3d parseUp(const std::string& text) {
+  if (text == "x") return {1, 0, 0};
+  if (text == "y") return {0, 1, 0};
+  if (text == "z") return {0, 0, 1};
+  if (text == "-x") return {-1, 0, 0};
+  if (text == "-y") return {0, -1, 0};
+  if (text == "-z") return {0, 0, -1};
+  return viewer::parseVec3(text);
+}
+
+// The scene: defaults, then the scene file, then the command line.
+void buildScene(ViewArgs& a) {
+  viewer::Scene& s = a.view.scene;
+  if (!a.view.sceneFile.empty()) viewer::loadScene(a.view.sceneFile, s);
+  if (!a.camera.empty()) {
+    std::vector<double> v;
+    size_t at = 0;
+    const std::string& t = a.camera;
+    for (int i = 0; i < 3; ++i) {
+      // eye,target,up: nine numbers.
+      (void)i;
+    }
+    std::string item;
+    for (size_t i = 0; i <= t.size(); ++i) {
+      if (i == t.size() || t[i] == ',') {
+        item = t.substr(at, i - at);
+        at = i + 1;
+        v.push_back(viewer::parseVec3(item + ",0,0")[0]);
+      }
+    }
+    if (v.size() != 9)
+      throw std::invalid_argument("--camera: expected eye,target,up (9 numbers), not '" + t + "'");
+    viewer::Camera c = s.camera.value_or(viewer::Camera{});
+    c.eye = {v[0], v[1], v[2]};
+    c.target = {v[3], v[4], v[5]};
+    c.up = {v[6], v[7], v[8]};
+    s.camera = c;
+  }
+  if (a.fov != 0) {
+    if (!(a.fov > 1 && a.fov < 179)) throw std::invalid_argument("--fov: from 1 to 179 degrees");
+    if (!s.camera) throw std::invalid_argument("--fov needs --camera (or a camera in --scene)");
+    s.camera->fovDegrees = a.fov;
+  }
+  if (!a.up.empty()) s.up = parseUp(a.up);
+  if (!a.lights.empty()) {
+    if (a.lights.size() > gpu::kMaxLights)
+      throw std::invalid_argument(fmt::format("at most {} --light options", gpu::kMaxLights));
+    s.lights.clear();
+    for (const std::string& l : a.lights) s.lights.push_back(viewer::parseLight(l));
+  }
+  if (!a.color.empty()) {
+    const auto c = viewer::parseVec3(a.color);
+    s.material.color = {float(c[0]), float(c[1]), float(c[2])};
+  }
+  if (a.reflectivity) s.material.reflectivity = *a.reflectivity;
+  if (a.transparency) s.material.transparency = *a.transparency;
+  if (a.ior) s.material.ior = *a.ior;
+  if (a.shininess) s.material.shininess = *a.shininess;
+  if (s.material.reflectivity + s.material.transparency > 1.0f)
+    throw std::invalid_argument("--reflectivity + --transparency must be at most 1");
+  if (!a.environment.empty()) s.environment = a.environment;
+  if (a.environmentIntensity) s.environmentIntensity = *a.environmentIntensity;
+  if (a.lodPixels) s.lodPixels = *a.lodPixels;
+  if (a.bounces) s.bounces = *a.bounces;
+  if (a.samples) s.samples = *a.samples;
+  if (a.noShadows) s.shadows = false;
+  if (a.noReflections) s.reflections = false;
+  if (a.noRefractions) s.refractions = false;
+}
+
+}  // namespace
+
+void addViewCommand(CLI::App& app, int& exitCode) {
+  auto a = std::make_shared<ViewArgs>();
+  CLI::App* c = app.add_subcommand(
+      "view",
+      "Look at an .iso file: a window (default), a picture (--headless --out F.png, or --cpu), "
+      "or a benchmark (--bench); chunks stream to the GPU under --vram");
+  c->add_option("file", a->view.file, ".iso file")->required()->check(CLI::ExistingFile);
+  c->add_flag("--headless", a->headless, "Render a picture to --out without a window (GPU)");
+  c->add_flag("--cpu", a->cpu, "Render the picture with the CPU reference tracer instead");
+  c->add_flag("--bench", a->bench,
+              "Render a camera path (an orbit) and print ms/frame, rays/s, GPU memory, chunks "
+              "resident and bytes streamed");
+  c->add_option("--out,-o", a->view.out, "Picture to write (.png, .jpg, .exr, ...)");
+  c->add_option("--width", a->view.width, "Picture width in pixels")
+      ->capture_default_str()->check(CLI::Range(8, 16384));
+  c->add_option("--height", a->view.height, "Picture height in pixels")
+      ->capture_default_str()->check(CLI::Range(8, 16384));
+  c->add_option("--camera", a->camera,
+                "eye,target,up in world units (9 numbers; default: framed on the surface)");
+  c->add_option("--fov", a->fov, "Vertical field of view in degrees (default 40)");
+  c->add_option("--up", a->up, "The scene's up: x, y, z, -x, -y, -z or X,Y,Z (default: z for "
+                               "LAS inputs, else y)");
+  c->add_option("--vram", a->vram,
+                "GPU memory the viewer may allocate, all buffers included (e.g. 64M, 2G)")
+      ->capture_default_str();
+  c->add_option("--upload-per-frame", a->upload, "Chunk bytes uploaded per frame at most")
+      ->capture_default_str();
+  c->add_option("--scene", a->view.sceneFile,
+                "JSON scene file: camera, lights, material, environment (specs/viewer.md); the "
+                "window reloads it when it changes")
+      ->check(CLI::ExistingFile);
+  c->add_option("--light", a->lights,
+                "A light (repeatable, up to 4): point:X,Y,Z[:R,G,B[:I]] or "
+                "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]");
+  c->add_option("--color", a->color, "Material color R,G,B (linear) where the file has none");
+  c->add_option("--reflectivity", a->reflectivity, "Mirror reflection, 0 to 1")
+      ->check(CLI::Range(0.0, 1.0));
+  c->add_option("--transparency", a->transparency, "Refraction, 0 to 1")
+      ->check(CLI::Range(0.0, 1.0));
+  c->add_option("--ior", a->ior, "Index of refraction")->check(CLI::Range(1.0, 4.0));
+  c->add_option("--shininess", a->shininess, "Phong exponent")->check(CLI::Range(1.0, 10000.0));
+  c->add_option("--env", a->environment,
+                "Environment map: an equirectangular image OpenImageIO reads")
+      ->check(CLI::ExistingFile);
+  c->add_option("--env-intensity", a->environmentIntensity, "Environment map scale")
+      ->check(CLI::Range(0.0, 1000.0));
+  c->add_option("--bounces", a->bounces, "Reflection and refraction bounces at most")
+      ->check(CLI::Range(0, 8));
+  c->add_option("--spp", a->samples, "Samples per pixel (supersampling)")
+      ->check(CLI::Range(1, 256));
+  c->add_option("--lod-pixels", a->lodPixels,
+                "Screen-space error in pixels below which a coarser level is drawn")
+      ->check(CLI::Range(0.0, 1000.0));
+  c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
+  c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
+  c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
+  c->add_option("--frames", a->view.frames, "Window: quit after this many frames");
+  c->add_option("--screenshot", a->view.screenshot, "Window: save the last frame here on quitting");
+  c->add_option("--max-frames", a->view.maxFrames,
+                "Headless: frames at most for streaming to bring in what the view needs")
+      ->capture_default_str()->check(CLI::Range(1, 100000));
+  c->add_option("--bench-frames", a->view.benchFrames, "Frames of the --bench camera path")
+      ->capture_default_str()->check(CLI::Range(2, 100000));
+  c->add_flag("--validation", a->view.validation,
+              "Enable the Vulkan validation layer (errors make the command fail)");
+  c->add_option("--device", a->view.device, "Use the Vulkan device whose name contains this");
+  c->callback([a, &exitCode] {
+    exitCode = runGuarded("view", [&]() -> int {
+      const int modes = int(a->headless) + int(a->cpu) + int(a->bench);
+      if (modes > 1) {
+        fmt::print(stderr, "iso view: choose one of --headless, --cpu and --bench\n");
+        return kExitUsage;
+      }
+      if ((a->headless || a->cpu) && a->view.out.empty()) {
+        fmt::print(stderr, "iso view: --headless and --cpu need --out FILE\n");
+        return kExitUsage;
+      }
+      try {
+        a->view.vram = parseSize(a->vram, "--vram");
+        a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
+        buildScene(*a);
+      } catch (const std::invalid_argument& e) {
+        fmt::print(stderr, "iso view: {}\n", e.what());
+        return kExitUsage;
+      }
+      if (a->cpu) return viewer::viewCpu(a->view);
+      if (a->headless) return viewer::viewHeadless(a->view);
+      if (a->bench) return viewer::viewBench(a->view);
+      return viewer::viewWindow(a->view);
+    });
+  });
+}
+
+}  // namespace iso::cli

@@ -1,0 +1,50 @@
+// Opening .iso files for viewing (asset.h).
+#include "asset.h"
+
+#include <cmath>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "iso/error.h"
+#include "iso/surface.h"
+
+namespace iso::viewer {
+
+Asset::Asset(Reader r) : reader(std::move(r)), tree(reader.chunks()) {}
+
+std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
+  std::unique_ptr<Asset> a(new Asset(Reader::open(path)));
+  const FileHeader& header = a->reader.header();
+  if (a->tree.topChunk() == kNoParent)
+    throw FileError(a->reader.name(), std::nullopt, "the file holds no surface to view");
+  for (const AttributeDesc& d : header.attributes) {
+    if (d.semantic == Semantic::Normal) a->blob.normals = true;
+    if (d.semantic == Semantic::Color) a->blob.colors = true;
+  }
+  // Bounds from the coarsest chunk's deepest level.
+  const SurfaceChunk top = decodeSurfaceChunk(a->reader, a->tree.topChunk());
+  const uint8_t last = uint8_t(top.topology.startLevel + top.topology.depth - 1);
+  double lo[3] = {1, 1, 1}, hi[3] = {0, 0, 0};
+  for (const SurfaceNode& n : top.layout.nodes) {
+    if (n.level != last && !n.isLeaf()) continue;
+    const auto cell = mortonDecode(n.key);
+    const double size = std::ldexp(1.0, -int(n.level));
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], cell[k] * size);
+      hi[k] = std::max(hi[k], (cell[k] + 1) * size);
+    }
+  }
+  const Frame& f = header.frame;
+  for (int k = 0; k < 3; ++k) {
+    a->bounds.lo[k] = f.origin[k] + lo[k] * f.size;
+    a->bounds.hi[k] = f.origin[k] + hi[k] * f.size;
+  }
+  // Airborne and terrestrial LiDAR (LAS) has z up; meshes and photogrammetry mostly y.
+  const auto meta = nlohmann::json::parse(a->reader.metadata(), nullptr, false);
+  if (meta.is_object() && meta.contains("inputs") && meta["inputs"].is_array())
+    for (const auto& input : meta["inputs"])
+      if (input.is_object() && input.value("format", "").rfind("las", 0) == 0) a->up = {0, 0, 1};
+  return a;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,28 @@
+// An .iso file opened for viewing: the memory-mapped reader, its chunk tree, what its corner
+// records carry, the bounds of its surface and the scene's up direction.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+
+#include "blob.h"
+#include "iso/reader.h"
+#include "scene.h"
+
+namespace iso::viewer {
+
+struct Asset {
+  Reader reader;
+  ChunkTree tree;
+  BlobOptions blob;
+  Bounds bounds;  // world units: the cells of the coarsest chunk's deepest nodes
+  Vec3d up{0, 1, 0};
+
+  // Throws iso::FileError for files that are not valid or hold no surface.
+  static std::unique_ptr<Asset> open(const std::filesystem::path& path);
+
+ private:
+  explicit Asset(Reader r);
+};
+
+}  // namespace iso::viewer

@@ -1,0 +1,178 @@
+// Building the GPU form of surface chunks (specs/viewer.md, "Chunks on the GPU").
+#include "blob.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <glm/glm.hpp>
+#include <glm/packing.hpp>
+#include <stdexcept>
+
+#include "iso/check.h"
+#include "shared.h"
+
+namespace iso::viewer {
+namespace {
+
+using gpu::kBlobData;
+using gpu::kBlobNodeCount;
+using gpu::kBlobNodes;
+using gpu::kBlobPageCount;
+using gpu::kBlobPageList;
+using gpu::kNodeCut;
+using gpu::kPageWords;
+
+// Octahedral encoding of a unit vector into [-1, 1]^2 (the decoder is decodeOctahedral).
+glm::vec2 encodeOctahedral(const std::array<float, 3>& n) {
+  const float sum = std::abs(n[0]) + std::abs(n[1]) + std::abs(n[2]);
+  if (!(sum > 0.0f)) return {0.0f, 0.0f};
+  glm::vec2 p(n[0] / sum, n[1] / sum);
+  if (n[2] < 0.0f) {
+    const float x = (1.0f - std::abs(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f);
+    const float y = (1.0f - std::abs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f);
+    p = {x, y};
+  }
+  return p;
+}
+
+uint8_t srgbByte(float linear) {
+  const float c = std::clamp(linear, 0.0f, 1.0f);
+  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
+  return uint8_t(std::lround(s * 255.0f));
+}
+
+// Append the corner record of a node: its 8 corners' values, distances in cell units.
+void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
+                  const BlobOptions& options) {
+  const float cell = std::ldexp(1.0f, -int(node.level));
+  float d[8];
+  for (int c = 0; c < 8; ++c) d[c] = values.distance.at(node.corners[c]) / cell;
+  for (int c = 0; c < 8; c += 2) out.push_back(glm::packHalf2x16({d[c], d[c + 1]}));
+  if (options.normals) {
+    for (int c = 0; c < 8; c += 2) {
+      const glm::vec2 a = encodeOctahedral(values.normal.at(node.corners[c]));
+      const glm::vec2 b = encodeOctahedral(values.normal.at(node.corners[c + 1]));
+      out.push_back(glm::packSnorm4x8({a.x, a.y, b.x, b.y}));
+    }
+  }
+  if (options.colors) {
+    for (int c = 0; c < 8; ++c) {
+      const auto& rgb = values.color.at(node.corners[c]);
+      out.push_back(uint32_t(srgbByte(rgb[0])) | uint32_t(srgbByte(rgb[1])) << 8 |
+                    uint32_t(srgbByte(rgb[2])) << 16 | 0xFF000000u);
+    }
+  }
+}
+
+}  // namespace
+
+ChunkTree::ChunkTree(std::span<const ChunkInfo> chunks) : chunks_(chunks) {
+  children_.resize(chunks.size());
+  for (const ChunkInfo& c : chunks) {
+    if (c.kind != kSurfaceKind) continue;
+    if (c.parent == kNoParent) {
+      if (c.level == 0 && top_ == kNoParent) top_ = c.id;
+    } else if (chunks[c.parent].kind == kSurfaceKind) {
+      children_[c.parent].push_back(c.id);
+    }
+  }
+}
+
+uint32_t ChunkTree::childCovering(uint32_t parent, uint8_t level, uint64_t key) const {
+  for (uint32_t child : children_.at(parent)) {
+    const ChunkInfo& c = chunks_[child];
+    if (cellContains(c.level, c.key, level, key)) return child;
+  }
+  return kNoParent;
+}
+
+uint32_t recordWords(const BlobOptions& options) {
+  return gpu::kRecordDistanceWords + (options.normals ? gpu::kRecordNormalWords : 0) +
+         (options.colors ? gpu::kRecordColorWords : 0);
+}
+
+uint32_t blobPages(size_t words) { return uint32_t((words + kPageWords - 1) / kPageWords); }
+
+std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const ChunkTree& tree,
+                                const BlobOptions& options) {
+  const std::vector<SurfaceNode>& nodes = chunk.layout.nodes;
+  const uint8_t lastLevel = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
+  // Records: one per filled leaf and per cut node, in node order.
+  std::vector<uint32_t> records;
+  std::vector<uint32_t> recordOf(nodes.size(), kNoNode);
+  // Cut nodes: links to the roots of the child chunks. A child chunk's roots are the children of
+  // this chunk's last-level nodes inside its cell, in key order, so counting them in node order
+  // gives each one's root index there.
+  std::vector<uint32_t> links;
+  std::vector<uint32_t> linkOf(nodes.size(), kNoNode);
+  std::vector<std::pair<uint32_t, uint32_t>> rootCounts;  // (child chunk, roots so far)
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    const SurfaceNode& node = nodes[i];
+    if (node.isLeaf()) {
+      recordOf[i] = uint32_t(records.size() / recordWords(options));
+      appendRecord(records, node, chunk.leafValues, options);
+      continue;
+    }
+    if (node.level != lastLevel) continue;
+    std::vector<uint32_t> nodeLinks;
+    bool complete = true;
+    for (int o = 0; o < 8 && complete; ++o) {
+      if (!(node.childMask & (1u << o))) continue;
+      const uint64_t childKey = node.key << 3 | uint64_t(o);
+      const uint32_t child = tree.childCovering(id, uint8_t(node.level + 1), childKey);
+      if (child == kNoParent) {
+        complete = false;
+        break;
+      }
+      auto it = std::find_if(rootCounts.begin(), rootCounts.end(),
+                             [&](const auto& p) { return p.first == child; });
+      if (it == rootCounts.end()) it = rootCounts.insert(rootCounts.end(), {child, 0});
+      nodeLinks.push_back(child);
+      nodeLinks.push_back(it->second++);
+    }
+    recordOf[i] = uint32_t(records.size() / recordWords(options));
+    appendRecord(records, node, chunk.lodValues, options);
+    if (complete) {  // else (a file without the child chunk) the node is drawn as its patch
+      linkOf[i] = uint32_t(links.size());
+      links.push_back(recordOf[i]);
+      links.insert(links.end(), nodeLinks.begin(), nodeLinks.end());
+    }
+  }
+  const uint32_t nodeCount = uint32_t(nodes.size());
+  const size_t pagesGuess = blobPages(kBlobPageList + 2 * size_t(nodeCount) + links.size() +
+                                      records.size() + 64) + 1;
+  const size_t header = kBlobPageList + pagesGuess;
+  const size_t nodesAt = header, linksAt = nodesAt + 2 * size_t(nodeCount);
+  const size_t dataAt = linksAt + links.size();
+  const size_t total = dataAt + records.size();
+  if (pagesGuess > kPageWords - kBlobPageList || total > (size_t(1) << 31))
+    throw std::length_error("chunk " + std::to_string(id) + " is too large for the viewer");
+  ISO_CHECK(blobPages(total) <= pagesGuess);
+  std::vector<uint32_t> blob(total, 0);
+  blob[kBlobNodeCount] = nodeCount;
+  blob[kBlobPageCount] = blobPages(total);
+  blob[kBlobNodes] = uint32_t(nodesAt);
+  blob[kBlobData] = uint32_t(dataAt);
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    const SurfaceNode& node = nodes[i];
+    uint32_t w0 = node.childMask, w1 = 0;
+    if (node.isLeaf()) {
+      w1 = recordOf[i];
+    } else if (node.level != lastLevel) {
+      w1 = node.firstChild;
+    } else if (linkOf[i] != kNoNode) {
+      w0 |= kNodeCut;
+      w1 = uint32_t(linksAt + linkOf[i]);
+    } else {
+      w0 = 0;  // children missing from the file: a leaf with the node's own patch
+      w1 = recordOf[i];
+    }
+    blob[nodesAt + 2 * i] = w0;
+    blob[nodesAt + 2 * i + 1] = w1;
+  }
+  std::copy(links.begin(), links.end(), blob.begin() + std::ptrdiff_t(linksAt));
+  std::copy(records.begin(), records.end(), blob.begin() + std::ptrdiff_t(dataAt));
+  return blob;
+}
+
+}  // namespace iso::viewer

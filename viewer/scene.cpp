@@ -1,0 +1,333 @@
+// Scene files, command-line scene options and the shaders' frame parameters (scene.h).
+#include "scene.h"
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <stdexcept>
+
+#include "iso/error.h"
+
+namespace iso::viewer {
+namespace {
+
+using nlohmann::json;
+
+Vec3d add(const Vec3d& a, const Vec3d& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3d scale(const Vec3d& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3d cross(const Vec3d& a, const Vec3d& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3d normalized(const Vec3d& a) {
+  const double n = std::sqrt(dot(a, a));
+  if (!(n > 0.0) || !std::isfinite(n)) throw std::invalid_argument("a zero or non-finite vector");
+  return scale(a, 1.0 / n);
+}
+
+std::vector<double> numbers(const std::string& text, size_t count, const std::string& what) {
+  std::vector<double> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || !std::isfinite(v))
+      throw std::invalid_argument(what + ": '" + item + "' is not a finite number");
+    out.push_back(v);
+  }
+  if (out.size() != count)
+    throw std::invalid_argument(what + ": expected " + std::to_string(count) + " numbers, got '" +
+                                text + "'");
+  return out;
+}
+
+std::vector<std::string> split(const std::string& text, char sep) {
+  std::vector<std::string> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, sep)) out.push_back(item);
+  return out;
+}
+
+// Reading JSON values with errors that name the file and the key.
+struct Fields {
+  const std::string& file;
+  [[noreturn]] void fail(const std::string& key, const std::string& why) const {
+    throw FileError(file, std::nullopt, "scene key '" + key + "': " + why);
+  }
+  double number(const json& j, const std::string& key) const {
+    if (!j.is_number() || !std::isfinite(j.get<double>())) fail(key, "expected a finite number");
+    return j.get<double>();
+  }
+  Vec3d vec3(const json& j, const std::string& key) const {
+    if (!j.is_array() || j.size() != 3) fail(key, "expected an array of 3 numbers");
+    return {number(j[0], key), number(j[1], key), number(j[2], key)};
+  }
+  std::array<float, 3> color(const json& j, const std::string& key) const {
+    const Vec3d v = vec3(j, key);
+    for (double c : v)
+      if (c < 0) fail(key, "colors are not negative");
+    return {float(v[0]), float(v[1]), float(v[2])};
+  }
+  bool boolean(const json& j, const std::string& key) const {
+    if (!j.is_boolean()) fail(key, "expected true or false");
+    return j.get<bool>();
+  }
+  void known(const json& object, const std::string& where,
+             std::initializer_list<const char*> keys) const {
+    if (!object.is_object()) fail(where, "expected an object");
+    for (const auto& item : object.items()) {
+      bool ok = false;
+      for (const char* k : keys) ok = ok || item.key() == k;
+      if (!ok) fail(where.empty() ? item.key() : where + "." + item.key(), "unknown key");
+    }
+  }
+};
+
+}  // namespace
+
+Vec3d parseVec3(const std::string& text) {
+  const auto v = numbers(text, 3, "vector");
+  return {v[0], v[1], v[2]};
+}
+
+LightSpec parseLight(const std::string& text) {
+  const auto parts = split(text, ':');
+  LightSpec light;
+  if (parts.size() < 2) throw std::invalid_argument("light '" + text + "': expected KIND:X,Y,Z");
+  size_t next = 2;
+  if (parts[0] == "point") {
+    light.position = parseVec3(parts[1]);
+  } else if (parts[0] == "area") {
+    if (parts.size() < 4)
+      throw std::invalid_argument("light '" + text + "': an area light needs X,Y,Z:U:V");
+    light.area = true;
+    light.position = parseVec3(parts[1]);
+    light.u = parseVec3(parts[2]);
+    light.v = parseVec3(parts[3]);
+    next = 4;
+    if (parts.size() > next) {
+      const double s = numbers(parts[next++], 1, "light samples")[0];
+      if (s < 1 || s > 1024 || s != std::floor(s))
+        throw std::invalid_argument("light samples: expected a whole number from 1 to 1024");
+      light.samples = int(s);
+    }
+  } else {
+    throw std::invalid_argument("light '" + text + "': the kind is point or area");
+  }
+  if (parts.size() > next) {
+    const Vec3d c = parseVec3(parts[next++]);
+    light.color = {float(c[0]), float(c[1]), float(c[2])};
+  }
+  if (parts.size() > next) light.intensity = float(numbers(parts[next++], 1, "intensity")[0]);
+  if (parts.size() > next) throw std::invalid_argument("light '" + text + "': too many parts");
+  return light;
+}
+
+void loadScene(const std::filesystem::path& path, Scene& scene) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) throw FileError(file, std::nullopt, "cannot open the scene file");
+  json j = json::parse(in, nullptr, false);
+  if (j.is_discarded()) throw FileError(file, std::nullopt, "not valid JSON");
+  const Fields f{file};
+  f.known(j, "", {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up",
+                  "environment", "environment_intensity", "shadows", "reflections",
+                  "refractions", "bounces", "samples", "lod_pixels"});
+  if (j.contains("camera")) {
+    const json& c = j["camera"];
+    f.known(c, "camera", {"eye", "target", "up", "fov"});
+    Camera cam = scene.camera.value_or(Camera{});
+    if (!c.contains("eye") || !c.contains("target")) f.fail("camera", "needs eye and target");
+    cam.eye = f.vec3(c["eye"], "camera.eye");
+    cam.target = f.vec3(c["target"], "camera.target");
+    if (c.contains("up")) cam.up = f.vec3(c["up"], "camera.up");
+    if (c.contains("fov")) cam.fovDegrees = f.number(c["fov"], "camera.fov");
+    if (!(cam.fovDegrees > 1 && cam.fovDegrees < 179)) f.fail("camera.fov", "from 1 to 179");
+    scene.camera = cam;
+  }
+  if (j.contains("lights")) {
+    if (!j["lights"].is_array()) f.fail("lights", "expected an array");
+    scene.lights.clear();
+    for (const json& l : j["lights"]) {
+      f.known(l, "lights[]", {"type", "position", "u", "v", "color", "intensity", "samples"});
+      LightSpec light;
+      const std::string type = l.value("type", "point");
+      if (type != "point" && type != "area") f.fail("lights[].type", "point or area");
+      light.area = type == "area";
+      if (!l.contains("position")) f.fail("lights[].position", "missing");
+      light.position = f.vec3(l["position"], "lights[].position");
+      if (light.area) {
+        if (!l.contains("u") || !l.contains("v")) f.fail("lights[]", "an area light needs u, v");
+        light.u = f.vec3(l["u"], "lights[].u");
+        light.v = f.vec3(l["v"], "lights[].v");
+      }
+      if (l.contains("color")) light.color = f.color(l["color"], "lights[].color");
+      if (l.contains("intensity"))
+        light.intensity = float(f.number(l["intensity"], "lights[].intensity"));
+      if (l.contains("samples")) {
+        const double s = f.number(l["samples"], "lights[].samples");
+        if (s < 1 || s > 1024 || s != std::floor(s)) f.fail("lights[].samples", "1 to 1024");
+        light.samples = int(s);
+      }
+      scene.lights.push_back(light);
+    }
+    if (scene.lights.size() > gpu::kMaxLights)
+      f.fail("lights", "at most " + std::to_string(gpu::kMaxLights) + " lights");
+  }
+  if (j.contains("material")) {
+    const json& m = j["material"];
+    f.known(m, "material", {"color", "diffuse", "specular", "shininess", "reflectivity",
+                            "transparency", "ior", "absorption"});
+    Material& mat = scene.material;
+    if (m.contains("color")) mat.color = f.color(m["color"], "material.color");
+    auto unit = [&](const char* key, float& out) {
+      if (!m.contains(key)) return;
+      const double v = f.number(m[key], std::string("material.") + key);
+      if (v < 0 || v > 1) f.fail(std::string("material.") + key, "from 0 to 1");
+      out = float(v);
+    };
+    unit("diffuse", mat.diffuse);
+    unit("specular", mat.specular);
+    unit("reflectivity", mat.reflectivity);
+    unit("transparency", mat.transparency);
+    if (m.contains("shininess")) mat.shininess = float(f.number(m["shininess"], "material.shininess"));
+    if (m.contains("ior")) {
+      mat.ior = float(f.number(m["ior"], "material.ior"));
+      if (!(mat.ior >= 1.0f && mat.ior <= 4.0f)) f.fail("material.ior", "from 1 to 4");
+    }
+    if (m.contains("absorption")) mat.absorption = f.color(m["absorption"], "material.absorption");
+    if (mat.reflectivity + mat.transparency > 1.0f)
+      f.fail("material", "reflectivity + transparency is at most 1");
+  }
+  if (j.contains("ambient")) scene.ambient = f.color(j["ambient"], "ambient");
+  if (j.contains("sky_top")) scene.skyTop = f.color(j["sky_top"], "sky_top");
+  if (j.contains("sky_bottom")) scene.skyBottom = f.color(j["sky_bottom"], "sky_bottom");
+  if (j.contains("up")) scene.up = f.vec3(j["up"], "up");
+  if (j.contains("environment")) {
+    if (!j["environment"].is_string()) f.fail("environment", "expected a file name");
+    const std::filesystem::path env = j["environment"].get<std::string>();
+    scene.environment = (env.is_relative() ? path.parent_path() / env : env).string();
+  }
+  if (j.contains("environment_intensity"))
+    scene.environmentIntensity = float(f.number(j["environment_intensity"], "environment_intensity"));
+  if (j.contains("shadows")) scene.shadows = f.boolean(j["shadows"], "shadows");
+  if (j.contains("reflections")) scene.reflections = f.boolean(j["reflections"], "reflections");
+  if (j.contains("refractions")) scene.refractions = f.boolean(j["refractions"], "refractions");
+  if (j.contains("bounces")) {
+    const double b = f.number(j["bounces"], "bounces");
+    if (b < 0 || b > 8 || b != std::floor(b)) f.fail("bounces", "a whole number from 0 to 8");
+    scene.bounces = int(b);
+  }
+  if (j.contains("samples")) {
+    const double s = f.number(j["samples"], "samples");
+    if (s < 1 || s > 256 || s != std::floor(s)) f.fail("samples", "a whole number from 1 to 256");
+    scene.samples = int(s);
+  }
+  if (j.contains("lod_pixels")) {
+    scene.lodPixels = float(f.number(j["lod_pixels"], "lod_pixels"));
+    if (!(scene.lodPixels >= 0)) f.fail("lod_pixels", "not negative");
+  }
+}
+
+Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {
+  const Vec3d center = scale(add(b.lo, b.hi), 0.5);
+  const double radius = 0.5 * std::sqrt(dot(sub(b.hi, b.lo), sub(b.hi, b.lo)));
+  const Vec3d u = normalized(up);
+  // A horizontal direction not along up, then 20 degrees above the horizon.
+  Vec3d side = std::abs(u[2]) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, -1, 0};
+  side = normalized(sub(side, scale(u, dot(side, u))));
+  const Vec3d right = normalized(cross(side, u));
+  const Vec3d view = normalized(add(add(side, scale(right, 0.35)), scale(u, 0.36)));
+  const double distance = radius / std::sin(fovDegrees * M_PI / 360.0) * 1.05;
+  return {add(center, scale(view, distance)), center, u, fovDegrees};
+}
+
+LightSpec defaultLight(const Camera& c, const Bounds& b) {
+  const Vec3d forward = normalized(sub(c.target, c.eye));
+  const Vec3d right = normalized(cross(forward, c.up));
+  const Vec3d up = cross(right, forward);
+  const double radius = 0.5 * std::sqrt(dot(sub(b.hi, b.lo), sub(b.hi, b.lo)));
+  LightSpec light;
+  light.position = add(c.target, scale(add(add(scale(right, -0.6), scale(up, 1.0)),
+                                           scale(forward, -0.7)),
+                                       3.0 * radius));
+  return light;
+}
+
+gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
+                             const FrameSetup& s) {
+  using glm::vec4;
+  if (!scene.camera) throw std::logic_error("frameParams: the scene has no camera");
+  const Camera& c = *scene.camera;
+  const auto toFrame = [&](const Vec3d& p) {
+    return vec4(float((p[0] - frame.origin[0]) / frame.size),
+                float((p[1] - frame.origin[1]) / frame.size),
+                float((p[2] - frame.origin[2]) / frame.size), 0.0f);
+  };
+  const auto toFrameVector = [&](const Vec3d& v) {
+    return vec4(float(v[0] / frame.size), float(v[1] / frame.size), float(v[2] / frame.size), 0);
+  };
+  const auto rgb = [](const std::array<float, 3>& a, float w = 0.0f) {
+    return vec4(a[0], a[1], a[2], w);
+  };
+  gpu::FrameParams p{};
+  const Vec3d forward = normalized(sub(c.target, c.eye));
+  const Vec3d right = normalized(cross(forward, c.up));
+  const Vec3d up = cross(right, forward);
+  const double tanHalf = std::tan(c.fovDegrees * M_PI / 360.0);
+  const double aspect = double(s.width) / double(std::max(s.height, 1u));
+  p.eye = toFrame(c.eye);
+  p.eye.w = float(2.0 * tanHalf / std::max(s.height, 1u));
+  p.right = vec4(float(right[0] * tanHalf * aspect), float(right[1] * tanHalf * aspect),
+                 float(right[2] * tanHalf * aspect), 0);
+  p.up = vec4(float(up[0] * tanHalf), float(up[1] * tanHalf), float(up[2] * tanHalf), 0);
+  p.forward = vec4(float(forward[0]), float(forward[1]), float(forward[2]), 0);
+  p.image = {s.width, s.height, uint32_t(std::max(scene.samples, 1)), s.frameNumber};
+  uint32_t options = 0;
+  if (scene.shadows) options |= gpu::kOptionShadows;
+  if (scene.reflections) options |= gpu::kOptionReflections;
+  if (scene.refractions) options |= gpu::kOptionRefractions;
+  if (s.normals) options |= gpu::kOptionNormals;
+  if (s.colors) options |= gpu::kOptionColors;
+  if (s.swapRedBlue) options |= gpu::kOptionSwapRB;
+  if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
+  if (s.requests) options |= gpu::kOptionRequests;
+  p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
+  p.pool = {s.poolWordsLog2, s.poolWords, s.environmentWidth, s.environmentHeight};
+  // Rays leave surfaces a hundredth of the finest cell away (the side flag does the rest).
+  p.lod = vec4(scene.lodPixels, float(0.01 * std::ldexp(1.0, -int(maxLevel))),
+               scene.environmentIntensity, 0);
+  p.ambient = rgb(scene.ambient);
+  p.albedo = rgb(scene.material.color, scene.material.shininess);
+  p.material = vec4(scene.material.diffuse, scene.material.specular, scene.material.reflectivity,
+                    scene.material.transparency);
+  p.medium = vec4(scene.material.ior, float(scene.material.absorption[0] * frame.size),
+                  float(scene.material.absorption[1] * frame.size),
+                  float(scene.material.absorption[2] * frame.size));
+  p.skyTop = rgb(scene.skyTop);
+  p.skyBottom = rgb(scene.skyBottom);
+  const Vec3d worldUp = normalized(scene.up.value_or(c.up));
+  p.worldUp = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]), 0);
+  for (size_t i = 0; i < scene.lights.size() && i < gpu::kMaxLights; ++i) {
+    const LightSpec& l = scene.lights[i];
+    gpu::Light& g = p.lights[i];
+    g.position = toFrame(l.position);
+    g.position.w = float(l.area ? gpu::kLightArea : gpu::kLightPoint);
+    g.color = vec4(l.color[0] * l.intensity, l.color[1] * l.intensity, l.color[2] * l.intensity,
+                   float(l.samples));
+    g.u = toFrameVector(l.u);
+    g.v = toFrameVector(l.v);
+  }
+  return p;
+}
+
+}  // namespace iso::viewer

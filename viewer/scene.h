@@ -1,0 +1,88 @@
+// What the viewer draws besides the surface: camera, lights, material, environment and the
+// rendering switches, in world units (those of the scanned points). Set from a JSON scene file
+// (specs/viewer.md, "Scene files") and command-line options, and turned into the shaders'
+// FrameParams in frame units.
+#pragma once
+
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "iso/format.h"
+#include "shared.h"
+
+namespace iso::viewer {
+
+using Vec3d = std::array<double, 3>;
+
+struct Camera {
+  Vec3d eye{}, target{}, up{0, 1, 0};
+  double fovDegrees = 40.0;
+};
+
+struct LightSpec {
+  bool area = false;
+  Vec3d position{};       // point light, or the center of an area light
+  Vec3d u{}, v{};         // area light edges
+  std::array<float, 3> color{1, 1, 1};
+  float intensity = 1.0f;
+  int samples = 16;       // area light shadow rays per sample
+};
+
+struct Material {
+  std::array<float, 3> color{0.75f, 0.75f, 0.72f};  // linear, when the file has no colors
+  float diffuse = 0.9f, specular = 0.25f, shininess = 40.0f;
+  float reflectivity = 0.0f, transparency = 0.0f, ior = 1.5f;
+  std::array<float, 3> absorption{0, 0, 0};  // per world unit, inside
+};
+
+struct Scene {
+  std::optional<Camera> camera;       // none: framed on the surface's bounds
+  std::vector<LightSpec> lights;      // none: one point light over the camera's shoulder
+  Material material;
+  std::array<float, 3> ambient{0.12f, 0.12f, 0.13f};
+  std::array<float, 3> skyTop{0.55f, 0.66f, 0.85f}, skyBottom{0.18f, 0.17f, 0.16f};
+  std::optional<Vec3d> up;            // none: from the file (z for LiDAR inputs, else y)
+  std::string environment;            // an image OpenImageIO reads (equirectangular)
+  float environmentIntensity = 1.0f;
+  bool shadows = true, reflections = true, refractions = true;
+  int bounces = 3;
+  int samples = 1;                    // per pixel (supersampling)
+  float lodPixels = 1.0f;             // screen-space error allowed, pixels
+};
+
+// Read a scene file over `scene` (keys it does not set stay). Throws iso::FileError naming the
+// file and the key for anything it does not understand.
+void loadScene(const std::filesystem::path& path, Scene& scene);
+
+// Parse "x,y,z" and light specs for the command line (std::invalid_argument on error).
+Vec3d parseVec3(const std::string& text);
+// "point:X,Y,Z[:R,G,B[:INTENSITY]]" or "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]".
+LightSpec parseLight(const std::string& text);
+
+// Axis-aligned bounds in world units.
+struct Bounds {
+  Vec3d lo{}, hi{};
+};
+
+// A camera that frames the bounds, looking from the front and a little above.
+Camera frameCamera(const Bounds& bounds, const Vec3d& up, double fovDegrees);
+// The default light for a camera: above and to the left of it.
+LightSpec defaultLight(const Camera& camera, const Bounds& bounds);
+
+struct FrameSetup {
+  uint32_t width = 0, height = 0;
+  uint32_t frameNumber = 1;
+  uint32_t topChunk = 0, chunkCount = 0;
+  uint32_t poolWordsLog2 = 0, poolWords = 0;  // per pool buffer; all of them
+  uint32_t environmentWidth = 0, environmentHeight = 0;
+  bool normals = false, colors = false, swapRedBlue = false, requests = true;
+};
+
+// The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.
+gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
+                             const FrameSetup& setup);
+
+}  // namespace iso::viewer

@@ -1,0 +1,177 @@
+// The page pool's residency and the loader thread (streaming.h, specs/viewer.md "Streaming").
+#include "streaming.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "iso/error.h"
+#include "iso/surface.h"
+#include "shared.h"
+
+namespace iso::viewer {
+
+ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options,
+                       uint32_t poolPages)
+    : reader_(reader), tree_(tree), options_(options), poolPages_(poolPages) {
+  state_.resize(reader.chunks().size());
+  freePages_.resize(poolPages);
+  for (uint32_t i = 0; i < poolPages; ++i) freePages_[i] = poolPages - 1 - i;  // low pages first
+  if (tree.topChunk() == kNoParent) throw std::runtime_error("the file has no surface chunk");
+  {
+    std::lock_guard lock(mutex_);
+    state_[tree.topChunk()].queued = true;
+    state_[tree.topChunk()].pinned = true;
+    ready_.emplace_back(tree.topChunk(), prepare(tree.topChunk()));
+  }
+  if (blobPages(ready_.front().second.size()) > poolPages)
+    throw std::runtime_error("--vram is too small: the coarsest chunk alone needs " +
+                             std::to_string(blobPages(ready_.front().second.size()) *
+                                            uint64_t(gpu::kPageWords) * 4) +
+                             " bytes of page pool");
+  loader_ = std::thread([this] { loaderLoop(); });
+}
+
+ChunkCache::~ChunkCache() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  loader_.join();
+}
+
+std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
+  const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
+  return buildBlob(decoded, chunk, tree_, options_);
+}
+
+void ChunkCache::request(uint32_t chunk, uint64_t frame) {
+  if (chunk >= state_.size()) return;
+  State& s = state_[chunk];
+  s.lastRequested = frame;
+  if (s.firstPage != kNone || s.queued) return;
+  s.queued = true;
+  {
+    std::lock_guard lock(mutex_);
+    queue_.push_back(chunk);
+  }
+  wake_.notify_one();
+}
+
+void ChunkCache::use(uint32_t chunk, uint64_t frame) {
+  if (chunk < state_.size()) state_[chunk].lastUsed = std::max(state_[chunk].lastUsed, frame);
+}
+
+void ChunkCache::loaderLoop() {
+  for (;;) {
+    uint32_t chunk;
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait(lock, [&] { return stop_ || (!queue_.empty() && !error_); });
+      if (stop_) return;
+      // Coarser chunks first: they stand in for more of the picture.
+      auto best = std::min_element(queue_.begin(), queue_.end(), [&](uint32_t a, uint32_t b) {
+        return reader_.chunk(a).level < reader_.chunk(b).level;
+      });
+      chunk = *best;
+      queue_.erase(best);
+      busy_ = true;
+    }
+    std::vector<uint32_t> blob;
+    std::optional<std::string> failure;
+    try {
+      blob = prepare(chunk);
+    } catch (const std::exception& e) {
+      failure = e.what();
+    }
+    std::lock_guard lock(mutex_);
+    busy_ = false;
+    if (failure)
+      error_ = failure;
+    else
+      ready_.emplace_back(chunk, std::move(blob));
+  }
+}
+
+bool ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted) {
+  while (freePages_.size() < pages) {
+    uint32_t victim = kNone;
+    for (uint32_t c = 0; c < state_.size(); ++c) {
+      const State& s = state_[c];
+      if (s.firstPage == kNone || s.pinned || s.lastUsed >= frame) continue;
+      if (victim == kNone || s.lastUsed < state_[victim].lastUsed) victim = c;
+    }
+    if (victim == kNone) return false;
+    State& s = state_[victim];
+    freePages_.insert(freePages_.end(), s.pages.rbegin(), s.pages.rend());
+    s.pages.clear();
+    s.firstPage = kNone;
+    --residentCount_;
+    evicted.push_back(victim);
+  }
+  return true;
+}
+
+std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBytes,
+                                                  std::vector<uint32_t>& evicted) {
+  std::vector<Upload> uploads;
+  uint64_t bytes = 0;
+  std::deque<std::pair<uint32_t, std::vector<uint32_t>>> ready;
+  {
+    std::lock_guard lock(mutex_);
+    ready.swap(ready_);
+  }
+  std::deque<std::pair<uint32_t, std::vector<uint32_t>>> keep;
+  while (!ready.empty()) {
+    auto [chunk, words] = std::move(ready.front());
+    ready.pop_front();
+    State& s = state_[chunk];
+    const uint32_t pages = blobPages(words.size());
+    // Past this frame's upload budget, or a chunk no longer wanted: wait, or drop.
+    const bool wanted = s.pinned || s.lastRequested + 8 >= frame;
+    if (!wanted) {
+      s.queued = false;
+      continue;
+    }
+    if ((bytes > 0 && bytes + words.size() * 4 > maxBytes) || !makeRoom(pages, frame, evicted)) {
+      keep.emplace_back(chunk, std::move(words));
+      continue;
+    }
+    Upload up;
+    up.chunk = chunk;
+    for (uint32_t i = 0; i < pages; ++i) {
+      up.pages.push_back(freePages_.back());
+      freePages_.pop_back();
+    }
+    std::copy(up.pages.begin(), up.pages.end(), words.begin() + gpu::kBlobPageList);
+    s.pages = up.pages;
+    s.firstPage = up.pages[0];
+    s.queued = false;
+    s.lastUsed = std::max(s.lastUsed, frame);
+    ++residentCount_;
+    bytes += words.size() * 4;
+    up.words = std::move(words);
+    uploads.push_back(std::move(up));
+  }
+  std::lock_guard lock(mutex_);
+  for (auto& k : keep) ready_.push_back(std::move(k));
+  return uploads;
+}
+
+uint32_t ChunkCache::pendingChunks() const {
+  uint32_t n = 0;
+  for (const State& s : state_) n += s.queued ? 1 : 0;
+  return n;
+}
+
+bool ChunkCache::idle() const {
+  std::lock_guard lock(mutex_);
+  return queue_.empty() && !busy_;
+}
+
+std::optional<std::string> ChunkCache::error() const {
+  std::lock_guard lock(mutex_);
+  return error_;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,91 @@
+// Which chunks live in the GPU's page pool: a page allocator with an LRU over chunks, and a
+// loader thread that decodes requested chunks from the memory-mapped file into blobs (blob.h)
+// while frames go on. No Vulkan here: the renderer uploads what place() hands out.
+//
+// Threading: every member function is called from one thread (the renderer's); the loader thread
+// only touches the request and ready queues, under the mutex.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "blob.h"
+#include "iso/reader.h"
+
+namespace iso::viewer {
+
+class ChunkCache {
+ public:
+  // A pool of poolPages pages. Throws when the top chunk alone does not fit.
+  ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options, uint32_t poolPages);
+  ~ChunkCache();
+  ChunkCache(const ChunkCache&) = delete;
+  ChunkCache& operator=(const ChunkCache&) = delete;
+
+  // A chunk's blob, decoded and built now on the calling thread.
+  std::vector<uint32_t> prepare(uint32_t chunk) const;
+
+  // A ray asked for the chunk in `frame` / went through it in `frame`.
+  void request(uint32_t chunk, uint64_t frame);
+  void use(uint32_t chunk, uint64_t frame);
+
+  struct Upload {
+    uint32_t chunk = 0;
+    std::vector<uint32_t> pages;  // pool pages, in blob order
+    std::vector<uint32_t> words;  // the blob with its page list filled in
+  };
+  // Place prepared chunks into the pool, up to about maxBytes of them, evicting the least
+  // recently used chunks that no ray used in `frame` (the last one with feedback) and that are not
+  // pinned. `evicted` receives the chunks that left. The top chunk is placed, pinned, first.
+  std::vector<Upload> place(uint64_t frame, uint64_t maxBytes, std::vector<uint32_t>& evicted);
+
+  bool resident(uint32_t chunk) const { return state_[chunk].firstPage != kNone; }
+  uint32_t firstPage(uint32_t chunk) const { return state_[chunk].firstPage; }
+  uint32_t residentChunks() const { return residentCount_; }
+  uint32_t pagesInUse() const { return poolPages_ - uint32_t(freePages_.size()); }
+  uint32_t poolPages() const { return poolPages_; }
+  // Chunks asked for and not resident (queued, being decoded, or decoded and waiting for room).
+  uint32_t pendingChunks() const;
+  // Whether the loader has nothing to do and nothing waits to be placed that could be.
+  bool idle() const;
+  // The first error of the loader thread (a corrupt chunk), if any.
+  std::optional<std::string> error() const;
+
+ private:
+  static constexpr uint32_t kNone = 0xFFFFFFFFu;
+  struct State {
+    uint32_t firstPage = kNone;
+    std::vector<uint32_t> pages;
+    uint64_t lastUsed = 0;
+    uint64_t lastRequested = 0;
+    bool queued = false;  // asked of the loader, not yet resident
+    bool pinned = false;
+  };
+  void loaderLoop();
+  bool makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted);
+
+  const Reader& reader_;
+  const ChunkTree& tree_;
+  BlobOptions options_;
+  uint32_t poolPages_;
+  std::vector<uint32_t> freePages_;
+  std::vector<State> state_;
+  uint32_t residentCount_ = 0;
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::vector<uint32_t> queue_;  // asked for, not yet taken by the loader
+  std::deque<std::pair<uint32_t, std::vector<uint32_t>>> ready_;  // decoded, waiting for room
+  bool busy_ = false;
+  bool stop_ = false;
+  std::optional<std::string> error_;
+  std::thread loader_;
+};
+
+}  // namespace iso::viewer

@@ -1,0 +1,224 @@
+// Headless pictures, the CPU reference picture and the benchmark of `iso view` (view.h).
+#include "view.h"
+
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <optional>
+
+#include "asset.h"
+#include "cpu_tracer.h"
+#include "image.h"
+#include "renderer.h"
+
+namespace iso::viewer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+std::string mib(uint64_t bytes) { return fmt::format("{:.1f} MiB", bytes / 1048576.0); }
+
+// The scene with its camera and lights filled in for this asset.
+Scene completeScene(const ViewOptions& options, const Asset& asset) {
+  Scene scene = options.scene;
+  const Vec3d up = scene.up.value_or(asset.up);
+  if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, 40.0);
+  if (scene.lights.empty()) scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
+  return scene;
+}
+
+std::optional<Environment> environmentOf(const Scene& scene) {
+  if (scene.environment.empty()) return std::nullopt;
+  return loadEnvironment(scene.environment);
+}
+
+struct GpuSession {
+  Gpu gpu;
+  explicit GpuSession(const ViewOptions& o) {
+    GpuOptions g;
+    g.validation = o.validation;
+    g.deviceName = o.device;
+    gpu = createGpu(g);
+  }
+  ~GpuSession() { destroyGpu(gpu); }
+};
+
+}  // namespace
+
+int viewHeadless(const ViewOptions& options) {
+  const auto asset = Asset::open(options.file);
+  const Scene scene = completeScene(options, *asset);
+  const auto env = environmentOf(scene);
+  GpuSession session(options);
+  Gpu& gpu = session.gpu;
+  RendererOptions ro;
+  ro.width = options.width;
+  ro.height = options.height;
+  ro.vram = options.vram;
+  ro.uploadBytes = options.uploadBytes;
+  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
+  VkCommandBuffer cb = allocateCommandBuffer(gpu);
+  VkFence fence = createFence(gpu, false);
+  const auto start = Clock::now();
+  double lastFrame = 0;
+  uint32_t frames = 0;
+  for (; frames < options.maxFrames; ++frames) {
+    FrameSetup setup = renderer.setup();
+    renderer.prepare(frameParams(scene, asset->reader.header().frame,
+                                 asset->reader.header().maxLevel, setup));
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    ISO_VK(vkBeginCommandBuffer(cb, &begin));
+    renderer.record(cb);
+    ISO_VK(vkEndCommandBuffer(cb));
+    const auto t0 = Clock::now();
+    submitAndWait(gpu, cb, fence);
+    lastFrame = seconds(Clock::now() - t0);
+    renderer.collect();
+    if (renderer.converged() || renderer.stalled()) {
+      ++frames;
+      break;
+    }
+  }
+  const FrameStats& s = renderer.stats();
+  const auto pixels = renderer.pixels();
+  vkDestroyFence(gpu.device, fence, nullptr);
+  writeImage(options.out, options.width, options.height, pixels);
+  fmt::print("{}: {}x{} on {}, {} frame{} in {:.2f} s ({}), last frame {:.1f} ms, {:.1f} Mrays/s\n",
+             options.out.string(), options.width, options.height, gpu.properties.deviceName,
+             frames, frames == 1 ? "" : "s", seconds(Clock::now() - start),
+             renderer.converged() ? "converged" : "not converged",
+             lastFrame * 1e3, lastFrame > 0 ? s.rays / lastFrame / 1e6 : 0.0);
+  fmt::print("  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
+             "(--vram {})\n",
+             s.resident, asset->reader.chunks().size(), mib(s.poolBytesInUse), mib(s.poolBytes),
+             mib(s.streamedBytes), mib(s.vramPeak), mib(options.vram));
+  if (renderer.stalled())
+    fmt::print(stderr,
+               "iso view: the view needs more chunks than --vram {} holds; coarser levels are "
+               "shown where they are missing\n",
+               mib(options.vram));
+  if (*gpu.validationErrors > 0) {
+    fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
+    return 1;
+  }
+  return 0;
+}
+
+int viewCpu(const ViewOptions& options) {
+  const auto asset = Asset::open(options.file);
+  const Scene scene = completeScene(options, *asset);
+  const auto env = environmentOf(scene);
+  const auto t0 = Clock::now();
+  const CpuPool pool = buildCpuPool(*asset);
+  const double load = seconds(Clock::now() - t0);
+  FrameSetup setup;
+  setup.width = options.width;
+  setup.height = options.height;
+  setup.topChunk = asset->tree.topChunk();
+  setup.chunkCount = uint32_t(asset->reader.chunks().size());
+  setup.normals = asset->blob.normals;
+  setup.colors = asset->blob.colors;
+  setup.requests = false;
+  setup.environmentWidth = env ? env->width : 0;
+  setup.environmentHeight = env ? env->height : 0;
+  const auto params =
+      frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel, setup);
+  const auto t1 = Clock::now();
+  const CpuFrame frame = renderCpu(pool, params, env ? &*env : nullptr);
+  const double render = seconds(Clock::now() - t1);
+  writeImage(options.out, options.width, options.height, frame.pixels);
+  fmt::print("{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
+             "{:.2f} s\n",
+             options.out.string(), options.width, options.height, render,
+             frame.rays / render / 1e6, load);
+  return 0;
+}
+
+int viewBench(const ViewOptions& options) {
+  const auto asset = Asset::open(options.file);
+  const Scene base = completeScene(options, *asset);
+  const auto env = environmentOf(base);
+  GpuSession session(options);
+  Gpu& gpu = session.gpu;
+  RendererOptions ro;
+  ro.width = options.width;
+  ro.height = options.height;
+  ro.vram = options.vram;
+  ro.uploadBytes = options.uploadBytes;
+  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
+  VkCommandBuffer cb = allocateCommandBuffer(gpu);
+  VkFence fence = createFence(gpu, false);
+  // The camera path: a full orbit around the target at the starting distance.
+  const Camera c0 = *base.camera;
+  const Vec3d up = c0.up;
+  Vec3d offset{c0.eye[0] - c0.target[0], c0.eye[1] - c0.target[1], c0.eye[2] - c0.target[2]};
+  std::vector<double> ms;
+  std::vector<uint64_t> uploaded;
+  uint64_t rays = 0;
+  double total = 0;
+  uint32_t maxResident = 0;
+  for (uint32_t f = 0; f < options.benchFrames; ++f) {
+    const double a = 2 * M_PI * f / options.benchFrames;
+    // Rodrigues' rotation of the offset around up.
+    const double cs = std::cos(a), sn = std::sin(a);
+    const double k = up[0] * offset[0] + up[1] * offset[1] + up[2] * offset[2];
+    const Vec3d cr{up[1] * offset[2] - up[2] * offset[1], up[2] * offset[0] - up[0] * offset[2],
+                   up[0] * offset[1] - up[1] * offset[0]};
+    Scene scene = base;
+    for (int i = 0; i < 3; ++i)
+      scene.camera->eye[i] =
+          c0.target[i] + offset[i] * cs + cr[i] * sn + up[i] * k * (1 - cs);
+    renderer.prepare(frameParams(scene, asset->reader.header().frame,
+                                 asset->reader.header().maxLevel, renderer.setup()));
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    ISO_VK(vkBeginCommandBuffer(cb, &begin));
+    renderer.record(cb);
+    ISO_VK(vkEndCommandBuffer(cb));
+    const auto t0 = Clock::now();
+    submitAndWait(gpu, cb, fence);
+    const double dt = seconds(Clock::now() - t0);
+    renderer.collect();
+    const FrameStats& s = renderer.stats();
+    if (f > 0) {  // the first frame builds the pipeline's caches
+      ms.push_back(dt * 1e3);
+      rays += s.rays;
+      total += dt;
+    }
+    uploaded.push_back(s.uploadedBytes);
+    maxResident = std::max(maxResident, s.resident);
+  }
+  vkDestroyFence(gpu.device, fence, nullptr);
+  const FrameStats& s = renderer.stats();
+  std::vector<double> sorted = ms;
+  std::sort(sorted.begin(), sorted.end());
+  const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / std::max<size_t>(ms.size(), 1);
+  const uint64_t upTotal = std::accumulate(uploaded.begin(), uploaded.end(), uint64_t(0));
+  const uint64_t upMax = *std::max_element(uploaded.begin(), uploaded.end());
+  fmt::print("bench {}: {}x{} on {}, {} frames orbiting, samples {}, shadows {}, reflections {}, "
+             "--vram {}\n",
+             options.file.filename().string(), options.width, options.height,
+             gpu.properties.deviceName, options.benchFrames, base.samples,
+             base.shadows ? "on" : "off", base.reflections && base.material.reflectivity > 0
+                                              ? "on"
+                                              : "off",
+             mib(options.vram));
+  fmt::print("  ms/frame    mean {:.2f}, median {:.2f}, max {:.2f}\n", mean,
+             sorted.empty() ? 0 : sorted[sorted.size() / 2], sorted.empty() ? 0 : sorted.back());
+  fmt::print("  rays/s      {:.2f} M ({:.2f} rays a pixel)\n", total > 0 ? rays / total / 1e6 : 0,
+             double(rays) / std::max<size_t>(ms.size(), 1) / (double(options.width) * options.height));
+  fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", mib(s.vramInUse),
+             mib(s.vramPeak), mib(s.poolBytesInUse), mib(s.poolBytes));
+  fmt::print("  chunks      {} resident at the end, {} at most, of {}\n", s.resident, maxResident,
+             asset->reader.chunks().size());
+  fmt::print("  streamed    {} in all, {:.1f} KiB a frame on average, {} at most in a frame\n",
+             mib(upTotal), upTotal / 1024.0 / uploaded.size(), mib(upMax));
+  return *gpu.validationErrors > 0 ? 1 : 0;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,38 @@
+// `iso view`: the drivers behind the command (tools/iso/cmd_view.cpp) — a window, a headless
+// picture (GPU or CPU reference tracer), and a benchmark along a camera path.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+
+#include "scene.h"
+
+namespace iso::viewer {
+
+struct ViewOptions {
+  std::filesystem::path file;
+  std::filesystem::path sceneFile;     // JSON scene (watched and reloaded in the window)
+  Scene scene;                         // after the scene file and the command line
+  uint32_t width = 1024, height = 1024;
+  uint64_t vram = uint64_t(1) << 30;
+  uint64_t uploadBytes = 16u << 20;
+  bool validation = false;
+  std::string device;
+  // Headless
+  std::filesystem::path out;
+  uint32_t maxFrames = 1000;           // frames to let streaming converge
+  // Window
+  uint32_t frames = 0;                 // quit after this many frames (0: when closed)
+  std::filesystem::path screenshot;    // save the last frame here when quitting
+  // Benchmark
+  uint32_t benchFrames = 120;
+};
+
+// Each returns the process exit code and throws for errors (file, Vulkan, options).
+int viewHeadless(const ViewOptions& options);
+int viewCpu(const ViewOptions& options);
+int viewBench(const ViewOptions& options);
+int viewWindow(const ViewOptions& options);
+
+}  // namespace iso::viewer

@@ -1,0 +1,365 @@
+// The viewer's Vulkan layer (vulkan.h).
+#include "vulkan.h"
+
+#include <cstdlib>
+#include <cstring>
+#include <fmt/core.h>
+
+namespace iso::viewer {
+namespace {
+
+const char* resultName(VkResult r) {
+  switch (r) {
+    case VK_SUCCESS: return "VK_SUCCESS";
+    case VK_NOT_READY: return "VK_NOT_READY";
+    case VK_TIMEOUT: return "VK_TIMEOUT";
+    case VK_INCOMPLETE: return "VK_INCOMPLETE";
+    case VK_SUBOPTIMAL_KHR: return "VK_SUBOPTIMAL_KHR";
+    case VK_ERROR_OUT_OF_HOST_MEMORY: return "VK_ERROR_OUT_OF_HOST_MEMORY";
+    case VK_ERROR_OUT_OF_DEVICE_MEMORY: return "VK_ERROR_OUT_OF_DEVICE_MEMORY";
+    case VK_ERROR_INITIALIZATION_FAILED: return "VK_ERROR_INITIALIZATION_FAILED";
+    case VK_ERROR_DEVICE_LOST: return "VK_ERROR_DEVICE_LOST";
+    case VK_ERROR_MEMORY_MAP_FAILED: return "VK_ERROR_MEMORY_MAP_FAILED";
+    case VK_ERROR_LAYER_NOT_PRESENT: return "VK_ERROR_LAYER_NOT_PRESENT";
+    case VK_ERROR_EXTENSION_NOT_PRESENT: return "VK_ERROR_EXTENSION_NOT_PRESENT";
+    case VK_ERROR_FEATURE_NOT_PRESENT: return "VK_ERROR_FEATURE_NOT_PRESENT";
+    case VK_ERROR_INCOMPATIBLE_DRIVER: return "VK_ERROR_INCOMPATIBLE_DRIVER (no Vulkan driver)";
+    case VK_ERROR_TOO_MANY_OBJECTS: return "VK_ERROR_TOO_MANY_OBJECTS";
+    case VK_ERROR_SURFACE_LOST_KHR: return "VK_ERROR_SURFACE_LOST_KHR";
+    case VK_ERROR_OUT_OF_DATE_KHR: return "VK_ERROR_OUT_OF_DATE_KHR";
+    default: return "VkResult";
+  }
+}
+
+VKAPI_ATTR VkBool32 VKAPI_CALL onMessage(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
+                                         VkDebugUtilsMessageTypeFlagsEXT,
+                                         const VkDebugUtilsMessengerCallbackDataEXT* data,
+                                         void* user) {
+  if (severity >= VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT) {
+    fmt::print(stderr, "iso view: Vulkan {}: {}\n",
+               severity >= VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT ? "error" : "warning",
+               data->pMessage);
+    if (severity >= VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT)
+      static_cast<std::atomic<uint32_t>*>(user)->fetch_add(1);
+  }
+  return VK_FALSE;
+}
+
+bool hasLayer(const char* name) {
+  uint32_t count = 0;
+  vkEnumerateInstanceLayerProperties(&count, nullptr);
+  std::vector<VkLayerProperties> layers(count);
+  vkEnumerateInstanceLayerProperties(&count, layers.data());
+  for (const auto& l : layers)
+    if (std::strcmp(l.layerName, name) == 0) return true;
+  return false;
+}
+
+int deviceRank(VkPhysicalDeviceType type) {
+  switch (type) {
+    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: return 0;
+    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU: return 1;
+    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU: return 2;
+    case VK_PHYSICAL_DEVICE_TYPE_CPU: return 3;
+    default: return 4;
+  }
+}
+
+uint32_t memoryType(const Gpu& gpu, uint32_t typeBits, VkMemoryPropertyFlags wanted) {
+  for (uint32_t i = 0; i < gpu.memory.memoryTypeCount; ++i)
+    if ((typeBits & (1u << i)) && (gpu.memory.memoryTypes[i].propertyFlags & wanted) == wanted)
+      return i;
+  return UINT32_MAX;
+}
+
+}  // namespace
+
+VulkanError::VulkanError(const std::string& call, VkResult result)
+    : std::runtime_error(fmt::format("Vulkan: {} failed: {} ({})", call, resultName(result),
+                                     int(result))),
+      result_(result) {}
+
+void checkVk(VkResult result, const char* call) {
+  if (result != VK_SUCCESS) throw VulkanError(call, result);
+}
+
+std::string describeDevices(VkInstance instance) {
+  uint32_t count = 0;
+  vkEnumeratePhysicalDevices(instance, &count, nullptr);
+  std::vector<VkPhysicalDevice> devices(count);
+  vkEnumeratePhysicalDevices(instance, &count, devices.data());
+  std::string out;
+  for (VkPhysicalDevice d : devices) {
+    VkPhysicalDeviceProperties p;
+    vkGetPhysicalDeviceProperties(d, &p);
+    out += (out.empty() ? "" : ", ") + std::string(p.deviceName);
+  }
+  return out.empty() ? "none" : out;
+}
+
+Gpu createGpu(const GpuOptions& options) {
+  Gpu gpu;
+  gpu.validationErrors = new std::atomic<uint32_t>(0);
+  const char* env = std::getenv("ISO_VK_VALIDATION");
+  const bool validation = (options.validation || (env && std::string(env) == "1")) &&
+                          hasLayer("VK_LAYER_KHRONOS_validation");
+  VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
+  app.pApplicationName = "iso view";
+  app.apiVersion = VK_API_VERSION_1_2;
+  std::vector<const char*> extensions = options.instanceExtensions;
+  std::vector<const char*> layers;
+  if (validation) {
+    extensions.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+    layers.push_back("VK_LAYER_KHRONOS_validation");
+  }
+  VkInstanceCreateInfo instanceInfo{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+  instanceInfo.pApplicationInfo = &app;
+  instanceInfo.enabledExtensionCount = uint32_t(extensions.size());
+  instanceInfo.ppEnabledExtensionNames = extensions.data();
+  instanceInfo.enabledLayerCount = uint32_t(layers.size());
+  instanceInfo.ppEnabledLayerNames = layers.data();
+  ISO_VK(vkCreateInstance(&instanceInfo, nullptr, &gpu.instance));
+  try {
+    if (validation) {
+      VkDebugUtilsMessengerCreateInfoEXT m{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
+      m.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT |
+                          VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+      m.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT |
+                      VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+                      VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+      m.pfnUserCallback = onMessage;
+      m.pUserData = gpu.validationErrors;
+      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+          vkGetInstanceProcAddr(gpu.instance, "vkCreateDebugUtilsMessengerEXT"));
+      if (create) ISO_VK(create(gpu.instance, &m, nullptr, &gpu.messenger));
+    }
+    uint32_t count = 0;
+    ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, nullptr));
+    std::vector<VkPhysicalDevice> devices(count);
+    ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, devices.data()));
+    const char* envName = std::getenv("ISO_VK_DEVICE");
+    const std::string wanted = !options.deviceName.empty() ? options.deviceName
+                               : envName                   ? envName
+                                                           : "";
+    int best = 1 << 30;
+    for (VkPhysicalDevice d : devices) {
+      VkPhysicalDeviceProperties p;
+      vkGetPhysicalDeviceProperties(d, &p);
+      if (p.apiVersion < VK_API_VERSION_1_2) continue;
+      if (!wanted.empty() && std::string(p.deviceName).find(wanted) == std::string::npos) continue;
+      uint32_t families = 0;
+      vkGetPhysicalDeviceQueueFamilyProperties(d, &families, nullptr);
+      std::vector<VkQueueFamilyProperties> props(families);
+      vkGetPhysicalDeviceQueueFamilyProperties(d, &families, props.data());
+      for (uint32_t f = 0; f < families; ++f) {
+        if (!(props[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
+        if (deviceRank(p.deviceType) < best) {
+          best = deviceRank(p.deviceType);
+          gpu.physical = d;
+          gpu.queueFamily = f;
+        }
+        break;
+      }
+    }
+    if (gpu.physical == VK_NULL_HANDLE)
+      throw std::runtime_error(
+          fmt::format("no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
+                      "mesa-vulkan-drivers for the CPU one",
+                      wanted.empty() ? "" : " named like '" + wanted + "'",
+                      describeDevices(gpu.instance)));
+    vkGetPhysicalDeviceProperties(gpu.physical, &gpu.properties);
+    vkGetPhysicalDeviceMemoryProperties(gpu.physical, &gpu.memory);
+    const float priority = 1.0f;
+    VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    queueInfo.queueFamilyIndex = gpu.queueFamily;
+    queueInfo.queueCount = 1;
+    queueInfo.pQueuePriorities = &priority;
+    std::vector<const char*> deviceExtensions;
+    if (options.swapchain) deviceExtensions.push_back(VK_KHR_SWAPCHAIN_EXTENSION_NAME);
+    // The page pool is read through buffer device addresses (64-bit).
+    VkPhysicalDeviceVulkan12Features has12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+    VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+    has.pNext = &has12;
+    vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
+    if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
+      throw std::runtime_error(fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
+                                           "shaderInt64, which the viewer needs",
+                                           gpu.properties.deviceName));
+    VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+    use12.bufferDeviceAddress = VK_TRUE;
+    VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+    use.pNext = &use12;
+    use.features.shaderInt64 = VK_TRUE;
+    VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    deviceInfo.pNext = &use;
+    deviceInfo.queueCreateInfoCount = 1;
+    deviceInfo.pQueueCreateInfos = &queueInfo;
+    deviceInfo.enabledExtensionCount = uint32_t(deviceExtensions.size());
+    deviceInfo.ppEnabledExtensionNames = deviceExtensions.data();
+    ISO_VK(vkCreateDevice(gpu.physical, &deviceInfo, nullptr, &gpu.device));
+    vkGetDeviceQueue(gpu.device, gpu.queueFamily, 0, &gpu.queue);
+    VkCommandPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    poolInfo.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    poolInfo.queueFamilyIndex = gpu.queueFamily;
+    ISO_VK(vkCreateCommandPool(gpu.device, &poolInfo, nullptr, &gpu.commandPool));
+  } catch (...) {
+    destroyGpu(gpu);
+    throw;
+  }
+  return gpu;
+}
+
+void destroyGpu(Gpu& gpu) {
+  if (gpu.device) {
+    vkDeviceWaitIdle(gpu.device);
+    if (gpu.commandPool) vkDestroyCommandPool(gpu.device, gpu.commandPool, nullptr);
+    vkDestroyDevice(gpu.device, nullptr);
+  }
+  if (gpu.messenger) {
+    auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
+        vkGetInstanceProcAddr(gpu.instance, "vkDestroyDebugUtilsMessengerEXT"));
+    if (destroy) destroy(gpu.instance, gpu.messenger, nullptr);
+  }
+  if (gpu.instance) vkDestroyInstance(gpu.instance, nullptr);
+  delete gpu.validationErrors;
+  gpu = Gpu{};
+}
+
+VkDeviceSize bufferFootprint(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage) {
+  VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  info.size = size;
+  info.usage = usage;
+  VkBuffer buffer;
+  ISO_VK(vkCreateBuffer(gpu.device, &info, nullptr, &buffer));
+  VkMemoryRequirements req;
+  vkGetBufferMemoryRequirements(gpu.device, buffer, &req);
+  vkDestroyBuffer(gpu.device, buffer, nullptr);
+  return req.size;
+}
+
+Buffer createBuffer(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage, bool hostVisible) {
+  Buffer b;
+  b.size = size;
+  VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  info.size = size;
+  info.usage = usage;
+  ISO_VK(vkCreateBuffer(gpu.device, &info, nullptr, &b.buffer));
+  VkMemoryRequirements req;
+  vkGetBufferMemoryRequirements(gpu.device, b.buffer, &req);
+  const VkMemoryPropertyFlags wanted =
+      hostVisible ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                  : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+  uint32_t type = memoryType(gpu, req.memoryTypeBits, wanted);
+  if (type == UINT32_MAX && !hostVisible) type = memoryType(gpu, req.memoryTypeBits, 0);
+  if (type == UINT32_MAX) {
+    vkDestroyBuffer(gpu.device, b.buffer, nullptr);
+    throw std::runtime_error("Vulkan: no memory type for a buffer");
+  }
+  VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  VkMemoryAllocateFlagsInfo flags{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO};
+  flags.flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT;
+  if (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT) alloc.pNext = &flags;
+  alloc.allocationSize = req.size;
+  alloc.memoryTypeIndex = type;
+  if (VkResult r = vkAllocateMemory(gpu.device, &alloc, nullptr, &b.memory); r != VK_SUCCESS) {
+    vkDestroyBuffer(gpu.device, b.buffer, nullptr);
+    throw VulkanError(fmt::format("vkAllocateMemory({} bytes)", req.size), r);
+  }
+  b.allocated = req.size;
+  gpu.memoryInUse += req.size;
+  gpu.memoryPeak = std::max(gpu.memoryPeak, gpu.memoryInUse);
+  ISO_VK(vkBindBufferMemory(gpu.device, b.buffer, b.memory, 0));
+  if (hostVisible) ISO_VK(vkMapMemory(gpu.device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped));
+  if (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT) {
+    VkBufferDeviceAddressInfo info{VK_STRUCTURE_TYPE_BUFFER_DEVICE_ADDRESS_INFO};
+    info.buffer = b.buffer;
+    b.address = vkGetBufferDeviceAddress(gpu.device, &info);
+  }
+  return b;
+}
+
+void destroyBuffer(Gpu& gpu, Buffer& b) {
+  if (b.buffer) vkDestroyBuffer(gpu.device, b.buffer, nullptr);
+  if (b.memory) {
+    vkFreeMemory(gpu.device, b.memory, nullptr);
+    gpu.memoryInUse -= b.allocated;
+  }
+  b = Buffer{};
+}
+
+ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
+                                      std::span<const uint32_t> storageCounts) {
+  ComputePipeline p;
+  std::vector<VkDescriptorSetLayoutBinding> bindings;
+  bindings.push_back({0, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+  uint32_t storage = 0;
+  for (size_t i = 0; i < storageCounts.size(); ++i) {
+    bindings.push_back({uint32_t(i + 1), VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storageCounts[i],
+                        VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+    storage += storageCounts[i];
+  }
+  VkDescriptorSetLayoutCreateInfo setInfo{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+  setInfo.bindingCount = uint32_t(bindings.size());
+  setInfo.pBindings = bindings.data();
+  ISO_VK(vkCreateDescriptorSetLayout(gpu.device, &setInfo, nullptr, &p.setLayout));
+  VkPipelineLayoutCreateInfo layoutInfo{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+  layoutInfo.setLayoutCount = 1;
+  layoutInfo.pSetLayouts = &p.setLayout;
+  ISO_VK(vkCreatePipelineLayout(gpu.device, &layoutInfo, nullptr, &p.layout));
+  VkShaderModuleCreateInfo moduleInfo{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  moduleInfo.codeSize = spirv.size_bytes();
+  moduleInfo.pCode = spirv.data();
+  VkShaderModule module;
+  ISO_VK(vkCreateShaderModule(gpu.device, &moduleInfo, nullptr, &module));
+  VkComputePipelineCreateInfo info{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+  info.stage = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO};
+  info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+  info.stage.module = module;
+  info.stage.pName = "main";
+  info.layout = p.layout;
+  const VkResult made =
+      vkCreateComputePipelines(gpu.device, VK_NULL_HANDLE, 1, &info, nullptr, &p.pipeline);
+  vkDestroyShaderModule(gpu.device, module, nullptr);
+  ISO_VK(made);
+  VkDescriptorPoolSize sizes[2] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
+                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storage}};
+  VkDescriptorPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  poolInfo.maxSets = 1;
+  poolInfo.poolSizeCount = 2;
+  poolInfo.pPoolSizes = sizes;
+  ISO_VK(vkCreateDescriptorPool(gpu.device, &poolInfo, nullptr, &p.descriptorPool));
+  VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  alloc.descriptorPool = p.descriptorPool;
+  alloc.descriptorSetCount = 1;
+  alloc.pSetLayouts = &p.setLayout;
+  ISO_VK(vkAllocateDescriptorSets(gpu.device, &alloc, &p.set));
+  return p;
+}
+
+void destroyComputePipeline(Gpu& gpu, ComputePipeline& p) {
+  if (p.descriptorPool) vkDestroyDescriptorPool(gpu.device, p.descriptorPool, nullptr);
+  if (p.pipeline) vkDestroyPipeline(gpu.device, p.pipeline, nullptr);
+  if (p.layout) vkDestroyPipelineLayout(gpu.device, p.layout, nullptr);
+  if (p.setLayout) vkDestroyDescriptorSetLayout(gpu.device, p.setLayout, nullptr);
+  p = ComputePipeline{};
+}
+
+VkCommandBuffer allocateCommandBuffer(Gpu& gpu) {
+  VkCommandBufferAllocateInfo info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+  info.commandPool = gpu.commandPool;
+  info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  info.commandBufferCount = 1;
+  VkCommandBuffer cb;
+  ISO_VK(vkAllocateCommandBuffers(gpu.device, &info, &cb));
+  return cb;
+}
+
+VkFence createFence(Gpu& gpu, bool signaled) {
+  VkFenceCreateInfo info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+  if (signaled) info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
+  VkFence fence;
+  ISO_VK(vkCreateFence(gpu.device, &info, nullptr, &fence));
+  return fence;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,375 @@
+// `iso view FILE`: a GLFW window with a Vulkan swapchain; each frame traces into the output
+// buffer and copies it to the swapchain image (compute only, no graphics pipeline).
+//
+// Mouse: left drag orbits, right or middle drag pans, the wheel zooms. Keys: W A S D fly, Q E
+// down and up, 1 shadows, 2 reflections, 3 refractions, + and - samples per pixel, P screenshot,
+// R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
+#define GLFW_INCLUDE_VULKAN
+#include <GLFW/glfw3.h>
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+
+#include "asset.h"
+#include "image.h"
+#include "renderer.h"
+#include "view.h"
+
+namespace iso::viewer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+Vec3d operator+(const Vec3d& a, const Vec3d& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3d operator-(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3d operator*(const Vec3d& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3d cross(const Vec3d& a, const Vec3d& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3d unit(const Vec3d& a) { return a * (1.0 / std::sqrt(dot(a, a))); }
+Vec3d rotate(const Vec3d& v, const Vec3d& axis, double angle) {
+  const double c = std::cos(angle), s = std::sin(angle);
+  return v * c + cross(axis, v) * s + axis * (dot(axis, v) * (1 - c));
+}
+
+struct Input {
+  double wheel = 0;
+  bool screenshot = false, reload = false;
+  int toggled = 0;  // 1 shadows, 2 reflections, 3 refractions
+  int samples = 0;  // +1 / -1
+};
+
+struct Swapchain {
+  VkSwapchainKHR swapchain = VK_NULL_HANDLE;
+  VkFormat format = VK_FORMAT_UNDEFINED;
+  VkExtent2D extent{};
+  std::vector<VkImage> images;
+};
+
+Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32_t height) {
+  Swapchain s;
+  VkSurfaceCapabilitiesKHR caps;
+  ISO_VK(vkGetPhysicalDeviceSurfaceCapabilitiesKHR(gpu.physical, surface, &caps));
+  if (!(caps.supportedUsageFlags & VK_IMAGE_USAGE_TRANSFER_DST_BIT))
+    throw std::runtime_error("the window's swapchain images cannot be copied to");
+  uint32_t count = 0;
+  ISO_VK(vkGetPhysicalDeviceSurfaceFormatsKHR(gpu.physical, surface, &count, nullptr));
+  std::vector<VkSurfaceFormatKHR> formats(count);
+  ISO_VK(vkGetPhysicalDeviceSurfaceFormatsKHR(gpu.physical, surface, &count, formats.data()));
+  for (const auto& f : formats)  // the tracer writes sRGB-encoded bytes: a UNORM format
+    if (f.format == VK_FORMAT_B8G8R8A8_UNORM || f.format == VK_FORMAT_R8G8B8A8_UNORM) {
+      s.format = f.format;
+      break;
+    }
+  if (s.format == VK_FORMAT_UNDEFINED)
+    throw std::runtime_error("the window offers no 8-bit RGBA or BGRA swapchain format");
+  s.extent = caps.currentExtent.width != UINT32_MAX ? caps.currentExtent
+                                                     : VkExtent2D{width, height};
+  if (s.extent.width != width || s.extent.height != height)
+    throw std::runtime_error(fmt::format("the window is {}x{}, not the {}x{} asked for",
+                                         s.extent.width, s.extent.height, width, height));
+  VkSwapchainCreateInfoKHR info{VK_STRUCTURE_TYPE_SWAPCHAIN_CREATE_INFO_KHR};
+  info.surface = surface;
+  info.minImageCount = std::max(caps.minImageCount, 2u);
+  if (caps.maxImageCount) info.minImageCount = std::min(info.minImageCount, caps.maxImageCount);
+  info.imageFormat = s.format;
+  info.imageColorSpace = VK_COLOR_SPACE_SRGB_NONLINEAR_KHR;
+  info.imageExtent = s.extent;
+  info.imageArrayLayers = 1;
+  info.imageUsage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+  info.preTransform = caps.currentTransform;
+  info.compositeAlpha = VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR;
+  info.presentMode = VK_PRESENT_MODE_FIFO_KHR;
+  info.clipped = VK_TRUE;
+  ISO_VK(vkCreateSwapchainKHR(gpu.device, &info, nullptr, &s.swapchain));
+  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, s.swapchain, &count, nullptr));
+  s.images.resize(count);
+  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, s.swapchain, &count, s.images.data()));
+  return s;
+}
+
+void imageBarrier(VkCommandBuffer cb, VkImage image, VkImageLayout from, VkImageLayout to,
+                  VkAccessFlags srcAccess, VkAccessFlags dstAccess) {
+  VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+  b.oldLayout = from;
+  b.newLayout = to;
+  b.srcAccessMask = srcAccess;
+  b.dstAccessMask = dstAccess;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = image;
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT,
+                       0, 0, nullptr, 0, nullptr, 1, &b);
+}
+
+std::vector<uint32_t> toRgba(std::vector<uint32_t> pixels, bool bgra) {
+  if (bgra)
+    for (uint32_t& p : pixels) p = (p & 0xFF00FF00u) | (p & 0xFFu) << 16 | (p >> 16 & 0xFFu);
+  return pixels;
+}
+
+}  // namespace
+
+int viewWindow(const ViewOptions& options) {
+  const auto asset = Asset::open(options.file);
+  Scene scene = options.scene;
+  const Vec3d worldUp = scene.up.value_or(asset->up);
+  if (!scene.camera) scene.camera = frameCamera(asset->bounds, worldUp, 40.0);
+  const bool defaultLights = scene.lights.empty();
+  if (defaultLights) scene.lights.push_back(defaultLight(*scene.camera, asset->bounds));
+  std::optional<Environment> env;
+  if (!scene.environment.empty()) env = loadEnvironment(scene.environment);
+
+  if (!glfwInit())
+    throw std::runtime_error("cannot open a window (no display?); use --headless --out F.png");
+  struct GlfwGuard {
+    ~GlfwGuard() { glfwTerminate(); }
+  } glfwGuard;
+  if (!glfwVulkanSupported()) throw std::runtime_error("GLFW finds no Vulkan loader");
+  glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
+  glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);
+  const std::string title = "iso view " + options.file.filename().string();
+  GLFWwindow* window =
+      glfwCreateWindow(int(options.width), int(options.height), title.c_str(), nullptr, nullptr);
+  if (!window) throw std::runtime_error("cannot open a window (no display?); use --headless");
+  struct WindowGuard {
+    GLFWwindow* w;
+    ~WindowGuard() { glfwDestroyWindow(w); }
+  } windowGuard{window};
+
+  uint32_t extensionCount = 0;
+  const char** extensions = glfwGetRequiredInstanceExtensions(&extensionCount);
+  GpuOptions g;
+  g.instanceExtensions.assign(extensions, extensions + extensionCount);
+  g.swapchain = true;
+  g.validation = options.validation;
+  g.deviceName = options.device;
+  Gpu gpu = createGpu(g);
+  VkSurfaceKHR surface = VK_NULL_HANDLE;
+  Swapchain swapchain;
+  VkSemaphore acquired = VK_NULL_HANDLE, rendered = VK_NULL_HANDLE;
+  VkFence fence = VK_NULL_HANDLE;
+  int exitCode = 0;
+  try {
+    ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &surface));
+    VkBool32 canPresent = VK_FALSE;
+    ISO_VK(vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface,
+                                                &canPresent));
+    if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
+    swapchain = createSwapchain(gpu, surface, options.width, options.height);
+    const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+    RendererOptions ro;
+    ro.width = options.width;
+    ro.height = options.height;
+    ro.vram = options.vram;
+    ro.uploadBytes = options.uploadBytes;
+    ro.swapRedBlue = bgra;
+    Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
+    VkSemaphoreCreateInfo si{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
+    ISO_VK(vkCreateSemaphore(gpu.device, &si, nullptr, &acquired));
+    ISO_VK(vkCreateSemaphore(gpu.device, &si, nullptr, &rendered));
+    fence = createFence(gpu, false);
+    VkCommandBuffer cb = allocateCommandBuffer(gpu);
+
+    Input input;
+    glfwSetWindowUserPointer(window, &input);
+    glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
+      static_cast<Input*>(glfwGetWindowUserPointer(w))->wheel += dy;
+    });
+    glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+      if (action != GLFW_PRESS) return;
+      Input& in = *static_cast<Input*>(glfwGetWindowUserPointer(w));
+      if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
+      if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
+      if (key == GLFW_KEY_R) in.reload = true;
+      if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
+      if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
+      if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
+    });
+
+    std::filesystem::file_time_type sceneTime{};
+    if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
+    double mouseX = 0, mouseY = 0;
+    glfwGetCursorPos(window, &mouseX, &mouseY);
+    auto last = Clock::now(), titleTime = last;
+    uint32_t frames = 0, titleFrames = 0, screenshots = 0;
+    uint64_t titleRays = 0;
+    double titleGpu = 0;
+    const auto header = asset->reader.header();
+    while (!glfwWindowShouldClose(window)) {
+      glfwPollEvents();
+      const auto now = Clock::now();
+      const double dt = std::chrono::duration<double>(now - last).count();
+      last = now;
+      // Camera controls.
+      Camera& cam = *scene.camera;
+      double x, y;
+      glfwGetCursorPos(window, &x, &y);
+      const double dx = x - mouseX, dy = y - mouseY;
+      mouseX = x;
+      mouseY = y;
+      const Vec3d forward = unit(cam.target - cam.eye);
+      const Vec3d right = unit(cross(forward, cam.up));
+      const Vec3d up = cross(right, forward);
+      const double distance = std::sqrt(dot(cam.target - cam.eye, cam.target - cam.eye));
+      if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+        Vec3d offset = cam.eye - cam.target;
+        offset = rotate(offset, unit(cam.up), -dx * 0.008);
+        const Vec3d pitched = rotate(offset, right, -dy * 0.008);
+        if (std::abs(dot(unit(pitched), unit(cam.up))) < 0.98) offset = pitched;
+        cam.eye = cam.target + offset;
+      }
+      if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
+          glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
+        const double k = distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / options.height;
+        const Vec3d move = right * (-dx * k) + up * (dy * k);
+        cam.eye = cam.eye + move;
+        cam.target = cam.target + move;
+      }
+      if (input.wheel != 0) {
+        cam.eye = cam.target + (cam.eye - cam.target) * std::pow(0.9, input.wheel);
+        input.wheel = 0;
+      }
+      Vec3d fly{0, 0, 0};
+      if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) fly = fly + forward;
+      if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) fly = fly - forward;
+      if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) fly = fly + right;
+      if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
+      if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
+      if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
+      if (dot(fly, fly) > 0) {
+        const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
+        cam.eye = cam.eye + move;
+        cam.target = cam.target + move;
+      }
+      if (input.toggled == 1) scene.shadows = !scene.shadows;
+      if (input.toggled == 2) scene.reflections = !scene.reflections;
+      if (input.toggled == 3) scene.refractions = !scene.refractions;
+      input.toggled = 0;
+      if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
+      input.samples = 0;
+      // The scene file: reloaded on R or when it changes; the camera stays where it is.
+      if (!options.sceneFile.empty()) {
+        std::error_code ec;
+        const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
+        if (input.reload || (!ec && t != sceneTime)) {
+          sceneTime = t;
+          Scene next = options.scene;
+          try {
+            loadScene(options.sceneFile, next);
+            next.camera = scene.camera;
+            if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset->bounds));
+            scene = next;
+            fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+          } catch (const std::exception& e) {
+            fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
+          }
+        }
+        input.reload = false;
+      }
+
+      uint32_t index = 0;
+      const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
+                                                     acquired, VK_NULL_HANDLE, &index);
+      if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR) checkVk(acquire, "vkAcquireNextImageKHR");
+      renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+      ISO_VK(vkResetCommandBuffer(cb, 0));
+      VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+      begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+      ISO_VK(vkBeginCommandBuffer(cb, &begin));
+      renderer.record(cb);
+      VkImage image = swapchain.images[index];
+      imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
+                   VK_ACCESS_TRANSFER_WRITE_BIT);
+      VkBufferImageCopy copy{};
+      copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+      copy.imageExtent = {options.width, options.height, 1};
+      vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
+                             VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
+      imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                   VK_IMAGE_LAYOUT_PRESENT_SRC_KHR, VK_ACCESS_TRANSFER_WRITE_BIT, 0);
+      ISO_VK(vkEndCommandBuffer(cb));
+      const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+      VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+      submit.waitSemaphoreCount = 1;
+      submit.pWaitSemaphores = &acquired;
+      submit.pWaitDstStageMask = &waitStage;
+      submit.commandBufferCount = 1;
+      submit.pCommandBuffers = &cb;
+      submit.signalSemaphoreCount = 1;
+      submit.pSignalSemaphores = &rendered;
+      ISO_VK(vkResetFences(gpu.device, 1, &fence));
+      const auto t0 = Clock::now();
+      ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
+      VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
+      present.waitSemaphoreCount = 1;
+      present.pWaitSemaphores = &rendered;
+      present.swapchainCount = 1;
+      present.pSwapchains = &swapchain.swapchain;
+      present.pImageIndices = &index;
+      const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
+      if (presented != VK_SUCCESS && presented != VK_SUBOPTIMAL_KHR)
+        checkVk(presented, "vkQueuePresentKHR");
+      ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
+      titleGpu += std::chrono::duration<double>(Clock::now() - t0).count();
+      renderer.collect();
+      ++frames;
+      ++titleFrames;
+      titleRays += renderer.stats().rays;
+      const bool last = options.frames > 0 && frames >= options.frames;
+      if (input.screenshot || (last && !options.screenshot.empty())) {
+        const std::filesystem::path file =
+            last && !options.screenshot.empty()
+                ? options.screenshot
+                : std::filesystem::path(fmt::format("iso-screenshot-{}.png", ++screenshots));
+        writeImage(file, options.width, options.height, toRgba(renderer.pixels(), bgra));
+        fmt::print("iso view: saved {}\n", file.string());
+        input.screenshot = false;
+      }
+      const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
+      if (sinceTitle > 0.5 || last) {
+        const FrameStats& s = renderer.stats();
+        const std::string text = fmt::format(
+            "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
+            "resident, {} requested",
+            title, titleGpu / titleFrames * 1e3, titleFrames / sinceTitle,
+            titleRays / std::max(titleGpu, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident,
+            s.pending);
+        glfwSetWindowTitle(window, text.c_str());
+        if (last) fmt::print("{}\n", text);
+        titleTime = Clock::now();
+        titleFrames = 0;
+        titleRays = 0;
+        titleGpu = 0;
+      }
+      if (last) break;
+    }
+    vkDeviceWaitIdle(gpu.device);
+    if (*gpu.validationErrors > 0) {
+      fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
+      exitCode = 1;
+    }
+  } catch (...) {
+    if (gpu.device) vkDeviceWaitIdle(gpu.device);
+    if (fence) vkDestroyFence(gpu.device, fence, nullptr);
+    if (acquired) vkDestroySemaphore(gpu.device, acquired, nullptr);
+    if (rendered) vkDestroySemaphore(gpu.device, rendered, nullptr);
+    if (swapchain.swapchain) vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
+    if (surface) vkDestroySurfaceKHR(gpu.instance, surface, nullptr);
+    destroyGpu(gpu);
+    throw;
+  }
+  vkDestroyFence(gpu.device, fence, nullptr);
+  vkDestroySemaphore(gpu.device, acquired, nullptr);
+  vkDestroySemaphore(gpu.device, rendered, nullptr);
+  vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
+  vkDestroySurfaceKHR(gpu.instance, surface, nullptr);
+  destroyGpu(gpu);
+  return exitCode;
+}
+
+}  // namespace iso::viewer
