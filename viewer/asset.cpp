@@ -22,6 +22,7 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
     if (d.semantic == Semantic::Color) a->blob.colors = true;
   }
   // Bounds from the coarsest chunk's deepest level.
+  a->reader.checkPayload(a->tree.topChunk());
   const SurfaceChunk top = decodeSurfaceChunk(a->reader, a->tree.topChunk());
   const uint8_t last = uint8_t(top.topology.startLevel + top.topology.depth - 1);
   double lo[3] = {1, 1, 1}, hi[3] = {0, 0, 0};

@@ -53,6 +53,7 @@ CpuPool buildCpuPool(const Asset& asset) {
   std::vector<std::vector<uint32_t>> blobs(chunks.size());
   tbb::parallel_for(size_t(0), chunks.size(), [&](size_t i) {
     if (chunks[i].kind != kSurfaceKind) return;
+    asset.reader.checkPayload(uint32_t(i));
     blobs[i] = buildBlob(decodeSurfaceChunk(asset.reader, uint32_t(i)), uint32_t(i), asset.tree,
                          asset.blob);
   });

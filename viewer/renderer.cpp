@@ -45,9 +45,13 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   constexpr auto src = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
   const uint64_t pixelsBytes = uint64_t(options.width) * options.height * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
-  uint64_t stagingBytes = options.uploadBytes;
+  uint64_t stagingBytes = 0, fileBytes = 0;  // the largest blob; all blobs
   for (const ChunkInfo& c : chunks)
-    if (c.kind == kSurfaceKind) stagingBytes = std::max(stagingBytes, blobBound(c, asset.blob));
+    if (c.kind == kSurfaceKind) {
+      stagingBytes = std::max(stagingBytes, blobBound(c, asset.blob));
+      fileBytes += (blobBound(c, asset.blob) + kPageBytes - 1) / kPageBytes * kPageBytes;
+    }
+  stagingBytes = std::max(stagingBytes, std::min(options.uploadBytes, fileBytes));
   const uint64_t fixed =
       bufferFootprint(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT) +
       bufferFootprint(gpu, uint64_t(chunkCount) * 16, storage) +
@@ -56,8 +60,10 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
       bufferFootprint(gpu, stagingBytes, src);
   const uint64_t maxBuffer = uint64_t(1) << 30;  // the pool is addressed, not bound
   uint64_t poolPages = options.vram > fixed + kPageBytes ? (options.vram - fixed) / kPageBytes : 0;
-  // Each buffer's memory may round up (alignment); leave a page a buffer for it.
+  // Each buffer's memory may round up (alignment); leave a page a buffer for it. A pool larger
+  // than the whole file would be wasted.
   poolPages = poolPages > gpu::kPoolBuffers ? poolPages - gpu::kPoolBuffers : 0;
+  poolPages = std::min(poolPages, fileBytes / kPageBytes);
   const uint64_t maxPagesPerBuffer = std::bit_floor(maxBuffer / kPageBytes);
   pagesPerBuffer_ = uint32_t(std::min<uint64_t>(
       maxPagesPerBuffer, std::bit_ceil((poolPages + gpu::kPoolBuffers - 1) / gpu::kPoolBuffers)));

@@ -41,6 +41,7 @@ ChunkCache::~ChunkCache() {
 }
 
 std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
+  reader_.checkPayload(chunk);
   const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
   return buildBlob(decoded, chunk, tree_, options_);
 }

@@ -267,4 +267,10 @@ void Reader::decodePayload(uint32_t id, std::span<std::byte> out) const {
          std::to_string(c.rawSize));
 }
 
+void Reader::checkPayload(uint32_t id) const {
+  const ChunkInfo& c = chunk(id);
+  if (detail::checksum(storedPayload(id)) != c.checksum)
+    throw FileError(impl_->name, c.offset, "chunk " + std::to_string(id) + ": checksum mismatch");
+}
+
 }  // namespace iso

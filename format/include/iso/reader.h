@@ -42,6 +42,10 @@ class Reader {
   // otherwise). Throws iso::FileError when a zstd payload is corrupt. Does not check the checksum.
   void decodePayload(uint32_t id, std::span<std::byte> out) const;
 
+  // Check a chunk's stored bytes against its checksum; throws iso::FileError (file, the payload's
+  // offset, "chunk N: checksum mismatch") when they differ.
+  void checkPayload(uint32_t id) const;
+
   // The whole file as mapped.
   std::span<const std::byte> bytes() const;
 

@@ -1,0 +1,145 @@
+// `iso view` as a user runs it: pictures, the window under Xvfb, bad files and bad options.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "cli_support.h"
+#include "image.h"
+#include "iso/reader.h"
+
+namespace iso::test {
+namespace {
+
+CommandResult iso(const std::string& arguments) { return runIso(arguments); }
+
+// A small converted scan shared by the tests (the bundled kitten, cut into many chunks).
+const std::filesystem::path& kittenIso() {
+  static TempDir dir;
+  static const std::filesystem::path path = [] {
+    const auto out = dir / "kitten.iso";
+    const CommandResult run =
+        iso("convert --quiet --chunk-nodes 400 " +
+            quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz") + " -o " +
+            quoted(out));
+    EXPECT_EQ(run.exitCode, 0) << run.err;
+    return out;
+  }();
+  return path;
+}
+
+// Distinct colors and the share of pixels unlike the top-left one.
+struct Variety {
+  size_t colors = 0;
+  double unlikeCorner = 0;
+};
+Variety varietyOf(const std::filesystem::path& png, uint32_t& w, uint32_t& h) {
+  const auto pixels = viewer::readImage(png, w, h);
+  std::set<uint32_t> colors(pixels.begin(), pixels.end());
+  size_t unlike = 0;
+  for (uint32_t p : pixels) unlike += p != pixels[0];
+  return {colors.size(), double(unlike) / pixels.size()};
+}
+
+TEST(CliView, headlessAndCpuWritePicturesOfTheSurface) {
+  TempDir dir;
+  for (const char* mode : {"--headless", "--cpu"}) {
+    SCOPED_TRACE(mode);
+    const auto out = dir / (std::string(mode + 2) + ".png");
+    const CommandResult run = iso("view " + quoted(kittenIso()) + " " + mode + " --out " +
+                                  quoted(out) + " --width 120 --height 90 --spp 2");
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    EXPECT_NE(run.out.find(out.string()), std::string::npos) << run.out;
+    uint32_t w = 0, h = 0;
+    const Variety v = varietyOf(out, w, h);
+    EXPECT_EQ(w, 120u);
+    EXPECT_EQ(h, 90u);
+    EXPECT_GT(v.colors, 50u);
+    EXPECT_GT(v.unlikeCorner, 0.1);
+  }
+}
+
+TEST(CliView, benchPrintsItsNumbers) {
+  const CommandResult run = iso("view " + quoted(kittenIso()) +
+                                " --bench --bench-frames 4 --width 64 --height 64 --vram 64M");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  for (const char* line : {"ms/frame", "rays/s", "GPU memory", "chunks", "streamed"})
+    EXPECT_NE(run.out.find(line), std::string::npos) << line << "\n" << run.out;
+}
+
+TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
+  if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0)
+    GTEST_SKIP() << "xvfb-run is not installed (tools/run setup installs it)";
+  TempDir dir;
+  const auto shot = dir / "shot.png";
+  const std::string command = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(ISO_BINARY) +
+                              " view " + quoted(kittenIso()) +
+                              " --frames 12 --screenshot " + quoted(shot) +
+                              " --width 160 --height 120 >" + quoted(dir / "out") + " 2>" +
+                              quoted(dir / "err");
+  const int status = std::system(command.c_str());
+  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0) << slurp(dir / "err");
+  EXPECT_NE(slurp(dir / "out").find("chunks"), std::string::npos) << slurp(dir / "out");
+  uint32_t w = 0, h = 0;
+  const Variety v = varietyOf(shot, w, h);
+  EXPECT_EQ(w, 160u);
+  EXPECT_EQ(h, 120u);
+  EXPECT_GT(v.colors, 50u);
+  EXPECT_GT(v.unlikeCorner, 0.1);
+}
+
+TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {
+  TempDir dir;
+  const std::vector<std::byte> good = readFile(kittenIso());
+  const auto out = dir / "picture.png";
+  // Truncated.
+  std::vector<std::byte> cut(good.begin(), good.begin() + good.size() / 2);
+  writeFile(dir / "cut.iso", cut);
+  CommandResult run = iso("view " + quoted(dir / "cut.iso") + " --headless --out " + quoted(out));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find((dir / "cut.iso").string()), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  // A byte flipped in the last chunk's payload: found when that chunk streams in, before it is
+  // drawn; an older picture at --out stays as it was.
+  std::vector<std::byte> flipped = good;
+  {
+    const auto reader = Reader::fromMemory(good, "kitten");
+    const ChunkInfo& last = reader.chunks().back();
+    flipped[last.offset + last.storedSize / 2] ^= std::byte{0x40};
+  }
+  writeFile(dir / "flipped.iso", flipped);
+  std::ofstream(out) << "old picture";
+  for (const char* mode : {"--headless", "--cpu"}) {
+    run = iso("view " + quoted(dir / "flipped.iso") + " " + mode + " --out " + quoted(out) +
+              " --width 200 --height 200 --lod-pixels 0");
+    EXPECT_EQ(run.exitCode, 1) << mode;
+    EXPECT_NE(run.err.find((dir / "flipped.iso").string()), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find("checksum mismatch"), std::string::npos) << run.err;
+    EXPECT_EQ(slurp(out), "old picture");
+  }
+  // Not an .iso file at all.
+  std::ofstream(dir / "text.iso") << "hello";
+  run = iso("view " + quoted(dir / "text.iso") + " --headless --out " + quoted(out));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("text.iso"), std::string::npos) << run.err;
+}
+
+TEST(CliView, impossibleOptionsAreUsageErrors) {
+  const std::string file = quoted(kittenIso());
+  EXPECT_EQ(iso("view " + file + " --headless").exitCode, 2);  // no --out
+  EXPECT_EQ(iso("view " + file + " --headless --cpu --out x.png").exitCode, 2);
+  const CommandResult vram = iso("view " + file + " --headless --out x.png --vram lots");
+  EXPECT_EQ(vram.exitCode, 2);
+  EXPECT_NE(vram.err.find("--vram"), std::string::npos) << vram.err;
+  EXPECT_EQ(iso("view " + file + " --headless --out x.png --light spot:1,2,3").exitCode, 2);
+  EXPECT_EQ(iso("view " + file + " --headless --out x.png --reflectivity 0.7 --transparency 0.5")
+                .exitCode,
+            2);
+  EXPECT_EQ(iso("view /nonexistent.iso --headless --out x.png").exitCode, 2);
+  const CommandResult small = iso("view " + file + " --headless --out x.png --vram 4K");
+  EXPECT_EQ(small.exitCode, 1);
+  EXPECT_NE(small.err.find("--vram"), std::string::npos) << small.err;
+  EXPECT_FALSE(std::filesystem::exists("x.png"));
+}
+
+}  // namespace
+}  // namespace iso::test

@@ -1,0 +1,321 @@
+// The viewer against references: the GPU's pictures (lavapipe in CI) against the CPU reference
+// tracer's, the tracer's hits against the surface model's and the analytic sphere, streaming
+// under a tiny budget against an unlimited one, and scene files.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include "asset.h"
+#include "cpu_tracer.h"
+#include "io/readers.h"
+#include "iso/error.h"
+#include "iso/surface_model.h"
+#include "pipeline/pipeline_support.h"
+#include "renderer.h"
+#include "scene.h"
+#include "vulkan.h"
+
+namespace iso::test {
+namespace {
+
+using namespace iso::viewer;
+
+struct Files {
+  TempDir dir;
+  std::filesystem::path sphere = dir / "sphere.iso", torus = dir / "torus.iso",
+                        kitten = dir / "kitten.iso", chunked = dir / "chunked.iso";
+  double sphereSpacing = 0;
+  Files() {
+    BuildOptions quiet;
+    sphereSpacing = convertToIso(scanOf("sphere", 30000), sphere, quiet)["mean_spacing"];
+    convertToIso(scanOf("torus", 30000), torus, quiet);
+    const PointCloud kittenPoints =
+        readPointFile(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz");
+    convertToIso(kittenPoints, kitten, quiet);
+    BuildOptions small;  // many chunks, to stream
+    small.chunkNodes = 600;
+    convertToIso(scanOf("torus", 30000), chunked, small);
+  }
+};
+
+const Files& files() {
+  static Files f;
+  return f;
+}
+
+// One Vulkan device for the whole program, validation on when the layer is installed.
+Gpu& gpu() {
+  static Gpu g = [] {
+    GpuOptions o;
+    o.validation = true;
+    return createGpu(o);
+  }();
+  return g;
+}
+
+Scene sceneFor(const Asset& asset) {
+  Scene scene;
+  scene.camera = frameCamera(asset.bounds, asset.up, 40.0);
+  scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
+  return scene;
+}
+
+FrameSetup setupFor(const Asset& asset, uint32_t w, uint32_t h) {
+  FrameSetup s;
+  s.width = w;
+  s.height = h;
+  s.topChunk = asset.tree.topChunk();
+  s.chunkCount = uint32_t(asset.reader.chunks().size());
+  s.normals = asset.blob.normals;
+  s.colors = asset.blob.colors;
+  return s;
+}
+
+std::vector<uint32_t> renderReference(const Asset& asset, const Scene& scene, uint32_t w,
+                                      uint32_t h) {
+  const CpuPool pool = buildCpuPool(asset);
+  const auto header = asset.reader.header();
+  return renderCpu(pool, frameParams(scene, header.frame, header.maxLevel, setupFor(asset, w, h)),
+                   nullptr)
+      .pixels;
+}
+
+struct GpuRun {
+  std::vector<uint32_t> pixels;
+  std::vector<std::vector<uint32_t>> frames;  // every frame's picture
+  FrameStats stats;
+  uint32_t frameCount = 0;
+  bool converged = false;
+  uint64_t peak = 0;  // device memory at most, from the allocator
+};
+
+GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h, uint64_t vram,
+                 uint32_t maxFrames = 200) {
+  Gpu& g = gpu();
+  const uint64_t before = g.memoryInUse;
+  g.memoryPeak = before;
+  GpuRun run;
+  {
+    RendererOptions o;
+    o.width = w;
+    o.height = h;
+    o.vram = vram;
+    o.uploadBytes = 64 << 10;  // a few chunks a frame, so that streaming takes frames
+    Renderer renderer(g, asset, nullptr, o);
+    VkCommandBuffer cb = allocateCommandBuffer(g);
+    VkFence fence = createFence(g, false);
+    const auto header = asset.reader.header();
+    for (uint32_t f = 0; f < maxFrames; ++f) {
+      renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+      VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO, nullptr, 0,
+                                     nullptr};
+      ISO_VK(vkBeginCommandBuffer(cb, &begin));
+      renderer.record(cb);
+      ISO_VK(vkEndCommandBuffer(cb));
+      submitAndWait(g, cb, fence);
+      renderer.collect();
+      run.frames.push_back(renderer.pixels());
+      ++run.frameCount;
+      if (renderer.converged()) {
+        run.converged = true;
+        break;
+      }
+    }
+    run.pixels = renderer.pixels();
+    run.stats = renderer.stats();
+    vkDestroyFence(g.device, fence, nullptr);
+    vkFreeCommandBuffers(g.device, g.commandPool, 1, &cb);
+  }
+  run.peak = g.memoryPeak - before;
+  EXPECT_EQ(g.validationErrors->load(), 0u) << "Vulkan validation errors";
+  return run;
+}
+
+// Pixels whose channels differ by more than `threshold` in any of R, G, B.
+double differing(const std::vector<uint32_t>& a, const std::vector<uint32_t>& b,
+                 int threshold = 8) {
+  EXPECT_EQ(a.size(), b.size());
+  size_t n = 0;
+  for (size_t i = 0; i < a.size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(int(a[i] >> (8 * c) & 0xFF) - int(b[i] >> (8 * c) & 0xFF)) > threshold) {
+        ++n;
+        break;
+      }
+  return double(n) / double(a.size());
+}
+
+TEST(ViewerGolden, theGpuAndTheCpuReferenceDrawTheSamePictures) {
+  // Metric: at most 0.5 % of the pixels differ by more than 8/255 in a channel.
+  const uint32_t w = 160, h = 120;
+  for (const auto& file : {files().sphere, files().torus, files().kitten}) {
+    SCOPED_TRACE(file.filename().string());
+    const auto asset = Asset::open(file);
+    Scene scene = sceneFor(*asset);
+    const auto gpuPicture = renderGpu(*asset, scene, w, h, uint64_t(1) << 30);
+    const auto cpuPicture = renderReference(*asset, scene, w, h);
+    EXPECT_TRUE(gpuPicture.converged);
+    EXPECT_LE(differing(gpuPicture.pixels, cpuPicture), 0.005);
+    // Not a blank picture: the framed surface covers a good part of it, lit unevenly.
+    size_t lit = 0, dark = 0;
+    for (uint32_t p : cpuPicture) {
+      const int g = int(p >> 8 & 0xFF);
+      lit += g > 150;
+      dark += g < 90;
+    }
+    EXPECT_GT(lit, cpuPicture.size() / 50);
+    EXPECT_GT(dark, cpuPicture.size() / 100);
+  }
+}
+
+TEST(ViewerGolden, shadowsReflectionsRefractionsAndAreaLightsAgreeToo) {
+  const uint32_t w = 128, h = 96;
+  const auto asset = Asset::open(files().torus);
+  Scene scene = sceneFor(*asset);
+  LightSpec area = scene.lights[0];
+  area.area = true;
+  area.samples = 8;
+  const double r = 0.3 * (asset->bounds.hi[0] - asset->bounds.lo[0]);
+  area.u = {r, 0, 0};
+  area.v = {0, 0, r};
+  scene.lights = {area};
+  scene.material.reflectivity = 0.3f;
+  scene.material.transparency = 0.3f;
+  scene.samples = 2;
+  const auto gpuPicture = renderGpu(*asset, scene, w, h, uint64_t(1) << 30);
+  const auto cpuPicture = renderReference(*asset, scene, w, h);
+  EXPECT_LE(differing(gpuPicture.pixels, cpuPicture), 0.005);
+  // And the effects change the picture: without them it differs a lot.
+  Scene plain = sceneFor(*asset);
+  EXPECT_GT(differing(renderReference(*asset, plain, w, h), cpuPicture), 0.05);
+}
+
+TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
+  const auto asset = Asset::open(files().sphere);
+  const SurfaceModel model = SurfaceModel::load(asset->reader);
+  const CpuPool pool = buildCpuPool(*asset);
+  const Frame& frame = asset->reader.header().frame;
+  const Scene scene = sceneFor(*asset);
+  const auto params = frameParams(scene, frame, asset->reader.header().maxLevel,
+                                  setupFor(*asset, 64, 64));
+  const double cell = std::ldexp(1.0, -int(asset->reader.header().maxLevel));
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> uniform(-0.9, 0.9);
+  int hits = 0, agree = 0, onSphere = 0;
+  const int rays = 2000;
+  for (int i = 0; i < rays; ++i) {
+    // From a sphere of radius 3 around the unit sphere toward a point well inside it (world
+    // units).
+    Vec3 dir{normal(rng), normal(rng), normal(rng)};
+    const double n = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+    Vec3 originWorld{3 * dir[0] / n, 3 * dir[1] / n, 3 * dir[2] / n};
+    Vec3 aim{uniform(rng), uniform(rng), uniform(rng)};
+    if (aim[0] * aim[0] + aim[1] * aim[1] + aim[2] * aim[2] > 0.8 * 0.8) {
+      --i;  // aim inside a ball of radius 0.8: no grazing rays
+      continue;
+    }
+    Vec3 d{aim[0] - originWorld[0], aim[1] - originWorld[1], aim[2] - originWorld[2]};
+    const double dn = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (double& c : d) c /= dn;
+    Vec3 o;
+    for (int k = 0; k < 3; ++k) o[k] = (originWorld[k] - frame.origin[k]) / frame.size;
+    const auto mine = traceCpu(pool, params, glm::vec3(o[0], o[1], o[2]),
+                               glm::vec3(d[0], d[1], d[2]));
+    const auto theirs = model.intersect(o, d, 0.0, 1e9);
+    ASSERT_EQ(mine.has_value(), theirs.has_value()) << "ray " << i;
+    if (!mine) continue;
+    ++hits;
+    // The same surface: t within a tenth of the finest cell (float against double).
+    agree += std::abs(mine->t - theirs->t) <= 0.1 * cell;
+    // And the unit sphere: within half a point spacing.
+    double radius2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double p = frame.origin[k] + (o[k] + mine->t * d[k]) * frame.size;
+      radius2 += p * p;
+    }
+    onSphere += std::abs(std::sqrt(radius2) - 1.0) <= 0.5 * files().sphereSpacing;
+  }
+  EXPECT_EQ(hits, rays);  // every ray aims inside the sphere
+  EXPECT_GE(agree, hits * 99 / 100);
+  EXPECT_GE(onSphere, hits * 99 / 100);
+}
+
+TEST(ViewerStreaming, aTinyBudgetIsKeptAndConvergesToThePictureOfAnUnlimitedOne) {
+  const uint32_t w = 96, h = 96;
+  const auto asset = Asset::open(files().chunked);
+  ASSERT_GT(asset->reader.chunks().size(), 20u);
+  Scene scene = sceneFor(*asset);
+  // A close view of part of the torus: it needs some chunks, not all.
+  Camera& c = *scene.camera;
+  for (int k = 0; k < 3; ++k) c.eye[k] = c.target[k] + 0.45 * (c.eye[k] - c.target[k]);
+  const GpuRun unlimited = renderGpu(*asset, scene, w, h, uint64_t(1) << 30);
+  ASSERT_TRUE(unlimited.converged);
+  const uint64_t fixed = unlimited.peak - unlimited.stats.poolBytes;
+  const uint64_t needed = unlimited.stats.poolBytesInUse;
+  const uint32_t resident = unlimited.stats.resident;
+  ASSERT_LT(resident, asset->reader.chunks().size()) << "the view should not need every chunk";
+  // A budget with room for what the view needs and a few pages more, not for the whole file.
+  const uint64_t vram = fixed + needed + 16 * 32768;
+  ASSERT_LT(vram, unlimited.peak);
+  const GpuRun tiny = renderGpu(*asset, scene, w, h, vram);
+  EXPECT_LE(tiny.peak, vram);
+  EXPECT_TRUE(tiny.converged);
+  EXPECT_GT(tiny.frameCount, 2u);  // it took frames: the first ones show coarser levels
+  EXPECT_GT(differing(tiny.frames.front(), tiny.pixels), 0.01);
+  EXPECT_EQ(differing(tiny.pixels, unlimited.pixels, 0), 0.0);
+  // Orbiting with that budget evicts chunks and stays inside it.
+  Scene moved = scene;
+  Camera& m = *moved.camera;
+  for (int k = 0; k < 3; ++k) m.eye[k] = 2 * m.target[k] - m.eye[k];
+  const GpuRun other = renderGpu(*asset, moved, w, h, vram);
+  EXPECT_LE(other.peak, vram);
+}
+
+TEST(ViewerScene, sceneFilesSetEverythingAndNameWhatTheyCannotUse) {
+  TempDir dir;
+  const auto file = dir / "scene.json";
+  std::ofstream(file) << R"({"camera": {"eye": [0, 0, 5], "target": [0, 0, 0], "fov": 30},
+    "lights": [{"type": "area", "position": [1, 2, 3], "u": [1, 0, 0], "v": [0, 1, 0],
+                "samples": 4, "color": [1, 0.5, 0.25], "intensity": 2}],
+    "material": {"color": [0.2, 0.3, 0.4], "reflectivity": 0.25, "transparency": 0.5,
+                 "ior": 1.33}, "shadows": false, "bounces": 2, "samples": 4})";
+  Scene scene;
+  loadScene(file, scene);
+  ASSERT_TRUE(scene.camera);
+  EXPECT_EQ(scene.camera->fovDegrees, 30);
+  ASSERT_EQ(scene.lights.size(), 1u);
+  EXPECT_TRUE(scene.lights[0].area);
+  EXPECT_EQ(scene.lights[0].samples, 4);
+  EXPECT_FLOAT_EQ(scene.material.ior, 1.33f);
+  EXPECT_FALSE(scene.shadows);
+  EXPECT_EQ(scene.samples, 4);
+  const auto fails = [&](const std::string& text, const std::string& expected) {
+    std::ofstream(file) << text;
+    Scene s;
+    try {
+      loadScene(file, s);
+      ADD_FAILURE() << "accepted " << text;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find(file.string()), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  fails(R"({"camera": {"eye": [0, 0, 5]}})", "camera");
+  fails(R"({"lights": [{"type": "spot", "position": [0, 0, 0]}]})", "lights[].type");
+  fails(R"({"material": {"reflectivity": 0.8, "transparency": 0.5}})", "material");
+  fails(R"({"brightness": 2})", "'brightness': unknown key");
+  fails(R"({"samples": 0.5})", "samples");
+  fails("{not json", "not valid JSON");
+  EXPECT_THROW(parseLight("spot:1,2,3"), std::invalid_argument);
+  EXPECT_THROW(parseLight("point:1,2"), std::invalid_argument);
+  const LightSpec l = parseLight("area:1,2,3:1,0,0:0,1,0:9:1,1,1:3");
+  EXPECT_TRUE(l.area);
+  EXPECT_EQ(l.samples, 9);
+  EXPECT_FLOAT_EQ(l.intensity, 3.0f);
+}
+
+}  // namespace
+}  // namespace iso::test
