@@ -76,7 +76,9 @@ Cell locate(uvec3 g, float distance, bool request) {
     float error = uintBitsToFloat(chunkState(chunk).z);
     uvec4 child = chunkState(childChunk);
     bool fineEnough = error <= P.lod.x * P.eye.w * distance;
-    if (fineEnough || child.x == kNotResident) {
+    // (A root index past the child's nodes would only come from a file whose chunks disagree.)
+    bool usable = child.x != kNotResident && childRoot < blobWord(child.x, kBlobNodeCount);
+    if (fineEnough || !usable) {
       if (!fineEnough && request) requestChunk(childChunk);
       cell.filled = true;
       cell.record = ownRecord;
