@@ -352,117 +352,115 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
   for (uint i = 0u; i < kMaxLights; ++i) {
     Light light = P.lights[i];
     uint kind = uint(light.position.w);
-    if (kind == kLightNone) continue;
     uint samples = kind == kLightArea ? max(uint(light.color.w), 1u) : 1u;
+    if (kind == kLightNone) samples = 0u;
     vec3 sum = vec3(0.0f);
     for (uint s = 0u; s < samples; ++s) {
       vec3 at = vec3(light.position.x, light.position.y, light.position.z);
       if (kind == kLightArea) {
         // Stratified over a near-square grid of cells, jittered per pixel.
         uint columns = uint(ceil(sqrt(float(samples))));
+        uint rows = (samples + columns - 1u) / columns;
         float a = (float(s % columns) + randomUnit(rng)) / float(columns) - 0.5f;
-        float b = (float(s / columns) + randomUnit(rng)) / float((samples + columns - 1u) / columns) - 0.5f;
+        float b = (float(s / columns) + randomUnit(rng)) / float(rows) - 0.5f;
         at += a * vec3(light.u.x, light.u.y, light.u.z) + b * vec3(light.v.x, light.v.y, light.v.z);
       }
       vec3 l = at - p;
       float lengthL = length(l);
       l = l / lengthL;
       float lambert = dot(n, l);
-      if (lambert <= 0.0f) continue;
-      if ((P.options.x & kOptionShadows) != 0u) {
+      bool lit = lambert > 0.0f;
+      if (lit && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
-        if (intersect(origin, l, 0.0f, lengthL, false, distance, false, blocker, rays)) continue;
+        lit = !intersect(origin, l, 0.0f, lengthL, false, distance, false, blocker, rays);
       }
-      vec3 r = reflect(-l, n);
-      float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
-      sum += P.material.x * lambert * hit.color + vec3(P.material.y * specular);
+      if (lit) {
+        vec3 r = reflect(-l, n);
+        float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
+        sum += P.material.x * lambert * hit.color + vec3(P.material.y * specular);
+      }
     }
-    color += vec3(light.color.x, light.color.y, light.color.z) * sum / float(samples);
+    if (samples > 0u)
+      color += vec3(light.color.x, light.color.y, light.color.z) * sum / float(samples);
   }
   return color;
 }
 
-struct RayTask {
-  vec3 origin;
-  vec3 direction;
-  vec3 weight;
-  uint depth;
-  bool inside;
-  float distance;  // path length before origin
-};
-
 // The color seen along a camera ray, with reflection and refraction rays up to the bounce limit.
+// Pending rays wait on a small stack of vec4s: origin and path length before it, direction and
+// bounce count, weight and whether the ray travels inside.
 vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
-  RayTask stack[kRayStack];
-  uint count = 1u;
-  stack[0].origin = o;
-  stack[0].direction = d;
-  stack[0].weight = vec3(1.0f);
-  stack[0].depth = 0u;
-  stack[0].inside = false;
-  stack[0].distance = 0.0f;
+  vec4 stackOrigin[kRayStack];
+  vec4 stackDirection[kRayStack];
+  vec4 stackWeight[kRayStack];
+  // The camera ray first.
+  vec3 origin = o;
+  vec3 direction = d;
+  vec3 weight = vec3(1.0f);
+  float before = 0.0f;  // path length before origin
+  uint depth = 0u;
+  bool inside = false;
+  uint count = 0u;
   vec3 color = vec3(0.0f);
   float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
   float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
   float eta = P.medium.x;
   float offset = P.lod.y;
-  while (count > 0u) {
-    count -= 1u;
-    RayTask task = stack[count];
+  bool more = true;  // a ray to trace
+  while (more) {
     Hit hit;
-    bool primary = task.depth == 0u;
-    if (!intersect(task.origin, task.direction, 0.0f, 1e30f, task.inside, task.distance,
+    bool primary = depth == 0u;
+    if (!intersect(origin, direction, 0.0f, 1e30f, inside, before,
                    primary && (P.options.x & kOptionRequests) != 0u, hit, rays)) {
-      color += task.weight * background(task.direction);
-      continue;
-    }
-    vec3 p = task.origin + task.direction * hit.t;
-    vec3 n = hit.normal;
-    float distance = task.distance + hit.t;
-    bool more = task.depth < P.options.y;
-    if (!task.inside) {
-      // A front face: local shading, then the mirror and the transmitted rays.
-      color += task.weight * (1.0f - reflectivity - transparency) *
-               shade(p, task.direction, hit, distance, rng, rays);
-      float mirror = reflectivity;
-      if (more && transparency > 0.0f) {
-        vec3 r = refract(task.direction, n, 1.0f / eta);
-        if (dot(r, r) > 0.0f && count < kRayStack) {
-          stack[count].origin = p - n * offset;
-          stack[count].direction = normalize(r);
-          stack[count].weight = task.weight * transparency;
-          stack[count].depth = task.depth + 1u;
-          stack[count].inside = true;
-          stack[count].distance = distance;
-          count += 1u;
-        } else {
-          mirror += transparency;  // total internal reflection cannot happen entering; kept safe
-        }
-      }
-      if (more && mirror > 0.0f && count < kRayStack) {
-        stack[count].origin = p + n * offset;
-        stack[count].direction = reflect(task.direction, n);
-        stack[count].weight = task.weight * mirror;
-        stack[count].depth = task.depth + 1u;
-        stack[count].inside = false;
-        stack[count].distance = distance;
-        count += 1u;
-      }
+      color += weight * background(direction);
     } else {
-      // A back face from inside: absorption along the way, then out or totally reflected.
-      vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
-      vec3 weight = task.weight * exp(-absorption * hit.t);
-      if (more && count < kRayStack) {
-        vec3 r = refract(task.direction, -n, eta);
+      vec3 p = origin + direction * hit.t;
+      vec3 n = hit.normal;
+      float distance = before + hit.t;
+      bool bounce = depth < P.options.y;
+      if (!inside) {
+        // A front face: local shading, then the transmitted and the mirror rays.
+        color += weight * (1.0f - reflectivity - transparency) *
+                 shade(p, direction, hit, distance, rng, rays);
+        float mirror = reflectivity;
+        if (bounce && transparency > 0.0f) {
+          vec3 r = refract(direction, n, 1.0f / eta);
+          if (dot(r, r) > 0.0f && count < kRayStack) {
+            stackOrigin[count] = vec4(p - n * offset, distance);
+            stackDirection[count] = vec4(normalize(r), float(depth + 1u));
+            stackWeight[count] = vec4(weight * transparency, 1.0f);
+            count += 1u;
+          } else {
+            mirror += transparency;
+          }
+        }
+        if (bounce && mirror > 0.0f && count < kRayStack) {
+          stackOrigin[count] = vec4(p + n * offset, distance);
+          stackDirection[count] = vec4(reflect(direction, n), float(depth + 1u));
+          stackWeight[count] = vec4(weight * mirror, 0.0f);
+          count += 1u;
+        }
+      } else if (bounce && count < kRayStack) {
+        // A back face from inside: absorption along the way, then out or totally reflected.
+        vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
+        vec3 r = refract(direction, -n, eta);
         bool leaves = dot(r, r) > 0.0f;
-        stack[count].origin = leaves ? p + n * offset : p - n * offset;
-        stack[count].direction = leaves ? normalize(r) : reflect(task.direction, -n);
-        stack[count].weight = weight;
-        stack[count].depth = task.depth + 1u;
-        stack[count].inside = !leaves;
-        stack[count].distance = distance;
+        stackOrigin[count] = vec4(leaves ? p + n * offset : p - n * offset, distance);
+        stackDirection[count] =
+            vec4(leaves ? normalize(r) : reflect(direction, -n), float(depth + 1u));
+        stackWeight[count] = vec4(weight * exp(-absorption * hit.t), leaves ? 0.0f : 1.0f);
         count += 1u;
       }
+    }
+    more = count > 0u;
+    if (more) {
+      count -= 1u;
+      origin = vec3(stackOrigin[count].x, stackOrigin[count].y, stackOrigin[count].z);
+      before = stackOrigin[count].w;
+      direction = vec3(stackDirection[count].x, stackDirection[count].y, stackDirection[count].z);
+      depth = uint(stackDirection[count].w);
+      weight = vec3(stackWeight[count].x, stackWeight[count].y, stackWeight[count].z);
+      inside = stackWeight[count].w > 0.5f;
     }
   }
   return color;
