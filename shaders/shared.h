@@ -30,8 +30,8 @@ ISO_CONST uint kNotResident = 0xFFFFFFFFu;
 // w >> kPageWordsLog2 of the chunk, whose pool page is word kBlobPageList + (w >> kPageWordsLog2).
 ISO_CONST uint kBlobNodeCount = 0u;    // nodes of the chunk
 ISO_CONST uint kBlobPageCount = 1u;    // pages the blob spans
-ISO_CONST uint kBlobNodes = 2u;        // word of node 0; node i is 2 words at kBlobNodes + 2i
-ISO_CONST uint kBlobData = 3u;         // word of corner record 0
+ISO_CONST uint kBlobNodes = 2u;        // holds the word of node 0; node i is the 2 words 2i on
+ISO_CONST uint kBlobData = 3u;         // holds the word of corner record 0
 ISO_CONST uint kBlobPageList = 4u;     // the pool pages of the blob, in order
 // Node records: word 0 = childMask | kNodeCut; word 1 = the first child's node index (internal
 // node), the corner record index (filled leaf), or the word of the node's link list (cut node:

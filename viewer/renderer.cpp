@@ -17,11 +17,13 @@ const uint32_t kTraceSpirv[] =
 
 constexpr uint64_t kPageBytes = uint64_t(gpu::kPageWords) * 4;
 
-// An upper bound of a chunk's blob size from its table entry (buildBlob's layout).
+// An upper bound of a chunk's blob size from its table entry (buildBlob's layout): node records,
+// a record per leaf, and at most a link list (17 words) and a record per internal node.
 uint64_t blobBound(const ChunkInfo& c, const BlobOptions& o) {
-  const uint64_t words = 2 * uint64_t(c.nodeCount) + 17 * uint64_t(c.nodeCount) +
-                         uint64_t(c.nodeCount) * recordWords(o) + 64;
-  return (words + gpu::kBlobPageList + words / gpu::kPageWords + 2) * 4 + kPageBytes;
+  const uint64_t leaves = std::min(c.leafCount, c.nodeCount), inner = c.nodeCount - leaves;
+  const uint64_t words =
+      2 * uint64_t(c.nodeCount) + leaves * recordWords(o) + inner * (17 + recordWords(o)) + 64;
+  return (words + gpu::kBlobPageList + words / gpu::kPageWords + 2) * 4;
 }
 
 }  // namespace
