@@ -27,7 +27,9 @@ Vec3d normalized(const Vec3d& a) {
   return scale(a, 1.0 / n);
 }
 
-std::vector<double> numbers(const std::string& text, size_t count, const std::string& what) {
+}  // namespace
+
+std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& what) {
   std::vector<double> out;
   std::stringstream in(text);
   std::string item;
@@ -48,6 +50,8 @@ std::vector<double> numbers(const std::string& text, size_t count, const std::st
                                 text + "'");
   return out;
 }
+
+namespace {
 
 std::vector<std::string> split(const std::string& text, char sep) {
   std::vector<std::string> out;
@@ -95,7 +99,7 @@ struct Fields {
 }  // namespace
 
 Vec3d parseVec3(const std::string& text) {
-  const auto v = numbers(text, 3, "vector");
+  const auto v = parseNumbers(text, 3, "vector");
   return {v[0], v[1], v[2]};
 }
 
@@ -115,7 +119,7 @@ LightSpec parseLight(const std::string& text) {
     light.v = parseVec3(parts[3]);
     next = 4;
     if (parts.size() > next) {
-      const double s = numbers(parts[next++], 1, "light samples")[0];
+      const double s = parseNumbers(parts[next++], 1, "light samples")[0];
       if (s < 1 || s > 1024 || s != std::floor(s))
         throw std::invalid_argument("light samples: expected a whole number from 1 to 1024");
       light.samples = int(s);
@@ -127,7 +131,7 @@ LightSpec parseLight(const std::string& text) {
     const Vec3d c = parseVec3(parts[next++]);
     light.color = {float(c[0]), float(c[1]), float(c[2])};
   }
-  if (parts.size() > next) light.intensity = float(numbers(parts[next++], 1, "intensity")[0]);
+  if (parts.size() > next) light.intensity = float(parseNumbers(parts[next++], 1, "intensity")[0]);
   if (parts.size() > next) throw std::invalid_argument("light '" + text + "': too many parts");
   return light;
 }

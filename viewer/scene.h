@@ -40,6 +40,7 @@ struct Material {
 
 struct Scene {
   std::optional<Camera> camera;       // none: framed on the surface's bounds
+  std::optional<double> fovDegrees;   // overrides the camera's field of view
   std::vector<LightSpec> lights;      // none: one point light over the camera's shoulder
   Material material;
   std::array<float, 3> ambient{0.12f, 0.12f, 0.13f};
@@ -57,7 +58,9 @@ struct Scene {
 // file and the key for anything it does not understand.
 void loadScene(const std::filesystem::path& path, Scene& scene);
 
-// Parse "x,y,z" and light specs for the command line (std::invalid_argument on error).
+// Parse "a,b,c,..." (exactly count finite numbers), "x,y,z" and light specs for the command line;
+// std::invalid_argument naming `what` on error.
+std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& what);
 Vec3d parseVec3(const std::string& text);
 // "point:X,Y,Z[:R,G,B[:INTENSITY]]" or "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]".
 LightSpec parseLight(const std::string& text);

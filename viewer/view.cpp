@@ -23,15 +23,6 @@ double seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 
 std::string mib(uint64_t bytes) { return fmt::format("{:.1f} MiB", bytes / 1048576.0); }
 
-// The scene with its camera and lights filled in for this asset.
-Scene completeScene(const ViewOptions& options, const Asset& asset) {
-  Scene scene = options.scene;
-  const Vec3d up = scene.up.value_or(asset.up);
-  if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, 40.0);
-  if (scene.lights.empty()) scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
-  return scene;
-}
-
 std::optional<Environment> environmentOf(const Scene& scene) {
   if (scene.environment.empty()) return std::nullopt;
   return loadEnvironment(scene.environment);
@@ -49,6 +40,15 @@ struct GpuSession {
 };
 
 }  // namespace
+
+Scene completeScene(const ViewOptions& options, const Asset& asset) {
+  Scene scene = options.scene;
+  const Vec3d up = scene.up.value_or(asset.up);
+  if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, scene.fovDegrees.value_or(40.0));
+  if (scene.fovDegrees) scene.camera->fovDegrees = *scene.fovDegrees;
+  if (scene.lights.empty()) scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
+  return scene;
+}
 
 int viewHeadless(const ViewOptions& options) {
   const auto asset = Asset::open(options.file);

@@ -29,6 +29,11 @@ struct ViewOptions {
   uint32_t benchFrames = 120;
 };
 
+struct Asset;
+// The options' scene with a camera (framed on the asset when it has none) and lights (one over the
+// camera's shoulder when it has none).
+Scene completeScene(const ViewOptions& options, const Asset& asset);
+
 // Each returns the process exit code and throws for errors (file, Vulkan, options).
 int viewHeadless(const ViewOptions& options);
 int viewCpu(const ViewOptions& options);

@@ -116,11 +116,7 @@ std::vector<uint32_t> toRgba(std::vector<uint32_t> pixels, bool bgra) {
 
 int viewWindow(const ViewOptions& options) {
   const auto asset = Asset::open(options.file);
-  Scene scene = options.scene;
-  const Vec3d worldUp = scene.up.value_or(asset->up);
-  if (!scene.camera) scene.camera = frameCamera(asset->bounds, worldUp, 40.0);
-  const bool defaultLights = scene.lights.empty();
-  if (defaultLights) scene.lights.push_back(defaultLight(*scene.camera, asset->bounds));
+  Scene scene = completeScene(options, *asset);
   std::optional<Environment> env;
   if (!scene.environment.empty()) env = loadEnvironment(scene.environment);
 

@@ -35,23 +35,7 @@ void buildScene(ViewArgs& a) {
   viewer::Scene& s = a.view.scene;
   if (!a.view.sceneFile.empty()) viewer::loadScene(a.view.sceneFile, s);
   if (!a.camera.empty()) {
-    std::vector<double> v;
-    size_t at = 0;
-    const std::string& t = a.camera;
-    for (int i = 0; i < 3; ++i) {
-      // eye,target,up: nine numbers.
-      (void)i;
-    }
-    std::string item;
-    for (size_t i = 0; i <= t.size(); ++i) {
-      if (i == t.size() || t[i] == ',') {
-        item = t.substr(at, i - at);
-        at = i + 1;
-        v.push_back(viewer::parseVec3(item + ",0,0")[0]);
-      }
-    }
-    if (v.size() != 9)
-      throw std::invalid_argument("--camera: expected eye,target,up (9 numbers), not '" + t + "'");
+    const std::vector<double> v = viewer::parseNumbers(a.camera, 9, "--camera eye,target,up");
     viewer::Camera c = s.camera.value_or(viewer::Camera{});
     c.eye = {v[0], v[1], v[2]};
     c.target = {v[3], v[4], v[5]};
@@ -60,8 +44,7 @@ void buildScene(ViewArgs& a) {
   }
   if (a.fov != 0) {
     if (!(a.fov > 1 && a.fov < 179)) throw std::invalid_argument("--fov: from 1 to 179 degrees");
-    if (!s.camera) throw std::invalid_argument("--fov needs --camera (or a camera in --scene)");
-    s.camera->fovDegrees = a.fov;
+    s.fovDegrees = a.fov;
   }
   if (!a.up.empty()) s.up = parseUp(a.up);
   if (!a.lights.empty()) {
