@@ -39,6 +39,63 @@ struct GpuSession {
   ~GpuSession() { destroyGpu(gpu); }
 };
 
+RendererOptions rendererOptions(const ViewOptions& o) {
+  RendererOptions r;
+  r.width = o.width;
+  r.height = o.height;
+  r.vram = o.vram;
+  r.uploadBytes = o.uploadBytes;
+  return r;
+}
+
+// Render one frame of the scene and wait for it; returns the seconds from submit to done.
+double renderFrame(Gpu& gpu, Renderer& renderer, const Asset& asset, const Scene& scene,
+                   VkCommandBuffer cb, VkFence fence) {
+  const FileHeader& header = asset.reader.header();
+  renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  renderer.record(cb);
+  ISO_VK(vkEndCommandBuffer(cb));
+  const auto t0 = Clock::now();
+  submitAndWait(gpu, cb, fence);
+  const double elapsed = seconds(Clock::now() - t0);
+  renderer.collect();
+  return elapsed;
+}
+
+// What the GPU modes share: the asset and its scene, a device, a renderer, and the command
+// buffer and fence of a frame.
+struct GpuView {
+  std::unique_ptr<Asset> asset;
+  Scene scene;
+  std::optional<Environment> env;
+  GpuSession session;  // outlives the renderer (members are destroyed in reverse order)
+  std::unique_ptr<Renderer> renderer;
+  VkCommandBuffer cb = VK_NULL_HANDLE;
+  VkFence fence = VK_NULL_HANDLE;
+
+  explicit GpuView(const ViewOptions& o)
+      : asset(Asset::open(o.file)),
+        scene(completeScene(o, *asset)),
+        env(environmentOf(scene)),
+        session(o) {
+    renderer = std::make_unique<Renderer>(session.gpu, *asset, env ? &*env : nullptr,
+                                          rendererOptions(o));
+    cb = allocateCommandBuffer(session.gpu);
+    fence = createFence(session.gpu, false);
+  }
+  ~GpuView() {
+    renderer.reset();
+    if (fence) vkDestroyFence(session.gpu.device, fence, nullptr);
+  }
+  // Render a frame of `s` and wait for it; the seconds from submit to done.
+  double frame(const Scene& s) {
+    return renderFrame(session.gpu, *renderer, *asset, s, cb, fence);
+  }
+};
+
 }  // namespace
 
 Scene completeScene(const ViewOptions& options, const Asset& asset) {
@@ -51,35 +108,15 @@ Scene completeScene(const ViewOptions& options, const Asset& asset) {
 }
 
 int viewHeadless(const ViewOptions& options) {
-  const auto asset = Asset::open(options.file);
-  const Scene scene = completeScene(options, *asset);
-  const auto env = environmentOf(scene);
-  GpuSession session(options);
-  Gpu& gpu = session.gpu;
-  RendererOptions ro;
-  ro.width = options.width;
-  ro.height = options.height;
-  ro.vram = options.vram;
-  ro.uploadBytes = options.uploadBytes;
-  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
-  VkCommandBuffer cb = allocateCommandBuffer(gpu);
-  VkFence fence = createFence(gpu, false);
+  GpuView view(options);
+  Gpu& gpu = view.session.gpu;
+  Renderer& renderer = *view.renderer;
+  const Asset* asset = view.asset.get();
   const auto start = Clock::now();
   double lastFrame = 0;
   uint32_t frames = 0;
   for (; frames < options.maxFrames; ++frames) {
-    FrameSetup setup = renderer.setup();
-    renderer.prepare(frameParams(scene, asset->reader.header().frame,
-                                 asset->reader.header().maxLevel, setup));
-    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    ISO_VK(vkBeginCommandBuffer(cb, &begin));
-    renderer.record(cb);
-    ISO_VK(vkEndCommandBuffer(cb));
-    const auto t0 = Clock::now();
-    submitAndWait(gpu, cb, fence);
-    lastFrame = seconds(Clock::now() - t0);
-    renderer.collect();
+    lastFrame = view.frame(view.scene);
     if (renderer.converged() || renderer.stalled()) {
       ++frames;
       break;
@@ -87,7 +124,6 @@ int viewHeadless(const ViewOptions& options) {
   }
   const FrameStats& s = renderer.stats();
   const auto pixels = renderer.pixels();
-  vkDestroyFence(gpu.device, fence, nullptr);
   writeImage(options.out, options.width, options.height, pixels);
   fmt::print("{}: {}x{} on {}, {} frame{} in {:.2f} s ({}), last frame {:.1f} ms, {:.1f} Mrays/s\n",
              options.out.string(), options.width, options.height, gpu.properties.deviceName,
@@ -141,19 +177,11 @@ int viewCpu(const ViewOptions& options) {
 }
 
 int viewBench(const ViewOptions& options) {
-  const auto asset = Asset::open(options.file);
-  const Scene base = completeScene(options, *asset);
-  const auto env = environmentOf(base);
-  GpuSession session(options);
-  Gpu& gpu = session.gpu;
-  RendererOptions ro;
-  ro.width = options.width;
-  ro.height = options.height;
-  ro.vram = options.vram;
-  ro.uploadBytes = options.uploadBytes;
-  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
-  VkCommandBuffer cb = allocateCommandBuffer(gpu);
-  VkFence fence = createFence(gpu, false);
+  GpuView view(options);
+  Gpu& gpu = view.session.gpu;
+  Renderer& renderer = *view.renderer;
+  const Asset* asset = view.asset.get();
+  const Scene& base = view.scene;
   // The camera path: a full orbit around the target at the starting distance.
   const Camera c0 = *base.camera;
   const Vec3d up = c0.up;
@@ -174,16 +202,7 @@ int viewBench(const ViewOptions& options) {
     for (int i = 0; i < 3; ++i)
       scene.camera->eye[i] =
           c0.target[i] + offset[i] * cs + cr[i] * sn + up[i] * k * (1 - cs);
-    renderer.prepare(frameParams(scene, asset->reader.header().frame,
-                                 asset->reader.header().maxLevel, renderer.setup()));
-    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-    ISO_VK(vkBeginCommandBuffer(cb, &begin));
-    renderer.record(cb);
-    ISO_VK(vkEndCommandBuffer(cb));
-    const auto t0 = Clock::now();
-    submitAndWait(gpu, cb, fence);
-    const double dt = seconds(Clock::now() - t0);
-    renderer.collect();
+    const double dt = view.frame(scene);
     const FrameStats& s = renderer.stats();
     if (f > 0) {  // the first frame builds the pipeline's caches
       ms.push_back(dt * 1e3);
@@ -193,7 +212,6 @@ int viewBench(const ViewOptions& options) {
     uploaded.push_back(s.uploadedBytes);
     maxResident = std::max(maxResident, s.resident);
   }
-  vkDestroyFence(gpu.device, fence, nullptr);
   const FrameStats& s = renderer.stats();
   std::vector<double> sorted = ms;
   std::sort(sorted.begin(), sorted.end());
