@@ -28,11 +28,11 @@ ISO_CONST uint kNotResident = 0xFFFFFFFFu;
 
 // A chunk on the GPU ("blob"), in 32-bit words from its first word. Word w lies on page
 // w >> kPageWordsLog2 of the chunk, whose pool page is word kBlobPageList + (w >> kPageWordsLog2).
-ISO_CONST uint kBlobNodeCount = 0u;    // nodes of the chunk
-ISO_CONST uint kBlobPageCount = 1u;    // pages the blob spans
-ISO_CONST uint kBlobNodes = 2u;        // holds the word of node 0; node i is the 2 words 2i on
-ISO_CONST uint kBlobData = 3u;         // holds the word of corner record 0
-ISO_CONST uint kBlobPageList = 4u;     // the pool pages of the blob, in order
+ISO_CONST uint kBlobNodeCount = 0u;  // nodes of the chunk
+ISO_CONST uint kBlobPageCount = 1u;  // pages the blob spans
+ISO_CONST uint kBlobNodes = 2u;      // holds the word of node 0; node i is the 2 words 2i on
+ISO_CONST uint kBlobData = 3u;       // holds the word of corner record 0
+ISO_CONST uint kBlobPageList = 4u;   // the pool pages of the blob, in order
 // Node records: word 0 = childMask | kNodeCut; word 1 = the first child's node index (internal
 // node), the corner record index (filled leaf), or the word of the node's link list (cut node:
 // a node whose children are roots of other chunks). A link list is the cut node's corner record
@@ -55,20 +55,20 @@ ISO_CONST uint kGridMax = 2097151u;
 
 // Rendering limits.
 ISO_CONST uint kMaxLights = 4u;
-ISO_CONST uint kRayStack = 8u;          // pending reflection/refraction rays per sample
-ISO_CONST uint kMaxSteps = 4096u;       // cells one ray may visit (a guard, never a visible limit)
-ISO_CONST uint kWorkgroupSize = 64u;    // one 8×8 tile of pixels, visited in Z-order
-ISO_CONST uint kSamplesPerLeaf = 4u;    // sign checks per cell crossing before root refinement
+ISO_CONST uint kRayStack = 8u;        // pending reflection/refraction rays per sample
+ISO_CONST uint kMaxSteps = 4096u;     // cells one ray may visit (a guard, never a visible limit)
+ISO_CONST uint kWorkgroupSize = 64u;  // one 8×8 tile of pixels, visited in Z-order
+ISO_CONST uint kSamplesPerLeaf = 4u;  // sign checks per cell crossing before root refinement
 
 // Bits of FrameParams.options.x.
 ISO_CONST uint kOptionShadows = 1u;
 ISO_CONST uint kOptionReflections = 2u;
 ISO_CONST uint kOptionRefractions = 4u;
-ISO_CONST uint kOptionNormals = 8u;      // the file has normals (else the gradient is used)
-ISO_CONST uint kOptionColors = 16u;      // the file has colors (else the material's color)
-ISO_CONST uint kOptionSwapRB = 32u;      // write BGRA (swapchains) instead of RGBA
-ISO_CONST uint kOptionEnvironment = 64u; // an environment map is bound
-ISO_CONST uint kOptionRequests = 128u;   // rays request missing chunks (streaming on)
+ISO_CONST uint kOptionNormals = 8u;       // the file has normals (else the gradient is used)
+ISO_CONST uint kOptionColors = 16u;       // the file has colors (else the material's color)
+ISO_CONST uint kOptionSwapRB = 32u;       // write BGRA (swapchains) instead of RGBA
+ISO_CONST uint kOptionEnvironment = 64u;  // an environment map is bound
+ISO_CONST uint kOptionRequests = 128u;    // rays request missing chunks (streaming on)
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;
@@ -85,22 +85,22 @@ struct Light {
 
 // Everything a frame needs besides the chunks (uniform buffer, binding 0).
 struct FrameParams {
-  vec4 eye;       // xyz: camera position in frame units; w: the angle of one pixel (radians)
-  vec4 right;     // xyz: camera right × tan(fov/2) × width/height
-  vec4 up;        // xyz: camera up × tan(fov/2)
-  vec4 forward;   // xyz: view direction, unit
-  uvec4 image;    // width, height, samples per pixel, frame number
-  uvec4 options;  // option bits, bounce limit, top chunk, chunk count
-  uvec4 pool;     // log2 of the words per pool buffer, pool words, environment width, height
-  vec4 lod;       // x: screen-space error (pixels) below which a coarser chunk is drawn; y: ray
-                  // offset (frame units) against self-intersection; z: environment intensity
-  vec4 ambient;   // rgb: ambient light
-  vec4 albedo;    // rgb: material color (when the file has none); w: Phong exponent
-  vec4 material;  // x: diffuse, y: specular, z: reflectivity, w: transparency
-  vec4 medium;    // x: index of refraction; yzw: absorption per frame unit inside
-  vec4 skyTop;    // rgb: sky color overhead (no environment map)
-  vec4 skyBottom; // rgb: sky color below the horizon
-  vec4 worldUp;   // xyz: the scene's up direction (sky and environment map), unit
+  vec4 eye;        // xyz: camera position in frame units; w: the angle of one pixel (radians)
+  vec4 right;      // xyz: camera right × tan(fov/2) × width/height
+  vec4 up;         // xyz: camera up × tan(fov/2)
+  vec4 forward;    // xyz: view direction, unit
+  uvec4 image;     // width, height, samples per pixel, frame number
+  uvec4 options;   // option bits, bounce limit, top chunk, chunk count
+  uvec4 pool;      // log2 of the words per pool buffer, pool words, environment width, height
+  vec4 lod;        // x: screen-space error (pixels) below which a coarser chunk is drawn; y: ray
+                   // offset (frame units) against self-intersection; z: environment intensity
+  vec4 ambient;    // rgb: ambient light
+  vec4 albedo;     // rgb: material color (when the file has none); w: Phong exponent
+  vec4 material;   // x: diffuse, y: specular, z: reflectivity, w: transparency
+  vec4 medium;     // x: index of refraction; yzw: absorption per frame unit inside
+  vec4 skyTop;     // rgb: sky color overhead (no environment map)
+  vec4 skyBottom;  // rgb: sky color below the horizon
+  vec4 worldUp;    // xyz: the scene's up direction (sky and environment map), unit
   Light lights[kMaxLights];
   uvec4 poolAddress[kPoolBuffers / 2u];  // device addresses of the pool buffers, two a vec4
 };

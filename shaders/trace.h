@@ -27,9 +27,9 @@ uint blobWord(uint firstPage, uint word) {
 struct Cell {
   bool filled;
   uint level;
-  uvec3 coord;      // cell coordinates at level
-  uint page;        // first pool page of the chunk holding the node
-  uint record;      // word of the corner record (filled)
+  uvec3 coord;  // cell coordinates at level
+  uint page;    // first pool page of the chunk holding the node
+  uint record;  // word of the corner record (filled)
 };
 
 // Find the cell of grid point g, descending from the octree root through resident chunks. At a
@@ -59,8 +59,8 @@ Cell locate(uvec3 g, float distance, bool request) {
       break;
     }
     uint shift = 20u - level;
-    uint octant = ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) |
-                  (((g.z >> shift) & 1u) << 2u);
+    uint octant =
+        ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) | (((g.z >> shift) & 1u) << 2u);
     if (((mask >> octant) & 1u) == 0u) {  // an empty child
       level += 1u;
       break;
@@ -117,7 +117,7 @@ Corners loadCorners(uint page, uint record) {
 
 // The trilinear interpolation at local coordinates u in [0, 1]^3.
 float trilinear(Corners c, vec3 u) {
-  vec4 a = mix(c.d0, c.d1, u.z);                 // (x0y0, x1y0, x0y1, x1y1)
+  vec4 a = mix(c.d0, c.d1, u.z);  // (x0y0, x1y0, x0y1, x1y1)
   float x0 = mix(a.x, a.z, u.y);
   float x1 = mix(a.y, a.w, u.y);
   return mix(x0, x1, u.x);
@@ -137,8 +137,8 @@ vec3 trilinearGradient(Corners c, vec3 u) {
 
 struct Hit {
   float t;
-  vec3 normal;   // unit, pointing outside (where the signed distance is positive)
-  vec3 color;    // linear RGB: the file's colors, or the material's
+  vec3 normal;  // unit, pointing outside (where the signed distance is positive)
+  vec3 color;   // linear RGB: the file's colors, or the material's
 };
 
 vec3 decodeOctahedral(vec2 e) {
@@ -248,8 +248,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
             float m = (flo - fhi) != 0.0f ? lo_t + (hi_t - lo_t) * flo / (flo - fhi)
                                           : 0.5f * (lo_t + hi_t);
             m = clamp(m, lo_t, hi_t);
-            float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f),
-                                                 vec3(1.0f)));
+            float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f), vec3(1.0f)));
             if (fm > 0.0f) {
               lo_t = m;
               flo = fm;

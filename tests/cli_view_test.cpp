@@ -69,10 +69,9 @@ TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
   TempDir dir;
   const auto shot = dir / "shot.png";
   const std::string command = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(ISO_BINARY) +
-                              " view " + quoted(kittenIso()) +
-                              " --frames 12 --screenshot " + quoted(shot) +
-                              " --width 160 --height 120 >" + quoted(dir / "out") + " 2>" +
-                              quoted(dir / "err");
+                              " view " + quoted(kittenIso()) + " --frames 12 --screenshot " +
+                              quoted(shot) + " --width 160 --height 120 >" + quoted(dir / "out") +
+                              " 2>" + quoted(dir / "err");
   const int status = std::system(command.c_str());
   ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0) << slurp(dir / "err");
   EXPECT_NE(slurp(dir / "out").find("chunks"), std::string::npos) << slurp(dir / "out");

@@ -139,8 +139,8 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
     }
   }
   const uint32_t nodeCount = uint32_t(nodes.size());
-  const size_t pagesGuess = blobPages(kBlobPageList + 2 * size_t(nodeCount) + links.size() +
-                                      records.size() + 64) + 1;
+  const size_t pagesGuess =
+      blobPages(kBlobPageList + 2 * size_t(nodeCount) + links.size() + records.size() + 64) + 1;
   const size_t header = kBlobPageList + pagesGuess;
   const size_t nodesAt = header, linksAt = nodesAt + 2 * size_t(nodeCount);
   const size_t dataAt = linksAt + links.size();

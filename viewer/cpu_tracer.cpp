@@ -85,7 +85,8 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
   tbb::parallel_for(uint32_t(0), height, [&](uint32_t y) {
     shader::Tracer tracer(pool, params, environment);
     uint32_t count = 0;
-    for (uint32_t x = 0; x < width; ++x) frame.pixels[size_t(y) * width + x] = tracer.renderPixel(x, y, count);
+    for (uint32_t x = 0; x < width; ++x)
+      frame.pixels[size_t(y) * width + x] = tracer.renderPixel(x, y, count);
     rays += count;
   });
   frame.rays = rays;

@@ -31,7 +31,8 @@ void writeImage(const std::filesystem::path& path, uint32_t width, uint32_t heig
 std::vector<uint32_t> readImage(const std::filesystem::path& path, uint32_t& width,
                                 uint32_t& height) {
   auto in = OIIO::ImageInput::open(path.string());
-  if (!in) throw FileError(path.string(), std::nullopt, "cannot read the image: " + OIIO::geterror());
+  if (!in)
+    throw FileError(path.string(), std::nullopt, "cannot read the image: " + OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
   width = uint32_t(spec.width);
   height = uint32_t(spec.height);
@@ -62,7 +63,8 @@ Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth
   OIIO::ImageBuf image = source;
   if (uint32_t(spec.width) > maxWidth) {
     const int w = int(maxWidth), h = std::max(1, int(int64_t(spec.height) * w / spec.width));
-    image = OIIO::ImageBufAlgo::resize(source, "box", 0.0f, OIIO::ROI(0, w, 0, h, 0, 1, 0, spec.nchannels));
+    image = OIIO::ImageBufAlgo::resize(source, "box", 0.0f,
+                                       OIIO::ROI(0, w, 0, h, 0, 1, 0, spec.nchannels));
     if (image.has_error())
       throw FileError(path.string(), std::nullopt, "cannot resize the environment map");
   }

@@ -1,10 +1,10 @@
 // The viewer's GPU frames and streaming uploads (renderer.h).
 #include "renderer.h"
 
+#include <fmt/core.h>
 #include <algorithm>
 #include <bit>
 #include <cstring>
-#include <fmt/core.h>
 
 #include "iso/check.h"
 
@@ -72,11 +72,10 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   pagesPerBuffer_ = std::max<uint32_t>(pagesPerBuffer_, 1);
   poolPages = std::min<uint64_t>(poolPages, uint64_t(pagesPerBuffer_) * gpu::kPoolBuffers);
   if (poolPages == 0)
-    throw std::runtime_error(fmt::format(
-        "--vram {} is too small: the frame buffers and tables alone take {} bytes", options.vram,
-        fixed));
-  cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob,
-                                        uint32_t(poolPages));
+    throw std::runtime_error(
+        fmt::format("--vram {} is too small: the frame buffers and tables alone take {} bytes",
+                    options.vram, fixed));
+  cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages));
   try {
     params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
     chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
@@ -87,8 +86,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
     staging_ = createBuffer(gpu, stagingBytes, src, true);
     for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
       const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
-      pool_.push_back(createBuffer(
-          gpu, pages * kPageBytes, dst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
+      pool_.push_back(createBuffer(gpu, pages * kPageBytes,
+                                   dst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
     }
     if (environment)
       std::memcpy(environment_.mapped, environment->texels.data(), envBytes);
@@ -166,9 +165,9 @@ void Renderer::prepare(gpu::FrameParams params) {
     std::memcpy(staging + offset, up.words.data(), bytes);
     for (size_t p = 0; p < up.pages.size(); ++p) {
       const uint64_t size = std::min<uint64_t>(kPageBytes, bytes - p * kPageBytes);
-      copies_.push_back({up.pages[p] / pagesPerBuffer_,
-                         {offset + p * kPageBytes, (up.pages[p] % pagesPerBuffer_) * kPageBytes,
-                          size}});
+      copies_.push_back(
+          {up.pages[p] / pagesPerBuffer_,
+           {offset + p * kPageBytes, (up.pages[p] % pagesPerBuffer_) * kPageBytes, size}});
     }
     table[up.chunk].state.x = up.pages[0];
     offset += bytes;
@@ -196,11 +195,12 @@ void Renderer::prepare(gpu::FrameParams params) {
 }
 
 void Renderer::record(VkCommandBuffer cb) {
-  for (const Copy& c : copies_) vkCmdCopyBuffer(cb, staging_.buffer, pool_[c.buffer].buffer, 1, &c.region);
+  for (const Copy& c : copies_)
+    vkCmdCopyBuffer(cb, staging_.buffer, pool_[c.buffer].buffer, 1, &c.region);
   VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
   barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT;
-  barrier.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
-                          VK_ACCESS_UNIFORM_READ_BIT;
+  barrier.dstAccessMask =
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_UNIFORM_READ_BIT;
   vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
                        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
                        nullptr);
@@ -213,8 +213,8 @@ void Renderer::record(VkCommandBuffer cb) {
   after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
   after.dstAccessMask = VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
   vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after,
-                       0, nullptr, 0, nullptr);
+                       VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
+                       nullptr, 0, nullptr);
 }
 
 void Renderer::collect() {

@@ -19,22 +19,22 @@ namespace iso::viewer {
 
 struct RendererOptions {
   uint32_t width = 1024, height = 1024;
-  uint64_t vram = uint64_t(1) << 30;      // all device memory the viewer allocates
-  uint64_t uploadBytes = 16u << 20;       // chunk bytes uploaded per frame at most
-  bool swapRedBlue = false;               // BGRA output (swapchains)
-  bool streaming = true;                  // rays request chunks; off: the top chunk alone
+  uint64_t vram = uint64_t(1) << 30;  // all device memory the viewer allocates
+  uint64_t uploadBytes = 16u << 20;   // chunk bytes uploaded per frame at most
+  bool swapRedBlue = false;           // BGRA output (swapchains)
+  bool streaming = true;              // rays request chunks; off: the top chunk alone
 };
 
 struct FrameStats {
   uint64_t frame = 0;
-  uint64_t rays = 0;              // traced in the frame
-  uint32_t requested = 0;         // chunks rays asked for that were not resident
-  uint32_t uploadedChunks = 0;    // placed in this frame
+  uint64_t rays = 0;            // traced in the frame
+  uint32_t requested = 0;       // chunks rays asked for that were not resident
+  uint32_t uploadedChunks = 0;  // placed in this frame
   uint64_t uploadedBytes = 0;
-  uint64_t streamedBytes = 0;     // since the start
+  uint64_t streamedBytes = 0;  // since the start
   uint32_t evicted = 0;
   uint32_t resident = 0;
-  uint32_t pending = 0;           // asked for, not resident yet
+  uint32_t pending = 0;  // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
 };
 
@@ -51,7 +51,7 @@ class Renderer {
   void collect();
 
   const Buffer& output() const { return output_; }  // RGBA8 (BGRA with swapRedBlue) pixels
-  std::vector<uint32_t> pixels() const;              // a copy of the output
+  std::vector<uint32_t> pixels() const;             // a copy of the output
   const FrameStats& stats() const { return stats_; }
   // Whether the last frame's rays found every chunk they asked for resident.
   bool converged() const { return stats_.requested == 0 && stats_.pending == 0; }

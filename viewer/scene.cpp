@@ -143,9 +143,10 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   json j = json::parse(in, nullptr, false);
   if (j.is_discarded()) throw FileError(file, std::nullopt, "not valid JSON");
   const Fields f{file};
-  f.known(j, "", {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up",
-                  "environment", "environment_intensity", "shadows", "reflections",
-                  "refractions", "bounces", "samples", "lod_pixels"});
+  f.known(j, "",
+          {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
+           "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
+           "lod_pixels"});
   if (j.contains("camera")) {
     const json& c = j["camera"];
     f.known(c, "camera", {"eye", "target", "up", "fov"});
@@ -189,8 +190,9 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   }
   if (j.contains("material")) {
     const json& m = j["material"];
-    f.known(m, "material", {"color", "diffuse", "specular", "shininess", "reflectivity",
-                            "transparency", "ior", "absorption"});
+    f.known(m, "material",
+            {"color", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior",
+             "absorption"});
     Material& mat = scene.material;
     if (m.contains("color")) mat.color = f.color(m["color"], "material.color");
     auto unit = [&](const char* key, float& out) {
@@ -203,7 +205,8 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
     unit("specular", mat.specular);
     unit("reflectivity", mat.reflectivity);
     unit("transparency", mat.transparency);
-    if (m.contains("shininess")) mat.shininess = float(f.number(m["shininess"], "material.shininess"));
+    if (m.contains("shininess"))
+      mat.shininess = float(f.number(m["shininess"], "material.shininess"));
     if (m.contains("ior")) {
       mat.ior = float(f.number(m["ior"], "material.ior"));
       if (!(mat.ior >= 1.0f && mat.ior <= 4.0f)) f.fail("material.ior", "from 1 to 4");
@@ -222,7 +225,8 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
     scene.environment = (env.is_relative() ? path.parent_path() / env : env).string();
   }
   if (j.contains("environment_intensity"))
-    scene.environmentIntensity = float(f.number(j["environment_intensity"], "environment_intensity"));
+    scene.environmentIntensity =
+        float(f.number(j["environment_intensity"], "environment_intensity"));
   if (j.contains("shadows")) scene.shadows = f.boolean(j["shadows"], "shadows");
   if (j.contains("reflections")) scene.reflections = f.boolean(j["reflections"], "reflections");
   if (j.contains("refractions")) scene.refractions = f.boolean(j["refractions"], "refractions");
@@ -261,9 +265,9 @@ LightSpec defaultLight(const Camera& c, const Bounds& b) {
   const Vec3d up = cross(right, forward);
   const double radius = 0.5 * std::sqrt(dot(sub(b.hi, b.lo), sub(b.hi, b.lo)));
   LightSpec light;
-  light.position = add(c.target, scale(add(add(scale(right, -0.6), scale(up, 1.0)),
-                                           scale(forward, -0.7)),
-                                       3.0 * radius));
+  light.position =
+      add(c.target,
+          scale(add(add(scale(right, -0.6), scale(up, 1.0)), scale(forward, -0.7)), 3.0 * radius));
   return light;
 }
 

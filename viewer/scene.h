@@ -24,11 +24,11 @@ struct Camera {
 
 struct LightSpec {
   bool area = false;
-  Vec3d position{};       // point light, or the center of an area light
-  Vec3d u{}, v{};         // area light edges
+  Vec3d position{};  // point light, or the center of an area light
+  Vec3d u{}, v{};    // area light edges
   std::array<float, 3> color{1, 1, 1};
   float intensity = 1.0f;
-  int samples = 16;       // area light shadow rays per sample
+  int samples = 16;  // area light shadow rays per sample
 };
 
 struct Material {
@@ -39,19 +39,19 @@ struct Material {
 };
 
 struct Scene {
-  std::optional<Camera> camera;       // none: framed on the surface's bounds
-  std::optional<double> fovDegrees;   // overrides the camera's field of view
-  std::vector<LightSpec> lights;      // none: one point light over the camera's shoulder
+  std::optional<Camera> camera;      // none: framed on the surface's bounds
+  std::optional<double> fovDegrees;  // overrides the camera's field of view
+  std::vector<LightSpec> lights;     // none: one point light over the camera's shoulder
   Material material;
   std::array<float, 3> ambient{0.12f, 0.12f, 0.13f};
   std::array<float, 3> skyTop{0.55f, 0.66f, 0.85f}, skyBottom{0.18f, 0.17f, 0.16f};
-  std::optional<Vec3d> up;            // none: from the file (z for LiDAR inputs, else y)
-  std::string environment;            // an image OpenImageIO reads (equirectangular)
+  std::optional<Vec3d> up;  // none: from the file (z for LiDAR inputs, else y)
+  std::string environment;  // an image OpenImageIO reads (equirectangular)
   float environmentIntensity = 1.0f;
   bool shadows = true, reflections = true, refractions = true;
   int bounces = 3;
-  int samples = 1;                    // per pixel (supersampling)
-  float lodPixels = 1.0f;             // screen-space error allowed, pixels
+  int samples = 1;         // per pixel (supersampling)
+  float lodPixels = 1.0f;  // screen-space error allowed, pixels
 };
 
 // Read a scene file over `scene` (keys it does not set stay). Throws iso::FileError naming the

@@ -24,10 +24,10 @@ ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions 
     ready_.emplace_back(tree.topChunk(), prepare(tree.topChunk()));
   }
   if (blobPages(ready_.front().second.size()) > poolPages)
-    throw std::runtime_error("--vram is too small: the coarsest chunk alone needs " +
-                             std::to_string(blobPages(ready_.front().second.size()) *
-                                            uint64_t(gpu::kPageWords) * 4) +
-                             " bytes of page pool");
+    throw std::runtime_error(
+        "--vram is too small: the coarsest chunk alone needs " +
+        std::to_string(blobPages(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
+        " bytes of page pool");
   loader_ = std::thread([this] { loaderLoop(); });
 }
 
@@ -46,8 +46,8 @@ std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
   // The renderer sizes its buffers from the table's counts.
   const ChunkInfo& info = reader_.chunk(chunk);
   const auto& nodes = decoded.layout.nodes;
-  const size_t leaves = size_t(std::count_if(nodes.begin(), nodes.end(),
-                                             [](const SurfaceNode& n) { return n.isLeaf(); }));
+  const size_t leaves = size_t(
+      std::count_if(nodes.begin(), nodes.end(), [](const SurfaceNode& n) { return n.isLeaf(); }));
   if (nodes.size() != info.nodeCount || leaves != info.leafCount)
     throw FileError(reader_.name(), info.offset,
                     "chunk " + std::to_string(chunk) + ": the chunk table gives " +

@@ -81,8 +81,8 @@ struct GpuView {
         scene(completeScene(o, *asset)),
         env(environmentOf(scene)),
         session(o) {
-    renderer = std::make_unique<Renderer>(session.gpu, *asset, env ? &*env : nullptr,
-                                          rendererOptions(o));
+    renderer =
+        std::make_unique<Renderer>(session.gpu, *asset, env ? &*env : nullptr, rendererOptions(o));
     cb = allocateCommandBuffer(session.gpu);
     fence = createFence(session.gpu, false);
   }
@@ -91,9 +91,7 @@ struct GpuView {
     if (fence) vkDestroyFence(session.gpu.device, fence, nullptr);
   }
   // Render a frame of `s` and wait for it; the seconds from submit to done.
-  double frame(const Scene& s) {
-    return renderFrame(session.gpu, *renderer, *asset, s, cb, fence);
-  }
+  double frame(const Scene& s) { return renderFrame(session.gpu, *renderer, *asset, s, cb, fence); }
 };
 
 }  // namespace
@@ -126,14 +124,15 @@ int viewHeadless(const ViewOptions& options) {
   const auto pixels = renderer.pixels();
   writeImage(options.out, options.width, options.height, pixels);
   fmt::print("{}: {}x{} on {}, {} frame{} in {:.2f} s ({}), last frame {:.1f} ms, {:.1f} Mrays/s\n",
-             options.out.string(), options.width, options.height, gpu.properties.deviceName,
-             frames, frames == 1 ? "" : "s", seconds(Clock::now() - start),
-             renderer.converged() ? "converged" : "not converged",
-             lastFrame * 1e3, lastFrame > 0 ? s.rays / lastFrame / 1e6 : 0.0);
-  fmt::print("  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
-             "(--vram {})\n",
-             s.resident, asset->reader.chunks().size(), mib(s.poolBytesInUse), mib(s.poolBytes),
-             mib(s.streamedBytes), mib(s.vramPeak), mib(options.vram));
+             options.out.string(), options.width, options.height, gpu.properties.deviceName, frames,
+             frames == 1 ? "" : "s", seconds(Clock::now() - start),
+             renderer.converged() ? "converged" : "not converged", lastFrame * 1e3,
+             lastFrame > 0 ? s.rays / lastFrame / 1e6 : 0.0);
+  fmt::print(
+      "  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
+      "(--vram {})\n",
+      s.resident, asset->reader.chunks().size(), mib(s.poolBytesInUse), mib(s.poolBytes),
+      mib(s.streamedBytes), mib(s.vramPeak), mib(options.vram));
   if (renderer.stalled())
     fmt::print(stderr,
                "iso view: the view needs more chunks than --vram {} holds; coarser levels are "
@@ -169,10 +168,10 @@ int viewCpu(const ViewOptions& options) {
   const CpuFrame frame = renderCpu(pool, params, env ? &*env : nullptr);
   const double render = seconds(Clock::now() - t1);
   writeImage(options.out, options.width, options.height, frame.pixels);
-  fmt::print("{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
-             "{:.2f} s\n",
-             options.out.string(), options.width, options.height, render,
-             frame.rays / render / 1e6, load);
+  fmt::print(
+      "{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
+      "{:.2f} s\n",
+      options.out.string(), options.width, options.height, render, frame.rays / render / 1e6, load);
   return 0;
 }
 
@@ -200,8 +199,7 @@ int viewBench(const ViewOptions& options) {
                    up[0] * offset[1] - up[1] * offset[0]};
     Scene scene = base;
     for (int i = 0; i < 3; ++i)
-      scene.camera->eye[i] =
-          c0.target[i] + offset[i] * cs + cr[i] * sn + up[i] * k * (1 - cs);
+      scene.camera->eye[i] = c0.target[i] + offset[i] * cs + cr[i] * sn + up[i] * k * (1 - cs);
     const double dt = view.frame(scene);
     const FrameStats& s = renderer.stats();
     if (f > 0) {  // the first frame builds the pipeline's caches
@@ -218,28 +216,28 @@ int viewBench(const ViewOptions& options) {
   const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / std::max<size_t>(ms.size(), 1);
   const uint64_t upTotal = std::accumulate(uploaded.begin(), uploaded.end(), uint64_t(0));
   const uint64_t upMax = *std::max_element(uploaded.begin(), uploaded.end());
-  fmt::print("bench {}: {}x{} on {}, {} frames orbiting, samples {}, shadows {}, reflections {}, "
-             "--vram {}\n",
-             options.file.filename().string(), options.width, options.height,
-             gpu.properties.deviceName, options.benchFrames, base.samples,
-             base.shadows ? "on" : "off", base.reflections && base.material.reflectivity > 0
-                                              ? "on"
-                                              : "off",
-             mib(options.vram));
+  fmt::print(
+      "bench {}: {}x{} on {}, {} frames orbiting, samples {}, shadows {}, reflections {}, "
+      "--vram {}\n",
+      options.file.filename().string(), options.width, options.height, gpu.properties.deviceName,
+      options.benchFrames, base.samples, base.shadows ? "on" : "off",
+      base.reflections && base.material.reflectivity > 0 ? "on" : "off", mib(options.vram));
   fmt::print("  ms/frame    mean {:.2f}, median {:.2f}, max {:.2f}\n", mean,
              sorted.empty() ? 0 : sorted[sorted.size() / 2], sorted.empty() ? 0 : sorted.back());
-  fmt::print("  rays/s      {:.2f} M ({:.2f} rays a pixel)\n", total > 0 ? rays / total / 1e6 : 0,
-             double(rays) / std::max<size_t>(ms.size(), 1) / (double(options.width) * options.height));
+  fmt::print(
+      "  rays/s      {:.2f} M ({:.2f} rays a pixel)\n", total > 0 ? rays / total / 1e6 : 0,
+      double(rays) / std::max<size_t>(ms.size(), 1) / (double(options.width) * options.height));
   fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", mib(s.vramInUse),
              mib(s.vramPeak), mib(s.poolBytesInUse), mib(s.poolBytes));
   fmt::print("  chunks      {} resident at the end, {} at most, of {}\n", s.resident, maxResident,
              asset->reader.chunks().size());
   const size_t half = uploaded.size() / 2;
   const uint64_t upLater = std::accumulate(uploaded.begin() + half, uploaded.end(), uint64_t(0));
-  fmt::print("  streamed    {} in all, {:.1f} KiB a frame on average ({:.1f} KiB in the second "
-             "half of the path), {} at most in a frame\n",
-             mib(upTotal), upTotal / 1024.0 / uploaded.size(),
-             upLater / 1024.0 / std::max<size_t>(uploaded.size() - half, 1), mib(upMax));
+  fmt::print(
+      "  streamed    {} in all, {:.1f} KiB a frame on average ({:.1f} KiB in the second "
+      "half of the path), {} at most in a frame\n",
+      mib(upTotal), upTotal / 1024.0 / uploaded.size(),
+      upLater / 1024.0 / std::max<size_t>(uploaded.size() - half, 1), mib(upMax));
   return *gpu.validationErrors > 0 ? 1 : 0;
 }
 

@@ -12,8 +12,8 @@ namespace iso::viewer {
 
 struct ViewOptions {
   std::filesystem::path file;
-  std::filesystem::path sceneFile;     // JSON scene (watched and reloaded in the window)
-  Scene scene;                         // after the scene file and the command line
+  std::filesystem::path sceneFile;  // JSON scene (watched and reloaded in the window)
+  Scene scene;                      // after the scene file and the command line
   uint32_t width = 1024, height = 1024;
   uint64_t vram = uint64_t(1) << 30;
   uint64_t uploadBytes = 16u << 20;
@@ -21,10 +21,10 @@ struct ViewOptions {
   std::string device;
   // Headless
   std::filesystem::path out;
-  uint32_t maxFrames = 1000;           // frames to let streaming converge
+  uint32_t maxFrames = 1000;  // frames to let streaming converge
   // Window
-  uint32_t frames = 0;                 // quit after this many frames (0: when closed)
-  std::filesystem::path screenshot;    // save the last frame here when quitting
+  uint32_t frames = 0;               // quit after this many frames (0: when closed)
+  std::filesystem::path screenshot;  // save the last frame here when quitting
   // Benchmark
   uint32_t benchFrames = 120;
 };

@@ -1,33 +1,51 @@
 // The viewer's Vulkan layer (vulkan.h).
 #include "vulkan.h"
 
+#include <fmt/core.h>
 #include <cstdlib>
 #include <cstring>
-#include <fmt/core.h>
 
 namespace iso::viewer {
 namespace {
 
 const char* resultName(VkResult r) {
   switch (r) {
-    case VK_SUCCESS: return "VK_SUCCESS";
-    case VK_NOT_READY: return "VK_NOT_READY";
-    case VK_TIMEOUT: return "VK_TIMEOUT";
-    case VK_INCOMPLETE: return "VK_INCOMPLETE";
-    case VK_SUBOPTIMAL_KHR: return "VK_SUBOPTIMAL_KHR";
-    case VK_ERROR_OUT_OF_HOST_MEMORY: return "VK_ERROR_OUT_OF_HOST_MEMORY";
-    case VK_ERROR_OUT_OF_DEVICE_MEMORY: return "VK_ERROR_OUT_OF_DEVICE_MEMORY";
-    case VK_ERROR_INITIALIZATION_FAILED: return "VK_ERROR_INITIALIZATION_FAILED";
-    case VK_ERROR_DEVICE_LOST: return "VK_ERROR_DEVICE_LOST";
-    case VK_ERROR_MEMORY_MAP_FAILED: return "VK_ERROR_MEMORY_MAP_FAILED";
-    case VK_ERROR_LAYER_NOT_PRESENT: return "VK_ERROR_LAYER_NOT_PRESENT";
-    case VK_ERROR_EXTENSION_NOT_PRESENT: return "VK_ERROR_EXTENSION_NOT_PRESENT";
-    case VK_ERROR_FEATURE_NOT_PRESENT: return "VK_ERROR_FEATURE_NOT_PRESENT";
-    case VK_ERROR_INCOMPATIBLE_DRIVER: return "VK_ERROR_INCOMPATIBLE_DRIVER (no Vulkan driver)";
-    case VK_ERROR_TOO_MANY_OBJECTS: return "VK_ERROR_TOO_MANY_OBJECTS";
-    case VK_ERROR_SURFACE_LOST_KHR: return "VK_ERROR_SURFACE_LOST_KHR";
-    case VK_ERROR_OUT_OF_DATE_KHR: return "VK_ERROR_OUT_OF_DATE_KHR";
-    default: return "VkResult";
+    case VK_SUCCESS:
+      return "VK_SUCCESS";
+    case VK_NOT_READY:
+      return "VK_NOT_READY";
+    case VK_TIMEOUT:
+      return "VK_TIMEOUT";
+    case VK_INCOMPLETE:
+      return "VK_INCOMPLETE";
+    case VK_SUBOPTIMAL_KHR:
+      return "VK_SUBOPTIMAL_KHR";
+    case VK_ERROR_OUT_OF_HOST_MEMORY:
+      return "VK_ERROR_OUT_OF_HOST_MEMORY";
+    case VK_ERROR_OUT_OF_DEVICE_MEMORY:
+      return "VK_ERROR_OUT_OF_DEVICE_MEMORY";
+    case VK_ERROR_INITIALIZATION_FAILED:
+      return "VK_ERROR_INITIALIZATION_FAILED";
+    case VK_ERROR_DEVICE_LOST:
+      return "VK_ERROR_DEVICE_LOST";
+    case VK_ERROR_MEMORY_MAP_FAILED:
+      return "VK_ERROR_MEMORY_MAP_FAILED";
+    case VK_ERROR_LAYER_NOT_PRESENT:
+      return "VK_ERROR_LAYER_NOT_PRESENT";
+    case VK_ERROR_EXTENSION_NOT_PRESENT:
+      return "VK_ERROR_EXTENSION_NOT_PRESENT";
+    case VK_ERROR_FEATURE_NOT_PRESENT:
+      return "VK_ERROR_FEATURE_NOT_PRESENT";
+    case VK_ERROR_INCOMPATIBLE_DRIVER:
+      return "VK_ERROR_INCOMPATIBLE_DRIVER (no Vulkan driver)";
+    case VK_ERROR_TOO_MANY_OBJECTS:
+      return "VK_ERROR_TOO_MANY_OBJECTS";
+    case VK_ERROR_SURFACE_LOST_KHR:
+      return "VK_ERROR_SURFACE_LOST_KHR";
+    case VK_ERROR_OUT_OF_DATE_KHR:
+      return "VK_ERROR_OUT_OF_DATE_KHR";
+    default:
+      return "VkResult";
   }
 }
 
@@ -57,11 +75,16 @@ bool hasLayer(const char* name) {
 
 int deviceRank(VkPhysicalDeviceType type) {
   switch (type) {
-    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: return 0;
-    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU: return 1;
-    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU: return 2;
-    case VK_PHYSICAL_DEVICE_TYPE_CPU: return 3;
-    default: return 4;
+    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU:
+      return 0;
+    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU:
+      return 1;
+    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU:
+      return 2;
+    case VK_PHYSICAL_DEVICE_TYPE_CPU:
+      return 3;
+    default:
+      return 4;
   }
 }
 
@@ -75,8 +98,8 @@ uint32_t memoryType(const Gpu& gpu, uint32_t typeBits, VkMemoryPropertyFlags wan
 }  // namespace
 
 VulkanError::VulkanError(const std::string& call, VkResult result)
-    : std::runtime_error(fmt::format("Vulkan: {} failed: {} ({})", call, resultName(result),
-                                     int(result))),
+    : std::runtime_error(
+          fmt::format("Vulkan: {} failed: {} ({})", call, resultName(result), int(result))),
       result_(result) {}
 
 void checkVk(VkResult result, const char* call) {
@@ -162,11 +185,10 @@ Gpu createGpu(const GpuOptions& options) {
       }
     }
     if (gpu.physical == VK_NULL_HANDLE)
-      throw std::runtime_error(
-          fmt::format("no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
-                      "mesa-vulkan-drivers for the CPU one",
-                      wanted.empty() ? "" : " named like '" + wanted + "'",
-                      describeDevices(gpu.instance)));
+      throw std::runtime_error(fmt::format(
+          "no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
+          "mesa-vulkan-drivers for the CPU one",
+          wanted.empty() ? "" : " named like '" + wanted + "'", describeDevices(gpu.instance)));
     vkGetPhysicalDeviceProperties(gpu.physical, &gpu.properties);
     vkGetPhysicalDeviceMemoryProperties(gpu.physical, &gpu.memory);
     const float priority = 1.0f;
@@ -182,9 +204,10 @@ Gpu createGpu(const GpuOptions& options) {
     has.pNext = &has12;
     vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
     if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
-      throw std::runtime_error(fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
-                                           "shaderInt64, which the viewer needs",
-                                           gpu.properties.deviceName));
+      throw std::runtime_error(
+          fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
+                      "shaderInt64, which the viewer needs",
+                      gpu.properties.deviceName));
     VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
     use12.bufferDeviceAddress = VK_TRUE;
     VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
@@ -291,7 +314,8 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts) {
   ComputePipeline p;
   std::vector<VkDescriptorSetLayoutBinding> bindings;
-  bindings.push_back({0, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
+  bindings.push_back(
+      {0, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
   uint32_t storage = 0;
   for (size_t i = 0; i < storageCounts.size(); ++i) {
     bindings.push_back({uint32_t(i + 1), VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storageCounts[i],

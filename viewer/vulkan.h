@@ -43,8 +43,8 @@ struct Gpu {
   VkPhysicalDeviceProperties properties{};
   VkPhysicalDeviceMemoryProperties memory{};
   VkCommandPool commandPool = VK_NULL_HANDLE;
-  uint64_t memoryInUse = 0;  // bytes of device memory allocated now
-  uint64_t memoryPeak = 0;   // the most at once
+  uint64_t memoryInUse = 0;                           // bytes of device memory allocated now
+  uint64_t memoryPeak = 0;                            // the most at once
   std::atomic<uint32_t>* validationErrors = nullptr;  // messages of severity error
 };
 
@@ -56,10 +56,10 @@ std::string describeDevices(VkInstance instance);
 struct Buffer {
   VkBuffer buffer = VK_NULL_HANDLE;
   VkDeviceMemory memory = VK_NULL_HANDLE;
-  VkDeviceSize size = 0;       // as asked
-  VkDeviceSize allocated = 0;  // device memory it holds
-  void* mapped = nullptr;      // host-visible buffers stay mapped
-  VkDeviceAddress address = 0; // with VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT
+  VkDeviceSize size = 0;        // as asked
+  VkDeviceSize allocated = 0;   // device memory it holds
+  void* mapped = nullptr;       // host-visible buffers stay mapped
+  VkDeviceAddress address = 0;  // with VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT
 };
 
 // A buffer in device-local memory, or host-visible coherent memory when hostVisible.

@@ -67,8 +67,8 @@ Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32
     }
   if (s.format == VK_FORMAT_UNDEFINED)
     throw std::runtime_error("the window offers no 8-bit RGBA or BGRA swapchain format");
-  s.extent = caps.currentExtent.width != UINT32_MAX ? caps.currentExtent
-                                                     : VkExtent2D{width, height};
+  s.extent =
+      caps.currentExtent.width != UINT32_MAX ? caps.currentExtent : VkExtent2D{width, height};
   if (s.extent.width != width || s.extent.height != height)
     throw std::runtime_error(fmt::format("the window is {}x{}, not the {}x{} asked for",
                                          s.extent.width, s.extent.height, width, height));
@@ -153,8 +153,8 @@ int viewWindow(const ViewOptions& options) {
   try {
     ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &surface));
     VkBool32 canPresent = VK_FALSE;
-    ISO_VK(vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface,
-                                                &canPresent));
+    ISO_VK(
+        vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface, &canPresent));
     if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
     swapchain = createSwapchain(gpu, surface, options.width, options.height);
     const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
@@ -182,7 +182,8 @@ int viewWindow(const ViewOptions& options) {
       if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
       if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
       if (key == GLFW_KEY_R) in.reload = true;
-      if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
+      if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
+        in.toggled = key - GLFW_KEY_0;
       if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
       if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
     });
@@ -258,7 +259,8 @@ int viewWindow(const ViewOptions& options) {
           try {
             loadScene(options.sceneFile, next);
             next.camera = scene.camera;
-            if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset->bounds));
+            if (next.lights.empty())
+              next.lights.push_back(defaultLight(*next.camera, asset->bounds));
             scene = next;
             fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
           } catch (const std::exception& e) {
@@ -271,7 +273,8 @@ int viewWindow(const ViewOptions& options) {
       uint32_t index = 0;
       const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
                                                      acquired, VK_NULL_HANDLE, &index);
-      if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR) checkVk(acquire, "vkAcquireNextImageKHR");
+      if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
+        checkVk(acquire, "vkAcquireNextImageKHR");
       renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
       ISO_VK(vkResetCommandBuffer(cb, 0));
       VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
@@ -286,8 +289,8 @@ int viewWindow(const ViewOptions& options) {
       copy.imageExtent = {options.width, options.height, 1};
       vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
                              VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
-      imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
-                   VK_IMAGE_LAYOUT_PRESENT_SRC_KHR, VK_ACCESS_TRANSFER_WRITE_BIT, 0);
+      imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
+                   VK_ACCESS_TRANSFER_WRITE_BIT, 0);
       ISO_VK(vkEndCommandBuffer(cb));
       const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
       VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};

@@ -52,9 +52,10 @@ SpirvLayout readSpirv(const std::string& path) {
   for (size_t i = 5; i < words.size();) {
     const uint32_t count = words[i] >> 16, opcode = words[i] & 0xFFFF;
     if (count == 0) break;
-    if (opcode == 5) layout.names[words[i + 1]] = text(i + 2, i + count);                 // OpName
+    if (opcode == 5) layout.names[words[i + 1]] = text(i + 2, i + count);  // OpName
     if (opcode == 6) layout.memberNames[{words[i + 1], words[i + 2]}] = text(i + 3, i + count);
-    if (opcode == 72 && words[i + 3] == 35) layout.offsets[{words[i + 1], words[i + 2]}] = words[i + 4];
+    if (opcode == 72 && words[i + 3] == 35)
+      layout.offsets[{words[i + 1], words[i + 2]}] = words[i + 4];
     if (opcode == 71 && words[i + 2] == 6) layout.arrayStrides[words[i + 1]] = words[i + 3];
     i += count;
   }
@@ -65,14 +66,22 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
   const SpirvLayout spirv = readSpirv(ISO_TRACE_DEBUG_SPIRV);
   using gpu::FrameParams;
   const std::map<std::string, uint32_t> frame = {
-      {"eye", offsetof(FrameParams, eye)},         {"right", offsetof(FrameParams, right)},
-      {"up", offsetof(FrameParams, up)},           {"forward", offsetof(FrameParams, forward)},
-      {"image", offsetof(FrameParams, image)},     {"options", offsetof(FrameParams, options)},
-      {"pool", offsetof(FrameParams, pool)},       {"lod", offsetof(FrameParams, lod)},
-      {"ambient", offsetof(FrameParams, ambient)}, {"albedo", offsetof(FrameParams, albedo)},
-      {"material", offsetof(FrameParams, material)}, {"medium", offsetof(FrameParams, medium)},
-      {"skyTop", offsetof(FrameParams, skyTop)},   {"skyBottom", offsetof(FrameParams, skyBottom)},
-      {"worldUp", offsetof(FrameParams, worldUp)}, {"lights", offsetof(FrameParams, lights)},
+      {"eye", offsetof(FrameParams, eye)},
+      {"right", offsetof(FrameParams, right)},
+      {"up", offsetof(FrameParams, up)},
+      {"forward", offsetof(FrameParams, forward)},
+      {"image", offsetof(FrameParams, image)},
+      {"options", offsetof(FrameParams, options)},
+      {"pool", offsetof(FrameParams, pool)},
+      {"lod", offsetof(FrameParams, lod)},
+      {"ambient", offsetof(FrameParams, ambient)},
+      {"albedo", offsetof(FrameParams, albedo)},
+      {"material", offsetof(FrameParams, material)},
+      {"medium", offsetof(FrameParams, medium)},
+      {"skyTop", offsetof(FrameParams, skyTop)},
+      {"skyBottom", offsetof(FrameParams, skyBottom)},
+      {"worldUp", offsetof(FrameParams, worldUp)},
+      {"lights", offsetof(FrameParams, lights)},
       {"poolAddress", offsetof(FrameParams, poolAddress)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},

@@ -160,8 +160,8 @@ TEST(ViewerGolden, theGpuAndTheCpuReferenceDrawTheSamePictures) {
     const auto cpuPicture = renderReference(*asset, scene, w, h);
     EXPECT_TRUE(gpuPicture.converged);
     const double differ = differing(gpuPicture.pixels, cpuPicture);
-    std::printf("%s: %.4f %% of the pixels differ by more than 8/255\n",
-                file.filename().c_str(), 100 * differ);
+    std::printf("%s: %.4f %% of the pixels differ by more than 8/255\n", file.filename().c_str(),
+                100 * differ);
     EXPECT_LE(differ, 0.005);
     // Not a blank picture: the framed surface covers a good part of it, lit unevenly.
     size_t lit = 0, dark = 0;
@@ -219,8 +219,8 @@ TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const CpuPool pool = buildCpuPool(*asset);
   const Frame& frame = asset->reader.header().frame;
   const Scene scene = sceneFor(*asset);
-  const auto params = frameParams(scene, frame, asset->reader.header().maxLevel,
-                                  setupFor(*asset, 64, 64));
+  const auto params =
+      frameParams(scene, frame, asset->reader.header().maxLevel, setupFor(*asset, 64, 64));
   const double cell = std::ldexp(1.0, -int(asset->reader.header().maxLevel));
   std::mt19937 rng(7);
   std::normal_distribution<double> normal;
@@ -243,8 +243,8 @@ TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
     for (double& c : d) c /= dn;
     Vec3 o;
     for (int k = 0; k < 3; ++k) o[k] = (originWorld[k] - frame.origin[k]) / frame.size;
-    const auto mine = traceCpu(pool, params, glm::vec3(o[0], o[1], o[2]),
-                               glm::vec3(d[0], d[1], d[2]));
+    const auto mine =
+        traceCpu(pool, params, glm::vec3(o[0], o[1], o[2]), glm::vec3(d[0], d[1], d[2]));
     const auto theirs = model.intersect(o, d, 0.0, 1e9);
     ASSERT_EQ(mine.has_value(), theirs.has_value()) << "ray " << i;
     if (!mine) continue;

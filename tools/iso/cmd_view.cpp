@@ -89,14 +89,17 @@ void addViewCommand(CLI::App& app, int& exitCode) {
               "resident and bytes streamed");
   c->add_option("--out,-o", a->view.out, "Picture to write (.png, .jpg, .exr, ...)");
   c->add_option("--width", a->view.width, "Picture width in pixels")
-      ->capture_default_str()->check(CLI::Range(8, 16384));
+      ->capture_default_str()
+      ->check(CLI::Range(8, 16384));
   c->add_option("--height", a->view.height, "Picture height in pixels")
-      ->capture_default_str()->check(CLI::Range(8, 16384));
+      ->capture_default_str()
+      ->check(CLI::Range(8, 16384));
   c->add_option("--camera", a->camera,
                 "eye,target,up in world units (9 numbers; default: framed on the surface)");
   c->add_option("--fov", a->fov, "Vertical field of view in degrees (default 40)");
-  c->add_option("--up", a->up, "The scene's up: x, y, z, -x, -y, -z or X,Y,Z (default: z for "
-                               "LAS inputs, else y)");
+  c->add_option("--up", a->up,
+                "The scene's up: x, y, z, -x, -y, -z or X,Y,Z (default: z for "
+                "LAS inputs, else y)");
   c->add_option("--vram", a->vram,
                 "GPU memory the viewer may allocate, all buffers included (e.g. 64M, 2G)")
       ->capture_default_str();
@@ -135,9 +138,11 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_option("--screenshot", a->view.screenshot, "Window: save the last frame here on quitting");
   c->add_option("--max-frames", a->view.maxFrames,
                 "Headless: frames at most for streaming to bring in what the view needs")
-      ->capture_default_str()->check(CLI::Range(1, 100000));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
   c->add_option("--bench-frames", a->view.benchFrames, "Frames of the --bench camera path")
-      ->capture_default_str()->check(CLI::Range(2, 100000));
+      ->capture_default_str()
+      ->check(CLI::Range(2, 100000));
   c->add_flag("--validation", a->view.validation,
               "Enable the Vulkan validation layer (errors make the command fail)");
   c->add_option("--device", a->view.device, "Use the Vulkan device whose name contains this");
