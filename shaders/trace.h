@@ -219,7 +219,12 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
   uvec3 g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
   bool havePrevious = false;
   float previous = 0.0f;  // f × side at the end of the previous surface cell
-  for (uint step = 0u; step < kMaxSteps; ++step) {
+  // The traversal only brackets the first crossing; the root and the attributes are computed once
+  // after it (in SIMD execution, work inside the loop costs every lane every step).
+  bool found = false;
+  Cell hitCell;
+  float tLo = 0.0f, tHi = 0.0f, fLo = 0.0f, fHi = 0.0f;
+  for (uint step = 0u; step < kMaxSteps && !found; ++step) {
     Cell cell = locate(g, distance + t, request);
     float size = 1.0f / float(1u << cell.level);
     vec3 lo = vec3(cell.coord) * size;
@@ -232,70 +237,77 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
       Corners c = loadCorners(cell.page, cell.record);
       float ta0 = t;
       float fa = side * trilinear(c, clamp((o + d * ta0 - lo) / size, vec3(0.0f), vec3(1.0f)));
-      bool found = false;
-      float tHit = t;
       if (havePrevious && previous > 0.0f && fa <= 0.0f) {  // the sign changed at the face
         found = true;
+        tLo = t;
+        tHi = t;
+        fLo = 0.0f;
+        fHi = 0.0f;
       }
       for (uint k = 1u; k <= kSamplesPerLeaf && !found; ++k) {
         float tb0 = mix(t, tStop, float(k) / float(kSamplesPerLeaf));
         float fb = side * trilinear(c, clamp((o + d * tb0 - lo) / size, vec3(0.0f), vec3(1.0f)));
         if (fa > 0.0f && fb <= 0.0f) {
-          // Solve f(t) = 0 on [ta0, tb0]: regula falsi with the Illinois rule.
-          float lo_t = ta0, hi_t = tb0, flo = fa, fhi = fb;
-          int kept = 0;
-          for (int i = 0; i < 12; ++i) {
-            float m = (flo - fhi) != 0.0f ? lo_t + (hi_t - lo_t) * flo / (flo - fhi)
-                                          : 0.5f * (lo_t + hi_t);
-            m = clamp(m, lo_t, hi_t);
-            float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f), vec3(1.0f)));
-            if (fm > 0.0f) {
-              lo_t = m;
-              flo = fm;
-              if (kept == 1) fhi *= 0.5f;
-              kept = 1;
-            } else {
-              hi_t = m;
-              fhi = fm;
-              if (kept == -1) flo *= 0.5f;
-              kept = -1;
-            }
-          }
-          tHit = (flo - fhi) != 0.0f ? lo_t + (hi_t - lo_t) * flo / (flo - fhi) : hi_t;
           found = true;
+          tLo = ta0;
+          tHi = tb0;
+          fLo = fa;
+          fHi = fb;
         }
         ta0 = tb0;
         fa = fb;
       }
-      if (found) {
-        hit.t = tHit;
-        vec3 u = clamp((o + d * tHit - lo) / size, vec3(0.0f), vec3(1.0f));
-        surfaceAttributes(cell, c, u, hit);
-        return true;
-      }
+      hitCell = cell;
       havePrevious = true;
       previous = fa;
     } else {
       havePrevious = false;
     }
-    if (tExit >= tEnd) return false;
-    // Step into the neighbour across the exit face: exact on the grid, so rays always progress.
-    t = tExit;
-    p = o + d * t;
-    uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
-    g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
-    uint shift = 21u - cell.level;
-    uint lower = cell.coord[axis] << shift;
-    uint upper = (cell.coord[axis] + 1u) << shift;
-    if (dir[axis] > 0.0f) {
-      if (upper > kGridMax) return false;
-      g[axis] = upper;
-    } else {
-      if (lower == 0u) return false;
-      g[axis] = lower - 1u;
+    if (!found) {
+      if (tExit >= tEnd) return false;
+      // Step into the neighbour across the exit face: exact on the grid, so rays always progress.
+      t = tExit;
+      p = o + d * t;
+      uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
+      g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
+      uint shift = 21u - cell.level;
+      uint lower = cell.coord[axis] << shift;
+      uint upper = (cell.coord[axis] + 1u) << shift;
+      if (dir[axis] > 0.0f) {
+        if (upper > kGridMax) return false;
+        g[axis] = upper;
+      } else {
+        if (lower == 0u) return false;
+        g[axis] = lower - 1u;
+      }
     }
   }
-  return false;
+  if (!found) return false;
+  // Solve f(t) = 0 on [tLo, tHi]: regula falsi with the Illinois rule, then a last secant step.
+  float size = 1.0f / float(1u << hitCell.level);
+  vec3 lo = vec3(hitCell.coord) * size;
+  Corners c = loadCorners(hitCell.page, hitCell.record);
+  int kept = 0;
+  for (int i = 0; i < 12 && tHi > tLo; ++i) {
+    float m = (fLo - fHi) != 0.0f ? tLo + (tHi - tLo) * fLo / (fLo - fHi) : 0.5f * (tLo + tHi);
+    m = clamp(m, tLo, tHi);
+    float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f), vec3(1.0f)));
+    if (fm > 0.0f) {
+      tLo = m;
+      fLo = fm;
+      if (kept == 1) fHi *= 0.5f;
+      kept = 1;
+    } else {
+      tHi = m;
+      fHi = fm;
+      if (kept == -1) fLo *= 0.5f;
+      kept = -1;
+    }
+  }
+  hit.t = (fLo - fHi) != 0.0f ? tLo + (tHi - tLo) * fLo / (fLo - fHi) : tHi;
+  vec3 u = clamp((o + d * hit.t - lo) / size, vec3(0.0f), vec3(1.0f));
+  surfaceAttributes(hitCell, c, u, hit);
+  return true;
 }
 
 // ---- Shading --------------------------------------------------------------------------------
