@@ -78,6 +78,30 @@ TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
   expectPicture(shot, 160, 120);
 }
 
+TEST(CliView, theWindowResizesTakesScreenshotsAndOrbitsWithTheMouse) {
+  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  TempDir dir;
+  const std::string command = "xvfb-run -a -s '-screen 0 800x600x24' " +
+                              quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" /
+                                     "window_session.sh") +
+                              " " + std::string(ISO_BINARY) + " " + quoted(kittenIso()) + " " +
+                              quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
+  const int status = std::system(command.c_str());
+  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
+      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  EXPECT_NE(slurp(dir / "out.txt").find("saved"), std::string::npos) << slurp(dir / "out.txt");
+  // Both pictures are at the new size; the orbit between them turned the view.
+  expectPicture(dir / "iso-screenshot-1.png", 480, 260);
+  expectPicture(dir / "final.png", 480, 260);
+  uint32_t w = 0, h = 0;
+  const auto before = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
+  const auto after = viewer::readImage(dir / "final.png", w, h);
+  size_t changed = 0;
+  for (size_t i = 0; i < before.size(); ++i) changed += before[i] != after[i];
+  EXPECT_GT(changed, before.size() / 20);
+}
+
 TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {
   TempDir dir;
   const std::vector<std::byte> good = readFile(kittenIso());

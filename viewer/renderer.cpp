@@ -45,7 +45,9 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   constexpr auto storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   constexpr auto dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
   constexpr auto src = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
-  const uint64_t pixelsBytes = uint64_t(options.width) * options.height * 4;
+  options_.capacityWidth = std::max(options.capacityWidth, options.width);
+  options_.capacityHeight = std::max(options.capacityHeight, options.height);
+  const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
   uint64_t stagingBytes = 0, fileBytes = 0;  // the largest blob; all blobs
   for (const ChunkInfo& c : chunks)
@@ -146,6 +148,14 @@ void Renderer::release() {
     destroyBuffer(gpu_, *b);
   for (Buffer& b : pool_) destroyBuffer(gpu_, b);
   pool_.clear();
+}
+
+void Renderer::resize(uint32_t width, uint32_t height) {
+  if (width == 0 || height == 0 || width > options_.capacityWidth ||
+      height > options_.capacityHeight)
+    throw std::invalid_argument("Renderer::resize: larger than the output's capacity");
+  options_.width = setup_.width = width;
+  options_.height = setup_.height = height;
 }
 
 void Renderer::prepare(gpu::FrameParams params) {

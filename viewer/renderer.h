@@ -19,6 +19,7 @@ namespace iso::viewer {
 
 struct RendererOptions {
   uint32_t width = 1024, height = 1024;
+  uint32_t capacityWidth = 0, capacityHeight = 0;  // the largest size resize() allows (0: this)
   uint64_t vram = uint64_t(1) << 30;  // all device memory the viewer allocates
   uint64_t uploadBytes = 16u << 20;   // chunk bytes uploaded per frame at most
   bool swapRedBlue = false;           // BGRA output (swapchains)
@@ -44,6 +45,9 @@ class Renderer {
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
+
+  // Draw at another size, up to the capacity asked for (std::invalid_argument beyond).
+  void resize(uint32_t width, uint32_t height);
 
   // Host work of a frame. params come from frameParams() without the pool fields (set here).
   void prepare(gpu::FrameParams params);

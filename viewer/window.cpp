@@ -50,7 +50,10 @@ struct Swapchain {
   std::vector<VkImage> images;
 };
 
-Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32_t height) {
+// A swapchain for the surface at the window's size (width × height when the surface leaves it
+// to us), replacing `old` when given.
+Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32_t height,
+                          VkSwapchainKHR old = VK_NULL_HANDLE) {
   Swapchain s;
   VkSurfaceCapabilitiesKHR caps;
   ISO_VK(vkGetPhysicalDeviceSurfaceCapabilitiesKHR(gpu.physical, surface, &caps));
@@ -69,9 +72,6 @@ Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32
     throw std::runtime_error("the window offers no 8-bit RGBA or BGRA swapchain format");
   s.extent =
       caps.currentExtent.width != UINT32_MAX ? caps.currentExtent : VkExtent2D{width, height};
-  if (s.extent.width != width || s.extent.height != height)
-    throw std::runtime_error(fmt::format("the window is {}x{}, not the {}x{} asked for",
-                                         s.extent.width, s.extent.height, width, height));
   VkSwapchainCreateInfoKHR info{VK_STRUCTURE_TYPE_SWAPCHAIN_CREATE_INFO_KHR};
   info.surface = surface;
   info.minImageCount = std::max(caps.minImageCount, 2u);
@@ -85,6 +85,7 @@ Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32
   info.compositeAlpha = VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR;
   info.presentMode = VK_PRESENT_MODE_FIFO_KHR;
   info.clipped = VK_TRUE;
+  info.oldSwapchain = old;
   ISO_VK(vkCreateSwapchainKHR(gpu.device, &info, nullptr, &s.swapchain));
   ISO_VK(vkGetSwapchainImagesKHR(gpu.device, s.swapchain, &count, nullptr));
   s.images.resize(count);
@@ -127,7 +128,6 @@ int viewWindow(const ViewOptions& options) {
   } glfwGuard;
   if (!glfwVulkanSupported()) throw std::runtime_error("GLFW finds no Vulkan loader");
   glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
-  glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);
   const std::string title = "iso view " + options.file.filename().string();
   GLFWwindow* window =
       glfwCreateWindow(int(options.width), int(options.height), title.c_str(), nullptr, nullptr);
@@ -159,8 +159,13 @@ int viewWindow(const ViewOptions& options) {
     swapchain = createSwapchain(gpu, surface, options.width, options.height);
     const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
     RendererOptions ro;
-    ro.width = options.width;
-    ro.height = options.height;
+    ro.width = swapchain.extent.width;
+    ro.height = swapchain.extent.height;
+    // Room in the output for the window at the screen's size, so that resizing needs no new
+    // GPU memory (the budget holds for any size up to it).
+    const GLFWvidmode* mode = glfwGetVideoMode(glfwGetPrimaryMonitor());
+    ro.capacityWidth = std::max(ro.width, mode ? uint32_t(mode->width) : 0u);
+    ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
     ro.vram = options.vram;
     ro.uploadBytes = options.uploadBytes;
     ro.swapRedBlue = bgra;
@@ -190,6 +195,7 @@ int viewWindow(const ViewOptions& options) {
 
     std::filesystem::file_time_type sceneTime{};
     if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
+    bool stale = false;  // the swapchain no longer matches the window
     double mouseX = 0, mouseY = 0;
     glfwGetCursorPos(window, &mouseX, &mouseY);
     auto last = Clock::now(), titleTime = last;
@@ -222,7 +228,8 @@ int viewWindow(const ViewOptions& options) {
       }
       if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
           glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
-        const double k = distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / options.height;
+        const double k =
+            distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / swapchain.extent.height;
         const Vec3d move = right * (-dx * k) + up * (dy * k);
         cam.eye = cam.eye + move;
         cam.target = cam.target + move;
@@ -270,9 +277,32 @@ int viewWindow(const ViewOptions& options) {
         input.reload = false;
       }
 
+      // A new window size: a new swapchain, and the renderer draws at that size.
+      int fbWidth = 0, fbHeight = 0;
+      glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
+      if (fbWidth == 0 || fbHeight == 0) {  // minimized
+        glfwWaitEvents();
+        continue;
+      }
+      if (stale || uint32_t(fbWidth) != swapchain.extent.width ||
+          uint32_t(fbHeight) != swapchain.extent.height) {
+        ISO_VK(vkDeviceWaitIdle(gpu.device));
+        Swapchain next = createSwapchain(gpu, surface, uint32_t(fbWidth), uint32_t(fbHeight),
+                                         swapchain.swapchain);
+        vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
+        swapchain = next;
+        // Beyond the screen's size (another monitor) the picture is drawn at the capacity.
+        renderer.resize(std::min(swapchain.extent.width, ro.capacityWidth),
+                        std::min(swapchain.extent.height, ro.capacityHeight));
+        stale = false;
+      }
       uint32_t index = 0;
       const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
                                                      acquired, VK_NULL_HANDLE, &index);
+      if (acquire == VK_ERROR_OUT_OF_DATE_KHR) {
+        stale = true;
+        continue;
+      }
       if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
         checkVk(acquire, "vkAcquireNextImageKHR");
       renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
@@ -286,7 +316,8 @@ int viewWindow(const ViewOptions& options) {
                    VK_ACCESS_TRANSFER_WRITE_BIT);
       VkBufferImageCopy copy{};
       copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-      copy.imageExtent = {options.width, options.height, 1};
+      copy.bufferRowLength = renderer.setup().width;
+      copy.imageExtent = {renderer.setup().width, renderer.setup().height, 1};
       vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
                              VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
       imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
@@ -311,7 +342,9 @@ int viewWindow(const ViewOptions& options) {
       present.pSwapchains = &swapchain.swapchain;
       present.pImageIndices = &index;
       const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
-      if (presented != VK_SUCCESS && presented != VK_SUBOPTIMAL_KHR)
+      if (presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR)
+        stale = true;
+      else
         checkVk(presented, "vkQueuePresentKHR");
       ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
       titleGpu += std::chrono::duration<double>(Clock::now() - t0).count();
@@ -325,7 +358,8 @@ int viewWindow(const ViewOptions& options) {
             last && !options.screenshot.empty()
                 ? options.screenshot
                 : std::filesystem::path(fmt::format("iso-screenshot-{}.png", ++screenshots));
-        writeImage(file, options.width, options.height, toRgba(renderer.pixels(), bgra));
+        writeImage(file, renderer.setup().width, renderer.setup().height,
+                   toRgba(renderer.pixels(), bgra));
         fmt::print("iso view: saved {}\n", file.string());
         input.screenshot = false;
       }

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Drives `iso view` in a window on a virtual display (run under xvfb-run): resizes the window,
+# presses P for a screenshot, drags the mouse to orbit, and lets it quit after its frames.
+# Usage: window_session.sh ISO_BINARY FILE.iso WORKDIR
+set -euo pipefail
+iso=$1 file=$2 work=$3
+cd "$work"
+"$iso" view "$file" --width 300 --height 200 --frames 100 --screenshot final.png >out.txt 2>err.txt &
+pid=$!
+window=
+for _ in $(seq 100); do
+  window=$(xdotool search --name "iso view" 2>/dev/null | head -1 || true)
+  [ -n "$window" ] && break
+  sleep 0.1
+done
+[ -n "$window" ] || { echo "no window appeared" >&2; kill $pid; exit 1; }
+sleep 1
+xdotool windowsize "$window" 480 260
+sleep 1
+xdotool mousemove --window "$window" 240 130
+xdotool key p                       # screenshot: iso-screenshot-1.png, before the orbit
+sleep 1
+xdotool mousedown 1
+sleep 0.5
+xdotool mousemove --window "$window" 400 130
+sleep 0.5
+xdotool mouseup 1
+wait $pid
