@@ -78,7 +78,7 @@ TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
   expectPicture(shot, 160, 120);
 }
 
-TEST(CliView, theWindowResizesTakesScreenshotsAndOrbitsWithTheMouse) {
+TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
   if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
     GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
   TempDir dir;
@@ -100,6 +100,15 @@ TEST(CliView, theWindowResizesTakesScreenshotsAndOrbitsWithTheMouse) {
   size_t changed = 0;
   for (size_t i = 0; i < before.size(); ++i) changed += before[i] != after[i];
   EXPECT_GT(changed, before.size() / 20);
+  // The scene file changed under the window: the surface turned red, and the window said so.
+  EXPECT_NE(slurp(dir / "out.txt").find("reloaded"), std::string::npos) << slurp(dir / "out.txt");
+  const auto redder = [](const std::vector<uint32_t>& picture) {
+    size_t n = 0;
+    for (uint32_t p : picture) n += int(p & 0xFF) > int(p >> 8 & 0xFF) + 40;
+    return n;
+  };
+  EXPECT_EQ(redder(before), 0u);
+  EXPECT_GT(redder(after), after.size() / 20);
 }
 
 TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {

@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # Drives `iso view` in a window on a virtual display (run under xvfb-run): resizes the window,
-# presses P for a screenshot, drags the mouse to orbit, and lets it quit after its frames.
+# presses P for a screenshot, drags the mouse to orbit, turns the material red in the scene file
+# the window watches, and lets it quit after its frames.
 # Usage: window_session.sh ISO_BINARY FILE.iso WORKDIR
 set -euo pipefail
 iso=$1 file=$2 work=$3
 cd "$work"
-"$iso" view "$file" --width 300 --height 200 --frames 100 --screenshot final.png >out.txt 2>err.txt &
+echo '{"material": {"color": [0.7, 0.7, 0.7]}}' >scene.json
+"$iso" view "$file" --scene scene.json --width 300 --height 200 --frames 100 \
+  --screenshot final.png >out.txt 2>err.txt &
 pid=$!
 window=
 for _ in $(seq 100); do
@@ -25,4 +28,7 @@ sleep 0.5
 xdotool mousemove --window "$window" 400 130
 sleep 0.5
 xdotool mouseup 1
+sleep 1
+echo '{"material": {"color": [0.8, 0.05, 0.05]}}' >scene.json.new
+mv scene.json.new scene.json
 wait $pid
