@@ -252,10 +252,65 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
           {"truth_to_iso", back}};
 }
 
+namespace {
+
+double srgbEncoded(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  return c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+}
+
+struct ColorError {
+  uint64_t points = 0;   // points compared
+  double squared = 0.0;  // sum over points and channels of the squared 8-bit sRGB differences
+};
+
+// Each colored point against the surface's color where the point projects onto the zero set,
+// both sRGB-encoded on the 0–255 scale.
+ColorError colorError(const SurfaceModel& surface, const PointCloud& points) {
+  const Frame& frame = surface.header().frame;
+  std::vector<double> squared(points.size(), -1.0);
+  tbb::parallel_for(size_t(0), points.size(), [&](size_t i) {
+    const glm::dvec3 f = toFrame(points.positions[i], frame);
+    const std::optional<Vec3> q = surface.project({f.x, f.y, f.z});
+    if (!q) return;
+    const uint32_t leaf = surface.findLeaf(*q);
+    if (leaf == kNoNode) return;
+    const SurfaceEval e = surface.evaluate(leaf, *q);
+    double sum = 0.0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = 255.0 * (srgbEncoded(e.color[c]) - srgbEncoded(points.colors[i][c]));
+      sum += d * d;
+    }
+    squared[i] = sum;
+  });
+  ColorError out;
+  for (double v : squared)
+    if (v >= 0.0) {
+      ++out.points;
+      out.squared += v;
+    }
+  return out;
+}
+
+}  // namespace
+
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points) {
   const double spacing = meanNearestSpacing(points);
   const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions);
+  nlohmann::json color = nullptr;
+  if (points.hasColors() && surface.hasColors()) {
+    const ColorError e = colorError(surface, points);
+    const double mse = e.points > 0 ? e.squared / (3.0 * double(e.points)) : 0.0;
+    color = {{"points", e.points},
+             {"rmse_8bit", std::sqrt(mse)},
+             // Peak signal 255 over the root mean square error of the 8-bit sRGB channels; none
+             // (null) when they are equal everywhere.
+             {"psnr_db", mse > 0 ? nlohmann::json(10.0 * std::log10(255.0 * 255.0 / mse))
+                                 : nlohmann::json(nullptr)}};
+  }
   return {{"points", d.samples},
+          {"color_psnr_db", color.is_null() ? nlohmann::json(nullptr) : color["psnr_db"]},
+          {"color", color},
           {"unprojected", d.unprojected},
           {"rms", d.rms},
           {"max", d.max},

@@ -32,7 +32,10 @@ struct EvalOptions {
 nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
                                     double meanSpacing, const EvalOptions& options = {});
 
-// Distances of the points to the zero set (the conversion report's measure) with their spacing.
+// Distances of the points to the zero set (the conversion report's measure) with their spacing,
+// and, when both the points and the file have colors, the color error: the file's color where
+// each point projects onto the zero set against the point's, as the PSNR of 8-bit sRGB values
+// ("color_psnr_db"; null when there is nothing to compare).
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);
 
 }  // namespace iso
