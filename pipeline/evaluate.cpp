@@ -8,6 +8,7 @@
 #include <numbers>
 
 #include "geom/random.h"
+#include "iso/quantize.h"
 #include "knn.h"
 #include "measure.h"
 #include "stages.h"
@@ -254,11 +255,6 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
 
 namespace {
 
-double srgbEncoded(double linear) {
-  const double c = std::clamp(linear, 0.0, 1.0);
-  return c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
-}
-
 struct ColorError {
   uint64_t points = 0;   // points compared
   double squared = 0.0;  // sum over points and channels of the squared 8-bit sRGB differences
@@ -278,7 +274,8 @@ ColorError colorError(const SurfaceModel& surface, const PointCloud& points) {
     const SurfaceEval e = surface.evaluate(leaf, *q);
     double sum = 0.0;
     for (int c = 0; c < 3; ++c) {
-      const double d = 255.0 * (srgbEncoded(e.color[c]) - srgbEncoded(points.colors[i][c]));
+      const double d = 255.0 * (double(linearToSrgb(std::clamp(e.color[c], 0.0f, 1.0f))) -
+                                linearToSrgb(std::clamp(points.colors[i][c], 0.0f, 1.0f)));
       sum += d * d;
     }
     squared[i] = sum;

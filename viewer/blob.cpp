@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "iso/check.h"
+#include "iso/quantize.h"
 #include "shared.h"
 
 namespace iso::viewer {
@@ -22,23 +23,11 @@ using gpu::kBlobPageList;
 using gpu::kNodeCut;
 using gpu::kPageWords;
 
-// Octahedral encoding of a unit vector into [-1, 1]^2 (the decoder is decodeOctahedral).
-glm::vec2 encodeOctahedral(const std::array<float, 3>& n) {
-  const float sum = std::abs(n[0]) + std::abs(n[1]) + std::abs(n[2]);
-  if (!(sum > 0.0f)) return {0.0f, 0.0f};
-  glm::vec2 p(n[0] / sum, n[1] / sum);
-  if (n[2] < 0.0f) {
-    const float x = (1.0f - std::abs(p.y)) * (p.x >= 0.0f ? 1.0f : -1.0f);
-    const float y = (1.0f - std::abs(p.x)) * (p.y >= 0.0f ? 1.0f : -1.0f);
-    p = {x, y};
-  }
-  return p;
-}
-
-uint8_t srgbByte(float linear) {
-  const float c = std::clamp(linear, 0.0f, 1.0f);
-  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
-  return uint8_t(std::lround(s * 255.0f));
+// Two octahedral normals as the snorm8 pairs of one word (the file's own 8-bit encoding).
+uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& b) {
+  const auto qa = encodeOctahedral(a, 8), qb = encodeOctahedral(b, 8);
+  return uint32_t(uint8_t(qa[0])) | uint32_t(uint8_t(qa[1])) << 8 |
+         uint32_t(uint8_t(qb[0])) << 16 | uint32_t(uint8_t(qb[1])) << 24;
 }
 
 // Append the corner record of a node: its 8 corners' values, distances in cell units.
@@ -49,17 +38,15 @@ void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const Cor
   for (int c = 0; c < 8; ++c) d[c] = values.distance.at(node.corners[c]) / cell;
   for (int c = 0; c < 8; c += 2) out.push_back(glm::packHalf2x16({d[c], d[c + 1]}));
   if (options.normals) {
-    for (int c = 0; c < 8; c += 2) {
-      const glm::vec2 a = encodeOctahedral(values.normal.at(node.corners[c]));
-      const glm::vec2 b = encodeOctahedral(values.normal.at(node.corners[c + 1]));
-      out.push_back(glm::packSnorm4x8({a.x, a.y, b.x, b.y}));
-    }
+    for (int c = 0; c < 8; c += 2)
+      out.push_back(packNormals(values.normal.at(node.corners[c]),
+                                values.normal.at(node.corners[c + 1])));
   }
   if (options.colors) {
     for (int c = 0; c < 8; ++c) {
       const auto& rgb = values.color.at(node.corners[c]);
-      out.push_back(uint32_t(srgbByte(rgb[0])) | uint32_t(srgbByte(rgb[1])) << 8 |
-                    uint32_t(srgbByte(rgb[2])) << 16 | 0xFF000000u);
+      out.push_back(uint32_t(linearToSrgb8(rgb[0])) | uint32_t(linearToSrgb8(rgb[1])) << 8 |
+                    uint32_t(linearToSrgb8(rgb[2])) << 16 | 0xFF000000u);
     }
   }
 }

@@ -10,6 +10,7 @@
 
 #include "iso/atomic_file.h"
 #include "iso/error.h"
+#include "iso/quantize.h"
 
 namespace iso::viewer {
 namespace OIIO = OIIO_NAMESPACE;
@@ -74,10 +75,7 @@ Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth
   const int n = image.spec().nchannels;
   std::vector<float> pixels(size_t(env.width) * env.height * n);
   image.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, pixels.data());
-  const auto linear = [&](float c) {
-    if (!encoded) return std::max(c, 0.0f);
-    return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-  };
+  const auto linear = [&](float c) { return encoded ? srgbToLinear(c) : std::max(c, 0.0f); };
   env.texels.resize(size_t(env.width) * env.height * 2);
   for (size_t i = 0; i < size_t(env.width) * env.height; ++i) {
     const float* p = &pixels[i * n];

@@ -4,17 +4,15 @@
 
 #include <cmath>
 
+#include "iso/quantize.h"
 #include "pipeline_support.h"
 
 namespace iso {
 namespace {
 
-float linearOf(int srgb8) {
-  const double c = srgb8 / 255.0;
-  return float(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+glm::vec3 colorOf(uint8_t r, uint8_t g, uint8_t b) {
+  return {srgb8ToLinear(r), srgb8ToLinear(g), srgb8ToLinear(b)};
 }
-
-glm::vec3 colorOf(int r, int g, int b) { return {linearOf(r), linearOf(g), linearOf(b)}; }
 
 TEST(ColorError, psnrOfAUniformColorAgainstAnotherIsExact) {
   // A sphere all of sRGB (200, 100, 50): every corner stores exactly that color, so wherever a
