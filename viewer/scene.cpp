@@ -2,6 +2,7 @@
 #include "scene.h"
 
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -14,20 +15,18 @@ namespace {
 
 using nlohmann::json;
 
-Vec3d add(const Vec3d& a, const Vec3d& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec3d scale(const Vec3d& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-Vec3d cross(const Vec3d& a, const Vec3d& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-Vec3d normalized(const Vec3d& a) {
-  const double n = std::sqrt(dot(a, a));
+}  // namespace
+
+Vec3d normalized(const Vec3d& v) {
+  const double n = glm::length(v);
   if (!(n > 0.0) || !std::isfinite(n)) throw std::invalid_argument("a zero or non-finite vector");
-  return scale(a, 1.0 / n);
+  return v / n;
 }
 
-}  // namespace
+Vec3d rotated(const Vec3d& v, const Vec3d& axis, double angle) {
+  const double c = std::cos(angle), s = std::sin(angle);  // Rodrigues' rotation formula
+  return v * c + glm::cross(axis, v) * s + axis * (glm::dot(axis, v) * (1 - c));
+}
 
 std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& what) {
   std::vector<double> out;
@@ -77,8 +76,7 @@ struct Fields {
   }
   std::array<float, 3> color(const json& j, const std::string& key) const {
     const Vec3d v = vec3(j, key);
-    for (double c : v)
-      if (c < 0) fail(key, "colors are not negative");
+    if (v.x < 0 || v.y < 0 || v.z < 0) fail(key, "colors are not negative");
     return {float(v[0]), float(v[1]), float(v[2])};
   }
   bool boolean(const json& j, const std::string& key) const {
@@ -247,27 +245,25 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
 }
 
 Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {
-  const Vec3d center = scale(add(b.lo, b.hi), 0.5);
-  const double radius = 0.5 * std::sqrt(dot(sub(b.hi, b.lo), sub(b.hi, b.lo)));
+  const Vec3d center = 0.5 * (b.lo + b.hi);
+  const double radius = 0.5 * glm::length(b.hi - b.lo);
   const Vec3d u = normalized(up);
   // A horizontal direction not along up, then 20 degrees above the horizon.
   Vec3d side = std::abs(u[2]) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, -1, 0};
-  side = normalized(sub(side, scale(u, dot(side, u))));
-  const Vec3d right = normalized(cross(side, u));
-  const Vec3d view = normalized(add(add(side, scale(right, 0.35)), scale(u, 0.36)));
+  side = normalized(side - u * glm::dot(side, u));
+  const Vec3d right = normalized(glm::cross(side, u));
+  const Vec3d view = normalized(side + right * 0.35 + u * 0.36);
   const double distance = radius / std::sin(fovDegrees * M_PI / 360.0) * 1.05;
-  return {add(center, scale(view, distance)), center, u, fovDegrees};
+  return {center + view * distance, center, u, fovDegrees};
 }
 
 LightSpec defaultLight(const Camera& c, const Bounds& b) {
-  const Vec3d forward = normalized(sub(c.target, c.eye));
-  const Vec3d right = normalized(cross(forward, c.up));
-  const Vec3d up = cross(right, forward);
-  const double radius = 0.5 * std::sqrt(dot(sub(b.hi, b.lo), sub(b.hi, b.lo)));
+  const Vec3d forward = normalized(c.target - c.eye);
+  const Vec3d right = normalized(glm::cross(forward, c.up));
+  const Vec3d up = glm::cross(right, forward);
+  const double radius = 0.5 * glm::length(b.hi - b.lo);
   LightSpec light;
-  light.position =
-      add(c.target,
-          scale(add(add(scale(right, -0.6), scale(up, 1.0)), scale(forward, -0.7)), 3.0 * radius));
+  light.position = c.target + (right * -0.6 + up + forward * -0.7) * (3.0 * radius);
   return light;
 }
 
@@ -288,9 +284,9 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
     return vec4(a[0], a[1], a[2], w);
   };
   gpu::FrameParams p{};
-  const Vec3d forward = normalized(sub(c.target, c.eye));
-  const Vec3d right = normalized(cross(forward, c.up));
-  const Vec3d up = cross(right, forward);
+  const Vec3d forward = normalized(c.target - c.eye);
+  const Vec3d right = normalized(glm::cross(forward, c.up));
+  const Vec3d up = glm::cross(right, forward);
   const double tanHalf = std::tan(c.fovDegrees * M_PI / 360.0);
   const double aspect = double(s.width) / double(std::max(s.height, 1u));
   p.eye = toFrame(c.eye);

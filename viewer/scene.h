@@ -10,12 +10,14 @@
 #include <string>
 #include <vector>
 
+#include <glm/vec3.hpp>
+
 #include "iso/format.h"
 #include "shared.h"
 
 namespace iso::viewer {
 
-using Vec3d = std::array<double, 3>;
+using Vec3d = glm::dvec3;
 
 struct Camera {
   Vec3d eye{}, target{}, up{0, 1, 0};
@@ -64,6 +66,11 @@ std::vector<double> parseNumbers(const std::string& text, size_t count, const st
 Vec3d parseVec3(const std::string& text);
 // "point:X,Y,Z[:R,G,B[:INTENSITY]]" or "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]".
 LightSpec parseLight(const std::string& text);
+
+// A unit vector along v; std::invalid_argument for a zero or non-finite v.
+Vec3d normalized(const Vec3d& v);
+// v turned by angle (radians) around the unit vector axis.
+Vec3d rotated(const Vec3d& v, const Vec3d& axis, double angle);
 
 // Axis-aligned bounds in world units.
 struct Bounds {

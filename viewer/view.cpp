@@ -183,8 +183,7 @@ int viewBench(const ViewOptions& options) {
   const Scene& base = view.scene;
   // The camera path: a full orbit around the target at the starting distance.
   const Camera c0 = *base.camera;
-  const Vec3d up = c0.up;
-  Vec3d offset{c0.eye[0] - c0.target[0], c0.eye[1] - c0.target[1], c0.eye[2] - c0.target[2]};
+  const Vec3d axis = normalized(c0.up), offset = c0.eye - c0.target;
   std::vector<double> ms;
   std::vector<uint64_t> uploaded;
   uint64_t rays = 0;
@@ -192,14 +191,8 @@ int viewBench(const ViewOptions& options) {
   uint32_t maxResident = 0;
   for (uint32_t f = 0; f < options.benchFrames; ++f) {
     const double a = 2 * M_PI * f / options.benchFrames;
-    // Rodrigues' rotation of the offset around up.
-    const double cs = std::cos(a), sn = std::sin(a);
-    const double k = up[0] * offset[0] + up[1] * offset[1] + up[2] * offset[2];
-    const Vec3d cr{up[1] * offset[2] - up[2] * offset[1], up[2] * offset[0] - up[0] * offset[2],
-                   up[0] * offset[1] - up[1] * offset[0]};
     Scene scene = base;
-    for (int i = 0; i < 3; ++i)
-      scene.camera->eye[i] = c0.target[i] + offset[i] * cs + cr[i] * sn + up[i] * k * (1 - cs);
+    scene.camera->eye = c0.target + rotated(offset, axis, a);
     const double dt = view.frame(scene);
     const FrameStats& s = renderer.stats();
     if (f > 0) {  // the first frame builds the pipeline's caches

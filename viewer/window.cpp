@@ -6,6 +6,7 @@
 // R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
+#include <glm/geometric.hpp>
 #include <fmt/core.h>
 
 #include <algorithm>
@@ -22,19 +23,6 @@ namespace iso::viewer {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-Vec3d operator+(const Vec3d& a, const Vec3d& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-Vec3d operator-(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec3d operator*(const Vec3d& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-Vec3d cross(const Vec3d& a, const Vec3d& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-Vec3d unit(const Vec3d& a) { return a * (1.0 / std::sqrt(dot(a, a))); }
-Vec3d rotate(const Vec3d& v, const Vec3d& axis, double angle) {
-  const double c = std::cos(angle), s = std::sin(angle);
-  return v * c + cross(axis, v) * s + axis * (dot(axis, v) * (1 - c));
-}
 
 struct Input {
   double wheel = 0;
@@ -215,15 +203,16 @@ int viewWindow(const ViewOptions& options) {
       const double dx = x - mouseX, dy = y - mouseY;
       mouseX = x;
       mouseY = y;
-      const Vec3d forward = unit(cam.target - cam.eye);
-      const Vec3d right = unit(cross(forward, cam.up));
-      const Vec3d up = cross(right, forward);
-      const double distance = std::sqrt(dot(cam.target - cam.eye, cam.target - cam.eye));
+      const Vec3d forward = glm::normalize(cam.target - cam.eye);
+      const Vec3d right = glm::normalize(glm::cross(forward, cam.up));
+      const Vec3d up = glm::cross(right, forward);
+      const double distance = glm::length(cam.target - cam.eye);
       if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
         Vec3d offset = cam.eye - cam.target;
-        offset = rotate(offset, unit(cam.up), -dx * 0.008);
-        const Vec3d pitched = rotate(offset, right, -dy * 0.008);
-        if (std::abs(dot(unit(pitched), unit(cam.up))) < 0.98) offset = pitched;
+        offset = rotated(offset, glm::normalize(cam.up), -dx * 0.008);
+        const Vec3d pitched = rotated(offset, right, -dy * 0.008);
+        if (std::abs(glm::dot(glm::normalize(pitched), glm::normalize(cam.up))) < 0.98)
+          offset = pitched;
         cam.eye = cam.target + offset;
       }
       if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
@@ -245,7 +234,7 @@ int viewWindow(const ViewOptions& options) {
       if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
       if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
       if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
-      if (dot(fly, fly) > 0) {
+      if (glm::dot(fly, fly) > 0) {
         const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
         cam.eye = cam.eye + move;
         cam.target = cam.target + move;
