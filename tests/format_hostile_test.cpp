@@ -10,6 +10,7 @@
 
 #include "iso/error.h"
 #include "iso/reader.h"
+#include "iso/surface.h"
 #include "iso/verify.h"
 #include "support/support.h"
 
@@ -98,6 +99,24 @@ TEST_F(Hostile, everySingleByteChangeIsRejectedOrCaughtByVerify) {
       ASSERT_TRUE(isRejectedOrCaught(b))
           << "byte " << i << " xor " << int(mask) << " went unnoticed";
     }
+  }
+}
+
+TEST_F(Hostile, surfaceChunkCountsThatDisagreeWithTheTableAreRejected) {
+  // Chunk 5 of the golden file is a surface of 3 nodes; its table entry says so.
+  for (const auto& [field, value] : {std::pair{56, 4u}, std::pair{60, 7u}}) {
+    std::vector<std::byte> b = golden_;
+    put<uint32_t>(b, entry(5) + field, value);
+    test::resealChecksums(b);
+    const Reader reader = Reader::fromMemory(b, "counts.iso");
+    try {
+      decodeSurfaceChunk(reader, 5);
+      ADD_FAILURE() << "accepted a table count of " << value << " at byte " << field;
+    } catch (const FileError& e) {
+      EXPECT_NE(std::string(e.what()).find("the chunk table gives"), std::string::npos)
+          << e.what();
+    }
+    EXPECT_FALSE(verifyFile(reader).ok());
   }
 }
 

@@ -43,17 +43,7 @@ ChunkCache::~ChunkCache() {
 std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
   reader_.checkPayload(chunk);
   const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
-  // The renderer sizes its buffers from the table's counts.
-  const ChunkInfo& info = reader_.chunk(chunk);
-  const auto& nodes = decoded.layout.nodes;
-  const size_t leaves = size_t(
-      std::count_if(nodes.begin(), nodes.end(), [](const SurfaceNode& n) { return n.isLeaf(); }));
-  if (nodes.size() != info.nodeCount || leaves != info.leafCount)
-    throw FileError(reader_.name(), info.offset,
-                    "chunk " + std::to_string(chunk) + ": the chunk table gives " +
-                        std::to_string(info.nodeCount) + " nodes and " +
-                        std::to_string(info.leafCount) + " leaves, its data " +
-                        std::to_string(nodes.size()) + " and " + std::to_string(leaves));
+  // (Decoding checks the table's node and leaf counts, from which the renderer sizes buffers.)
   return buildBlob(decoded, chunk, tree_, options_);
 }
 

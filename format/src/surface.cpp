@@ -349,6 +349,12 @@ SurfaceChunk decodeSurfaceChunk(const Reader& reader, uint32_t id) {
   }
   if (out.layout.leafCorners.size() != leafCount || out.layout.lodCorners.size() != lodCount)
     fail("corner counts differ from those the nodes use");
+  const size_t leaves = size_t(std::count_if(out.layout.nodes.begin(), out.layout.nodes.end(),
+                                             [](const SurfaceNode& n) { return n.isLeaf(); }));
+  if (nodeCount != chunk.nodeCount || leaves != chunk.leafCount)
+    fail("the chunk table gives " + std::to_string(chunk.nodeCount) + " nodes and " +
+         std::to_string(chunk.leafCount) + " filled leaves, the data " +
+         std::to_string(nodeCount) + " and " + std::to_string(leaves));
   resizeValues(out.leafValues, schema, leafCount);
   resizeValues(out.lodValues, schema, lodCount);
   size_t at = p.attributesOffset;
