@@ -260,14 +260,13 @@ struct ColorError {
   double squared = 0.0;  // sum over points and channels of the squared 8-bit sRGB differences
 };
 
-// Each colored point against the surface's color where the point projects onto the zero set,
-// both sRGB-encoded on the 0–255 scale.
-ColorError colorError(const SurfaceModel& surface, const PointCloud& points) {
-  const Frame& frame = surface.header().frame;
+// Each colored point against the surface's color where the point projects onto the zero set
+// (`projected`, frame units), both sRGB-encoded on the 0–255 scale.
+ColorError colorError(const SurfaceModel& surface, const PointCloud& points,
+                      const std::vector<std::optional<Vec3>>& projected) {
   std::vector<double> squared(points.size(), -1.0);
   tbb::parallel_for(size_t(0), points.size(), [&](size_t i) {
-    const glm::dvec3 f = toFrame(points.positions[i], frame);
-    const std::optional<Vec3> q = surface.project({f.x, f.y, f.z});
+    const std::optional<Vec3>& q = projected[i];
     if (!q) return;
     const uint32_t leaf = surface.findLeaf(*q);
     if (leaf == kNoNode) return;
@@ -293,10 +292,13 @@ ColorError colorError(const SurfaceModel& surface, const PointCloud& points) {
 
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points) {
   const double spacing = meanNearestSpacing(points);
-  const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions);
+  const bool colors = points.hasColors() && surface.hasColors();
+  std::vector<std::optional<Vec3>> projected;
+  const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions,
+                                          false, colors ? &projected : nullptr);
   nlohmann::json color = nullptr;
-  if (points.hasColors() && surface.hasColors()) {
-    const ColorError e = colorError(surface, points);
+  if (colors) {
+    const ColorError e = colorError(surface, points, projected);
     const double mse = e.points > 0 ? e.squared / (3.0 * double(e.points)) : 0.0;
     color = {{"points", e.points},
              {"rmse_8bit", std::sqrt(mse)},

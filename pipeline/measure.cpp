@@ -17,10 +17,11 @@ namespace iso {
 namespace {
 
 // Distances (world units) of points to the zero set, -1 where none was found; escaped[i] set where
-// the projection left the model's region (then distance[i] is left alone).
+// the projection left the model's region (then distance[i] is left alone); projected[i] the point
+// of the zero set (frame units) when asked for.
 void project(const SurfaceModel& surface, const Frame& frame, std::span<const glm::dvec3> points,
              std::span<const uint32_t> which, std::vector<double>& distance,
-             std::vector<uint8_t>* escaped) {
+             std::vector<uint8_t>* escaped, std::vector<std::optional<Vec3>>* projected) {
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, which.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t j = r.begin(); j < r.end(); ++j) {
@@ -33,6 +34,7 @@ void project(const SurfaceModel& surface, const Frame& frame, std::span<const gl
             continue;
           }
           if (x) distance[i] = glm::length(glm::dvec3((*x)[0], (*x)[1], (*x)[2]) - p) * frame.size;
+          if (projected) (*projected)[i] = x;
         }
       });
 }
@@ -62,11 +64,13 @@ DistanceStats statsOf(const std::vector<double>& distance, bool keepValues) {
 }  // namespace
 
 DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
-                              std::span<const glm::dvec3> points, bool keepValues) {
+                              std::span<const glm::dvec3> points, bool keepValues,
+                              std::vector<std::optional<Vec3>>* projected) {
   std::vector<double> distance(points.size(), -1.0);
   std::vector<uint32_t> all(points.size());
   std::iota(all.begin(), all.end(), 0u);
-  project(surface, frame, points, all, distance, nullptr);
+  if (projected) projected->assign(points.size(), std::nullopt);
+  project(surface, frame, points, all, distance, nullptr, projected);
   return statsOf(distance, keepValues);
 }
 
@@ -107,7 +111,7 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
       for (size_t a = 0; a < 3; ++a) whole = whole && region.lo[a] <= 0.0 && region.hi[a] >= 1.0;
       const SurfaceModel surface =
           SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region), source);
-      project(surface, frame, points, which, distance, &escaped);
+      project(surface, frame, points, which, distance, &escaped, nullptr);
       std::erase_if(which, [&](uint32_t i) { return !escaped[i]; });
       for (const uint32_t i : which) escaped[i] = 0;
     }

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -19,9 +20,11 @@ struct DistanceStats {
   std::vector<double> values;  // per projected point, when asked for
 };
 
-// Distance of each point (world coordinates) to the zero set, by projection onto it.
+// Distance of each point (world coordinates) to the zero set, by projection onto it; `projected`,
+// when given, receives each point's projection (frame units; none where it found no zero set).
 DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
-                              std::span<const glm::dvec3> points, bool keepValues = false);
+                              std::span<const glm::dvec3> points, bool keepValues = false,
+                              std::vector<std::optional<Vec3>>* projected = nullptr);
 
 // The same from a file, region by region (specs/pipeline.md §10): the points are grouped by cell
 // of the coarsest level whose cells a surface meets hold about regionLeaves leaves (4^level cells
