@@ -76,6 +76,21 @@ CpuPool buildCpuPool(const Asset& asset) {
   return pool;
 }
 
+FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
+                         const Environment* environment) {
+  FrameSetup setup;
+  setup.width = width;
+  setup.height = height;
+  setup.topChunk = asset.tree.topChunk();
+  setup.chunkCount = uint32_t(asset.reader.chunks().size());
+  setup.normals = asset.blob.normals;
+  setup.colors = asset.blob.colors;
+  setup.requests = false;
+  setup.environmentWidth = environment ? environment->width : 0;
+  setup.environmentHeight = environment ? environment->height : 0;
+  return setup;
+}
+
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment) {
   CpuFrame frame;

@@ -26,6 +26,10 @@ struct CpuFrame {
   uint64_t rays = 0;
 };
 
+// The frame setup of the CPU tracer for an asset (everything resident, no requests).
+FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
+                         const Environment* environment);
+
 // Render a frame. params.pool is ignored (the host pool is one array).
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment);

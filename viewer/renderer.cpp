@@ -4,6 +4,7 @@
 #include <fmt/core.h>
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cstring>
 
 #include "iso/check.h"
@@ -37,6 +38,22 @@ void submitAndWait(Gpu& gpu, VkCommandBuffer cb, VkFence fence) {
   ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
 }
 
+double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params,
+                   VkCommandBuffer cb, VkFence fence) {
+  renderer.prepare(params);
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  renderer.record(cb);
+  ISO_VK(vkEndCommandBuffer(cb));
+  const auto t0 = std::chrono::steady_clock::now();
+  submitAndWait(gpu, cb, fence);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  renderer.collect();
+  return seconds;
+}
+
 Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                    RendererOptions options)
     : gpu_(gpu), asset_(asset), options_(options) {
@@ -52,8 +69,9 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   uint64_t stagingBytes = 0, fileBytes = 0;  // the largest blob; all blobs
   for (const ChunkInfo& c : chunks)
     if (c.kind == kSurfaceKind) {
-      stagingBytes = std::max(stagingBytes, blobBound(c, asset.blob));
-      fileBytes += (blobBound(c, asset.blob) + kPageBytes - 1) / kPageBytes * kPageBytes;
+      const uint64_t bound = blobBound(c, asset.blob);
+      stagingBytes = std::max(stagingBytes, bound);
+      fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
     }
   stagingBytes = std::max(stagingBytes, std::min(options.uploadBytes, fileBytes));
   const uint64_t fixed =

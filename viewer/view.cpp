@@ -48,23 +48,6 @@ RendererOptions rendererOptions(const ViewOptions& o) {
   return r;
 }
 
-// Render one frame of the scene and wait for it; returns the seconds from submit to done.
-double renderFrame(Gpu& gpu, Renderer& renderer, const Asset& asset, const Scene& scene,
-                   VkCommandBuffer cb, VkFence fence) {
-  const FileHeader& header = asset.reader.header();
-  renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  ISO_VK(vkBeginCommandBuffer(cb, &begin));
-  renderer.record(cb);
-  ISO_VK(vkEndCommandBuffer(cb));
-  const auto t0 = Clock::now();
-  submitAndWait(gpu, cb, fence);
-  const double elapsed = seconds(Clock::now() - t0);
-  renderer.collect();
-  return elapsed;
-}
-
 // What the GPU modes share: the asset and its scene, a device, a renderer, and the command
 // buffer and fence of a frame.
 struct GpuView {
@@ -91,7 +74,11 @@ struct GpuView {
     if (fence) vkDestroyFence(session.gpu.device, fence, nullptr);
   }
   // Render a frame of `s` and wait for it; the seconds from submit to done.
-  double frame(const Scene& s) { return renderFrame(session.gpu, *renderer, *asset, s, cb, fence); }
+  double frame(const Scene& s) {
+    const FileHeader& header = asset->reader.header();
+    return renderFrame(session.gpu, *renderer,
+                       frameParams(s, header.frame, header.maxLevel, renderer->setup()), cb, fence);
+  }
 };
 
 }  // namespace
@@ -152,18 +139,9 @@ int viewCpu(const ViewOptions& options) {
   const auto t0 = Clock::now();
   const CpuPool pool = buildCpuPool(*asset);
   const double load = seconds(Clock::now() - t0);
-  FrameSetup setup;
-  setup.width = options.width;
-  setup.height = options.height;
-  setup.topChunk = asset->tree.topChunk();
-  setup.chunkCount = uint32_t(asset->reader.chunks().size());
-  setup.normals = asset->blob.normals;
-  setup.colors = asset->blob.colors;
-  setup.requests = false;
-  setup.environmentWidth = env ? env->width : 0;
-  setup.environmentHeight = env ? env->height : 0;
   const auto params =
-      frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel, setup);
+      frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel,
+                  cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr));
   const auto t1 = Clock::now();
   const CpuFrame frame = renderCpu(pool, params, env ? &*env : nullptr);
   const double render = seconds(Clock::now() - t1);

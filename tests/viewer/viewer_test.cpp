@@ -63,25 +63,14 @@ Scene sceneFor(const Asset& asset) {
   return scene;
 }
 
-FrameSetup setupFor(const Asset& asset, uint32_t w, uint32_t h) {
-  FrameSetup s;
-  s.width = w;
-  s.height = h;
-  s.topChunk = asset.tree.topChunk();
-  s.chunkCount = uint32_t(asset.reader.chunks().size());
-  s.normals = asset.blob.normals;
-  s.colors = asset.blob.colors;
-  return s;
-}
-
 std::vector<uint32_t> renderReference(const Asset& asset, const Scene& scene, uint32_t w,
                                       uint32_t h, const Environment* env = nullptr) {
   const CpuPool pool = buildCpuPool(asset);
   const auto header = asset.reader.header();
-  FrameSetup setup = setupFor(asset, w, h);
-  setup.environmentWidth = env ? env->width : 0;
-  setup.environmentHeight = env ? env->height : 0;
-  return renderCpu(pool, frameParams(scene, header.frame, header.maxLevel, setup), env).pixels;
+  return renderCpu(pool,
+                   frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(asset, w, h, env)),
+                   env)
+      .pixels;
 }
 
 struct GpuRun {
@@ -110,14 +99,8 @@ GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h,
     VkFence fence = createFence(g, false);
     const auto header = asset.reader.header();
     for (uint32_t f = 0; f < maxFrames; ++f) {
-      renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-      VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO, nullptr, 0,
-                                     nullptr};
-      ISO_VK(vkBeginCommandBuffer(cb, &begin));
-      renderer.record(cb);
-      ISO_VK(vkEndCommandBuffer(cb));
-      submitAndWait(g, cb, fence);
-      renderer.collect();
+      renderFrame(g, renderer, frameParams(scene, header.frame, header.maxLevel, renderer.setup()),
+                  cb, fence);
       run.frames.push_back(renderer.pixels());
       ++run.frameCount;
       if (renderer.converged()) {
@@ -220,7 +203,7 @@ TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const Frame& frame = asset->reader.header().frame;
   const Scene scene = sceneFor(*asset);
   const auto params =
-      frameParams(scene, frame, asset->reader.header().maxLevel, setupFor(*asset, 64, 64));
+      frameParams(scene, frame, asset->reader.header().maxLevel, cpuFrameSetup(*asset, 64, 64, nullptr));
   const double cell = std::ldexp(1.0, -int(asset->reader.header().maxLevel));
   std::mt19937 rng(7);
   std::normal_distribution<double> normal;
