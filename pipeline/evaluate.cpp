@@ -294,8 +294,8 @@ nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointClo
   const double spacing = meanNearestSpacing(points);
   const bool colors = points.hasColors() && surface.hasColors();
   std::vector<std::optional<Vec3>> projected;
-  const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions,
-                                          false, colors ? &projected : nullptr);
+  const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions, false,
+                                          colors ? &projected : nullptr);
   nlohmann::json color = nullptr;
   if (colors) {
     const ColorError e = colorError(surface, points, projected);

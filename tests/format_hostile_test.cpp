@@ -113,8 +113,7 @@ TEST_F(Hostile, surfaceChunkCountsThatDisagreeWithTheTableAreRejected) {
       decodeSurfaceChunk(reader, 5);
       ADD_FAILURE() << "accepted a table count of " << value << " at byte " << field;
     } catch (const FileError& e) {
-      EXPECT_NE(std::string(e.what()).find("the chunk table gives"), std::string::npos)
-          << e.what();
+      EXPECT_NE(std::string(e.what()).find("the chunk table gives"), std::string::npos) << e.what();
     }
     EXPECT_FALSE(verifyFile(reader).ok());
   }

@@ -26,8 +26,8 @@ using gpu::kPageWords;
 // Two octahedral normals as the snorm8 pairs of one word (the file's own 8-bit encoding).
 uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& b) {
   const auto qa = encodeOctahedral(a, 8), qb = encodeOctahedral(b, 8);
-  return uint32_t(uint8_t(qa[0])) | uint32_t(uint8_t(qa[1])) << 8 |
-         uint32_t(uint8_t(qb[0])) << 16 | uint32_t(uint8_t(qb[1])) << 24;
+  return uint32_t(uint8_t(qa[0])) | uint32_t(uint8_t(qa[1])) << 8 | uint32_t(uint8_t(qb[0])) << 16 |
+         uint32_t(uint8_t(qb[1])) << 24;
 }
 
 // Append the corner record of a node: its 8 corners' values, distances in cell units.
@@ -39,8 +39,8 @@ void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const Cor
   for (int c = 0; c < 8; c += 2) out.push_back(glm::packHalf2x16({d[c], d[c + 1]}));
   if (options.normals) {
     for (int c = 0; c < 8; c += 2)
-      out.push_back(packNormals(values.normal.at(node.corners[c]),
-                                values.normal.at(node.corners[c + 1])));
+      out.push_back(
+          packNormals(values.normal.at(node.corners[c]), values.normal.at(node.corners[c + 1])));
   }
   if (options.colors) {
     for (int c = 0; c < 8; ++c) {

@@ -38,8 +38,8 @@ void submitAndWait(Gpu& gpu, VkCommandBuffer cb, VkFence fence) {
   ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
 }
 
-double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params,
-                   VkCommandBuffer cb, VkFence fence) {
+double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params, VkCommandBuffer cb,
+                   VkFence fence) {
   renderer.prepare(params);
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;

@@ -91,7 +91,7 @@ void submitAndWait(Gpu& gpu, VkCommandBuffer cb, VkFence fence);
 
 // A whole frame: prepare, record into cb, submit and wait on fence, collect. Returns the seconds
 // from submit to done.
-double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params,
-                   VkCommandBuffer cb, VkFence fence);
+double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params, VkCommandBuffer cb,
+                   VkFence fence);
 
 }  // namespace iso::viewer

@@ -2,8 +2,8 @@
 #include "scene.h"
 
 #include <cmath>
-#include <glm/geometric.hpp>
 #include <fstream>
+#include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>

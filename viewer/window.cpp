@@ -6,8 +6,8 @@
 // R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
-#include <glm/geometric.hpp>
 #include <fmt/core.h>
+#include <glm/geometric.hpp>
 
 #include <algorithm>
 #include <chrono>

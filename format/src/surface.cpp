@@ -353,8 +353,8 @@ SurfaceChunk decodeSurfaceChunk(const Reader& reader, uint32_t id) {
                                              [](const SurfaceNode& n) { return n.isLeaf(); }));
   if (nodeCount != chunk.nodeCount || leaves != chunk.leafCount)
     fail("the chunk table gives " + std::to_string(chunk.nodeCount) + " nodes and " +
-         std::to_string(chunk.leafCount) + " filled leaves, the data " +
-         std::to_string(nodeCount) + " and " + std::to_string(leaves));
+         std::to_string(chunk.leafCount) + " filled leaves, the data " + std::to_string(nodeCount) +
+         " and " + std::to_string(leaves));
   resizeValues(out.leafValues, schema, leafCount);
   resizeValues(out.lodValues, schema, lodCount);
   size_t at = p.attributesOffset;

@@ -67,9 +67,10 @@ std::vector<uint32_t> renderReference(const Asset& asset, const Scene& scene, ui
                                       uint32_t h, const Environment* env = nullptr) {
   const CpuPool pool = buildCpuPool(asset);
   const auto header = asset.reader.header();
-  return renderCpu(pool,
-                   frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(asset, w, h, env)),
-                   env)
+  return renderCpu(
+             pool,
+             frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(asset, w, h, env)),
+             env)
       .pixels;
 }
 
@@ -202,8 +203,8 @@ TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const CpuPool pool = buildCpuPool(*asset);
   const Frame& frame = asset->reader.header().frame;
   const Scene scene = sceneFor(*asset);
-  const auto params =
-      frameParams(scene, frame, asset->reader.header().maxLevel, cpuFrameSetup(*asset, 64, 64, nullptr));
+  const auto params = frameParams(scene, frame, asset->reader.header().maxLevel,
+                                  cpuFrameSetup(*asset, 64, 64, nullptr));
   const double cell = std::ldexp(1.0, -int(asset->reader.header().maxLevel));
   std::mt19937 rng(7);
   std::normal_distribution<double> normal;
