@@ -9,6 +9,7 @@
 #include <functional>
 
 #include "iso/check.h"
+#include "iso/reader.h"
 #include "iso/writer.h"
 #include "stages.h"
 
@@ -211,9 +212,10 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     plan.pointCount = uint64_t(std::llround(inputPoints));
     const CornerLayout layout =
         layoutSurface(plan.topology, plan.cellLevel, plan.cellKey, header.maxLevel);
-    const CornerValues leaf =
+    CornerValues leaf =
         leafValues(layout, *in.corners, hangingOf, *in.hanging, header.attributes[0], in.colors);
-    const CornerValues lod = lodValues(layout, *in.lod, in.colors);
+    CornerValues lod = lodValues(layout, *in.lod, in.colors);
+    if (in.bakeCorners) in.bakeCorners(layout, leaf, lod);
     out.payload = encodeSurfaceChunk(plan.topology, layout, header.attributes, leaf, lod);
     ChunkDesc& desc = out.desc;
     desc.kind = kSurfaceKind;
@@ -247,12 +249,27 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     }
   }
   if (in.release) in.release();  // the measure below decodes the file: not two surfaces at once
-  stats.fileBytesWithoutMetadata =
-      writer.bytesWritten() + uint64_t(stats.chunks) * kChunkEntrySize + kTrailerSize;
+  const auto bytesWithoutMetadata = [&](const Writer& w) {
+    return w.bytesWritten() + uint64_t(stats.chunks) * kChunkEntrySize + kTrailerSize;
+  };
+  stats.fileBytesWithoutMetadata = bytesWithoutMetadata(writer);
   writer.setMetadata(in.metadata);
   writer.close();
-  writer.replaceMetadata(finalMetadata(writer.temporaryPath(), stats));
-  writer.commit();
+  if (!in.occlusion) {
+    writer.replaceMetadata(finalMetadata(writer.temporaryPath(), stats));
+    writer.commit();
+    return stats;
+  }
+  // The second file, at the output path: the first (complete, under its temporary name) with the
+  // occlusion at its corners.
+  Writer second(output, withOcclusion(header), {.zstdLevel = in.options.zstdLevel});
+  in.occlusion(Reader::open(writer.temporaryPath()), second);
+  writer.abandon();
+  stats.fileBytesWithoutMetadata = bytesWithoutMetadata(second);
+  second.setMetadata(in.metadata);
+  second.close();
+  second.replaceMetadata(finalMetadata(second.temporaryPath(), stats));
+  second.commit();
   return stats;
 }
 

@@ -9,6 +9,7 @@
 #include <map>
 #include <numeric>
 
+#include "io/image.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
 #include "iso/version.h"
@@ -67,6 +68,13 @@ void validate(const BuildOptions& o) {
   require(o.chunkNodes >= 64, "--chunk-nodes must be at least 64");
   require(o.zstdLevel >= 1 && o.zstdLevel <= 19, "--zstd-level must be 1 to 19");
   require(o.orientBlockPoints >= 16, "--orient-block-points must be at least 16");
+  const TextureOptions& t = o.texture;
+  require(std::isfinite(t.scale) && t.scale >= 0.0, "--texture-scale must be positive");
+  require(std::isfinite(t.sharpness) && t.sharpness >= 0.0 && t.sharpness <= 64.0,
+          "--texture-sharpness must be 0 to 64");
+  const OcclusionOptions& a = o.occlusion;
+  require(a.rays >= 1 && a.rays <= 4096, "--ao-rays must be 1 to 4096");
+  require(std::isfinite(a.radius) && a.radius >= 0.0, "--ao-radius must be positive");
 }
 
 // Whether all points lie on one line (then they define no surface).
@@ -183,7 +191,7 @@ nlohmann::json optionsJson(const BuildOptions& o) {
   const char* orient = o.orient == OrientMode::Up
                            ? "up"
                            : (o.orient == OrientMode::Propagate ? "propagate" : "auto");
-  return {{"neighbors", o.neighbors},
+  nlohmann::json out = {{"neighbors", o.neighbors},
           {"smoothing", o.smoothing},
           {"fit", o.fit == FitMode::Plane ? "plane" : "sphere"},
           {"orient", orient},
@@ -195,14 +203,24 @@ nlohmann::json optionsJson(const BuildOptions& o) {
           {"zstd_level", o.zstdLevel},
           {"remove_outliers", o.removeOutliers},
           {"orient_block_points", o.orientBlockPoints}};
+  // Bakes are listed only when asked for, so files without them keep their bytes.
+  if (o.texture.enabled())
+    out["texture"] = {{"image", o.texture.image.filename().string()},
+                      {"scale", o.texture.scale},
+                      {"sharpness", o.texture.sharpness},
+                      {"at", o.texture.at == TextureAt::Points ? "points" : "corners"}};
+  if (o.occlusion.enabled)
+    out["occlusion"] = {{"rays", o.occlusion.rays}, {"radius", o.occlusion.radius}};
+  return out;
 }
 
 namespace {
 
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
-                             const ConvertSource& source, StageTimer& timer,
-                             nlohmann::json& report, Clock::time_point started);
+                             std::optional<LinearImage> textureImage, const ConvertSource& source,
+                             StageTimer& timer, nlohmann::json& report,
+                             Clock::time_point started);
 
 // The point stages in core, timed.
 ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
@@ -255,12 +273,15 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   validate(options);
   if (inputPoints == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
+  std::optional<LinearImage> textureImage;  // read first: a bad image fails before any work
+  if (options.texture.enabled()) textureImage = readLinearImage(options.texture.image);
   nlohmann::json report;
   report["stages"] = nlohmann::json::array();
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
   ReadyPoints ready = prepare(timer);
-  return buildAndWrite(ready, inputPoints, output, options, source, timer, report, started);
+  return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), source, timer,
+                       report, started);
 }
 
 }  // namespace
@@ -292,13 +313,33 @@ namespace {
 
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
-                             const ConvertSource& source, StageTimer& timer,
-                             nlohmann::json& report, Clock::time_point started) {
+                             std::optional<LinearImage> textureImage, const ConvertSource& source,
+                             StageTimer& timer, nlohmann::json& report,
+                             Clock::time_point started) {
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;
   const NormalStats& normals = ready.normals;
   points.source = {};  // the octree stages do not need it: 4 bytes a point
+
+  // A texture sampled at the points becomes their colors here, in or out of core alike.
+  const bool inputColors = points.hasColors();
+  std::optional<TriplanarTexture> texture;
+  if (textureImage) {
+    const TextureOptions& t = options.texture;
+    report["texture"] = {{"image", t.image.filename().string()},
+                         {"width", textureImage->width},
+                         {"height", textureImage->height},
+                         {"scale", t.scale > 0.0 ? t.scale : frame.size},
+                         {"sharpness", t.sharpness},
+                         {"at", t.at == TextureAt::Points ? "points" : "corners"},
+                         {"modulates_point_colors", inputColors}};
+    texture.emplace(std::move(*textureImage), t.scale > 0.0 ? t.scale : frame.size, t.sharpness);
+    if (t.at == TextureAt::Points) {
+      timer.next("texture", points.size());
+      texturePoints(points, frame, *texture);
+    }
+  }
   timer.next("octree");
 
   // The signed distance and its point index are needed until the level-of-detail corners.
@@ -345,8 +386,32 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   report["corners"] = {
       {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 
-  WriteInput write{&octree, &points, &corners,           &hanging, &lod,
-                   frame,   "{}",    points.hasColors(), options, {}};
+  WriteInput write{.tree = &octree,
+                   .points = &points,
+                   .corners = &corners,
+                   .hanging = &hanging,
+                   .lod = &lod,
+                   .frame = frame,
+                   .metadata = "{}",
+                   .colors = points.hasColors() || texture.has_value(),
+                   .options = options};
+  if (texture && options.texture.at == TextureAt::Corners)
+    write.bakeCorners = [&](const CornerLayout& layout, CornerValues& leaf, CornerValues& lod) {
+      textureCorners(layout.leafCorners, leaf, frame, *texture, inputColors);
+      textureCorners(layout.lodCorners, lod, frame, *texture, inputColors);
+    };
+  if (options.occlusion.enabled)
+    write.occlusion = [&](const Reader& written, Writer& out) {
+      timer.next("occlusion");
+      const double radius =
+          options.occlusion.radius > 0.0 ? options.occlusion.radius : 0.1 * frame.size;
+      const OcclusionStats s = bakeOcclusion(written, out, options.occlusion.rays, radius / frame.size);
+      report["occlusion"] = {{"rays_per_corner", options.occlusion.rays},
+                             {"radius", radius},
+                             {"corners", s.corners},
+                             {"unprojected", s.unprojected},
+                             {"mean", s.mean}};
+    };
   // The file keeps what the data and options determine, not timings or memory, so that the same
   // input gives the same bytes on any machine and any number of threads.
   const auto metadata = [&](nlohmann::json r) {

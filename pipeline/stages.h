@@ -36,6 +36,8 @@
 #include "iso/flat_map.h"
 #include "iso/format.h"
 #include "iso/surface.h"
+#include "occlusion.h"
+#include "texture.h"
 
 static_assert(iso::KeyIndex<iso::Key128>::kNone == iso::kNoNode);
 
@@ -73,6 +75,8 @@ struct BuildOptions {
   bool removeOutliers = true;
   // Points per orientation block (orientNormals); part of the result, so a parameter.
   uint32_t orientBlockPoints = 1u << 20;
+  TextureOptions texture;      // a triplanar texture baked into the colors (texture.h)
+  OcclusionOptions occlusion;  // ambient occlusion baked into the corners (occlusion.h)
 };
 
 // The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
@@ -479,7 +483,12 @@ struct WriteInput {
   std::string metadata;  // JSON object
   bool colors = false;
   BuildOptions options;
-  std::function<void()> release;  // when set, called once every chunk is written (frees the above)
+  std::function<void()> release = {};  // when set, called once every chunk is written (frees the above)
+  // When set, called on each chunk's corner values before they are encoded (per-corner baking).
+  std::function<void(const CornerLayout&, CornerValues& leaf, CornerValues& lod)> bakeCorners = {};
+  // When set, the written file is copied by it into a second writer (whose header is
+  // withOcclusion's), which becomes the output: ambient occlusion needs the finished surface.
+  std::function<void(const Reader& written, Writer& output)> occlusion = {};
 };
 struct WriteStats {
   uint64_t chunks = 0, fileBytesWithoutMetadata = 0;

@@ -39,7 +39,9 @@ ISO_CONST uint kBlobPageList = 4u;   // the pool pages of the blob, in order
 // index, then (chunk, root node index) per existing child in octant order.
 ISO_CONST uint kNodeCut = 0x100u;
 // Corner records: 8 distances in units of the node's cell size (float16, 4 words), then, when the
-// file has them, 8 normals (octahedral snorm8 pairs, 4 words), then 8 colors (sRGB RGBA8, 8 words).
+// file has them, 8 normals (octahedral snorm8 pairs, 4 words), then, when it has colors or
+// occlusion, 8 colors (sRGB RGB8, white without colors, and the occlusion as unorm8 alpha, 255
+// without it; 8 words).
 ISO_CONST uint kRecordDistanceWords = 4u;
 ISO_CONST uint kRecordNormalWords = 4u;
 ISO_CONST uint kRecordColorWords = 8u;
@@ -69,6 +71,7 @@ ISO_CONST uint kOptionColors = 16u;       // the file has colors (else the mater
 ISO_CONST uint kOptionSwapRB = 32u;       // write BGRA (swapchains) instead of RGBA
 ISO_CONST uint kOptionEnvironment = 64u;  // an environment map is bound
 ISO_CONST uint kOptionRequests = 128u;    // rays request missing chunks (streaming on)
+ISO_CONST uint kOptionOcclusion = 256u;   // the file has baked ambient occlusion
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;

@@ -45,7 +45,7 @@ Cell locate(uvec3 g, float distance, bool request) {
   uint data = blobWord(page, kBlobData);
   uint recordWords = kRecordDistanceWords;
   if ((P.options.x & kOptionNormals) != 0u) recordWords += kRecordNormalWords;
-  if ((P.options.x & kOptionColors) != 0u) recordWords += kRecordColorWords;
+  if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) recordWords += kRecordColorWords;
   useChunk(chunk);
   uint node = 0u;
   uint level = 0u;
@@ -138,7 +138,8 @@ vec3 trilinearGradient(Corners c, vec3 u) {
 struct Hit {
   float t;
   vec3 normal;  // unit, pointing outside (where the signed distance is positive)
-  vec3 color;   // linear RGB: the file's colors, or the material's
+  vec3 color;       // linear RGB: the file's colors, or the material's
+  float occlusion;  // baked ambient occlusion (1: open)
 };
 
 vec3 decodeOctahedral(vec2 e) {
@@ -183,13 +184,17 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
   }
   hit.normal = dot(n, n) > 0.0f ? normalize(n) : vec3(0.0f, 0.0f, 1.0f);
   hit.color = vec3(P.albedo.x, P.albedo.y, P.albedo.z);
-  if ((P.options.x & kOptionColors) != 0u) {
+  hit.occlusion = 1.0f;
+  if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) {
     vec3 sum = vec3(0.0f);
+    float open = 0.0f;
     for (uint k = 0u; k < 8u; ++k) {
       vec4 rgba = unpackUnorm4x8(blobWord(cell.page, word + k));
       sum += cornerWeight(k, u) * srgbToLinear(vec3(rgba.x, rgba.y, rgba.z));
+      open += cornerWeight(k, u) * rgba.w;
     }
-    hit.color = sum;
+    if ((P.options.x & kOptionColors) != 0u) hit.color = sum;
+    if ((P.options.x & kOptionOcclusion) != 0u) hit.occlusion = open;
   }
 }
 
@@ -358,7 +363,7 @@ vec3 background(vec3 d) {
 vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
   vec3 n = hit.normal;
   vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
-  vec3 color = ambient * hit.color;
+  vec3 color = ambient * hit.occlusion * hit.color;
   vec3 origin = p + n * P.lod.y;
   for (uint i = 0u; i < kMaxLights; ++i) {
     Light light = P.lights[i];

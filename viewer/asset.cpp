@@ -20,6 +20,7 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
   for (const AttributeDesc& d : header.attributes) {
     if (d.semantic == Semantic::Normal) a->blob.normals = true;
     if (d.semantic == Semantic::Color) a->blob.colors = true;
+    if (d.semantic == Semantic::Occlusion) a->blob.occlusion = true;
   }
   // Bounds from the coarsest chunk's deepest level.
   a->reader.checkPayload(a->tree.topChunk());

@@ -42,11 +42,16 @@ void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const Cor
       out.push_back(
           packNormals(values.normal.at(node.corners[c]), values.normal.at(node.corners[c + 1])));
   }
-  if (options.colors) {
+  if (options.colors || options.occlusion) {
     for (int c = 0; c < 8; ++c) {
-      const auto& rgb = values.color.at(node.corners[c]);
-      out.push_back(uint32_t(linearToSrgb8(rgb[0])) | uint32_t(linearToSrgb8(rgb[1])) << 8 |
-                    uint32_t(linearToSrgb8(rgb[2])) << 16 | 0xFF000000u);
+      uint32_t word = 0x00FFFFFFu;
+      if (options.colors) {
+        const auto& rgb = values.color.at(node.corners[c]);
+        word = uint32_t(linearToSrgb8(rgb[0])) | uint32_t(linearToSrgb8(rgb[1])) << 8 |
+               uint32_t(linearToSrgb8(rgb[2])) << 16;
+      }
+      const float open = options.occlusion ? values.occlusion.at(node.corners[c]) : 1.0f;
+      out.push_back(word | uint32_t(std::lround(std::clamp(open, 0.0f, 1.0f) * 255.0f)) << 24);
     }
   }
 }
@@ -75,7 +80,7 @@ uint32_t ChunkTree::childCovering(uint32_t parent, uint8_t level, uint64_t key) 
 
 uint32_t recordWords(const BlobOptions& options) {
   return gpu::kRecordDistanceWords + (options.normals ? gpu::kRecordNormalWords : 0) +
-         (options.colors ? gpu::kRecordColorWords : 0);
+         (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);
 }
 
 uint32_t blobPages(size_t words) { return uint32_t((words + kPageWords - 1) / kPageWords); }

@@ -29,6 +29,7 @@ class ChunkTree {
 struct BlobOptions {
   bool normals = false;  // the records carry normals
   bool colors = false;   // the records carry colors
+  bool occlusion = false;  // ... and occlusion (in the color words, white without colors)
 };
 
 // Words per corner record with these options.

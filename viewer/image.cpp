@@ -1,16 +1,14 @@
 // Image files through OpenImageIO (image.h).
 #include "image.h"
 
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imageio.h>
 
 #include <glm/glm.hpp>
 #include <glm/packing.hpp>
 
+#include "io/image.h"
 #include "iso/atomic_file.h"
 #include "iso/error.h"
-#include "iso/quantize.h"
 
 namespace iso::viewer {
 namespace OIIO = OIIO_NAMESPACE;
@@ -51,37 +49,17 @@ std::vector<uint32_t> readImage(const std::filesystem::path& path, uint32_t& wid
 }
 
 Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth) {
-  OIIO::ImageBuf source(path.string());
-  if (!source.read(0, 0, true, OIIO::TypeDesc::FLOAT))
-    throw FileError(path.string(), std::nullopt,
-                    "cannot read the environment map: " + source.geterror());
-  OIIO::ImageSpec spec = source.spec();
-  if (spec.width < 2 || spec.height < 1)
-    throw FileError(path.string(), std::nullopt, "the environment map is empty");
-  // 8-bit images are sRGB-encoded; float images (EXR, HDR) are linear already.
-  const bool encoded = spec.format.basetype == OIIO::TypeDesc::UINT8 ||
-                       spec.format.basetype == OIIO::TypeDesc::UINT16;
-  OIIO::ImageBuf image = source;
-  if (uint32_t(spec.width) > maxWidth) {
-    const int w = int(maxWidth), h = std::max(1, int(int64_t(spec.height) * w / spec.width));
-    image = OIIO::ImageBufAlgo::resize(source, "box", 0.0f,
-                                       OIIO::ROI(0, w, 0, h, 0, 1, 0, spec.nchannels));
-    if (image.has_error())
-      throw FileError(path.string(), std::nullopt, "cannot resize the environment map");
-  }
+  const LinearImage image = readLinearImage(path, maxWidth);
+  if (image.width < 2)
+    throw FileError(path.string(), std::nullopt, "the environment map is too small");
   Environment env;
-  env.width = uint32_t(image.spec().width);
-  env.height = uint32_t(image.spec().height);
-  const int n = image.spec().nchannels;
-  std::vector<float> pixels(size_t(env.width) * env.height * n);
-  image.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, pixels.data());
-  const auto linear = [&](float c) { return encoded ? srgbToLinear(c) : std::max(c, 0.0f); };
-  env.texels.resize(size_t(env.width) * env.height * 2);
-  for (size_t i = 0; i < size_t(env.width) * env.height; ++i) {
-    const float* p = &pixels[i * n];
-    const float r = linear(p[0]), g = linear(n > 1 ? p[1] : p[0]), b = linear(n > 2 ? p[2] : p[0]);
-    env.texels[2 * i] = glm::packHalf2x16({r, g});
-    env.texels[2 * i + 1] = glm::packHalf2x16({b, 0.0f});
+  env.width = image.width;
+  env.height = image.height;
+  env.texels.resize(image.texels.size() * 2);
+  for (size_t i = 0; i < image.texels.size(); ++i) {
+    const glm::vec3& c = image.texels[i];
+    env.texels[2 * i] = glm::packHalf2x16({c.r, c.g});
+    env.texels[2 * i + 1] = glm::packHalf2x16({c.b, 0.0f});
   }
   return env;
 }

@@ -151,6 +151,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.environmentHeight = environment ? environment->height : 0;
   setup_.normals = asset.blob.normals;
   setup_.colors = asset.blob.colors;
+  setup_.occlusion = asset.blob.occlusion;
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
   stats_.poolBytes = poolPages * kPageBytes;

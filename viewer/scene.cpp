@@ -302,6 +302,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (scene.refractions) options |= gpu::kOptionRefractions;
   if (s.normals) options |= gpu::kOptionNormals;
   if (s.colors) options |= gpu::kOptionColors;
+  if (s.occlusion) options |= gpu::kOptionOcclusion;
   if (s.swapRedBlue) options |= gpu::kOptionSwapRB;
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;

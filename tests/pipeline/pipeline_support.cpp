@@ -1,5 +1,8 @@
 #include "pipeline_support.h"
 
+#include <cstring>
+#include <random>
+
 namespace iso::test {
 
 PointCloud scanOf(const std::string& shape, uint64_t count, bool normals, double noise,
@@ -27,6 +30,23 @@ nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t
   options.truthSamples = 50000;
   return evaluateAgainstShape(converted.surface, truth,
                               converted.report["mean_spacing"].get<double>(), options);
+}
+
+void writePpm(const std::filesystem::path& path, uint32_t width, uint32_t height,
+              const std::vector<uint8_t>& rgb) {
+  const std::string header =
+      "P6\n" + std::to_string(width) + " " + std::to_string(height) + "\n255\n";
+  std::vector<std::byte> bytes(header.size() + rgb.size());
+  std::memcpy(bytes.data(), header.data(), header.size());
+  std::memcpy(bytes.data() + header.size(), rgb.data(), rgb.size());
+  writeFile(path, bytes);
+}
+
+std::vector<uint8_t> randomImage(uint32_t width, uint32_t height, uint32_t seed) {
+  std::mt19937 random(seed);
+  std::vector<uint8_t> rgb(size_t(width) * height * 3);
+  for (uint8_t& b : rgb) b = uint8_t(random() & 0xFF);
+  return rgb;
 }
 
 }  // namespace iso::test

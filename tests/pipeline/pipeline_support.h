@@ -31,4 +31,11 @@ Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& 
 // evaluateAgainstShape with the report's mean spacing.
 nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t rays = 20000);
 
+// Write an 8-bit binary PPM (rows from the top, RGB bytes), an image any OpenImageIO reads.
+void writePpm(const std::filesystem::path& path, uint32_t width, uint32_t height,
+              const std::vector<uint8_t>& rgb);
+
+// A width × height image of random colors (a texture with detail at every texel).
+std::vector<uint8_t> randomImage(uint32_t width, uint32_t height, uint32_t seed);
+
 }  // namespace iso::test

@@ -10,6 +10,7 @@
 #include "commands.h"
 #include "convert.h"
 #include "inputs.h"
+#include "io/image.h"
 #include "iso/error.h"
 #include "iso/temporary_files.h"
 #include "spill.h"
@@ -29,6 +30,7 @@ struct Options {
   std::string maxTemp = "auto";    // --max-temp
   std::string report;              // --report FILE
   std::string progress = "auto";   // auto, line, json, none
+  std::string texture, textureAt = "corners";  // --texture, --texture-at
   int threads = 0;                 // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
@@ -89,6 +91,24 @@ void printReport(const nlohmann::json& r, const Options& o) {
                           withSeparators(c["page_releases"].get<uint64_t>()));
     fmt::print("{}\n", disk);
   }
+  if (r.contains("texture")) {
+    const auto& t = r["texture"];
+    fmt::print("  texture: {} ({}×{}) sampled at the {}, one repeat per {:.6g}, sharpness {:.3g}{}\n",
+               t["image"].get<std::string>(), t["width"].get<uint32_t>(),
+               t["height"].get<uint32_t>(), t["at"].get<std::string>(),
+               t["scale"].get<double>(), t["sharpness"].get<double>(),
+               t["modulates_point_colors"].get<bool>() ? ", times the points' colors" : "");
+  }
+  if (r.contains("occlusion")) {
+    const auto& c = r["occlusion"];
+    fmt::print("  ambient occlusion: {} corners, {} rays each within {:.6g}: mean {:.3f}{}\n",
+               withSeparators(c["corners"].get<uint64_t>()), c["rays_per_corner"].get<int>(),
+               c["radius"].get<double>(), c["mean"].get<double>(),
+               c["unprojected"].get<uint64_t>() > 0
+                   ? fmt::format(" ({} not projected)",
+                                 withSeparators(c["unprojected"].get<uint64_t>()))
+                   : "");
+  }
   const auto& a = r["accuracy"];
   fmt::print(
       "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
@@ -125,6 +145,13 @@ int run(Options& o) {
     throw std::invalid_argument("--orient must be auto, up or propagate");
   o.build.orient = orients.at(o.orient);
   o.build.removeOutliers = !o.keepOutliers;
+  if (!o.texture.empty()) {
+    if (o.textureAt != "points" && o.textureAt != "corners")
+      throw std::invalid_argument("--texture-at must be points or corners");
+    o.build.texture.image = o.texture;
+    o.build.texture.at = o.textureAt == "points" ? TextureAt::Points : TextureAt::Corners;
+    checkImageReadable(o.build.texture.image);  // before the points are read
+  }
   const std::filesystem::path output(o.output);
   // Temporary files of runs that were killed (kill -9, power loss) next to the output.
   const size_t stale = removeStaleTemporaries(output.parent_path());
@@ -247,6 +274,30 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
   c->add_flag("--keep-outliers", o->keepOutliers, "Keep far outliers instead of removing them");
+  CLI::Option* texture = c->add_option(
+      "--texture", o->texture,
+      "An image (any OpenImageIO reads) projected along the three axes and blended by the "
+      "normal, baked into the colors (times the points' own colors when they have some)");
+  c->add_option("--texture-scale", o->build.texture.scale,
+                "World units one repeat of the texture spans (default: the frame's size)")
+      ->needs(texture);
+  c->add_option("--texture-sharpness", o->build.texture.sharpness,
+                "P of the blend weights |n·axis|^P: higher gives sharper seams")
+      ->capture_default_str()
+      ->needs(texture);
+  c->add_option("--texture-at", o->textureAt,
+                "Sample the texture at the points or at the corners' projections")
+      ->capture_default_str()
+      ->needs(texture);
+  CLI::Option* ao = c->add_flag("--bake-ao", o->build.occlusion.enabled,
+                                "Trace ambient occlusion against the surface and store it at "
+                                "every corner");
+  c->add_option("--ao-rays", o->build.occlusion.rays, "Rays per corner for --bake-ao")
+      ->capture_default_str()
+      ->needs(ao);
+  c->add_option("--ao-radius", o->build.occlusion.radius,
+                "How far (world units) an occluder counts (default: a tenth of the frame)")
+      ->needs(ao);
   c->add_option("--threads", o->threads, "Worker threads (0: all cores); the output is the same")
       ->capture_default_str();
   c->add_option("--progress", o->progress,

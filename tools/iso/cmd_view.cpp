@@ -12,7 +12,7 @@ namespace {
 struct ViewArgs {
   viewer::ViewOptions view;
   bool headless = false, cpu = false, bench = false;
-  std::string vram = "1G", upload = "16M", camera, up, color, environment;
+  std::string vram = "1G", upload = "16M", camera, up, color, ambient, environment;
   double fov = 0;
   std::vector<std::string> lights;
   std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
@@ -56,6 +56,12 @@ void buildScene(ViewArgs& a) {
   if (!a.color.empty()) {
     const auto c = viewer::parseVec3(a.color);
     s.material.color = {float(c[0]), float(c[1]), float(c[2])};
+  }
+  if (!a.ambient.empty()) {
+    const auto c = viewer::parseVec3(a.ambient);
+    if (!(c[0] >= 0.0 && c[1] >= 0.0 && c[2] >= 0.0))
+      throw std::invalid_argument("--ambient must not be negative");
+    s.ambient = {float(c[0]), float(c[1]), float(c[2])};
   }
   if (a.reflectivity) s.material.reflectivity = *a.reflectivity;
   if (a.transparency) s.material.transparency = *a.transparency;
@@ -113,6 +119,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "A light (repeatable, up to 4): point:X,Y,Z[:R,G,B[:I]] or "
                 "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]");
   c->add_option("--color", a->color, "Material color R,G,B (linear) where the file has none");
+  c->add_option("--ambient", a->ambient,
+                "Ambient light R,G,B (linear; default 0.12,0.12,0.13), darkened by the file's "
+                "baked ambient occlusion when it has some");
   c->add_option("--reflectivity", a->reflectivity, "Mirror reflection, 0 to 1")
       ->check(CLI::Range(0.0, 1.0));
   c->add_option("--transparency", a->transparency, "Refraction, 0 to 1")

@@ -1,0 +1,67 @@
+// Images through OpenImageIO (image.h).
+#include "io/image.h"
+
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+
+#include "iso/error.h"
+#include "iso/quantize.h"
+
+namespace iso {
+namespace OIIO = OIIO_NAMESPACE;
+
+void checkImageReadable(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw FileError(path.string(), std::nullopt, "no such image file");
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in)
+    throw FileError(path.string(), std::nullopt, "cannot read the image: " + OIIO::geterror());
+  if (in->spec().width < 1 || in->spec().height < 1)
+    throw FileError(path.string(), std::nullopt, "the image is empty");
+}
+
+LinearImage readLinearImage(const std::filesystem::path& path, uint32_t maxWidth) {
+  const auto fail = [&](const std::string& why) {
+    throw FileError(path.string(), std::nullopt, why);
+  };
+  if (!std::filesystem::is_regular_file(path)) fail("no such image file");
+  OIIO::ImageBuf source(path.string());
+  if (!source.read(0, 0, true, OIIO::TypeDesc::FLOAT))
+    fail("cannot read the image: " + source.geterror());
+  const OIIO::ImageSpec& spec = source.spec();
+  if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1) fail("the image is empty");
+  // 8- and 16-bit images are sRGB-encoded; float images (EXR, HDR) are linear already. (The
+  // buffer holds floats now: the file's own format is the native spec's.)
+  const OIIO::TypeDesc stored = source.nativespec().format;
+  const bool encoded =
+      stored.basetype == OIIO::TypeDesc::UINT8 || stored.basetype == OIIO::TypeDesc::UINT16;
+  OIIO::ImageBuf image = source;
+  if (maxWidth > 0 && uint32_t(spec.width) > maxWidth) {
+    const int w = int(maxWidth), h = std::max(1, int(int64_t(spec.height) * w / spec.width));
+    image = OIIO::ImageBufAlgo::resize(source, "box", 0.0f,
+                                       OIIO::ROI(0, w, 0, h, 0, 1, 0, spec.nchannels));
+    if (image.has_error()) fail("cannot resize the image: " + image.geterror());
+  }
+  LinearImage out;
+  out.width = uint32_t(image.spec().width);
+  out.height = uint32_t(image.spec().height);
+  const int n = image.spec().nchannels;
+  std::vector<float> pixels(size_t(out.width) * out.height * n);
+  if (!image.get_pixels(OIIO::ROI::All(), OIIO::TypeDesc::FLOAT, pixels.data()))
+    fail("cannot read the image's pixels: " + image.geterror());
+  const auto linear = [&](float c) {
+    return encoded ? srgbToLinear(std::clamp(c, 0.0f, 1.0f)) : std::max(c, 0.0f);
+  };
+  out.texels.resize(size_t(out.width) * out.height);
+  for (size_t i = 0; i < out.texels.size(); ++i) {
+    const float* p = &pixels[i * n];
+    const bool gray = n < 3;
+    out.texels[i] = {linear(p[0]), linear(gray ? p[0] : p[1]), linear(gray ? p[0] : p[2])};
+  }
+  return out;
+}
+
+}  // namespace iso
