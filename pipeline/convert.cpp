@@ -55,7 +55,9 @@ class StageTimer {
   Clock::time_point start_ = Clock::now();
 };
 
-void validate(const BuildOptions& o) {
+}  // namespace
+
+void validateOptions(const BuildOptions& o) {
   const auto require = [](bool ok, const char* what) {
     if (!ok) throw std::invalid_argument(what);
   };
@@ -76,6 +78,8 @@ void validate(const BuildOptions& o) {
   require(a.rays >= 1 && a.rays <= 4096, "--ao-rays must be 1 to 4096");
   require(std::isfinite(a.radius) && a.radius >= 0.0, "--ao-radius must be positive");
 }
+
+namespace {
 
 // Whether all points lie on one line (then they define no surface).
 bool isCollinear(const PointSet& points) {
@@ -270,7 +274,7 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
 nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& output,
                            const BuildOptions& options, const ConvertSource& source,
                            const std::function<ReadyPoints(StageTimer&)>& prepare) {
-  validate(options);
+  validateOptions(options);
   if (inputPoints == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
   std::optional<LinearImage> textureImage;  // read first: a bad image fails before any work

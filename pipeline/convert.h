@@ -62,6 +62,9 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
 
+// Throws std::invalid_argument naming the option (as on the command line) that is out of range.
+void validateOptions(const BuildOptions& options);
+
 // The options as JSON (the file's "parameters").
 nlohmann::json optionsJson(const BuildOptions& options);
 

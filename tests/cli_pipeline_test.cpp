@@ -11,6 +11,8 @@
 #include <vector>
 #include <nlohmann/json.hpp>
 
+#include <cstring>
+
 #include "cli_support.h"
 
 namespace iso {
@@ -180,6 +182,49 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
   EXPECT_FALSE(stored.contains("stages"));
   EXPECT_FALSE(stored.contains("peak_rss_bytes"));
   EXPECT_EQ(stored["accuracy"], report["accuracy"]);
+}
+
+TEST_F(CliPipeline, convertBakesATextureAndAmbientOcclusion) {
+  // A 2 × 2 binary PPM texture.
+  const std::string header = "P6\n2 2\n255\n";
+  const uint8_t texels[12] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255};
+  std::vector<std::byte> bytes(header.size() + sizeof texels);
+  std::memcpy(bytes.data(), header.data(), header.size());
+  std::memcpy(bytes.data() + header.size(), texels, sizeof texels);
+  test::writeFile(dir_ / "tex.ppm", bytes);
+  const auto run = runIso("convert " + quoted(dir_ / "sphere.ply") + " -o " +
+                          quoted(dir_ / "t.iso") + " --texture " + quoted(dir_ / "tex.ppm") +
+                          " --texture-scale 0.5 --bake-ao --ao-rays 8");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("texture: tex.ppm (2×2) sampled at the corners"), std::string::npos)
+      << run.out;
+  EXPECT_NE(run.out.find("ambient occlusion:"), std::string::npos) << run.out;
+  EXPECT_EQ(runIso("verify " + quoted(dir_ / "t.iso")).exitCode, 0);
+  const auto info = runIso("info --json " + quoted(dir_ / "t.iso"));
+  ASSERT_EQ(info.exitCode, 0) << info.err;
+  EXPECT_NE(info.out.find("\"occlusion\""), std::string::npos);
+  EXPECT_NE(info.out.find("\"color\""), std::string::npos);
+}
+
+TEST_F(CliPipeline, badTexturesAndImpossibleBakeOptionsLeaveTheOldFile) {
+  const std::vector<std::byte> old(64, std::byte{7});
+  test::writeFile(dir_ / "out.iso", old);
+  test::writeFile(dir_ / "notes.png", std::vector<std::byte>(32, std::byte{'a'}));
+  const std::string convert =
+      "convert -f " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "out.iso");
+  for (const char* image : {"missing.png", "notes.png"}) {
+    const auto run = runIso(convert + " --texture " + quoted(dir_ / image));
+    EXPECT_EQ(run.exitCode, 1) << image;
+    EXPECT_NE(run.err.find(image), std::string::npos) << run.err;
+  }
+  for (const char* options :
+       {"--texture-scale 2", "--ao-rays 8", "--ao-radius 1", "--bake-ao --ao-rays 0",
+        "--bake-ao --ao-radius -1", "--texture-at sideways --texture x.png",
+        "--texture-sharpness -1 --texture x.png"}) {
+    const auto run = runIso(convert + " " + options);
+    EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
+  }
+  EXPECT_TRUE(test::readFile(dir_ / "out.iso") == old);
 }
 
 TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {

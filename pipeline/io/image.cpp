@@ -12,13 +12,19 @@
 
 namespace iso {
 namespace OIIO = OIIO_NAMESPACE;
+namespace {
+// OpenImageIO's message, or what it means when it gives none.
+std::string reason(const std::string& error) {
+  return error.empty() ? "not an image OpenImageIO reads, or a damaged one" : error;
+}
+}  // namespace
 
 void checkImageReadable(const std::filesystem::path& path) {
   if (!std::filesystem::is_regular_file(path))
     throw FileError(path.string(), std::nullopt, "no such image file");
   auto in = OIIO::ImageInput::open(path.string());
   if (!in)
-    throw FileError(path.string(), std::nullopt, "cannot read the image: " + OIIO::geterror());
+    throw FileError(path.string(), std::nullopt, "cannot read the image: " + reason(OIIO::geterror()));
   if (in->spec().width < 1 || in->spec().height < 1)
     throw FileError(path.string(), std::nullopt, "the image is empty");
 }
@@ -30,7 +36,7 @@ LinearImage readLinearImage(const std::filesystem::path& path, uint32_t maxWidth
   if (!std::filesystem::is_regular_file(path)) fail("no such image file");
   OIIO::ImageBuf source(path.string());
   if (!source.read(0, 0, true, OIIO::TypeDesc::FLOAT))
-    fail("cannot read the image: " + source.geterror());
+    fail("cannot read the image: " + reason(source.geterror()));
   const OIIO::ImageSpec& spec = source.spec();
   if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1) fail("the image is empty");
   // 8- and 16-bit images are sRGB-encoded; float images (EXR, HDR) are linear already. (The

@@ -126,6 +126,22 @@ TEST(OutOfCore, sameFileWithInputNormalsSomeFlippedColorsAndDuplicates) {
   expectSameFiles(cloud, options, 400, 100);
 }
 
+TEST(OutOfCore, texturesAndAmbientOcclusionBakeTheSameFile) {
+  test::TempDir dir;
+  test::writePpm(dir / "tex.ppm", 8, 8, test::randomImage(8, 8, 2));
+  PointCloud cloud = test::scanOf("torus", 40000, true, 0.1, 4);
+  BuildOptions options;
+  options.orientBlockPoints = 256;
+  options.texture = {dir / "tex.ppm", 0.7, 3.0, TextureAt::Points};
+  options.occlusion = {true, 8, 0.5};
+  const nlohmann::json report = expectSameFiles(cloud, options, 400, 50);
+  EXPECT_EQ(report["texture"]["at"], "points");
+  EXPECT_GT(report["occlusion"]["corners"].get<uint64_t>(), 1000u);
+  options.texture.at = TextureAt::Corners;
+  cloud.colors.assign(cloud.size(), glm::vec3(0.5f, 0.25f, 1.0f));  // multiplied by the texture
+  expectSameFiles(cloud, options, 400, 50);
+}
+
 TEST(OutOfCore, farOutliersChooseTheFrameAgainAsInCore) {
   PointCloud cloud = test::scanOf("sphere", 40000, false, 0.0, 9);
   cloud.positions.push_back(glm::dvec3(40.0, 3.0, -2.0));

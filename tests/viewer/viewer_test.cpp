@@ -197,6 +197,55 @@ TEST(ViewerGolden, shadowsReflectionsRefractionsAreaLightsAndEnvironmentMapsAgre
   EXPECT_GT(differing(renderReference(*asset, plain, w, h), cpuPicture), 0.3);
 }
 
+TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAmbient) {
+  // A torus textured with a 2 × 2 image (red, green; blue, white), once without and once with
+  // occlusion baked within its whole size (the ring's inside sees its far side).
+  TempDir dir;
+  writeImage(dir / "quad.png", 2, 2, {0xFF0000FFu, 0xFF00FF00u, 0xFFFF0000u, 0xFFFFFFFFu});
+  BuildOptions options;
+  options.texture = {dir / "quad.png", 1.0, 4.0, TextureAt::Corners};
+  const PointCloud torus = scanOf("torus", 30000);
+  convertToIso(torus, dir / "textured.iso", options);
+  options.occlusion = {true, 32, 2.0};
+  convertToIso(torus, dir / "occluded.iso", options);
+  const uint32_t w = 128, h = 96;
+  std::vector<uint32_t> pictures[2];
+  for (int i = 0; i < 2; ++i) {
+    const auto asset = Asset::open(dir / (i == 0 ? "textured.iso" : "occluded.iso"));
+    EXPECT_TRUE(asset->blob.colors);
+    EXPECT_EQ(asset->blob.occlusion, i == 1);
+    Scene scene = sceneFor(*asset);
+    scene.ambient = {0.8f, 0.8f, 0.8f};
+    scene.lights[0].color = {0.2f, 0.2f, 0.2f};
+    pictures[i] = renderReference(*asset, scene, w, h);
+    const double differ = differing(renderGpu(*asset, scene, w, h, uint64_t(1) << 30).pixels,
+                                    pictures[i]);
+    std::printf("baked %s: %.4f %% of the pixels differ by more than 8/255\n",
+                i == 0 ? "texture" : "texture and occlusion", 100 * differ);
+    EXPECT_LE(differ, 0.005);
+  }
+  // The texture's colors show: pixels mostly red, mostly green and mostly blue.
+  size_t red = 0, green = 0, blue = 0;
+  for (uint32_t p : pictures[0]) {
+    const int r = int(p & 0xFF), g = int(p >> 8 & 0xFF), b = int(p >> 16 & 0xFF);
+    red += r > g + 60 && r > b + 60;
+    green += g > r + 60 && g > b + 60;
+    blue += b > r + 60 && b > g + 60;
+  }
+  EXPECT_GT(std::min({red, green, blue}), pictures[0].size() / 200) << red << " " << green << " "
+                                                                    << blue;
+  // Occlusion only darkens, and seen from above it darkens the ring's inner side: about 3 % of
+  // the picture.
+  size_t darker = 0, lighter = 0;
+  for (size_t i = 0; i < pictures[0].size(); ++i) {
+    const int a = int(pictures[0][i] >> 8 & 0xFF), b = int(pictures[1][i] >> 8 & 0xFF);
+    darker += b < a - 8;
+    lighter += b > a + 2;
+  }
+  EXPECT_GT(darker, pictures[0].size() / 100);
+  EXPECT_EQ(lighter, 0u);
+}
+
 TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const auto asset = Asset::open(files().sphere);
   const SurfaceModel model = SurfaceModel::load(asset->reader);

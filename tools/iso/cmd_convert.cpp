@@ -145,6 +145,7 @@ int run(Options& o) {
     throw std::invalid_argument("--orient must be auto, up or propagate");
   o.build.orient = orients.at(o.orient);
   o.build.removeOutliers = !o.keepOutliers;
+  validateOptions(o.build);  // before any file is read
   if (!o.texture.empty()) {
     if (o.textureAt != "points" && o.textureAt != "corners")
       throw std::invalid_argument("--texture-at must be points or corners");
