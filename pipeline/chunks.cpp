@@ -212,10 +212,9 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     plan.pointCount = uint64_t(std::llround(inputPoints));
     const CornerLayout layout =
         layoutSurface(plan.topology, plan.cellLevel, plan.cellKey, header.maxLevel);
-    CornerValues leaf =
+    const CornerValues leaf =
         leafValues(layout, *in.corners, hangingOf, *in.hanging, header.attributes[0], in.colors);
-    CornerValues lod = lodValues(layout, *in.lod, in.colors);
-    if (in.bakeCorners) in.bakeCorners(layout, leaf, lod);
+    const CornerValues lod = lodValues(layout, *in.lod, in.colors);
     out.payload = encodeSurfaceChunk(plan.topology, layout, header.attributes, leaf, lod);
     ChunkDesc& desc = out.desc;
     desc.kind = kSurfaceKind;

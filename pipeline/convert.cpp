@@ -371,6 +371,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     sdf.reset();
     ready.index.reset();
   });
+  if (texture && options.texture.at == TextureAt::Corners) {
+    timer.next("texture", corners.size() + lod.value.size());
+    textureCorners(closure.corners, lod, frame, *texture, inputColors);
+  }
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
@@ -399,11 +403,6 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                    .metadata = "{}",
                    .colors = points.hasColors() || texture.has_value(),
                    .options = options};
-  if (texture && options.texture.at == TextureAt::Corners)
-    write.bakeCorners = [&](const CornerLayout& layout, CornerValues& leaf, CornerValues& lod) {
-      textureCorners(layout.leafCorners, leaf, frame, *texture, inputColors);
-      textureCorners(layout.lodCorners, lod, frame, *texture, inputColors);
-    };
   if (options.occlusion.enabled)
     write.occlusion = [&](const Reader& written, Writer& out) {
       timer.next("occlusion");

@@ -137,6 +137,11 @@ uint32_t LodField::find(uint8_t level, const GridPoint& p) const {
   return index.find(lodKey(level, p));  // kNone is kNoNode
 }
 
+GridPoint LodField::point(uint32_t entry) const {
+  const Key128& k = index.key(entry);
+  return {uint32_t(k.a), uint32_t(k.a >> 32), uint32_t(k.b)};
+}
+
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options,
                           const std::function<void()>& pointsSdfDone) {

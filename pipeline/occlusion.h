@@ -14,7 +14,7 @@ class Writer;
 
 struct OcclusionOptions {
   bool enabled = false;
-  int rays = 64;        // per corner
+  int rays = 32;        // per corner
   double radius = 0.0;  // world units a ray looks for the surface; 0: a tenth of the frame's size
 };
 

@@ -13,7 +13,9 @@
 //   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
 //   exact.cpp     chunk runs: what may differ from the run on all points, and the check
 //   lod.cpp       level of detail: corners of internal nodes from point proxies, chunk errors
+//   texture.cpp   triplanar textures baked at the points or at the corners
 //   chunks.cpp    cutting the octree into file chunks, quantization, writing through format/
+//   occlusion.cpp ambient occlusion traced against the written surface, baked into corners
 //
 // The math, with the paper's equations and every deviation from them, is in specs/pipeline.md.
 // All stages work in frame units: the frame's cube is [0, 1)^3.
@@ -451,6 +453,7 @@ struct LodField {
   KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // lodKey → entry
   SpillVector<CornerSample> value;
   uint32_t find(uint8_t level, const GridPoint& p) const;
+  GridPoint point(uint32_t entry) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);
 // pointsSdfDone, when set, is called once pointsSdf is no longer needed (before any proxies are
@@ -484,8 +487,6 @@ struct WriteInput {
   bool colors = false;
   BuildOptions options;
   std::function<void()> release = {};  // when set, called once every chunk is written (frees the above)
-  // When set, called on each chunk's corner values before they are encoded (per-corner baking).
-  std::function<void(const CornerLayout&, CornerValues& leaf, CornerValues& lod)> bakeCorners = {};
   // When set, the written file is copied by it into a second writer (whose header is
   // withOcclusion's), which becomes the output: ambient occlusion needs the finished surface.
   std::function<void(const Reader& written, Writer& output)> occlusion = {};

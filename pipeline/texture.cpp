@@ -71,17 +71,18 @@ void texturePoints(PointSet& points, const Frame& frame, const TriplanarTexture&
   });
 }
 
-void textureCorners(std::span<const CornerKey> corners, CornerValues& values, const Frame& frame,
+void textureCorners(CornerField& leaves, LodField& lod, const Frame& frame,
                     const TriplanarTexture& texture, bool modulate) {
-  values.color.resize(corners.size(), {1.0f, 1.0f, 1.0f});
-  for (size_t i = 0; i < corners.size(); ++i) {
-    const auto& nv = values.normal[i];
-    const glm::dvec3 n(nv[0], nv[1], nv[2]);
-    const glm::dvec3 p = gridToFrame(corners[i].point) - double(values.distance[i]) * n;
-    const glm::vec3 c = texture.color(toWorld(p, frame), n);
-    auto& out = values.color[i];
-    for (int k = 0; k < 3; ++k) out[k] = modulate ? out[k] * c[k] : c[k];
-  }
+  const auto bake = [&](const GridPoint& point, CornerSample& s) {
+    const glm::dvec3 n(s.normal);
+    const glm::vec3 c = texture.color(toWorld(gridToFrame(point) - double(s.distance) * n, frame), n);
+    s.color = modulate ? s.color * c : c;
+  };
+  tbb::parallel_for(uint32_t{0}, uint32_t(leaves.size()), [&](uint32_t e) {
+    if (leaves.coarsestLevel[e] != kUnusedCorner) bake(leaves.point(e), leaves.value[e]);
+  });
+  tbb::parallel_for(uint32_t{0}, uint32_t(lod.value.size()),
+                    [&](uint32_t e) { bake(lod.point(e), lod.value[e]); });
 }
 
 }  // namespace iso

@@ -48,9 +48,12 @@ class TriplanarTexture {
 // (a detail texture over a scan's colors). Points in frame units, normals set.
 void texturePoints(PointSet& points, const Frame& frame, const TriplanarTexture& texture);
 
-// The same at corners: each corner's projection p − f·n onto the zero set of its value f, normal n
-// (frame units), multiplied into values.color when `modulate`, else replacing it.
-void textureCorners(std::span<const CornerKey> corners, CornerValues& values, const Frame& frame,
+struct CornerField;
+struct LodField;
+// The same at the corners of the filled leaves (those in use) and of the levels of detail: at each
+// corner's projection p − f·n onto the zero set of its value f, normal n (frame units), multiplied
+// into its color when `modulate`, else replacing it.
+void textureCorners(CornerField& leaves, LodField& lod, const Frame& frame,
                     const TriplanarTexture& texture, bool modulate);
 
 // The frame position of a grid point.
