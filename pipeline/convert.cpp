@@ -196,17 +196,17 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                            ? "up"
                            : (o.orient == OrientMode::Propagate ? "propagate" : "auto");
   nlohmann::json out = {{"neighbors", o.neighbors},
-          {"smoothing", o.smoothing},
-          {"fit", o.fit == FitMode::Plane ? "plane" : "sphere"},
-          {"orient", orient},
-          {"leaf_points", o.leafPoints},
-          {"max_depth", o.maxDepth},
-          {"tolerance", o.tolerance},
-          {"normal_bits", o.normalBits},
-          {"chunk_nodes", o.chunkNodes},
-          {"zstd_level", o.zstdLevel},
-          {"remove_outliers", o.removeOutliers},
-          {"orient_block_points", o.orientBlockPoints}};
+                        {"smoothing", o.smoothing},
+                        {"fit", o.fit == FitMode::Plane ? "plane" : "sphere"},
+                        {"orient", orient},
+                        {"leaf_points", o.leafPoints},
+                        {"max_depth", o.maxDepth},
+                        {"tolerance", o.tolerance},
+                        {"normal_bits", o.normalBits},
+                        {"chunk_nodes", o.chunkNodes},
+                        {"zstd_level", o.zstdLevel},
+                        {"remove_outliers", o.removeOutliers},
+                        {"orient_block_points", o.orientBlockPoints}};
   // Bakes are listed only when asked for, so files without them keep their bytes.
   if (o.texture.enabled())
     out["texture"] = {{"image", o.texture.image.filename().string()},
@@ -223,8 +223,7 @@ namespace {
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const ConvertSource& source,
-                             StageTimer& timer, nlohmann::json& report,
-                             Clock::time_point started);
+                             StageTimer& timer, nlohmann::json& report, Clock::time_point started);
 
 // The point stages in core, timed.
 ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
@@ -318,8 +317,7 @@ namespace {
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const ConvertSource& source,
-                             StageTimer& timer, nlohmann::json& report,
-                             Clock::time_point started) {
+                             StageTimer& timer, nlohmann::json& report, Clock::time_point started) {
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;
@@ -408,7 +406,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
       timer.next("occlusion");
       const double radius =
           options.occlusion.radius > 0.0 ? options.occlusion.radius : 0.1 * frame.size;
-      const OcclusionStats s = bakeOcclusion(written, out, options.occlusion.rays, radius / frame.size);
+      const OcclusionStats s =
+          bakeOcclusion(written, out, options.occlusion.rays, radius / frame.size);
       report["occlusion"] = {{"rays_per_corner", options.occlusion.rays},
                              {"radius", radius},
                              {"corners", s.corners},

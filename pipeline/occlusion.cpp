@@ -107,9 +107,9 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
     stats.corners += corners.size();
   };
   for (const ChunkInfo& info : in.chunks()) {
-    ChunkDesc desc{info.kind,      info.level,     info.key,       info.parent,
-                   info.pointCount, info.nodeCount, info.leafCount, info.geometricError,
-                   Codec::Zstd};
+    ChunkDesc desc{info.kind,      info.level,          info.key,
+                   info.parent,    info.pointCount,     info.nodeCount,
+                   info.leafCount, info.geometricError, Codec::Zstd};
     if (info.kind != kSurfaceKind) {  // copied as they are
       std::vector<std::byte> data(info.rawSize);
       in.decodePayload(info.id, data);

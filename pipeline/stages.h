@@ -486,7 +486,8 @@ struct WriteInput {
   std::string metadata;  // JSON object
   bool colors = false;
   BuildOptions options;
-  std::function<void()> release = {};  // when set, called once every chunk is written (frees the above)
+  std::function<void()> release =
+      {};  // when set, called once every chunk is written (frees the above)
   // When set, the written file is copied by it into a second writer (whose header is
   // withOcclusion's), which becomes the output: ambient occlusion needs the finished surface.
   std::function<void(const Reader& written, Writer& output)> occlusion = {};

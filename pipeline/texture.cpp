@@ -75,7 +75,8 @@ void textureCorners(CornerField& leaves, LodField& lod, const Frame& frame,
                     const TriplanarTexture& texture, bool modulate) {
   const auto bake = [&](const GridPoint& point, CornerSample& s) {
     const glm::dvec3 n(s.normal);
-    const glm::vec3 c = texture.color(toWorld(gridToFrame(point) - double(s.distance) * n, frame), n);
+    const glm::vec3 c =
+        texture.color(toWorld(gridToFrame(point) - double(s.distance) * n, frame), n);
     s.color = modulate ? s.color * c : c;
   };
   tbb::parallel_for(uint32_t{0}, uint32_t(leaves.size()), [&](uint32_t e) {

@@ -24,7 +24,8 @@ void checkImageReadable(const std::filesystem::path& path) {
     throw FileError(path.string(), std::nullopt, "no such image file");
   auto in = OIIO::ImageInput::open(path.string());
   if (!in)
-    throw FileError(path.string(), std::nullopt, "cannot read the image: " + reason(OIIO::geterror()));
+    throw FileError(path.string(), std::nullopt,
+                    "cannot read the image: " + reason(OIIO::geterror()));
   if (in->spec().width < 1 || in->spec().height < 1)
     throw FileError(path.string(), std::nullopt, "the image is empty");
 }

@@ -218,8 +218,8 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
     scene.ambient = {0.8f, 0.8f, 0.8f};
     scene.lights[0].color = {0.2f, 0.2f, 0.2f};
     pictures[i] = renderReference(*asset, scene, w, h);
-    const double differ = differing(renderGpu(*asset, scene, w, h, uint64_t(1) << 30).pixels,
-                                    pictures[i]);
+    const double differ =
+        differing(renderGpu(*asset, scene, w, h, uint64_t(1) << 30).pixels, pictures[i]);
     std::printf("baked %s: %.4f %% of the pixels differ by more than 8/255\n",
                 i == 0 ? "texture" : "texture and occlusion", 100 * differ);
     EXPECT_LE(differ, 0.005);
@@ -232,8 +232,8 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
     green += g > r + 60 && g > b + 60;
     blue += b > r + 60 && b > g + 60;
   }
-  EXPECT_GT(std::min({red, green, blue}), pictures[0].size() / 200) << red << " " << green << " "
-                                                                    << blue;
+  EXPECT_GT(std::min({red, green, blue}), pictures[0].size() / 200)
+      << red << " " << green << " " << blue;
   // Occlusion only darkens, and seen from above it darkens the ring's inner side: about 3 % of
   // the picture.
   size_t darker = 0, lighter = 0;

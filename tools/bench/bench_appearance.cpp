@@ -6,14 +6,15 @@
 //      texture at each input point (with its own normal), and the time the bake adds, for a
 //      generated sphere and the parasaurolophus (both with true normals), with a coarse and a
 //      fine random texture;
-//   3. ambient occlusion: the time per million points and per million corners, at 16, 32 and 64 rays,
+//   3. ambient occlusion: the time per million points and per million corners, at 16, 32 and 64
+//   rays,
 //      for the bunny and (with --dragon) a sampled dragon scan.
 #include <fmt/core.h>
 
 #include <algorithm>
 #include <chrono>
-#include <glm/common.hpp>
 #include <cstring>
+#include <glm/common.hpp>
 #include <random>
 #include <string>
 #include <vector>
@@ -77,8 +78,8 @@ void lionColors(const std::filesystem::path& data, const std::filesystem::path& 
     const Converted c = convert(lion, out / "lion.iso", options);
     fmt::print("| {}{} | {} | {:.2f} | {:.2f} | {:.2f} |\n", depth, depth == 20 ? " (default)" : "",
                c.report["octree"]["leaves"].get<uint64_t>(),
-               c.report["file"]["bytes_per_point"].get<double>(),
-               c.report["seconds"].get<double>(), psnr(c.surface, lion));
+               c.report["file"]["bytes_per_point"].get<double>(), c.report["seconds"].get<double>(),
+               psnr(c.surface, lion));
   }
 }
 
@@ -145,10 +146,10 @@ void occlusion(const std::vector<std::pair<std::string, std::filesystem::path>>&
       const nlohmann::json r = convertToIso(cloud, out / "occluded.iso", options);
       const double s = stageSeconds(r, "occlusion");
       const double corners = r["occlusion"]["corners"].get<double>();
-      fmt::print("| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.3f} |\n",
-                 name, cloud.size(), r["octree"]["leaves"].get<uint64_t>(), uint64_t(corners),
-                 rays, s, s / (double(cloud.size()) * 1e-6), s / (corners * 1e-6),
-                 corners * rays / s * 1e-6, r["occlusion"]["mean"].get<double>());
+      fmt::print("| {} | {} | {} | {} | {} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.3f} |\n", name,
+                 cloud.size(), r["octree"]["leaves"].get<uint64_t>(), uint64_t(corners), rays, s,
+                 s / (double(cloud.size()) * 1e-6), s / (corners * 1e-6), corners * rays / s * 1e-6,
+                 r["occlusion"]["mean"].get<double>());
     }
   }
 }

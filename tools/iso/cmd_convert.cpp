@@ -93,21 +93,21 @@ void printReport(const nlohmann::json& r, const Options& o) {
   }
   if (r.contains("texture")) {
     const auto& t = r["texture"];
-    fmt::print("  texture: {} ({}×{}) sampled at the {}, one repeat per {:.6g}, sharpness {:.3g}{}\n",
-               t["image"].get<std::string>(), t["width"].get<uint32_t>(),
-               t["height"].get<uint32_t>(), t["at"].get<std::string>(),
-               t["scale"].get<double>(), t["sharpness"].get<double>(),
-               t["modulates_point_colors"].get<bool>() ? ", times the points' colors" : "");
+    fmt::print(
+        "  texture: {} ({}×{}) sampled at the {}, one repeat per {:.6g}, sharpness {:.3g}{}\n",
+        t["image"].get<std::string>(), t["width"].get<uint32_t>(), t["height"].get<uint32_t>(),
+        t["at"].get<std::string>(), t["scale"].get<double>(), t["sharpness"].get<double>(),
+        t["modulates_point_colors"].get<bool>() ? ", times the points' colors" : "");
   }
   if (r.contains("occlusion")) {
     const auto& c = r["occlusion"];
-    fmt::print("  ambient occlusion: {} corners, {} rays each within {:.6g}: mean {:.3f}{}\n",
-               withSeparators(c["corners"].get<uint64_t>()), c["rays_per_corner"].get<int>(),
-               c["radius"].get<double>(), c["mean"].get<double>(),
-               c["unprojected"].get<uint64_t>() > 0
-                   ? fmt::format(" ({} not projected)",
-                                 withSeparators(c["unprojected"].get<uint64_t>()))
-                   : "");
+    fmt::print(
+        "  ambient occlusion: {} corners, {} rays each within {:.6g}: mean {:.3f}{}\n",
+        withSeparators(c["corners"].get<uint64_t>()), c["rays_per_corner"].get<int>(),
+        c["radius"].get<double>(), c["mean"].get<double>(),
+        c["unprojected"].get<uint64_t>() > 0
+            ? fmt::format(" ({} not projected)", withSeparators(c["unprojected"].get<uint64_t>()))
+            : "");
   }
   const auto& a = r["accuracy"];
   fmt::print(
