@@ -276,8 +276,10 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   validateOptions(options);
   if (inputPoints == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
-  std::optional<LinearImage> textureImage;  // read first: a bad image fails before any work
-  if (options.texture.enabled()) textureImage = readLinearImage(options.texture.image);
+  // Read first: a bad image fails before any work. Wider than 8192 texels it is box-filtered
+  // down (12 bytes a texel in memory; leaves hold far less detail than that).
+  std::optional<LinearImage> textureImage;
+  if (options.texture.enabled()) textureImage = readLinearImage(options.texture.image, 8192);
   nlohmann::json report;
   report["stages"] = nlohmann::json::array();
   StageTimer timer(report["stages"], source);
