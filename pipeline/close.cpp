@@ -9,6 +9,7 @@
 // zero set filled the same way.
 #include <algorithm>
 #include <cmath>
+#include <glm/vec3.hpp>
 
 #include "collect.h"
 #include "stages.h"
@@ -18,25 +19,50 @@ namespace {
 
 using Distances = std::array<float, kCorners>;  // at a leaf's corners, in corner order
 
-// A point where the zero set of a filled leaf's patch crosses its face (axis, side), near the
-// points (within the radius of influence of the nearest one), if there is one: the crossings along
-// the face's 4 edges are tried.
-bool crossesFaceNearPoints(const Distances& f, const OctreeNode& leaf, int axis, int side,
-                           const SdfEvaluator& sdf, const PointSet& points, bool& exact) {
-  std::array<int, 4> corners{};
-  int count = 0;
-  for (int c = 0; c < kCorners; ++c)
-    if (((c >> axis) & 1) == side) corners[size_t(count++)] = c;
-  // Face corners in cyclic order: 0, 1, 3, 2 of the four with the face's bit fixed.
-  const std::array<int, 4> cycle = {corners[0], corners[1], corners[3], corners[2]};
+// A square on a face of a filled leaf: its corners in cyclic order (grid units) and the leaf's
+// signed distance there.
+struct FaceSquare {
+  std::array<glm::dvec3, 4> corner;
+  std::array<double, 4> value{};
+};
+
+// The part of face (axis, side) of the leaf that the cell (level, key) at or below the leaf's
+// level across that face shares with it, with the leaf's patch (bilinear on the face) there.
+FaceSquare faceSquare(const Distances& f, const OctreeNode& leaf, int axis, int side,
+                      uint8_t level, uint64_t key) {
+  const auto leafCell = mortonDecode(leaf.key);
+  const auto cell = mortonDecode(key);
+  const double leafSize = std::ldexp(1.0, kMaxLevel - leaf.level);
+  const double size = std::ldexp(1.0, kMaxLevel - level);
+  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+  FaceSquare out;
+  const std::array<std::array<int, 2>, 4> cycle = {{{0, 0}, {1, 0}, {1, 1}, {0, 1}}};
+  for (size_t i = 0; i < 4; ++i) {
+    glm::dvec3 p;
+    p[axis] = (double(leafCell[size_t(axis)]) + side) * leafSize;
+    p[u] = (double(cell[size_t(u)]) + cycle[i][0]) * size;
+    p[v] = (double(cell[size_t(v)]) + cycle[i][1]) * size;
+    out.corner[i] = p;
+    std::array<double, 3> local{};
+    for (int a = 0; a < 3; ++a) local[size_t(a)] = p[a] / leafSize - double(leafCell[size_t(a)]);
+    std::array<double, 8> values{};
+    for (int c = 0; c < kCorners; ++c) values[size_t(c)] = f[size_t(c)];
+    out.value[i] = trilinear(values, local);
+  }
+  return out;
+}
+
+// A point where the leaf's zero set crosses the square near the points (within the radius of
+// influence of the nearest one), if there is one: the crossings along its 4 edges are tried.
+bool crossesNearPoints(const FaceSquare& square, const SdfEvaluator& sdf, const PointSet& points,
+                       bool& exact) {
   const double unit = std::ldexp(1.0, -kMaxLevel);
-  for (int e = 0; e < 4; ++e) {
-    const GridPoint pa = cornerPoint(leaf.level, leaf.key, cycle[size_t(e)]);
-    const GridPoint pb = cornerPoint(leaf.level, leaf.key, cycle[size_t((e + 1) % 4)]);
-    const double fa = f[size_t(cycle[size_t(e)])], fb = f[size_t(cycle[size_t((e + 1) % 4)])];
+  for (size_t e = 0; e < 4; ++e) {
+    const double fa = square.value[e], fb = square.value[(e + 1) % 4];
     if ((fa < 0.0) == (fb < 0.0)) continue;
     const double t = fa / (fa - fb);
-    const glm::dvec3 a(pa.x, pa.y, pa.z), b(pb.x, pb.y, pb.z);
+    const glm::dvec3& a = square.corner[e];
+    const glm::dvec3& b = square.corner[(e + 1) % 4];
     const glm::dvec3 x = (a + t * (b - a)) * unit;
     float distance = 0.0f;
     bool found = true;
@@ -79,6 +105,26 @@ struct Exit {
   auto operator<=>(const Exit&) const = default;
 };
 
+// The empty cells below the internal node `across` (a finer neighbour of the leaf across its face
+// (axis, side)) that touch the face and into which the leaf's zero set runs near the points.
+void finerExits(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                const Distances& f, const OctreeNode& leaf, int axis, int side, uint32_t across,
+                bool exact, std::vector<Exit>& out) {
+  const OctreeNode& node = tree.nodes[across];
+  for (int octant = 0; octant < 8; ++octant) {
+    if (((octant >> axis) & 1) != (side ? 0 : 1)) continue;  // not on the shared face
+    const uint32_t child = node.firstChild + uint32_t(octant);
+    const OctreeNode& c = tree.nodes[child];
+    if (c.kind == NodeKind::Internal) {
+      finerExits(tree, points, sdf, f, leaf, axis, side, child, exact, out);
+    } else if (c.kind == NodeKind::Empty) {
+      bool found = exact && tree.isExact(child);
+      if (crossesNearPoints(faceSquare(f, leaf, axis, side, c.level, c.key), sdf, points, found))
+        out.push_back({c.level, c.key, !found});
+    }
+  }
+}
+
 // The empty cells the surface runs into from one leaf.
 void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
              const CornerField& field, uint32_t id, std::vector<Exit>& out) {
@@ -100,11 +146,20 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
     n[size_t(axis)] += side ? 1 : -1;
     if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
     const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
-    if (tree.nodes[tree.find(leaf.level, key)].kind != NodeKind::Empty) continue;
+    const uint32_t across = tree.find(leaf.level, key);
+    if (tree.nodes[across].kind == NodeKind::Internal) {
+      // Finer cells across the face: the empty ones the zero set runs into through their part
+      // of it (without this, a coarse leaf's surface could run into the empty child of a finer
+      // neighbour).
+      finerExits(tree, points, sdf, f, leaf, axis, side, across, exact, out);
+      continue;
+    }
+    if (tree.nodes[across].kind != NodeKind::Empty) continue;
     // The zero set runs out through this face near the points, or the leaf holds points but no
     // zero set (a displaced estimate) and this face is the nearest to it.
     bool found = exact;
-    if (face == toward || crossesFaceNearPoints(f, leaf, axis, side, sdf, points, found))
+    if (face == toward ||
+        crossesNearPoints(faceSquare(f, leaf, axis, side, leaf.level, key), sdf, points, found))
       out.push_back({leaf.level, key, !found});
   }
 }

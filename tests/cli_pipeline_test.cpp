@@ -13,7 +13,10 @@
 
 #include <cstring>
 
+#include <glm/geometric.hpp>
+
 #include "cli_support.h"
+#include "io/ply.h"
 
 namespace iso {
 namespace {
@@ -225,6 +228,36 @@ TEST_F(CliPipeline, badTexturesAndImpossibleBakeOptionsLeaveTheOldFile) {
     EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
   }
   EXPECT_TRUE(test::readFile(dir_ / "out.iso") == old);
+}
+
+TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
+  ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"))
+                .exitCode,
+            0);
+  const std::string out = quoted(dir_ / "s-mesh.ply");
+  auto run = runIso("export --json " + quoted(dir_ / "s.iso") + " --mesh " + out);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json summary = nlohmann::json::parse(run.out);
+  const TriangleMesh mesh = readPlyMesh(dir_ / "s-mesh.ply");
+  EXPECT_EQ(summary["triangles"].get<size_t>(), mesh.triangles.size());
+  EXPECT_EQ(summary["vertices"].get<size_t>(), mesh.vertices.size());
+  EXPECT_GT(mesh.triangles.size(), 10000u);
+  for (const glm::dvec3& v : mesh.vertices) ASSERT_NEAR(glm::length(v), 1.0, 0.02);
+  // Not over an existing file without --force; with it, the same bytes again.
+  const std::vector<std::byte> first = test::readFile(dir_ / "s-mesh.ply");
+  run = runIso("export " + quoted(dir_ / "s.iso") + " --mesh " + out);
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("s-mesh.ply"), std::string::npos) << run.err;
+  run = runIso("export -f " + quoted(dir_ / "s.iso") + " --mesh " + out);
+  EXPECT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("triangles"), std::string::npos);
+  EXPECT_TRUE(test::readFile(dir_ / "s-mesh.ply") == first);
+  // No output asked for: a usage error. A file that is not an .iso file: its name, no output.
+  EXPECT_EQ(runIso("export " + quoted(dir_ / "s.iso")).exitCode, 2);
+  run = runIso("export " + quoted(dir_ / "sphere.ply") + " --mesh " + quoted(dir_ / "x.ply"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("sphere.ply"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
 }
 
 TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {

@@ -26,6 +26,7 @@ void writePly(const std::filesystem::path& path, const PointCloud& points,
               const PlyWriteOptions& options = {});
 
 // Write a triangle mesh as PLY (binary little endian, float positions).
-void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh);
+void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,
+                  bool doublePositions = false);
 
 }  // namespace iso

@@ -126,15 +126,18 @@ void writePly(const std::filesystem::path& path, const PointCloud& points,
   file.commit();
 }
 
-void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh) {
+void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,
+                  bool doublePositions) {
   // Indices are written as PLY "int", so every vertex must be reachable by a signed 32-bit index.
   ISO_CHECK(mesh.vertices.size() <= size_t{std::numeric_limits<int32_t>::max()} + 1);
   AtomicFile file(path);
   file.write(
-      fmt::format("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
-                  "property float y\nproperty float z\nelement face {}\n"
+      fmt::format("ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty {} x\n"
+                  "property {} y\nproperty {} z\nelement face {}\n"
                   "property list uchar int vertex_indices\nend_header\n",
-                  mesh.vertices.size(), mesh.triangles.size()));
+                  mesh.vertices.size(), doublePositions ? "double" : "float",
+                  doublePositions ? "double" : "float", doublePositions ? "double" : "float",
+                  mesh.triangles.size()));
   std::vector<std::byte> chunk;
   chunk.reserve(kChunkBytes + 64);
   const auto flushIfFull = [&] {
@@ -143,7 +146,12 @@ void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh) {
     chunk.clear();
   };
   for (const glm::dvec3& v : mesh.vertices) {
-    for (int axis = 0; axis < 3; ++axis) appendLE(chunk, io::narrowToFloat(v[axis]));
+    for (int axis = 0; axis < 3; ++axis) {
+      if (doublePositions)
+        appendLE(chunk, v[axis]);
+      else
+        appendLE(chunk, io::narrowToFloat(v[axis]));
+    }
     flushIfFull();
   }
   for (const std::array<uint32_t, 3>& triangle : mesh.triangles) {

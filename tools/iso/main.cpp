@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   int exitCode = iso::cli::kExitOk;
   iso::cli::addConvertCommand(app, exitCode);
   iso::cli::addEvalCommand(app, exitCode);
+  iso::cli::addExportCommand(app, exitCode);
   iso::cli::addGenCommand(app, exitCode);
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);

@@ -1,0 +1,126 @@
+// Exports: the mesh of the zero set is closed, oriented and of the right topology where leaves of
+// different levels meet, and matches the analytic surface.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <map>
+#include <numbers>
+
+#include "export.h"
+#include "pipeline_support.h"
+
+namespace iso {
+namespace {
+
+struct MeshCheck {
+  size_t edges = 0;
+  size_t boundaryEdges = 0;     // used by one triangle
+  size_t betweenFilled = 0;     // ... where every lattice cell around it is a filled leaf: a crack
+  size_t nonManifoldEdges = 0;  // used by more than two
+  size_t misoriented = 0;       // a directed edge used twice
+  long euler = 0;               // V − E + F
+  double area = 0.0, volume = 0.0;
+};
+
+// The mesh's topology and size; a boundary edge is a crack unless a lattice cell next to it (one
+// of the 8 around its midpoint, a quarter cell away) is empty: there the file's own zero set
+// leaves the filled leaves.
+MeshCheck check(const TriangleMesh& mesh, const SurfaceModel& surface) {
+  int level = 0;
+  for (const auto& leaf : surface.leaves()) level = std::max(level, int(leaf.level));
+  std::map<std::pair<uint32_t, uint32_t>, int> undirected, directed;
+  MeshCheck c;
+  for (const auto& t : mesh.triangles) {
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
+      ++undirected[{std::min(a, b), std::max(a, b)}];
+      if (++directed[{a, b}] == 2) ++c.misoriented;
+    }
+    const glm::dvec3 &p = mesh.vertices[t[0]], &q = mesh.vertices[t[1]], &r = mesh.vertices[t[2]];
+    c.area += 0.5 * glm::length(glm::cross(q - p, r - p));
+    c.volume += glm::dot(p, glm::cross(q, r)) / 6.0;
+  }
+  const Frame& frame = surface.header().frame;
+  const glm::dvec3 origin(frame.origin[0], frame.origin[1], frame.origin[2]);
+  const double cell = std::ldexp(1.0, -level);
+  for (const auto& [edge, count] : undirected) {
+    c.nonManifoldEdges += count > 2;
+    if (count != 1) continue;
+    ++c.boundaryEdges;
+    const glm::dvec3 mid =
+        ((mesh.vertices[edge.first] + mesh.vertices[edge.second]) * 0.5 - origin) / frame.size;
+    bool empty = false;
+    for (int corner = 0; corner < 8; ++corner) {
+      Vec3 p;
+      for (int a = 0; a < 3; ++a) p[size_t(a)] = mid[a] + ((corner >> a & 1) ? 0.25 : -0.25) * cell;
+      empty = empty || surface.findLeaf(p) == kNoNode;
+    }
+    c.betweenFilled += !empty;
+  }
+  c.edges = undirected.size();
+  c.euler = long(mesh.vertices.size()) - long(undirected.size()) + long(mesh.triangles.size());
+  return c;
+}
+
+size_t leafLevels(const SurfaceModel& surface) {
+  std::map<int, int> levels;
+  for (const auto& leaf : surface.leaves()) ++levels[leaf.level];
+  return levels.size();
+}
+
+void expectCrackFree(const MeshCheck& m, const char* name) {
+  std::printf("%s mesh: %zu edges, %zu open (%zu between filled leaves), area %.5f, volume %.5f, "
+              "χ %ld\n",
+              name, m.edges, m.boundaryEdges, m.betweenFilled, m.area, m.volume, m.euler);
+  EXPECT_EQ(m.betweenFilled, 0u) << name;  // no cracks, across levels too
+  EXPECT_EQ(m.nonManifoldEdges, 0u) << name;
+  EXPECT_EQ(m.misoriented, 0u) << name;  // every triangle faces outwards
+}
+
+TEST(MeshExport, theSphereIsCrackFreeAcrossLevelsOrientedAndRound) {
+  test::TempDir dir;
+  BuildOptions options;
+  options.chunkNodes = 500;  // many chunks
+  const test::Converted c =
+      test::convertAndLoad(test::scanOf("sphere", 50000), dir / "s.iso", options);
+  ASSERT_GE(leafLevels(c.surface), 2u);  // the mesh crosses level transitions
+  MeshStats stats;
+  const TriangleMesh mesh = extractMesh(c.surface, &stats);
+  EXPECT_EQ(stats.leaves, c.surface.leaves().size());
+  EXPECT_GT(stats.splitFaces, 0u);
+  const MeshCheck m = check(mesh, c.surface);
+  expectCrackFree(m, "sphere");
+  // Where the file's zero set leaves the filled leaves the mesh is open: a few edges in a hundred.
+  EXPECT_LT(m.boundaryEdges, m.edges / 50);
+  // The unit sphere: area 4π, volume 4π/3 (positive: facing outwards).
+  EXPECT_NEAR(m.area / (4 * std::numbers::pi), 1.0, 0.005);
+  EXPECT_NEAR(m.volume / (4 * std::numbers::pi / 3), 1.0, 0.005);
+  const double spacing = c.report["mean_spacing"].get<double>();
+  double worst = 0.0;
+  for (const glm::dvec3& v : mesh.vertices) worst = std::max(worst, std::abs(glm::length(v) - 1));
+  EXPECT_LT(worst, 0.5 * spacing);
+}
+
+TEST(MeshExport, theTorusAndAnOpenSheetToo) {
+  test::TempDir dir;
+  const test::Converted torus = test::convertAndLoad(test::scanOf("torus", 40000), dir / "t.iso");
+  MeshStats stats;
+  const MeshCheck t = check(extractMesh(torus.surface, &stats), torus.surface);
+  expectCrackFree(t, "torus");
+  EXPECT_LT(t.boundaryEdges, t.edges / 50);
+  const double major = 1.0, minor = 0.35;  // area 4π²Rr, volume 2π²Rr²
+  EXPECT_NEAR(t.area / (4 * std::numbers::pi * std::numbers::pi * major * minor), 1.0, 0.01);
+  EXPECT_NEAR(t.volume / (2 * std::numbers::pi * std::numbers::pi * major * minor * minor), 1.0,
+              0.01);
+  // The square |x|, |y| ≤ 1 at z = 0 (the surface runs a little past its rim).
+  const test::Converted plane = test::convertAndLoad(test::scanOf("plane", 40000), dir / "p.iso");
+  const MeshCheck p = check(extractMesh(plane.surface, &stats), plane.surface);
+  expectCrackFree(p, "plane");
+  EXPECT_GT(p.boundaryEdges, 0u);
+  EXPECT_GT(p.area, 4.0 * 0.99);
+  EXPECT_LT(p.area, 4.0 * 1.3);
+}
+
+}  // namespace
+}  // namespace iso
