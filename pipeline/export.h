@@ -3,6 +3,10 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
+#include <glm/vec3.hpp>
+#include <span>
+#include <vector>
 
 #include "io/point_cloud.h"
 #include "iso/surface_model.h"
@@ -32,5 +36,26 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr
 
 // The edges used by one triangle only: where the surface is open (or leaves the filled leaves).
 uint64_t openEdges(const TriangleMesh& mesh);
+
+struct VdbStats {
+  uint64_t activeVoxels = 0;
+  double voxelSize = 0.0;  // world units: the finest leaf's edge
+  int level = 0;           // the finest leaves' level
+};
+
+// The surface as an OpenVDB narrow-band level set (export_vdb.cpp): a float grid named "surface"
+// of class level set, voxel size the finest leaf's edge, voxel (i, j, k) at the frame's
+// origin + (i, j, k)·size (the lattice points of the finest leaves). Every lattice point of a
+// filled leaf whose signed distance (world units; the coarsest leaf's value where leaves meet) is
+// within `bandVoxels` voxels of 0 is active; the rest of space takes ±bandVoxels·size by a signed
+// flood fill (negative inside). Written atomically. Throws iso::FileError when it cannot write.
+VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path,
+                  double bandVoxels = 3.0);
+
+// The first float grid of a .vdb file, trilinearly interpolated at world positions (OpenVDB's box
+// sampler): for round trips and for measuring level sets made by other tools. Throws
+// iso::FileError for files OpenVDB cannot read or without a float grid.
+std::vector<double> sampleVdb(const std::filesystem::path& path,
+                              std::span<const glm::dvec3> world);
 
 }  // namespace iso

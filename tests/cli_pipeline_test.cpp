@@ -237,7 +237,7 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   const std::string out = quoted(dir_ / "s-mesh.ply");
   auto run = runIso("export --json " + quoted(dir_ / "s.iso") + " --mesh " + out);
   ASSERT_EQ(run.exitCode, 0) << run.err;
-  const nlohmann::json summary = nlohmann::json::parse(run.out);
+  const nlohmann::json summary = nlohmann::json::parse(run.out)["mesh"];
   const TriangleMesh mesh = readPlyMesh(dir_ / "s-mesh.ply");
   EXPECT_EQ(summary["triangles"].get<size_t>(), mesh.triangles.size());
   EXPECT_EQ(summary["vertices"].get<size_t>(), mesh.vertices.size());
@@ -252,6 +252,15 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   EXPECT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.out.find("triangles"), std::string::npos);
   EXPECT_TRUE(test::readFile(dir_ / "s-mesh.ply") == first);
+  // A level set that OpenVDB's own vdb_print reads.
+  run = runIso("export " + quoted(dir_ / "s.iso") + " --vdb " + quoted(dir_ / "s.vdb"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("active voxels"), std::string::npos) << run.out;
+  EXPECT_EQ(std::system(("vdb_print " + quoted(dir_ / "s.vdb") + " > /dev/null").c_str()), 0);
+  EXPECT_EQ(runIso("export " + quoted(dir_ / "s.iso") + " --vdb " + quoted(dir_ / "t.vdb") +
+                   " --band 0.5")
+                .exitCode,
+            2);
   // No output asked for: a usage error. A file that is not an .iso file: its name, no output.
   EXPECT_EQ(runIso("export " + quoted(dir_ / "s.iso")).exitCode, 2);
   run = runIso("export " + quoted(dir_ / "sphere.ply") + " --mesh " + quoted(dir_ / "x.ply"));

@@ -6,6 +6,7 @@
 #include <glm/geometric.hpp>
 #include <map>
 #include <numbers>
+#include <random>
 
 #include "export.h"
 #include "pipeline_support.h"
@@ -120,6 +121,65 @@ TEST(MeshExport, theTorusAndAnOpenSheetToo) {
   EXPECT_GT(p.boundaryEdges, 0u);
   EXPECT_GT(p.area, 4.0 * 0.99);
   EXPECT_LT(p.area, 4.0 * 1.3);
+}
+
+TEST(VdbExport, theLevelSetHoldsTheFilesDistancesAndItsZeroSetIsTheSphere) {
+  test::TempDir dir;
+  const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 50000), dir / "s.iso");
+  const VdbStats stats = writeVdb(c.surface, dir / "s.vdb");
+  EXPECT_GT(stats.activeVoxels, 10000u);
+  const Frame& frame = c.surface.header().frame;
+  EXPECT_NEAR(stats.voxelSize, std::ldexp(frame.size, -stats.level), 1e-12);
+  // vdb_print (OpenVDB's own tool) reads it.
+  const std::string print = "vdb_print '" + (dir / "s.vdb").string() + "' > '" +
+                            (dir / "print.txt").string() + "' 2>&1";
+  ASSERT_EQ(std::system(print.c_str()), 0);
+  const std::vector<std::byte> text = test::readFile(dir / "print.txt");
+  EXPECT_NE(std::string(reinterpret_cast<const char*>(text.data()), text.size()).find("surface"),
+            std::string::npos);
+  // Inside the band the grid interpolates the file's own signed distance (world units).
+  const double voxel = stats.voxelSize;
+  std::vector<glm::dvec3> near;
+  std::vector<double> expected;
+  std::mt19937 random(4);
+  std::normal_distribution<double> normal;
+  for (int i = 0; i < 2000; ++i) {
+    const glm::dvec3 d = glm::normalize(glm::dvec3(normal(random), normal(random), normal(random)));
+    const glm::dvec3 p = d * (1.0 + (i % 5 - 2) * 0.5 * voxel);
+    const Vec3 f = {(p.x - frame.origin[0]) / frame.size, (p.y - frame.origin[1]) / frame.size,
+                    (p.z - frame.origin[2]) / frame.size};
+    const uint32_t leaf = c.surface.findLeaf(f);
+    if (leaf == kNoNode) continue;
+    near.push_back(p);
+    expected.push_back(c.surface.evaluate(leaf, f).distance * frame.size);
+  }
+  ASSERT_GT(near.size(), 1000u);  // the points in filled leaves
+  const std::vector<double> got = sampleVdb(dir / "s.vdb", near);
+  double worst = 0.0;
+  for (size_t i = 0; i < near.size(); ++i) worst = std::max(worst, std::abs(got[i] - expected[i]));
+  std::printf("vdb: %llu active voxels of %.5f; largest difference to the file %.2e (%.3f voxels)\n",
+              static_cast<unsigned long long>(stats.activeVoxels), voxel, worst, worst / voxel);
+  EXPECT_LT(worst, 0.05 * voxel);
+  // Its zero crossing along rays from the centre is the unit sphere; inside is negative.
+  const double spacing = c.report["mean_spacing"].get<double>();
+  std::vector<glm::dvec3> rays(200);
+  for (glm::dvec3& d : rays)
+    d = glm::normalize(glm::dvec3(normal(random), normal(random), normal(random)));
+  std::vector<double> lo(rays.size(), 0.5), hi(rays.size(), 1.5);
+  const auto at = [&](const std::vector<double>& r) {
+    std::vector<glm::dvec3> p(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) p[i] = rays[i] * r[i];
+    return sampleVdb(dir / "s.vdb", p);
+  };
+  for (double v : at(lo)) ASSERT_LT(v, 0.0);
+  for (double v : at(hi)) ASSERT_GT(v, 0.0);
+  for (int step = 0; step < 30; ++step) {
+    std::vector<double> mid(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) mid[i] = 0.5 * (lo[i] + hi[i]);
+    const std::vector<double> v = at(mid);
+    for (size_t i = 0; i < rays.size(); ++i) (v[i] < 0.0 ? lo[i] : hi[i]) = mid[i];
+  }
+  for (double r : lo) EXPECT_NEAR(r, 1.0, 0.5 * spacing);
 }
 
 }  // namespace

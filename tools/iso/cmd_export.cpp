@@ -1,4 +1,5 @@
-// `iso export FILE.iso --mesh OUT.ply`: the surface of an .iso file for other tools.
+// `iso export FILE.iso [--mesh OUT.ply] [--vdb OUT.vdb]`: the surface of an .iso file for other
+// tools.
 #include <fmt/core.h>
 
 #include <chrono>
@@ -16,7 +17,8 @@ namespace iso::cli {
 namespace {
 
 struct Options {
-  std::string file, mesh;
+  std::string file, mesh, vdb;
+  double band = 3.0;
   bool force = false, json = false;
 };
 
@@ -26,41 +28,68 @@ void refuseToReplace(const std::string& path, bool force) {
 }
 
 int run(const Options& o) {
-  if (o.mesh.empty()) throw std::invalid_argument("give --mesh OUT.ply");
-  refuseToReplace(o.mesh, o.force);
-  const auto started = std::chrono::steady_clock::now();
+  if (o.mesh.empty() && o.vdb.empty()) throw std::invalid_argument("give --mesh OUT.ply or --vdb OUT.vdb");
+  if (!(o.band >= 1.0 && o.band <= 64.0)) throw std::invalid_argument("--band must be 1 to 64");
+  for (const std::string& out : {o.mesh, o.vdb})
+    if (!out.empty()) refuseToReplace(out, o.force);
   const Reader reader = Reader::open(o.file);
   const SurfaceModel surface = SurfaceModel::load(reader);
-  MeshStats stats;
-  const TriangleMesh mesh = extractMesh(surface, &stats);
-  // Far from the origin (UTM coordinates) float positions lose the surface's detail.
-  const Frame& frame = reader.header().frame;
-  double reach = frame.size;
-  for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
-  const bool doubles = reach > 65536.0;
-  writePlyMesh(o.mesh, mesh, doubles);
-  const uint64_t open = openEdges(mesh);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  nlohmann::json summary = {{"file", o.file}};
+  if (!o.mesh.empty()) {
+    const auto started = std::chrono::steady_clock::now();
+    MeshStats stats;
+    const TriangleMesh mesh = extractMesh(surface, &stats);
+    // Far from the origin (UTM coordinates) float positions lose the surface's detail.
+    const Frame& frame = reader.header().frame;
+    double reach = frame.size;
+    for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
+    const bool doubles = reach > 65536.0;
+    writePlyMesh(o.mesh, mesh, doubles);
+    summary["mesh"] = {
+        {"path", o.mesh},
+        {"vertices", mesh.vertices.size()},
+        {"triangles", mesh.triangles.size()},
+        {"leaves", stats.leaves},
+        {"tetrahedra", stats.tetrahedra},
+        {"split_faces", stats.splitFaces},
+        {"open_edges", openEdges(mesh)},
+        {"double_positions", doubles},
+        {"seconds",
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
+  }
+  if (!o.vdb.empty()) {
+    const auto started = std::chrono::steady_clock::now();
+    const VdbStats stats = writeVdb(surface, o.vdb, o.band);
+    summary["vdb"] = {
+        {"path", o.vdb},
+        {"active_voxels", stats.activeVoxels},
+        {"voxel_size", stats.voxelSize},
+        {"band_voxels", o.band},
+        {"bytes", std::filesystem::file_size(o.vdb)},
+        {"seconds",
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
+  }
   if (o.json) {
-    const nlohmann::json j = {{"file", o.file},
-                              {"mesh", o.mesh},
-                              {"vertices", mesh.vertices.size()},
-                              {"triangles", mesh.triangles.size()},
-                              {"leaves", stats.leaves},
-                              {"tetrahedra", stats.tetrahedra},
-                              {"split_faces", stats.splitFaces},
-                              {"open_edges", open},
-                              {"double_positions", doubles},
-                              {"seconds", seconds}};
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", summary.dump(2));
     return kExitOk;
   }
-  fmt::print("{}: {} triangles, {} vertices from {} leaves in {:.2f} s\n", o.mesh,
-             withSeparators(mesh.triangles.size()), withSeparators(mesh.vertices.size()),
-             withSeparators(stats.leaves), seconds);
-  fmt::print("  open edges: {}{}\n", withSeparators(open),
-             open > 0 ? " (where the surface is open or leaves the filled leaves)" : " (closed)");
+  if (summary.contains("mesh")) {
+    const auto& m = summary["mesh"];
+    const uint64_t open = m["open_edges"].get<uint64_t>();
+    fmt::print("{}: {} triangles, {} vertices from {} leaves in {:.2f} s\n", o.mesh,
+               withSeparators(m["triangles"].get<uint64_t>()),
+               withSeparators(m["vertices"].get<uint64_t>()),
+               withSeparators(m["leaves"].get<uint64_t>()), m["seconds"].get<double>());
+    fmt::print("  open edges: {}{}\n", withSeparators(open),
+               open > 0 ? " (where the surface is open or leaves the filled leaves)" : " (closed)");
+  }
+  if (summary.contains("vdb")) {
+    const auto& v = summary["vdb"];
+    fmt::print("{}: level set of {} active voxels of {:.6g} (band {} voxels), {} in {:.2f} s\n",
+               o.vdb, withSeparators(v["active_voxels"].get<uint64_t>()),
+               v["voxel_size"].get<double>(), o.band, humanBytes(v["bytes"].get<uint64_t>()),
+               v["seconds"].get<double>());
+  }
   return kExitOk;
 }
 
@@ -69,11 +98,18 @@ int run(const Options& o) {
 void addExportCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
   CLI::App* c = app.add_subcommand(
-      "export", "Write the surface of an .iso file for other tools: a triangle mesh (PLY)");
+      "export",
+      "Write the surface of an .iso file for other tools: a triangle mesh (PLY), an OpenVDB "
+      "level set");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
                 "Triangle mesh of the zero set (binary PLY), crack-free across levels: each leaf "
                 "cut into tetrahedra that match its neighbours' faces (marching tetrahedra)");
+  c->add_option("--vdb", o->vdb,
+                "OpenVDB narrow-band level set (float grid \"surface\"), voxels the finest "
+                "leaves' size");
+  c->add_option("--band", o->band, "Half width of the --vdb narrow band, in voxels")
+      ->capture_default_str();
   c->add_flag("-f,--force", o->force, "Replace output files that exist");
   c->add_flag("--json", o->json, "Print the summary as JSON");
   c->callback([o, &exitCode] {
