@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <map>
 #include <numbers>
 
 #include "geom/random.h"
 #include "iso/quantize.h"
+#include "iso/reader.h"
 #include "knn.h"
 #include "measure.h"
 #include "stages.h"
@@ -291,7 +293,11 @@ ColorError colorError(const SurfaceModel& surface, const PointCloud& points,
 }  // namespace
 
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points) {
-  const double spacing = meanNearestSpacing(points);
+  return evaluateAgainstPoints(surface, points, meanNearestSpacing(points));
+}
+
+nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points,
+                                     double spacing) {
   const bool colors = points.hasColors() && surface.hasColors();
   std::vector<std::optional<Vec3>> projected;
   const DistanceStats d = pointsToZeroSet(surface, surface.header().frame, points.positions, false,
@@ -317,6 +323,99 @@ nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointClo
           {"mean_spacing", spacing},
           {"rms_over_spacing", spacing > 0 ? d.rms / spacing : 0.0},
           {"max_over_spacing", spacing > 0 ? d.max / spacing : 0.0}};
+}
+
+nlohmann::json evaluateLevels(const Reader& reader, const PointCloud& points) {
+  const double spacing = meanNearestSpacing(points);
+  // Chunks decoded once for all the cuts.
+  std::map<uint32_t, std::shared_ptr<const SurfaceChunk>> decoded;
+  const SurfaceModel::ChunkSource source = [&](uint32_t id) {
+    auto& chunk = decoded[id];
+    if (!chunk) chunk = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
+    return chunk;
+  };
+  uint8_t first = kMaxLevel, last = 0;
+  for (const ChunkInfo& info : reader.chunks()) {
+    if (info.kind != kSurfaceKind) continue;
+    const std::shared_ptr<const SurfaceChunk> chunk = source(info.id);
+    first = std::min(first, chunk->topology.startLevel);
+    last = std::max(last, uint8_t(chunk->topology.startLevel + chunk->topology.depth - 1));
+  }
+  nlohmann::json levels = nlohmann::json::array();
+  for (int level = first; level <= last; ++level) {
+    const SurfaceModel cut = SurfaceModel::load(reader, {}, source, uint8_t(level));
+    nlohmann::json e = evaluateAgainstPoints(cut, points, spacing);
+    e["level"] = level;
+    e["patches"] = cut.leaves().size();
+    levels.push_back(std::move(e));
+  }
+  return levels;
+}
+
+namespace {
+
+struct OneWay {
+  nlohmann::json json;
+  ColorError color;
+};
+
+// Area-weighted samples of `from`'s zero set projected onto `onto`.
+OneWay oneWay(const SurfaceModel& from, const SurfaceModel& onto, int linesPerEdge, bool colors) {
+  const std::vector<ZeroSetSample> samples = from.sampleZeroSet(linesPerEdge);
+  const Frame& f = from.header().frame;
+  std::vector<glm::dvec3> world(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      world[i][a] = f.origin[size_t(a)] + samples[i].position[size_t(a)] * f.size;
+  std::vector<std::optional<Vec3>> projected;
+  const DistanceStats d = pointsToZeroSet(onto, onto.header().frame, world, true, &projected);
+  // Weighted by the area each sample stands for; `values` follow the projected samples in order.
+  double sum = 0.0, area = 0.0;
+  size_t k = 0;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (!projected[i]) continue;
+    const double v = d.values[k++];
+    sum += samples[i].area * v * v;
+    area += samples[i].area;
+  }
+  OneWay out;
+  out.json = {{"samples", d.samples},
+              {"unprojected", d.unprojected},
+              {"rms", area > 0.0 ? std::sqrt(sum / area) : 0.0},
+              {"max", d.max},
+              {"mean", d.mean}};
+  if (colors) {
+    PointCloud points;  // the samples with from's colors, for colorError
+    points.positions = world;
+    points.colors.resize(samples.size());
+    for (size_t i = 0; i < samples.size(); ++i)
+      points.colors[i] = [&] {
+        const SurfaceEval e = from.evaluate(samples[i].leaf, samples[i].position);
+        return glm::vec3(e.color[0], e.color[1], e.color[2]);
+      }();
+    out.color = colorError(onto, points, projected);
+  }
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
+                                   int linesPerEdge) {
+  const bool colors = a.hasColors() && b.hasColors();
+  const OneWay ab = oneWay(a, b, linesPerEdge, colors), ba = oneWay(b, a, linesPerEdge, false);
+  const double rmsAB = ab.json["rms"].get<double>(), rmsBA = ba.json["rms"].get<double>();
+  nlohmann::json out = {{"rms", std::sqrt(0.5 * (rmsAB * rmsAB + rmsBA * rmsBA))},
+                        {"max", std::max(ab.json["max"].get<double>(), ba.json["max"].get<double>())},
+                        {"a_to_b", ab.json},
+                        {"b_to_a", ba.json},
+                        {"color_psnr_db", nullptr}};
+  if (colors && ab.color.points > 0) {
+    const double mse = ab.color.squared / (3.0 * double(ab.color.points));
+    out["color_psnr_db"] = mse > 0 ? nlohmann::json(10.0 * std::log10(255.0 * 255.0 / mse))
+                                   : nlohmann::json(nullptr);
+  }
+  return out;
 }
 
 }  // namespace iso

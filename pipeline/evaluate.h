@@ -37,5 +37,20 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
 // each point projects onto the zero set against the point's, as the PSNR of 8-bit sRGB values
 // ("color_psnr_db"; null when there is nothing to compare).
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);
+// The same with the points' mean spacing given (computed once for many surfaces).
+nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points,
+                                     double meanSpacing);
+
+// evaluateAgainstPoints for each level-of-detail cut of the file (SurfaceModel::load's cutLevel),
+// from the coarsest level with nodes to the deepest leaves: what the viewer draws at that level.
+// JSON array of {"level", "patches", and evaluateAgainstPoints' values}.
+nlohmann::json evaluateLevels(const Reader& reader, const PointCloud& points);
+
+// Two files against each other: area-weighted samples of each zero set projected onto the other
+// ("a_to_b", "b_to_a": rms, max, mean in world units, samples, unprojected); "rms" combines them
+// as evaluateAgainstShape does; with colors in both, "color_psnr_db": the 8-bit sRGB PSNR of a's
+// color at its samples against b's where they project.
+nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
+                                   int linesPerEdge = 2);
 
 }  // namespace iso

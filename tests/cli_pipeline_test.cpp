@@ -269,6 +269,28 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
 }
 
+TEST_F(CliPipeline, evalComparesTwoFilesAndEveryLevelOfDetail) {
+  const std::string iso = quoted(dir_ / "s.iso"), ply = quoted(dir_ / "sphere.ply");
+  ASSERT_EQ(runIso("convert -q " + ply + " -o " + iso).exitCode, 0);
+  ASSERT_EQ(runIso("convert -q --max-depth 5 " + ply + " -o " + quoted(dir_ / "c.iso")).exitCode, 0);
+  auto run = runIso("eval " + iso + " --against " + quoted(dir_ / "c.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json e = nlohmann::json::parse(run.out);
+  EXPECT_GT(e["rms_over_spacing"].get<double>(), 0.0);
+  EXPECT_GT(e["a_to_b"]["samples"].get<uint64_t>(), 1000u);
+  run = runIso("eval " + iso + " --points " + ply + " --per-level");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json levels = nlohmann::json::parse(run.out)["levels"];
+  ASSERT_GE(levels.size(), 3u);
+  EXPECT_LT(levels.back()["rms"].get<double>(), levels[1]["rms"].get<double>());
+  // --per-level needs --points; one truth at a time.
+  EXPECT_EQ(runIso("eval " + iso + " --shape sphere --per-level").exitCode, 2);
+  EXPECT_EQ(runIso("eval " + iso + " --points " + ply + " --against " + iso).exitCode, 2);
+  run = runIso("eval " + iso + " --against " + quoted(dir_ / "missing.iso"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("missing.iso"), std::string::npos) << run.err;
+}
+
 TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
   for (const char* options : {"--threads -1", "--progress sometimes"}) {
     const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +

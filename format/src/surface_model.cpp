@@ -106,7 +106,7 @@ bool SurfaceModel::Region::meetsCell(uint8_t level, uint64_t key) const {
 }
 
 SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region>& region,
-                                const ChunkSource& source) {
+                                const ChunkSource& source, uint8_t cutLevel) {
   SurfaceModel model;
   model.header_ = reader.header();
   model.region_ = region;
@@ -133,6 +133,7 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
   for (const ChunkInfo& info : reader.chunks()) {
     if (info.kind != kSurfaceKind) continue;
     if (region && !region->meetsCell(info.level, info.key)) continue;
+    if (info.level > cutLevel) continue;  // every node of the chunk is below the cut
     const std::shared_ptr<const SurfaceChunk> decoded =
         source ? source(info.id)
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
@@ -145,8 +146,33 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
     model.corners_.color.insert(model.corners_.color.end(), v.color.begin(), v.color.end());
     model.corners_.occlusion.insert(model.corners_.occlusion.end(), v.occlusion.begin(),
                                     v.occlusion.end());
+    // The internal nodes at the cut level become leaves with their level-of-detail corners.
+    uint32_t lodBase = kNoNode;
+    const bool cutsHere = std::any_of(chunk.layout.nodes.begin(), chunk.layout.nodes.end(),
+                                       [&](const SurfaceNode& n) {
+                                         return n.level == cutLevel && !n.isLeaf();
+                                       });
+    if (cutsHere) {
+      const CornerValues& l = chunk.lodValues;
+      lodBase = uint32_t(model.corners_.distance.size());
+      model.corners_.distance.insert(model.corners_.distance.end(), l.distance.begin(),
+                                     l.distance.end());
+      model.corners_.normal.insert(model.corners_.normal.end(), l.normal.begin(), l.normal.end());
+      model.corners_.color.insert(model.corners_.color.end(), l.color.begin(), l.color.end());
+      model.corners_.occlusion.insert(model.corners_.occlusion.end(), l.occlusion.begin(),
+                                      l.occlusion.end());
+    }
     for (const SurfaceNode& node : chunk.layout.nodes) {
+      if (node.level > cutLevel) continue;
       const uint32_t id = ensureNode(node.level, node.key, ensureNode);
+      if (node.level == cutLevel && !node.isLeaf()) {
+        Leaf leaf{node.key, node.level, {}};
+        for (int c = 0; c < kCorners; ++c)
+          leaf.corners[size_t(c)] = lodBase + node.corners[size_t(c)];
+        model.nodes_[id].leaf = uint32_t(model.leaves_.size());
+        model.leaves_.push_back(leaf);
+        continue;
+      }
       if (node.isLeaf()) {
         if (model.nodes_[id].leaf != kNoNode)
           throw FileError(

@@ -16,6 +16,8 @@ struct Options {
   std::string file;
   std::string shape;
   std::vector<std::string> points;
+  std::string against;  // --against B.iso
+  bool perLevel = false;
   std::string columns;
   ShapeOptions truth;
   EvalOptions eval;
@@ -32,17 +34,32 @@ double reportedSpacing(const Reader& reader) {
 }
 
 int run(Options& o) {
-  const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty());
+  const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty()) +
+                     int(!o.against.empty());
   if (truths != 1)
     throw std::invalid_argument(
-        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE...");
+        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso");
+  if (o.perLevel && o.points.empty())
+    throw std::invalid_argument("--per-level measures against --points");
   const Reader reader = Reader::open(o.file);
   const SurfaceModel surface = SurfaceModel::load(reader);
   nlohmann::json result;
   if (!o.points.empty()) {
     ReadOptions read;
     read.columns = o.columns;
-    result = evaluateAgainstPoints(surface, loadPoints(expandInputs(o.points), read).cloud);
+    const PointCloud cloud = loadPoints(expandInputs(o.points), read).cloud;
+    result = evaluateAgainstPoints(surface, cloud);
+    if (o.perLevel) result["levels"] = evaluateLevels(reader, cloud);
+  } else if (!o.against.empty()) {
+    const Reader other = Reader::open(o.against);
+    result = evaluateAgainstFile(surface, SurfaceModel::load(other));
+    result["against"] = o.against;
+    const double spacing = reportedSpacing(reader);
+    if (spacing > 0.0) {
+      result["mean_spacing"] = spacing;
+      result["rms_over_spacing"] = result["rms"].get<double>() / spacing;
+      result["max_over_spacing"] = result["max"].get<double>() / spacing;
+    }
   } else {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
@@ -67,6 +84,11 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
                 "Analytic truth: sphere, torus, cube, plane or sheets (as iso gen)");
   c->add_option("--points", o->points,
                 "Measure the distance of these points (e.g. the input) to the surface");
+  c->add_option("--against", o->against,
+                "Another .iso file: the distance between the two zero sets, both ways, and the "
+                "color PSNR between them");
+  c->add_flag("--per-level", o->perLevel,
+              "With --points: the error of every level-of-detail cut, coarsest first");
   c->add_option("--columns", o->columns, "Column spec of text point files");
   c->add_option("--spacing", o->spacing,
                 "Mean point spacing (default: the file's conversion report)");

@@ -62,9 +62,12 @@ class SurfaceModel {
   // region, only the chunks whose cells meet it: every leaf that meets the region is there, and
   // the queries answer inside it as the whole model does (project() says when a query left it).
   // `source`, when set, gives the decoded chunks (a cache of those that many regions share).
+  // With cutLevel below the file's deepest level: the surface a level-of-detail cut at that level
+  // draws: leaves at or above it, and the internal nodes at it as leaves with their own (LOD)
+  // corners.
   using ChunkSource = std::function<std::shared_ptr<const SurfaceChunk>(uint32_t id)>;
   static SurfaceModel load(const Reader& reader, const std::optional<Region>& region = {},
-                           const ChunkSource& source = {});
+                           const ChunkSource& source = {}, uint8_t cutLevel = kMaxLevel);
 
   const FileHeader& header() const { return header_; }
   std::span<const Leaf> leaves() const { return leaves_; }
