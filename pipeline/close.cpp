@@ -28,8 +28,8 @@ struct FaceSquare {
 
 // The part of face (axis, side) of the leaf that the cell (level, key) at or below the leaf's
 // level across that face shares with it, with the leaf's patch (bilinear on the face) there.
-FaceSquare faceSquare(const Distances& f, const OctreeNode& leaf, int axis, int side,
-                      uint8_t level, uint64_t key) {
+FaceSquare faceSquare(const Distances& f, const OctreeNode& leaf, int axis, int side, uint8_t level,
+                      uint64_t key) {
   const auto leafCell = mortonDecode(leaf.key);
   const auto cell = mortonDecode(key);
   const double leafSize = std::ldexp(1.0, kMaxLevel - leaf.level);

@@ -400,20 +400,20 @@ OneWay oneWay(const SurfaceModel& from, const SurfaceModel& onto, int linesPerEd
 
 }  // namespace
 
-nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
-                                   int linesPerEdge) {
+nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b, int linesPerEdge) {
   const bool colors = a.hasColors() && b.hasColors();
   const OneWay ab = oneWay(a, b, linesPerEdge, colors), ba = oneWay(b, a, linesPerEdge, false);
   const double rmsAB = ab.json["rms"].get<double>(), rmsBA = ba.json["rms"].get<double>();
-  nlohmann::json out = {{"rms", std::sqrt(0.5 * (rmsAB * rmsAB + rmsBA * rmsBA))},
-                        {"max", std::max(ab.json["max"].get<double>(), ba.json["max"].get<double>())},
-                        {"a_to_b", ab.json},
-                        {"b_to_a", ba.json},
-                        {"color_psnr_db", nullptr}};
+  nlohmann::json out = {
+      {"rms", std::sqrt(0.5 * (rmsAB * rmsAB + rmsBA * rmsBA))},
+      {"max", std::max(ab.json["max"].get<double>(), ba.json["max"].get<double>())},
+      {"a_to_b", ab.json},
+      {"b_to_a", ba.json},
+      {"color_psnr_db", nullptr}};
   if (colors && ab.color.points > 0) {
     const double mse = ab.color.squared / (3.0 * double(ab.color.points));
-    out["color_psnr_db"] = mse > 0 ? nlohmann::json(10.0 * std::log10(255.0 * 255.0 / mse))
-                                   : nlohmann::json(nullptr);
+    out["color_psnr_db"] =
+        mse > 0 ? nlohmann::json(10.0 * std::log10(255.0 * 255.0 / mse)) : nlohmann::json(nullptr);
   }
   return out;
 }

@@ -15,12 +15,10 @@ namespace {
 
 using Point = std::array<int64_t, 3>;  // on the grid of kMaxLevel
 
-Key128 pointKey(const Point& p) {
-  return {uint64_t(p[0]) | uint64_t(p[1]) << 32, uint64_t(p[2])};
-}
+Key128 pointKey(const Point& p) { return {uint64_t(p[0]) | uint64_t(p[1]) << 32, uint64_t(p[2])}; }
 
 struct Sample {
-  uint32_t id = 0;   // the point's number
+  uint32_t id = 0;  // the point's number
   float value = 0;  // the signed distance there (frame units)
 };
 
@@ -50,7 +48,8 @@ class Extractor {
     if (added) {
       const double unit = std::ldexp(1.0, -kMaxLevel);
       slot->id = nextId_++;
-      slot->value = float(surface_.evaluate(leaf, {p[0] * unit, p[1] * unit, p[2] * unit}).distance);
+      slot->value =
+          float(surface_.evaluate(leaf, {p[0] * unit, p[1] * unit, p[2] * unit}).distance);
     }
     return *slot;
   }

@@ -55,7 +55,6 @@ VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path
 // The first float grid of a .vdb file, trilinearly interpolated at world positions (OpenVDB's box
 // sampler): for round trips and for measuring level sets made by other tools. Throws
 // iso::FileError for files OpenVDB cannot read or without a float grid.
-std::vector<double> sampleVdb(const std::filesystem::path& path,
-                              std::span<const glm::dvec3> world);
+std::vector<double> sampleVdb(const std::filesystem::path& path, std::span<const glm::dvec3> world);
 
 }  // namespace iso

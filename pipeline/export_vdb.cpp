@@ -58,7 +58,8 @@ VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path
   const float band = float(bandVoxels * stats.voxelSize);
   openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(band);
   grid->setTransform(openvdb::math::Transform::createLinearTransform(stats.voxelSize));
-  grid->transform().postTranslate(openvdb::Vec3d(frame.origin[0], frame.origin[1], frame.origin[2]));
+  grid->transform().postTranslate(
+      openvdb::Vec3d(frame.origin[0], frame.origin[1], frame.origin[2]));
   grid->setGridClass(openvdb::GRID_LEVEL_SET);
   grid->setName("surface");
   auto accessor = grid->getAccessor();

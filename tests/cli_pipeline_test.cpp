@@ -272,7 +272,8 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
 TEST_F(CliPipeline, evalComparesTwoFilesAndEveryLevelOfDetail) {
   const std::string iso = quoted(dir_ / "s.iso"), ply = quoted(dir_ / "sphere.ply");
   ASSERT_EQ(runIso("convert -q " + ply + " -o " + iso).exitCode, 0);
-  ASSERT_EQ(runIso("convert -q --max-depth 5 " + ply + " -o " + quoted(dir_ / "c.iso")).exitCode, 0);
+  ASSERT_EQ(runIso("convert -q --max-depth 5 " + ply + " -o " + quoted(dir_ / "c.iso")).exitCode,
+            0);
   auto run = runIso("eval " + iso + " --against " + quoted(dir_ / "c.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json e = nlohmann::json::parse(run.out);

@@ -148,10 +148,9 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
                                     v.occlusion.end());
     // The internal nodes at the cut level become leaves with their level-of-detail corners.
     uint32_t lodBase = kNoNode;
-    const bool cutsHere = std::any_of(chunk.layout.nodes.begin(), chunk.layout.nodes.end(),
-                                       [&](const SurfaceNode& n) {
-                                         return n.level == cutLevel && !n.isLeaf();
-                                       });
+    const bool cutsHere =
+        std::any_of(chunk.layout.nodes.begin(), chunk.layout.nodes.end(),
+                    [&](const SurfaceNode& n) { return n.level == cutLevel && !n.isLeaf(); });
     if (cutsHere) {
       const CornerValues& l = chunk.lodValues;
       lodBase = uint32_t(model.corners_.distance.size());

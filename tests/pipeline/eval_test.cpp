@@ -45,8 +45,8 @@ TEST(EvalAgainstFile, concentricSpheresAreTheirGapApartAndColorsTheirDifference)
     GenerateOptions generate;
     generate.count = 40000;
     PointCloud points = generateScan(*makeShape(params), generate);
-    points.colors.assign(points.size(), glm::vec3(srgb8ToLinear(red), srgb8ToLinear(100),
-                                                  srgb8ToLinear(50)));
+    points.colors.assign(points.size(),
+                         glm::vec3(srgb8ToLinear(red), srgb8ToLinear(100), srgb8ToLinear(50)));
     return test::convertAndLoad(points, dir / name);
   };
   const test::Converted a = sphere(1.0, 200, "a.iso"), b = sphere(1.05, 210, "b.iso");

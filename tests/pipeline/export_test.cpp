@@ -71,9 +71,10 @@ size_t leafLevels(const SurfaceModel& surface) {
 }
 
 void expectCrackFree(const MeshCheck& m, const char* name) {
-  std::printf("%s mesh: %zu edges, %zu open (%zu between filled leaves), area %.5f, volume %.5f, "
-              "χ %ld\n",
-              name, m.edges, m.boundaryEdges, m.betweenFilled, m.area, m.volume, m.euler);
+  std::printf(
+      "%s mesh: %zu edges, %zu open (%zu between filled leaves), area %.5f, volume %.5f, "
+      "χ %ld\n",
+      name, m.edges, m.boundaryEdges, m.betweenFilled, m.area, m.volume, m.euler);
   EXPECT_EQ(m.betweenFilled, 0u) << name;  // no cracks, across levels too
   EXPECT_EQ(m.nonManifoldEdges, 0u) << name;
   EXPECT_EQ(m.misoriented, 0u) << name;  // every triangle faces outwards
@@ -131,8 +132,8 @@ TEST(VdbExport, theLevelSetHoldsTheFilesDistancesAndItsZeroSetIsTheSphere) {
   const Frame& frame = c.surface.header().frame;
   EXPECT_NEAR(stats.voxelSize, std::ldexp(frame.size, -stats.level), 1e-12);
   // vdb_print (OpenVDB's own tool) reads it.
-  const std::string print = "vdb_print '" + (dir / "s.vdb").string() + "' > '" +
-                            (dir / "print.txt").string() + "' 2>&1";
+  const std::string print =
+      "vdb_print '" + (dir / "s.vdb").string() + "' > '" + (dir / "print.txt").string() + "' 2>&1";
   ASSERT_EQ(std::system(print.c_str()), 0);
   const std::vector<std::byte> text = test::readFile(dir / "print.txt");
   EXPECT_NE(std::string(reinterpret_cast<const char*>(text.data()), text.size()).find("surface"),
@@ -157,8 +158,9 @@ TEST(VdbExport, theLevelSetHoldsTheFilesDistancesAndItsZeroSetIsTheSphere) {
   const std::vector<double> got = sampleVdb(dir / "s.vdb", near);
   double worst = 0.0;
   for (size_t i = 0; i < near.size(); ++i) worst = std::max(worst, std::abs(got[i] - expected[i]));
-  std::printf("vdb: %llu active voxels of %.5f; largest difference to the file %.2e (%.3f voxels)\n",
-              static_cast<unsigned long long>(stats.activeVoxels), voxel, worst, worst / voxel);
+  std::printf(
+      "vdb: %llu active voxels of %.5f; largest difference to the file %.2e (%.3f voxels)\n",
+      static_cast<unsigned long long>(stats.activeVoxels), voxel, worst, worst / voxel);
   EXPECT_LT(worst, 0.05 * voxel);
   // Its zero crossing along rays from the centre is the unit sphere; inside is negative.
   const double spacing = c.report["mean_spacing"].get<double>();

@@ -28,7 +28,8 @@ void refuseToReplace(const std::string& path, bool force) {
 }
 
 int run(const Options& o) {
-  if (o.mesh.empty() && o.vdb.empty()) throw std::invalid_argument("give --mesh OUT.ply or --vdb OUT.vdb");
+  if (o.mesh.empty() && o.vdb.empty())
+    throw std::invalid_argument("give --mesh OUT.ply or --vdb OUT.vdb");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw std::invalid_argument("--band must be 1 to 64");
   for (const std::string& out : {o.mesh, o.vdb})
     if (!out.empty()) refuseToReplace(out, o.force);
