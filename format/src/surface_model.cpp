@@ -138,29 +138,22 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
         source ? source(info.id)
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
     const SurfaceChunk& chunk = *decoded;
-    const uint32_t cornerBase = uint32_t(model.corners_.distance.size());
-    const CornerValues& v = chunk.leafValues;
-    model.corners_.distance.insert(model.corners_.distance.end(), v.distance.begin(),
-                                   v.distance.end());
-    model.corners_.normal.insert(model.corners_.normal.end(), v.normal.begin(), v.normal.end());
-    model.corners_.color.insert(model.corners_.color.end(), v.color.begin(), v.color.end());
-    model.corners_.occlusion.insert(model.corners_.occlusion.end(), v.occlusion.begin(),
-                                    v.occlusion.end());
+    // Corner values appended to the model's; returns where they start.
+    const auto append = [&](const CornerValues& v) {
+      const uint32_t base = uint32_t(model.corners_.distance.size());
+      CornerValues& to = model.corners_;
+      to.distance.insert(to.distance.end(), v.distance.begin(), v.distance.end());
+      to.normal.insert(to.normal.end(), v.normal.begin(), v.normal.end());
+      to.color.insert(to.color.end(), v.color.begin(), v.color.end());
+      to.occlusion.insert(to.occlusion.end(), v.occlusion.begin(), v.occlusion.end());
+      return base;
+    };
+    const uint32_t cornerBase = append(chunk.leafValues);
     // The internal nodes at the cut level become leaves with their level-of-detail corners.
-    uint32_t lodBase = kNoNode;
     const bool cutsHere =
         std::any_of(chunk.layout.nodes.begin(), chunk.layout.nodes.end(),
                     [&](const SurfaceNode& n) { return n.level == cutLevel && !n.isLeaf(); });
-    if (cutsHere) {
-      const CornerValues& l = chunk.lodValues;
-      lodBase = uint32_t(model.corners_.distance.size());
-      model.corners_.distance.insert(model.corners_.distance.end(), l.distance.begin(),
-                                     l.distance.end());
-      model.corners_.normal.insert(model.corners_.normal.end(), l.normal.begin(), l.normal.end());
-      model.corners_.color.insert(model.corners_.color.end(), l.color.begin(), l.color.end());
-      model.corners_.occlusion.insert(model.corners_.occlusion.end(), l.occlusion.begin(),
-                                      l.occlusion.end());
-    }
+    const uint32_t lodBase = cutsHere ? append(chunk.lodValues) : kNoNode;
     for (const SurfaceNode& node : chunk.layout.nodes) {
       if (node.level > cutLevel) continue;
       const uint32_t id = ensureNode(node.level, node.key, ensureNode);
