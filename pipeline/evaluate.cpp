@@ -418,4 +418,37 @@ nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
   return out;
 }
 
+nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
+                                        double meanSpacing, uint64_t samples, uint64_t seed) {
+  const std::unique_ptr<Shape> surface = makeMeshShape(mesh);
+  // Distances from `count` samples of one to the other, in parallel with one stream per block.
+  const auto oneWay = [&](const Shape& from, const Shape& to, uint64_t salt) {
+    constexpr uint64_t kBlock = 4096;
+    std::vector<double> distance(samples);
+    tbb::parallel_for(uint64_t{0}, (samples + kBlock - 1) / kBlock, [&](uint64_t block) {
+      std::mt19937_64 rng(seed * 0x9e3779b97f4a7c15ull + salt + block);
+      for (uint64_t i = block * kBlock; i < std::min(samples, (block + 1) * kBlock); ++i)
+        distance[i] = to.closest(from.sample(rng).position).distance;
+    });
+    double squares = 0.0, max = 0.0;
+    for (double d : distance) {
+      squares += d * d;
+      max = std::max(max, d);
+    }
+    return std::pair{std::sqrt(squares / double(std::max<uint64_t>(samples, 1))), max};
+  };
+  const auto [rmsMT, maxMT] = oneWay(*surface, truth, 1);
+  const auto [rmsTM, maxTM] = oneWay(truth, *surface, 2);
+  const double rms = std::sqrt(0.5 * (rmsMT * rmsMT + rmsTM * rmsTM)), max = std::max(maxMT, maxTM);
+  return {{"rms", rms},
+          {"max", max},
+          {"mean_spacing", meanSpacing},
+          {"rms_over_spacing", rms / meanSpacing},
+          {"max_over_spacing", max / meanSpacing},
+          {"mesh_to_truth", {{"rms", rmsMT}, {"max", maxMT}}},
+          {"truth_to_mesh", {{"rms", rmsTM}, {"max", maxTM}}},
+          {"triangles", mesh.triangles.size()},
+          {"samples", samples}};
+}
+
 }  // namespace iso

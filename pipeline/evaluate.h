@@ -53,4 +53,12 @@ nlohmann::json evaluateLevels(const Reader& reader, const PointCloud& points);
 nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
                                    int linesPerEdge = 2);
 
+// A triangle mesh against a truth, both ways by closest points: the one metric for surfaces that
+// other tools make (an OpenVDB level set's mesh) and for an .iso file's exported mesh beside them.
+// "mesh_to_truth": area-uniform samples of the mesh; "truth_to_mesh": samples of the truth; "rms"
+// and "max" combined as evaluateAgainstShape does; *_over_spacing in meanSpacing.
+nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
+                                        double meanSpacing, uint64_t samples = 100000,
+                                        uint64_t seed = 1);
+
 }  // namespace iso
