@@ -1,4 +1,4 @@
-// iso-bench-vdb SCAN FILE.iso OUT.vdb (--shape NAME | --mesh TRUTH.ply | --points)
+// iso-bench-vdb SCAN FILE.iso OUT.vdb (--shape NAME | --mesh TRUTH.ply | --points TRUTH)
 //     [--radius-spacings R] [--voxel-scale F]
 // The OpenVDB baseline of `tools/run bench accuracy`, on the points an .iso file was converted from,
 // at its resolution (voxels the size of its finest leaves, times F: default 1). OpenVDB's ParticlesToLevelSet
@@ -86,19 +86,18 @@ int main(int argc, char** argv) {
   if (argc < 5) {
     fmt::print(stderr,
                "usage: iso-bench-vdb SCAN FILE.iso OUT.vdb (--shape NAME | --mesh TRUTH.ply | "
-               "--points) [--radius-spacings R] [--voxel-scale F]\n");
+               "--points TRUTH) [--radius-spacings R] [--voxel-scale F]\n");
     return 2;
   }
   try {
     const std::filesystem::path scan = argv[1], isoFile = argv[2], out = argv[3];
-    std::string shapeName, truthMesh;
-    bool againstPoints = false;
+    std::string shapeName, truthMesh, truthPoints;
     double radiusSpacings = 2.0, voxelScale = 1.0;
     for (int i = 4; i < argc; ++i) {
       const std::string a = argv[i];
       if (a == "--shape" && i + 1 < argc) shapeName = argv[++i];
       else if (a == "--mesh" && i + 1 < argc) truthMesh = argv[++i];
-      else if (a == "--points") againstPoints = true;
+      else if (a == "--points" && i + 1 < argc) truthPoints = argv[++i];
       else if (a == "--radius-spacings" && i + 1 < argc) radiusSpacings = std::stod(argv[++i]);
       else if (a == "--voxel-scale" && i + 1 < argc) voxelScale = std::stod(argv[++i]);
       else throw std::invalid_argument("unknown argument " + a);
@@ -141,9 +140,10 @@ int main(int argc, char** argv) {
                              {"active_voxels", grid->activeVoxelCount()}};
     const TriangleMesh vdbMesh = meshOf(*grid);
     const TriangleMesh isoMesh = extractMesh(surface);
-    if (againstPoints) {
-      result["vdb_error"] = pointsToMesh(cloud, vdbMesh, spacing);
-      result["iso_mesh_error"] = pointsToMesh(cloud, isoMesh, spacing);
+    if (!truthPoints.empty()) {
+      const PointCloud truth = readPointFile(truthPoints);
+      result["vdb_error"] = pointsToMesh(truth, vdbMesh, spacing);
+      result["iso_mesh_error"] = pointsToMesh(truth, isoMesh, spacing);
     } else {
       std::unique_ptr<Shape> truth;
       if (!truthMesh.empty()) {
