@@ -1,13 +1,13 @@
 // iso-bench-vdb SCAN FILE.iso OUT.vdb (--shape NAME | --mesh TRUTH.ply | --points TRUTH)
 //     [--radius-spacings R] [--voxel-scale F]
-// The OpenVDB baseline of `tools/run bench accuracy`, on the points an .iso file was converted from,
-// at its resolution (voxels the size of its finest leaves, times F: default 1). OpenVDB's ParticlesToLevelSet
-// rasterizes a sphere around every point, of R mean spacings (default 2) but at least 2 voxels so
-// that neighbours overlap; the union of spheres around surface points is a shell about the
-// surface, 2 radii thick, so it is eroded (LevelSetFilter::offset) by the radius less one voxel,
-// which leaves a shell a couple of voxels thick whose two sheets lie about a voxel from the surface,
-// and smoothed by one mean-curvature step. Prints JSON: seconds, peak memory, .vdb bytes, and the error of
-// its zero set's mesh (volumeToMesh) against the truth; and, with the same metric
+// The OpenVDB baseline of `tools/run bench accuracy`, on the points an .iso file was converted
+// from, at its resolution (voxels the size of its finest leaves, times F: default 1). OpenVDB's
+// ParticlesToLevelSet rasterizes a sphere around every point, of R mean spacings (default 2) but at
+// least 2 voxels so that neighbours overlap; the union of spheres around surface points is a shell
+// about the surface, 2 radii thick, so it is eroded (LevelSetFilter::offset) by the radius less one
+// voxel, which leaves a shell a couple of voxels thick whose two sheets lie about a voxel from the
+// surface, and smoothed by one mean-curvature step. Prints JSON: seconds, peak memory, .vdb bytes,
+// and the error of its zero set's mesh (volumeToMesh) against the truth; and, with the same metric
 // (evaluateMeshAgainstShape, or points to mesh), the error of the .iso file's exported mesh.
 #include <fmt/core.h>
 #include <openvdb/openvdb.h>
@@ -95,12 +95,18 @@ int main(int argc, char** argv) {
     double radiusSpacings = 2.0, voxelScale = 1.0;
     for (int i = 4; i < argc; ++i) {
       const std::string a = argv[i];
-      if (a == "--shape" && i + 1 < argc) shapeName = argv[++i];
-      else if (a == "--mesh" && i + 1 < argc) truthMesh = argv[++i];
-      else if (a == "--points" && i + 1 < argc) truthPoints = argv[++i];
-      else if (a == "--radius-spacings" && i + 1 < argc) radiusSpacings = std::stod(argv[++i]);
-      else if (a == "--voxel-scale" && i + 1 < argc) voxelScale = std::stod(argv[++i]);
-      else throw std::invalid_argument("unknown argument " + a);
+      if (a == "--shape" && i + 1 < argc)
+        shapeName = argv[++i];
+      else if (a == "--mesh" && i + 1 < argc)
+        truthMesh = argv[++i];
+      else if (a == "--points" && i + 1 < argc)
+        truthPoints = argv[++i];
+      else if (a == "--radius-spacings" && i + 1 < argc)
+        radiusSpacings = std::stod(argv[++i]);
+      else if (a == "--voxel-scale" && i + 1 < argc)
+        voxelScale = std::stod(argv[++i]);
+      else
+        throw std::invalid_argument("unknown argument " + a);
     }
     openvdb::initialize();
     const PointCloud cloud = readPointFile(scan);
@@ -130,14 +136,14 @@ int main(int argc, char** argv) {
     file.write({grid});
     file.close();
     const uint64_t peak = peakRssBytes();
-    nlohmann::json result = {{"voxel", voxel},
-                             {"radius", radius},
-                             {"seconds", seconds},
-                             {"peak_rss_bytes", peak},
-                             {"bytes", std::filesystem::file_size(out)},
-                             {"bytes_per_point", double(std::filesystem::file_size(out)) /
-                                                     double(cloud.size())},
-                             {"active_voxels", grid->activeVoxelCount()}};
+    nlohmann::json result = {
+        {"voxel", voxel},
+        {"radius", radius},
+        {"seconds", seconds},
+        {"peak_rss_bytes", peak},
+        {"bytes", std::filesystem::file_size(out)},
+        {"bytes_per_point", double(std::filesystem::file_size(out)) / double(cloud.size())},
+        {"active_voxels", grid->activeVoxelCount()}};
     const TriangleMesh vdbMesh = meshOf(*grid);
     const TriangleMesh isoMesh = extractMesh(surface);
     if (!truthPoints.empty()) {
