@@ -5,6 +5,8 @@
 #include <array>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -243,6 +245,11 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
   std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
     return surface.leaves()[a].level < surface.leaves()[b].level;
   });
+  // Leaf centres are points of the finest grid: leaves of level kMaxLevel have none.
+  if (!order.empty() && surface.leaves()[order.back()].level >= kMaxLevel)
+    throw std::runtime_error("leaves of level " + std::to_string(kMaxLevel) +
+                                " are too fine for the mesh export (at most " +
+                                std::to_string(kMaxLevel - 1) + ")");
   Extractor extractor(surface);
   for (uint32_t id : order) extractor.leaf(id);
   if (stats) *stats = extractor.stats;

@@ -31,7 +31,7 @@ struct MeshStats {
 // So the mesh has no cracks, also where leaves of different levels meet (2:1 balanced, as the
 // pipeline writes them). A value of exactly 0 counts as a tiny positive one: the mesh is that of a
 // field without zeros, edge-manifold, and closed where the file's zero set stays inside its filled
-// leaves.
+// leaves. Throws std::runtime_error for leaves of level kMaxLevel (the pipeline makes none).
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr);
 
 // The edges used by one triangle only: where the surface is open (or leaves the filled leaves).
