@@ -268,6 +268,26 @@ SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
 
 bool SurfaceModel::intersectLeaf(uint32_t leafId, double t0, double t1, Traversal& state) const {
   const Leaf& leaf = leaves_[leafId];
+  // Corners all of one sign: the patch (bounded by them) has no zero inside, and its sign at the
+  // entry and the exit is theirs; the cubic is not needed.
+  int positive = 0, negative = 0;
+  for (uint32_t corner : leaf.corners) {
+    const float f = corners_.distance[corner];
+    positive += f > 0.0f;
+    negative += f < 0.0f;
+  }
+  if (positive == kCorners || negative == kCorners) {
+    const double side = positive == kCorners ? 1.0 : -1.0;
+    if (state.hasPrevious && std::abs(state.previousExitT - t0) <= 1e-12 * (1.0 + std::abs(t0)) &&
+        sign(state.previousExitValue) != sign(side)) {
+      state.hit = RayHit{t0, leafId};
+      return true;
+    }
+    state.hasPrevious = true;
+    state.previousExitT = t1;
+    state.previousExitValue = side;
+    return false;
+  }
   const auto cell = mortonDecode(leaf.key);
   const double scale = std::ldexp(1.0, leaf.level);
   // Local coordinates along the ray: u(s) = a + b s with s = t - t0.
@@ -310,7 +330,12 @@ bool SurfaceModel::intersectNode(uint32_t nodeId, uint8_t level,
                                  Traversal& state) const {
   const Node& node = nodes_[nodeId];
   if (node.leaf != kNoNode) return intersectLeaf(node.leaf, t0, t1, state);
-  const double size = std::ldexp(1.0, -level);
+  static const std::array<double, kMaxLevel + 1> kSizes = [] {
+    std::array<double, kMaxLevel + 1> sizes{};
+    for (int l = 0; l <= kMaxLevel; ++l) sizes[size_t(l)] = std::ldexp(1.0, -l);
+    return sizes;
+  }();
+  const double size = kSizes[level];
   std::array<double, 5> splits{t0, t1, t1, t1, t1};
   int count = 1;
   for (int k = 0; k < 3; ++k) {
