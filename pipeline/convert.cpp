@@ -331,14 +331,15 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   std::optional<TriplanarTexture> texture;
   if (textureImage) {
     const TextureOptions& t = options.texture;
+    const double scale = t.scale > 0.0 ? t.scale : frame.size;
     report["texture"] = {{"image", t.image.filename().string()},
                          {"width", textureImage->width},
                          {"height", textureImage->height},
-                         {"scale", t.scale > 0.0 ? t.scale : frame.size},
+                         {"scale", scale},
                          {"sharpness", t.sharpness},
                          {"at", t.at == TextureAt::Points ? "points" : "corners"},
                          {"modulates_point_colors", inputColors}};
-    texture.emplace(std::move(*textureImage), t.scale > 0.0 ? t.scale : frame.size, t.sharpness);
+    texture.emplace(std::move(*textureImage), scale, t.sharpness);
     if (t.at == TextureAt::Points) {
       timer.next("texture", points.size());
       texturePoints(points, frame, *texture);

@@ -30,9 +30,7 @@ struct Weighted {
   double rms() const { return weight > 0 ? std::sqrt(squares / weight) : 0.0; }
 };
 
-glm::dvec3 toWorld(const Vec3& p, const Frame& f) {
-  return glm::dvec3(p[0], p[1], p[2]) * f.size + glm::dvec3(f.origin[0], f.origin[1], f.origin[2]);
-}
+glm::dvec3 toWorld(const Vec3& p, const Frame& f) { return toWorld(glm::dvec3(p[0], p[1], p[2]), f); }
 
 double percentile(std::vector<double> values, double q) {
   if (values.empty()) return 0.0;
@@ -364,9 +362,7 @@ OneWay oneWay(const SurfaceModel& from, const SurfaceModel& onto, int linesPerEd
   const std::vector<ZeroSetSample> samples = from.sampleZeroSet(linesPerEdge);
   const Frame& f = from.header().frame;
   std::vector<glm::dvec3> world(samples.size());
-  for (size_t i = 0; i < samples.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      world[i][a] = f.origin[size_t(a)] + samples[i].position[size_t(a)] * f.size;
+  for (size_t i = 0; i < samples.size(); ++i) world[i] = toWorld(samples[i].position, f);
   std::vector<std::optional<Vec3>> projected;
   const DistanceStats d = pointsToZeroSet(onto, onto.header().frame, world, true, &projected);
   // Weighted by the area each sample stands for; `values` follow the projected samples in order.

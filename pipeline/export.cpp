@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "iso/flat_map.h"
+#include "stages.h"
 
 namespace iso {
 namespace {
@@ -77,12 +78,9 @@ uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
   if (added) {
     const double fa = signedValue(a.value), fb = signedValue(b.value);
     const double t = fa / (fa - fb);
-    const double unit = std::ldexp(frame_.size, -kMaxLevel);
-    glm::dvec3 p;
-    for (int k = 0; k < 3; ++k)
-      p[k] = frame_.origin[size_t(k)] +
-             (double(pa[size_t(k)]) + t * double(pb[size_t(k)] - pa[size_t(k)])) * unit;
-    mesh.vertices.push_back(p);
+    const glm::dvec3 from{double(pa[0]), double(pa[1]), double(pa[2])};
+    const glm::dvec3 to{double(pb[0]), double(pb[1]), double(pb[2])};
+    mesh.vertices.push_back(toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
   }
   return *slot;
 }
@@ -237,14 +235,19 @@ void Extractor::leaf(uint32_t id) {
 
 }  // namespace
 
-TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
-  // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
-  // one's value, which the finer ones' corners there only approximate (quantized).
+std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
   std::vector<uint32_t> order(surface.leaves().size());
   for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
     return surface.leaves()[a].level < surface.leaves()[b].level;
   });
+  return order;
+}
+
+TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
+  // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
+  // one's value, which the finer ones' corners there only approximate (quantized).
+  const std::vector<uint32_t> order = leavesCoarseFirst(surface);
   // Leaf centres are points of the finest grid: leaves of level kMaxLevel have none.
   if (!order.empty() && surface.leaves()[order.back()].level >= kMaxLevel)
     throw std::runtime_error("leaves of level " + std::to_string(kMaxLevel) +

@@ -34,6 +34,10 @@ struct MeshStats {
 // leaves. Throws std::runtime_error for leaves of level kMaxLevel (the pipeline makes none).
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr);
 
+// The surface's leaves, coarsest first (stable): where leaves of several levels meet, the exports
+// take the first one's value.
+std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface);
+
 // The edges used by one triangle only: where the surface is open (or leaves the filled leaves).
 uint64_t openEdges(const TriangleMesh& mesh);
 

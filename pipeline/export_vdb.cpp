@@ -63,14 +63,8 @@ VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path
   grid->setGridClass(openvdb::GRID_LEVEL_SET);
   grid->setName("surface");
   auto accessor = grid->getAccessor();
-  // Coarse leaves first: where leaves meet, the coarsest one's value is kept.
-  std::vector<uint32_t> order(surface.leaves().size());
-  for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-    return surface.leaves()[a].level < surface.leaves()[b].level;
-  });
   const double bandFrame = bandVoxels * h;
-  for (uint32_t id : order) {
+  for (uint32_t id : leavesCoarseFirst(surface)) {  // where leaves meet, the coarsest one's value
     const SurfaceModel::Leaf& leaf = surface.leaves()[id];
     const int64_t n = int64_t{1} << (stats.level - leaf.level);
     const auto cell = mortonDecode(leaf.key);

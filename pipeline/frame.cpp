@@ -161,6 +161,14 @@ glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame) {
   return (world - glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2])) / frame.size;
 }
 
+glm::dvec3 toWorld(const glm::dvec3& frameUnits, const Frame& frame) {
+  return frameUnits * frame.size + glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+}
+
+glm::dvec3 gridToFrame(const GridPoint& p) {
+  return glm::dvec3(p.x, p.y, p.z) * std::ldexp(1.0, -int(kMaxLevel));
+}
+
 PointSet makePointSet(const PointCloud& cloud, const Frame& frame) {
   PointSet points;
   const size_t n = cloud.size();

@@ -7,20 +7,14 @@
 #include <cmath>
 #include <numbers>
 
+#include "iso/flat_map.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
 #include "iso/writer.h"
+#include "stages.h"
 
 namespace iso {
 namespace {
-
-uint64_t mix64(uint64_t x) {  // splitmix64's finalizer
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
 
 double unit(uint64_t bits) { return double(bits >> 11) * 0x1.0p-53; }
 
@@ -44,7 +38,7 @@ float ambientOcclusion(const SurfaceModel& surface, const Vec3& p, const Vec3& n
   const uint8_t level = leaf == kNoNode ? surface.header().maxLevel : surface.leaves()[leaf].level;
   const double size = std::ldexp(1.0, -int(level));
   const Vec3 origin = add(p, n, 1e-3 * size);
-  const double jitterU = unit(mix64(seed)), jitterPhi = unit(mix64(seed ^ 0x9e3779b97f4a7c15ull));
+  const double jitterU = unit(hashBits(seed)), jitterPhi = unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull));
   int open = 0;
   for (int k = 0; k < rays; ++k) {
     // Cosine-weighted: cos²θ uniform in [0, 1]; stratified in it, golden-ratio steps in azimuth.
@@ -77,8 +71,8 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
     values.occlusion.resize(corners.size());
     tbb::parallel_for(size_t{0}, corners.size(), [&](size_t i) {
       const CornerKey& k = corners[i];
-      const double cell = std::ldexp(1.0, -int(kMaxLevel));
-      const Vec3 corner{k.point.x * cell, k.point.y * cell, k.point.z * cell};
+      const glm::dvec3 g = gridToFrame(k.point);
+      const Vec3 corner{g.x, g.y, g.z};
       Vec3 n{values.normal[i][0], values.normal[i][1], values.normal[i][2]};
       // A corner lies on its leaf's boundary, often outside the filled leaves: the projection
       // starts from the corner's own estimate p − f·n, which lies near the zero set.
@@ -100,7 +94,7 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
       }
       // Seeded by the grid point alone: a corner in several chunks gets one value.
       const uint64_t seed =
-          mix64(uint64_t(k.point.x) | uint64_t(k.point.y) << 21 | uint64_t(k.point.z) << 42);
+          hashBits(uint64_t(k.point.x) | uint64_t(k.point.y) << 21 | uint64_t(k.point.z) << 42);
       values.occlusion[i] = ambientOcclusion(surface, p, n, rays, radius, seed);
     });
     for (float o : values.occlusion) sum += o;

@@ -105,6 +105,9 @@ Frame chooseFrame(const glm::dvec3& lo, const glm::dvec3& hi);
 // Frame-unit points with keys; normals copied (renormalized; invalid ones set to zero).
 PointSet makePointSet(const PointCloud& cloud, const Frame& frame);
 glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
+glm::dvec3 toWorld(const glm::dvec3& frameUnits, const Frame& frame);
+// The frame position of a point of the finest grid.
+glm::dvec3 gridToFrame(const GridPoint& p);
 // The Morton key at kMaxLevel of a position in frame units (clamped into the cube).
 uint64_t keyOf(const glm::vec3& frameUnits);
 void sortByKey(PointSet& points);

@@ -50,17 +50,6 @@ glm::vec3 TriplanarTexture::color(const glm::dvec3& world, const glm::dvec3& nor
   return glm::vec3(c / sum);
 }
 
-namespace {
-glm::dvec3 toWorld(const glm::dvec3& frameUnits, const Frame& frame) {
-  return glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) + frameUnits * frame.size;
-}
-}  // namespace
-
-glm::dvec3 gridToFrame(const GridPoint& p) {
-  const double cell = std::ldexp(1.0, -int(kMaxLevel));
-  return glm::dvec3(p.x, p.y, p.z) * cell;
-}
-
 void texturePoints(PointSet& points, const Frame& frame, const TriplanarTexture& texture) {
   const bool modulate = points.hasColors();
   if (!modulate) points.color.resize(points.size());

@@ -56,7 +56,4 @@ struct LodField;
 void textureCorners(CornerField& leaves, LodField& lod, const Frame& frame,
                     const TriplanarTexture& texture, bool modulate);
 
-// The frame position of a grid point.
-glm::dvec3 gridToFrame(const GridPoint& p);
-
 }  // namespace iso
