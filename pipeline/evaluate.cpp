@@ -30,7 +30,9 @@ struct Weighted {
   double rms() const { return weight > 0 ? std::sqrt(squares / weight) : 0.0; }
 };
 
-glm::dvec3 toWorld(const Vec3& p, const Frame& f) { return toWorld(glm::dvec3(p[0], p[1], p[2]), f); }
+glm::dvec3 toWorld(const Vec3& p, const Frame& f) {
+  return toWorld(glm::dvec3(p[0], p[1], p[2]), f);
+}
 
 double percentile(std::vector<double> values, double q) {
   if (values.empty()) return 0.0;

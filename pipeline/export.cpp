@@ -80,7 +80,8 @@ uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
     const double t = fa / (fa - fb);
     const glm::dvec3 from{double(pa[0]), double(pa[1]), double(pa[2])};
     const glm::dvec3 to{double(pb[0]), double(pb[1]), double(pb[2])};
-    mesh.vertices.push_back(toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
+    mesh.vertices.push_back(
+        toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
   }
   return *slot;
 }

@@ -38,7 +38,8 @@ float ambientOcclusion(const SurfaceModel& surface, const Vec3& p, const Vec3& n
   const uint8_t level = leaf == kNoNode ? surface.header().maxLevel : surface.leaves()[leaf].level;
   const double size = std::ldexp(1.0, -int(level));
   const Vec3 origin = add(p, n, 1e-3 * size);
-  const double jitterU = unit(hashBits(seed)), jitterPhi = unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull));
+  const double jitterU = unit(hashBits(seed)),
+               jitterPhi = unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull));
   int open = 0;
   for (int k = 0; k < rays; ++k) {
     // Cosine-weighted: cos²θ uniform in [0, 1]; stratified in it, golden-ratio steps in azimuth.
