@@ -248,6 +248,11 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     }
   }
   if (in.release) in.release();  // the measure below decodes the file: not two surfaces at once
+  if (in.moreChunks) {
+    const uint32_t before = writer.chunkCount();
+    in.moreChunks(writer, header);
+    stats.chunks += writer.chunkCount() - before;
+  }
   const auto bytesWithoutMetadata = [&](const Writer& w) {
     return w.bytesWritten() + uint64_t(stats.chunks) * kChunkEntrySize + kTrailerSize;
   };

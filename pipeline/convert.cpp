@@ -13,6 +13,7 @@
 #include "iso/reader.h"
 #include "iso/surface_model.h"
 #include "iso/version.h"
+#include "keep_points.h"
 #include "knn.h"
 #include "measure.h"
 #include "outofcore.h"
@@ -77,6 +78,9 @@ void validateOptions(const BuildOptions& o) {
   const OcclusionOptions& a = o.occlusion;
   require(a.rays >= 1 && a.rays <= 4096, "--ao-rays must be 1 to 4096");
   require(std::isfinite(a.radius) && a.radius >= 0.0, "--ao-radius must be positive");
+  require(o.pointBits >= 8 && o.pointBits <= 30, "--point-bits must be 8 to 30");
+  require(o.keptPointsPerChunk >= 1 && o.keptPointsPerChunk <= kMaxPointsPerChunk,
+          "kept points per chunk must be 1 to 2^20");
 }
 
 namespace {
@@ -215,15 +219,20 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                       {"at", o.texture.at == TextureAt::Points ? "points" : "corners"}};
   if (o.occlusion.enabled)
     out["occlusion"] = {{"rays", o.occlusion.rays}, {"radius", o.occlusion.radius}};
+  if (o.keepPoints) out["keep_points"] = {{"point_bits", o.pointBits}};
   return out;
 }
 
 namespace {
 
+// Writes the input points into points chunks (`--keep-points`), in the final frame.
+using KeepPoints = std::function<KeptPointsStats(Writer&, const FileHeader&)>;
+
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
-                             std::optional<LinearImage> textureImage, const ConvertSource& source,
-                             StageTimer& timer, nlohmann::json& report, Clock::time_point started);
+                             std::optional<LinearImage> textureImage, const KeepPoints& keep,
+                             const ConvertSource& source, StageTimer& timer,
+                             nlohmann::json& report, Clock::time_point started);
 
 // The point stages in core, timed.
 ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
@@ -272,7 +281,8 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
 // timed, then the octree stages and the file.
 nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& output,
                            const BuildOptions& options, const ConvertSource& source,
-                           const std::function<ReadyPoints(StageTimer&)>& prepare) {
+                           const std::function<ReadyPoints(StageTimer&)>& prepare,
+                           const KeepPoints& keep) {
   validateOptions(options);
   if (inputPoints == 0) throw ConvertError("no points to convert");
   const auto started = Clock::now();
@@ -285,16 +295,20 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
   ReadyPoints ready = prepare(timer);
-  return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), source, timer,
-                       report, started);
+  return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), keep, source,
+                       timer, report, started);
 }
 
 }  // namespace
 
 nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source) {
-  return convertWith(input.size(), output, options, source,
-                     [&](StageTimer& timer) { return prepareInCore(input, options, timer); });
+  return convertWith(
+      input.size(), output, options, source,
+      [&](StageTimer& timer) { return prepareInCore(input, options, timer); },
+      [&](Writer& writer, const FileHeader& header) {
+        return keepPoints(writer, input, header, options.pointBits, options.keptPointsPerChunk);
+      });
 }
 
 OutOfCoreBudget OutOfCoreBudget::forMemory(uint64_t memory) {
@@ -311,6 +325,9 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
     ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage);
     requireSurface(ready.points);  // known once every chunk's duplicates are merged
     return ready;
+  }, [&](Writer& writer, const FileHeader& header) {
+    return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
+                      options.keptPointsPerChunk);
   });
 }
 
@@ -318,8 +335,9 @@ namespace {
 
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
-                             std::optional<LinearImage> textureImage, const ConvertSource& source,
-                             StageTimer& timer, nlohmann::json& report, Clock::time_point started) {
+                             std::optional<LinearImage> textureImage, const KeepPoints& keep,
+                             const ConvertSource& source, StageTimer& timer,
+                             nlohmann::json& report, Clock::time_point started) {
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;
@@ -416,6 +434,13 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              {"corners", s.corners},
                              {"unprojected", s.unprojected},
                              {"mean", s.mean}};
+    };
+  if (options.keepPoints)
+    write.moreChunks = [&](Writer& out, const FileHeader& header) {
+      timer.next("keep points", inputPoints);
+      const KeptPointsStats kept = keep(out, header);
+      report["kept_points"] = kept.json();
+      report["kept_points"]["max_error_over_spacing"] = kept.maxError / spacing;
     };
   // The file keeps what the data and options determine, not timings or memory, so that the same
   // input gives the same bytes on any machine and any number of threads.

@@ -119,12 +119,12 @@ void permute(Vector& values, const std::vector<uint32_t>& order) {
   values.swap(out);
 }
 
+}  // namespace
+
 glm::vec3 unitOrZero(const glm::vec3& n) {
   const float length = glm::length(n);
   return std::isfinite(length) && length > 1e-12f ? n / length : glm::vec3(0.0f);
 }
-
-}  // namespace
 
 Frame chooseFrame(const PointCloud& cloud) {
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());

@@ -108,6 +108,7 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
     if (info.kind != kSurfaceKind) {  // copied as they are
       std::vector<std::byte> data(info.rawSize);
       in.decodePayload(info.id, data);
+      desc.codec = info.codec;
       out.addChunk(desc, data);
       continue;
     }

@@ -79,6 +79,13 @@ struct BuildOptions {
   uint32_t orientBlockPoints = 1u << 20;
   TextureOptions texture;      // a triplanar texture baked into the colors (texture.h)
   OcclusionOptions occlusion;  // ambient occlusion baked into the corners (occlusion.h)
+  // The input points kept in points chunks (keep_points.h), positions to 2^-pointBits of the
+  // frame.
+  bool keepPoints = false;
+  int pointBits = 24;
+  // Points per points chunk, about (kPointsPerChunk). Not a command-line option: tests lower it
+  // so that small scans have many chunks.
+  uint32_t keptPointsPerChunk = 1u << 16;
 };
 
 // The points of one processing chunk in frame units, sorted by Morton key after sortByKey().
@@ -108,6 +115,8 @@ glm::dvec3 toFrame(const glm::dvec3& world, const Frame& frame);
 glm::dvec3 toWorld(const glm::dvec3& frameUnits, const Frame& frame);
 // The frame position of a point of the finest grid.
 glm::dvec3 gridToFrame(const GridPoint& p);
+// The vector scaled to unit length; zero when it is zero, tiny or not finite.
+glm::vec3 unitOrZero(const glm::vec3& n);
 // The Morton key at kMaxLevel of a position in frame units (clamped into the cube).
 uint64_t keyOf(const glm::vec3& frameUnits);
 void sortByKey(PointSet& points);
@@ -494,6 +503,8 @@ struct WriteInput {
   // When set, the written file is copied by it into a second writer (whose header is
   // withOcclusion's), which becomes the output: ambient occlusion needs the finished surface.
   std::function<void(const Reader& written, Writer& output)> occlusion = {};
+  // When set, called after the surface chunks (and `release`) to add chunks of other kinds.
+  std::function<void(Writer& output, const FileHeader& header)> moreChunks = {};
 };
 struct WriteStats {
   uint64_t chunks = 0, fileBytesWithoutMetadata = 0;

@@ -17,6 +17,8 @@
 
 #include "cli_support.h"
 #include "io/ply.h"
+#include "io/readers.h"
+#include "pipeline/same_points.h"
 
 namespace iso {
 namespace {
@@ -267,6 +269,83 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   EXPECT_EQ(run.exitCode, 1);
   EXPECT_NE(run.err.find("sphere.ply"), std::string::npos) << run.err;
   EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
+}
+
+TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
+  // Real scans with normals (the kitten) and 16-bit colors (the lion), and a sphere 5,000 km from
+  // the origin: every point back within the precision asked for, one to one.
+  const auto gen = runIso("gen sphere -n 20000 --seed 4 --offset 500000,4900000,1200 -o " +
+                          quoted(dir_ / "far.ply"));
+  ASSERT_EQ(gen.exitCode, 0) << gen.err;
+  const std::filesystem::path shared(ISO_SHARED_DATA_DIR);
+  struct Case {
+    std::filesystem::path input;
+    int bits, colorCodes;
+  };
+  for (const Case& c : {Case{std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 24, 0},
+                        Case{shared / "lion_rgb.las", 20, 1}, Case{dir_ / "far.ply", 30, 0}}) {
+    SCOPED_TRACE(c.input.string());
+    const std::string iso = quoted(dir_ / "k.iso"), ply = quoted(dir_ / "k.ply");
+    auto run = runIso("convert -q -f --json --keep-points --point-bits " + std::to_string(c.bits) +
+                      " " + quoted(c.input) + " -o " + iso);
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    const nlohmann::json report = nlohmann::json::parse(run.out);
+    const PointCloud input = readPointFile(c.input);
+    EXPECT_EQ(report["kept_points"]["points"], input.size());
+    EXPECT_EQ(report["kept_points"]["coarser_chunks"], 0);
+    ASSERT_EQ(runIso("verify " + iso).exitCode, 0);
+    run = runIso("info --json " + iso);
+    const nlohmann::json info = nlohmann::json::parse(run.out);
+    EXPECT_EQ(info["kept_points"]["points"], input.size());
+    EXPECT_EQ(info["point_count"], report["points"]["used"].get<uint64_t>() +
+                                       report["points"]["duplicates_merged"].get<uint64_t>());
+    run = runIso("export -f --json " + iso + " --points " + ply);
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    EXPECT_EQ(nlohmann::json::parse(run.out)["points"]["points"], input.size());
+    const double step = std::ldexp(info["frame"]["size"].get<double>(), -c.bits);
+    EXPECT_LE(report["kept_points"]["max_error"].get<double>(), std::sqrt(3.0) / 2.0 * step * 1.01);
+    test::expectSamePoints(input, readPointFile(dir_ / "k.ply"), std::sqrt(3.0) / 2.0 * step * 1.01,
+                           c.colorCodes);
+  }
+
+  // A file without kept points; options that make no sense; the old output stays.
+  const std::string plain = quoted(dir_ / "plain.iso");
+  ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + plain).exitCode, 0);
+  auto run = runIso("export " + plain + " --points " + quoted(dir_ / "x.ply"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("plain.iso"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("keeps no points"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
+  const std::vector<std::byte> old = test::readFile(dir_ / "plain.iso");
+  for (const std::string options : {"--keep-points --point-bits 31", "--keep-points --point-bits 7",
+                                    "--point-bits 20"}) {
+    run = runIso("convert -q -f " + options + " " + quoted(dir_ / "sphere.ply") + " -o " + plain);
+    EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
+  }
+  EXPECT_TRUE(test::readFile(dir_ / "plain.iso") == old);
+
+  // One bit flipped in a points chunk: verify names the chunk, export writes nothing.
+  run = runIso("info --json --chunks " + quoted(dir_ / "k.iso"));
+  const nlohmann::json chunks = nlohmann::json::parse(run.out)["chunks"];
+  uint64_t at = 0, id = 0;
+  for (const nlohmann::json& chunk : chunks)
+    if (chunk["kind"] == "points") {
+      at = chunk["offset"].get<uint64_t>() + chunk["stored_bytes"].get<uint64_t>() / 2;
+      id = chunk["id"].get<uint64_t>();
+    }
+  ASSERT_GT(at, 0u);
+  std::vector<std::byte> bytes = test::readFile(dir_ / "k.iso");
+  bytes[at] ^= std::byte{0x10};
+  test::writeFile(dir_ / "broken.iso", bytes);
+  run = runIso("verify " + quoted(dir_ / "broken.iso"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE((run.out + run.err).find("chunk " + std::to_string(id)), std::string::npos)
+      << run.out << run.err;
+  run = runIso("export " + quoted(dir_ / "broken.iso") + " --points " + quoted(dir_ / "b.ply"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("broken.iso"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("checksum"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "b.ply"));
 }
 
 TEST_F(CliPipeline, evalComparesTwoFilesAndEveryLevelOfDetail) {

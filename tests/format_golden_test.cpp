@@ -1,5 +1,5 @@
-// tests/data/golden-v1.iso pins the bytes of format 1.0: the current writer must reproduce it
-// exactly, the reader must read the expected values from it, and the byte offsets asserted here
+// tests/data/golden-v1.iso pins the bytes of the current format (1.2): the current writer must
+// reproduce it exactly, the reader must read the expected values from it, and the byte offsets asserted here
 // are the ones of specs/iso-format.md, written independently of format/src/layout.h.
 #include <gtest/gtest.h>
 #define XXH_INLINE_ALL
@@ -45,7 +45,7 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
   EXPECT_EQ(at<uint16_t>(b, 8), 1);      // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 1);     // versionMinor
+  EXPECT_EQ(at<uint16_t>(b, 10), 2);     // versionMinor
   EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
   EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
   EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2

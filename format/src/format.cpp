@@ -123,6 +123,8 @@ std::string_view chunkKindName(uint8_t kind) {
       return "blob";
     case ChunkKind::Surface:
       return "surface";
+    case ChunkKind::Points:
+      return "points";
   }
   return "unknown";
 }

@@ -10,6 +10,7 @@
 
 #include "bytes.h"
 #include "iso/error.h"
+#include "iso/points.h"
 #include "iso/surface.h"
 
 namespace iso {
@@ -59,10 +60,12 @@ std::string ZstdChecker::problem(std::span<const std::byte> stored, uint64_t raw
   return {};
 }
 
-// Whether a surface chunk's data follows the rules of specs/iso-format.md, "Surface chunks".
-void checkSurface(const Reader& reader, const ChunkInfo& c, VerifyResult& result) {
+// Whether a surface or points chunk's data follows the rules of specs/iso-format.md ("Surface
+// chunks", "Points chunks"); chunks of other kinds have no rules beyond their payload.
+void checkContent(const Reader& reader, const ChunkInfo& c, VerifyResult& result) {
   try {
-    decodeSurfaceChunk(reader, c.id);
+    if (c.kind == kSurfaceKind) decodeSurfaceChunk(reader, c.id);
+    if (c.kind == kPointsKind) decodePointsChunk(reader, c.id);
   } catch (const FileError& error) {
     result.problems.push_back({c.id, c.offset, error.reason()});
   }
@@ -94,10 +97,10 @@ VerifyResult verifyFile(const Reader& reader) {
     } else if (c.codec == Codec::Zstd) {
       if (std::string problem = zstd.problem(stored, c.rawSize); !problem.empty())
         result.problems.push_back({c.id, c.offset, problem});
-      else if (c.kind == kSurfaceKind)
-        checkSurface(reader, c, result);
-    } else if (c.kind == kSurfaceKind) {
-      checkSurface(reader, c, result);
+      else
+        checkContent(reader, c, result);
+    } else {
+      checkContent(reader, c, result);
     }
     checkPadding(c.id, c.offset + c.storedSize);
     ++result.chunksChecked;

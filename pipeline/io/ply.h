@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,24 @@ struct PlyWriteOptions {
 // atomically: a temporary file renamed into place. Throws iso::FileError on failure.
 void writePly(const std::filesystem::path& path, const PointCloud& points,
               const PlyWriteOptions& options = {});
+
+// The same for points given batch by batch: a header for `count` points, then write() until
+// that many are written, then commit(). Nothing appears at path unless commit() succeeds.
+class AtomicFile;
+class PlyPointWriter {
+ public:
+  PlyPointWriter(const std::filesystem::path& path, uint64_t count, bool normals, bool colors,
+                 const PlyWriteOptions& options = {});
+  ~PlyPointWriter();
+  void write(const PointCloud& points);  // with normals and colors as declared
+  void commit();
+
+ private:
+  std::unique_ptr<AtomicFile> file_;
+  PlyWriteOptions options_;
+  uint64_t count_, written_ = 0;
+  bool normals_, colors_;
+};
 
 // Write a triangle mesh as PLY (binary little endian, float positions).
 void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,

@@ -37,7 +37,8 @@ void appendNumber(std::string& out, T value) {
   out.append(text, result.ptr);
 }
 
-std::string pointHeader(const PointCloud& points, const PlyWriteOptions& options) {
+std::string pointHeader(uint64_t count, bool normals, bool colors,
+                        const PlyWriteOptions& options) {
   std::string header = "ply\n";
   header += options.binary ? "format binary_little_endian 1.0\n" : "format ascii 1.0\n";
   for (std::string comment : options.comments) {
@@ -45,12 +46,12 @@ std::string pointHeader(const PointCloud& points, const PlyWriteOptions& options
     std::replace(comment.begin(), comment.end(), '\r', ' ');
     header += "comment " + comment + "\n";
   }
-  header += fmt::format("element vertex {}\n", points.size());
+  header += fmt::format("element vertex {}\n", count);
   const char* positionType = options.doublePositions ? "double" : "float";
   for (const char* axis : {"x", "y", "z"})
     header += fmt::format("property {} {}\n", positionType, axis);
-  if (points.hasNormals()) header += "property float nx\nproperty float ny\nproperty float nz\n";
-  if (points.hasColors())
+  if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
+  if (colors)
     header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   return header + "end_header\n";
 }
@@ -112,18 +113,41 @@ void writeAsciiPoints(AtomicFile& file, const PointCloud& points, bool doublePos
 
 }  // namespace
 
-void writePly(const std::filesystem::path& path, const PointCloud& points,
-              const PlyWriteOptions& options) {
+PlyPointWriter::PlyPointWriter(const std::filesystem::path& path, uint64_t count, bool normals,
+                               bool colors, const PlyWriteOptions& options)
+    : file_(std::make_unique<AtomicFile>(path)),
+      options_(options),
+      count_(count),
+      normals_(normals),
+      colors_(colors) {
+  file_->write(pointHeader(count, normals, colors, options));
+}
+
+PlyPointWriter::~PlyPointWriter() = default;
+
+void PlyPointWriter::write(const PointCloud& points) {
+  ISO_CHECK(points.hasNormals() == normals_ && points.hasColors() == colors_);
   ISO_CHECK(points.normals.empty() || points.normals.size() == points.size());
   ISO_CHECK(points.colors.empty() || points.colors.size() == points.size());
-  AtomicFile file(path);
-  file.write(pointHeader(points, options));
-  if (options.binary) {
-    writeBinaryPoints(file, points, options.doublePositions);
+  ISO_CHECK(written_ + points.size() <= count_);
+  if (options_.binary) {
+    writeBinaryPoints(*file_, points, options_.doublePositions);
   } else {
-    writeAsciiPoints(file, points, options.doublePositions);
+    writeAsciiPoints(*file_, points, options_.doublePositions);
   }
-  file.commit();
+  written_ += points.size();
+}
+
+void PlyPointWriter::commit() {
+  ISO_CHECK(written_ == count_);
+  file_->commit();
+}
+
+void writePly(const std::filesystem::path& path, const PointCloud& points,
+              const PlyWriteOptions& options) {
+  PlyPointWriter writer(path, points.size(), points.hasNormals(), points.hasColors(), options);
+  writer.write(points);
+  writer.commit();
 }
 
 void writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,

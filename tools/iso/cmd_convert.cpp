@@ -109,6 +109,20 @@ void printReport(const nlohmann::json& r, const Options& o) {
             ? fmt::format(" ({} not projected)", withSeparators(c["unprojected"].get<uint64_t>()))
             : "");
   }
+  if (r.contains("kept_points")) {
+    const auto& k = r["kept_points"];
+    fmt::print(
+        "  kept points: {} in {} chunk{}, {} ({:.2f} bytes/point), positions within {:.3g} "
+        "({:.3g} mean spacings){}\n",
+        withSeparators(k["points"].get<uint64_t>()), withSeparators(k["chunks"].get<uint64_t>()),
+        k["chunks"].get<uint64_t>() == 1 ? "" : "s", humanBytes(k["bytes"].get<uint64_t>()),
+        k["bytes_per_point"].get<double>(), k["max_error"].get<double>(),
+        k["max_error_over_spacing"].get<double>(),
+        k["coarser_chunks"].get<uint64_t>() > 0
+            ? fmt::format(" ({} chunks of far outliers at a coarser step)",
+                          withSeparators(k["coarser_chunks"].get<uint64_t>()))
+            : "");
+  }
   const auto& a = r["accuracy"];
   fmt::print(
       "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
@@ -299,6 +313,14 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--ao-radius", o->build.occlusion.radius,
                 "How far (world units) an occluder counts (default: a tenth of the frame)")
       ->needs(ao);
+  CLI::Option* keep = c->add_flag(
+      "--keep-points", o->build.keepPoints,
+      "Also store the input points in the file (Draco-compressed, a cell per chunk), for `iso "
+      "export --points`");
+  c->add_option("--point-bits", o->build.pointBits,
+                "Position precision of --keep-points: 2^-N of the frame's size")
+      ->capture_default_str()
+      ->needs(keep);
   c->add_option("--threads", o->threads, "Worker threads (0: all cores); the output is the same")
       ->capture_default_str();
   c->add_option("--progress", o->progress,

@@ -1,5 +1,5 @@
-// `iso export FILE.iso [--mesh OUT.ply] [--vdb OUT.vdb]`: the surface of an .iso file for other
-// tools.
+// `iso export FILE.iso [--mesh OUT.ply] [--vdb OUT.vdb] [--points OUT.ply]`: the surface of an
+// .iso file for other tools, and the original points it keeps.
 #include <fmt/core.h>
 
 #include <chrono>
@@ -7,6 +7,7 @@
 
 #include "commands.h"
 #include "export.h"
+#include "keep_points.h"
 #include "io/ply.h"
 #include "iso/error.h"
 #include "iso/reader.h"
@@ -17,10 +18,12 @@ namespace iso::cli {
 namespace {
 
 struct Options {
-  std::string file, mesh, vdb;
+  std::string file, mesh, vdb, points;
   double band = 3.0;
   bool force = false, json = false;
 };
+
+int print(const nlohmann::json& summary, const Options& o);
 
 void refuseToReplace(const std::string& path, bool force) {
   if (std::filesystem::exists(path) && !force)
@@ -28,23 +31,44 @@ void refuseToReplace(const std::string& path, bool force) {
 }
 
 int run(const Options& o) {
-  if (o.mesh.empty() && o.vdb.empty())
-    throw std::invalid_argument("give --mesh OUT.ply or --vdb OUT.vdb");
+  if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
+    throw std::invalid_argument("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw std::invalid_argument("--band must be 1 to 64");
-  for (const std::string& out : {o.mesh, o.vdb})
+  for (const std::string& out : {o.mesh, o.vdb, o.points})
     if (!out.empty()) refuseToReplace(out, o.force);
   const Reader reader = Reader::open(o.file);
-  const SurfaceModel surface = SurfaceModel::load(reader);
   nlohmann::json summary = {{"file", o.file}};
+  // Far from the origin (UTM coordinates) float positions lose the surface's detail.
+  const Frame& frame = reader.header().frame;
+  double reach = frame.size;
+  for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
+  const bool doubles = reach > 65536.0;
+  if (!o.points.empty()) {
+    const KeptPointsInfo kept = keptPointsInfo(reader);
+    if (kept.chunks == 0)
+      throw FileError(o.file, std::nullopt,
+                      "keeps no points (convert with --keep-points to keep them)");
+    const auto started = std::chrono::steady_clock::now();
+    // Double positions: float would round them more coarsely than the file keeps them.
+    PlyPointWriter ply(o.points, kept.points, kept.normals, kept.colors,
+                       {.doublePositions = true});
+    forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
+    ply.commit();
+    summary["points"] = {
+        {"path", o.points},
+        {"points", kept.points},
+        {"chunks", kept.chunks},
+        {"normals", kept.normals},
+        {"colors", kept.colors},
+        {"seconds",
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
+  }
+  if (o.mesh.empty() && o.vdb.empty()) return print(summary, o);
+  const SurfaceModel surface = SurfaceModel::load(reader);
   if (!o.mesh.empty()) {
     const auto started = std::chrono::steady_clock::now();
     MeshStats stats;
     const TriangleMesh mesh = extractMesh(surface, &stats);
-    // Far from the origin (UTM coordinates) float positions lose the surface's detail.
-    const Frame& frame = reader.header().frame;
-    double reach = frame.size;
-    for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
-    const bool doubles = reach > 65536.0;
     writePlyMesh(o.mesh, mesh, doubles);
     summary["mesh"] = {
         {"path", o.mesh},
@@ -70,6 +94,10 @@ int run(const Options& o) {
         {"seconds",
          std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
   }
+  return print(summary, o);
+}
+
+int print(const nlohmann::json& summary, const Options& o) {
   if (o.json) {
     fmt::print("{}\n", summary.dump(2));
     return kExitOk;
@@ -83,6 +111,14 @@ int run(const Options& o) {
                withSeparators(m["leaves"].get<uint64_t>()), m["seconds"].get<double>());
     fmt::print("  open edges: {}{}\n", withSeparators(open),
                open > 0 ? " (where the surface is open or leaves the filled leaves)" : " (closed)");
+  }
+  if (summary.contains("points")) {
+    const auto& p = summary["points"];
+    fmt::print("{}: {} points from {} chunks{}{} in {:.2f} s\n", o.points,
+               withSeparators(p["points"].get<uint64_t>()),
+               withSeparators(p["chunks"].get<uint64_t>()),
+               p["normals"].get<bool>() ? ", with normals" : "",
+               p["colors"].get<bool>() ? ", with colors" : "", p["seconds"].get<double>());
   }
   if (summary.contains("vdb")) {
     const auto& v = summary["vdb"];
@@ -101,7 +137,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   CLI::App* c = app.add_subcommand(
       "export",
       "Write the surface of an .iso file for other tools: a triangle mesh (PLY), an OpenVDB "
-      "level set");
+      "level set, or the original points it keeps");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
                 "Triangle mesh of the zero set (binary PLY), crack-free across levels: each leaf "
@@ -109,6 +145,9 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   c->add_option("--vdb", o->vdb,
                 "OpenVDB narrow-band level set (float grid \"surface\"), voxels the finest "
                 "leaves' size");
+  c->add_option("--points", o->points,
+                "The original points (binary PLY with their normals and colors), when the file "
+                "keeps them (iso convert --keep-points)");
   c->add_option("--band", o->band, "Half width of the --vdb narrow band, in voxels")
       ->capture_default_str();
   c->add_flag("-f,--force", o->force, "Replace output files that exist");

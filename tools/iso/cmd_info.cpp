@@ -19,7 +19,8 @@ struct Summary {
   uint64_t storedBytes = 0, rawBytes = 0;
   uint64_t points = 0;  // input points represented, counted over the chunks without a parent
   std::map<std::string, uint64_t> codecs;
-  std::map<int, LevelSummary> levels;
+  std::map<int, LevelSummary> levels;  // of the surface (and other non-points) chunks
+  LevelSummary kept;                   // the points chunks: the original points
 };
 
 Summary summarize(const Reader& reader) {
@@ -27,9 +28,10 @@ Summary summarize(const Reader& reader) {
   for (const ChunkInfo& c : reader.chunks()) {
     s.storedBytes += c.storedSize;
     s.rawBytes += c.rawSize;
-    if (c.parent == kNoParent) s.points += c.pointCount;  // roots cover all points once
     ++s.codecs[std::string(codecName(c.codec))];
-    LevelSummary& level = s.levels[c.level];
+    const bool points = c.kind == static_cast<uint8_t>(ChunkKind::Points);
+    if (c.parent == kNoParent && !points) s.points += c.pointCount;  // roots cover all points once
+    LevelSummary& level = points ? s.kept : s.levels[c.level];
     ++level.chunks;
     level.storedBytes += c.storedSize;
     level.rawBytes += c.rawSize;
@@ -81,6 +83,9 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
   j["raw_bytes"] = s.rawBytes;
   j["point_count"] = s.points;
   j["codecs"] = s.codecs;
+  j["kept_points"] = {{"chunks", s.kept.chunks},
+                      {"points", s.kept.points},
+                      {"stored_bytes", s.kept.storedBytes}};
   j["levels"] = nlohmann::json::array();
   for (const auto& [level, l] : s.levels)
     j["levels"].push_back({{"level", level},
@@ -144,6 +149,10 @@ void printInfo(const Reader& reader, bool withChunks) {
     fmt::print("  level {:<4}{} chunk{}, {} stored, {} points\n", level, withSeparators(l.chunks),
                l.chunks == 1 ? "" : "s", humanBytes(l.storedBytes), withSeparators(l.points));
   fmt::print("{:<12}{}\n", "points", withSeparators(s.points));
+  if (s.kept.chunks > 0)
+    fmt::print("{:<12}{} original points in {} chunk{}, {} stored\n", "kept",
+               withSeparators(s.kept.points), withSeparators(s.kept.chunks),
+               s.kept.chunks == 1 ? "" : "s", humanBytes(s.kept.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (metadata.is_discarded())
     fmt::print("{:<12}(not valid JSON, {} bytes)\n", "metadata", reader.metadata().size());

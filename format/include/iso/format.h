@@ -12,7 +12,7 @@ namespace iso {
 // Format version (specs/iso-format.md, "Change log"). Readers accept any minor version of their
 // major version; a change that older readers cannot ignore increases the major version.
 inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint16_t kFormatMinor = 2;
 
 inline constexpr std::array<uint8_t, 8> kHeaderMagic = {0x89, 'I',  'S',  'O',
                                                         0x0D, 0x0A, 0x1A, 0x0A};
@@ -43,7 +43,7 @@ enum class Encoding : uint8_t {
 
 enum class Codec : uint8_t { Raw = 0, Zstd = 1 };
 
-enum class ChunkKind : uint8_t { Blob = 0, Surface = 1 };
+enum class ChunkKind : uint8_t { Blob = 0, Surface = 1, Points = 2 };
 
 // One corner attribute and its quantization.
 struct AttributeDesc {

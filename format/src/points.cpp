@@ -1,0 +1,199 @@
+// Points chunks: an 8-byte header and one Draco point cloud (specs/iso-format.md, "Points chunks").
+#include "iso/points.h"
+
+#include <draco/compression/decode.h>
+#include <draco/compression/expert_encode.h>
+#include <draco/compression/point_cloud/point_cloud_decoder.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/point_cloud/point_cloud_builder.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "bytes.h"
+#include "iso/error.h"
+#include "iso/reader.h"
+#include "iso/surface.h"
+
+namespace iso {
+namespace {
+
+using detail::loadLE;
+using detail::storeLE;
+
+struct AttributeRule {
+  draco::GeometryAttribute::Type type;
+  draco::DataType dataType;
+  const char* name;
+};
+constexpr AttributeRule kPosition{draco::GeometryAttribute::POSITION, draco::DT_INT32,
+                                  "POSITION int32"};
+constexpr AttributeRule kColor{draco::GeometryAttribute::COLOR, draco::DT_UINT16,
+                               "COLOR uint16"};
+constexpr AttributeRule kNormal{draco::GeometryAttribute::NORMAL, draco::DT_INT16,
+                                "NORMAL int16"};
+
+template <typename T>
+void addAttribute(draco::PointCloudBuilder& builder, const AttributeRule& rule,
+                  const std::vector<std::array<T, 3>>& values) {
+  const int id = builder.AddAttribute(rule.type, 3, rule.dataType);
+  builder.SetAttributeValuesForAllPoints(id, values.data(), sizeof(values[0]));
+}
+
+// The values of a decoded attribute, point by point (Draco may map points to shared values).
+template <typename T>
+std::vector<std::array<T, 3>> valuesOf(const draco::PointAttribute& attribute, uint32_t count) {
+  std::vector<std::array<T, 3>> out(count);
+  for (uint32_t i = 0; i < count; ++i)
+    attribute.GetMappedValue(draco::PointIndex(i), out[i].data());
+  return out;
+}
+
+// Whether the offsets along each axis span less than 2^31 (max - min <= 2^31 - 1): Draco's kd-tree
+// coder codes them from their minimum in 31 bits.
+bool withinSpan(const std::vector<std::array<int32_t, 3>>& offsets) {
+  for (int a = 0; a < 3; ++a) {
+    int64_t lo = std::numeric_limits<int64_t>::max(), hi = std::numeric_limits<int64_t>::min();
+    for (const std::array<int32_t, 3>& o : offsets) {
+      lo = std::min<int64_t>(lo, o[a]);
+      hi = std::max<int64_t>(hi, o[a]);
+    }
+    if (!offsets.empty() && hi - lo > int64_t{kMaxPointOffsetSpan}) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
+  const size_t n = points.size();
+  if (n == 0 || n > kMaxPointsPerChunk)
+    throw std::invalid_argument("a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
+                                " points, not " + std::to_string(n));
+  if ((!points.colors.empty() && points.colors.size() != n) ||
+      (!points.normals.empty() && points.normals.size() != n))
+    throw std::invalid_argument("points chunk attributes are not one per point");
+  if (points.stepBits > kMaxPointStepBits)
+    throw std::invalid_argument("points chunk step bits above " +
+                                std::to_string(kMaxPointStepBits));
+  if (speed < 0 || speed > 10) throw std::invalid_argument("Draco speed must be 0 to 10");
+  if (!withinSpan(points.offsets))
+    throw std::invalid_argument("points chunk offsets span 2^31 or more along an axis");
+  draco::PointCloudBuilder builder;
+  builder.Start(uint32_t(n));
+  addAttribute(builder, kPosition, points.offsets);
+  if (!points.colors.empty()) addAttribute(builder, kColor, points.colors);
+  if (!points.normals.empty()) addAttribute(builder, kNormal, points.normals);
+  const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(false);
+  draco::ExpertEncoder encoder(*cloud);
+  encoder.SetEncodingMethod(draco::POINT_CLOUD_KD_TREE_ENCODING);
+  encoder.SetSpeedOptions(speed, speed);
+  draco::EncoderBuffer buffer;
+  const draco::Status status = encoder.EncodeToBuffer(&buffer);
+  if (!status.ok())
+    throw std::runtime_error("Draco cannot encode a points chunk: " + status.error_msg_string());
+
+  std::vector<std::byte> data(kPointsHeaderSize + buffer.size());
+  storeLE<uint32_t>(data.data(), uint32_t(n));
+  storeLE<uint8_t>(data.data() + 4, points.stepBits);
+  storeLE<uint8_t>(data.data() + 5, uint8_t((points.colors.empty() ? 0 : kPointsHaveColors) |
+                                            (points.normals.empty() ? 0 : kPointsHaveNormals)));
+  storeLE<uint16_t>(data.data() + 6, 0);
+  std::memcpy(data.data() + kPointsHeaderSize, buffer.data(), buffer.size());
+  return data;
+}
+
+PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
+  const ChunkInfo& chunk = reader.chunk(id);
+  const auto fail = [&](const std::string& reason) {
+    throw FileError(reader.name(), chunk.offset, "chunk " + std::to_string(id) + ": " + reason);
+  };
+  if (chunk.kind != kPointsKind) fail("not a points chunk");
+  if (chunk.nodeCount != 0 || chunk.leafCount != 0 || chunk.parent != kNoParent ||
+      chunk.geometricError != 0.0f)
+    fail("a points chunk has no nodes, leaves, parent or geometric error");
+  if (chunk.pointCount == 0 || chunk.pointCount > kMaxPointsPerChunk)
+    fail("a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) + " points, not " +
+         std::to_string(chunk.pointCount));
+  // Draco decodes most damaged streams into other points without complaint: the payload's
+  // checksum is what tells.
+  if (detail::checksum(reader.storedPayload(id)) != chunk.checksum)
+    fail("checksum mismatch: the points payload is damaged");
+  std::vector<std::byte> data(chunk.rawSize);
+  reader.decodePayload(id, data);
+  if (data.size() <= kPointsHeaderSize) fail("points data is shorter than its header");
+  const uint32_t count = loadLE<uint32_t>(data.data());
+  PointsChunk out;
+  out.stepBits = loadLE<uint8_t>(data.data() + 4);
+  const uint8_t attributes = loadLE<uint8_t>(data.data() + 5);
+  if (count != chunk.pointCount)
+    fail("points header says " + std::to_string(count) + " points, the chunk table " +
+         std::to_string(chunk.pointCount));
+  if (out.stepBits > kMaxPointStepBits)
+    fail("step bits " + std::to_string(out.stepBits) + " above " +
+         std::to_string(kMaxPointStepBits));
+  if ((attributes & ~(kPointsHaveColors | kPointsHaveNormals)) != 0 ||
+      loadLE<uint16_t>(data.data() + 6) != 0)
+    fail("reserved points header bits are not zero");
+
+  draco::DecoderBuffer buffer;
+  buffer.Init(reinterpret_cast<const char*>(data.data()) + kPointsHeaderSize,
+              data.size() - kPointsHeaderSize);
+  // Draco sizes its arrays by the count in its own header before reading a value: that count must
+  // be the chunk's (bounded above) before anything is decoded.
+  draco::DracoHeader header;
+  if (!draco::PointCloudDecoder::DecodeHeader(&buffer, &header).ok() ||
+      header.encoder_type != draco::POINT_CLOUD ||
+      header.encoder_method != draco::POINT_CLOUD_KD_TREE_ENCODING ||
+      (header.flags & METADATA_FLAG_MASK) != 0)
+    fail("the points are not a Draco kd-tree point cloud without metadata");
+  int32_t dracoCount = 0;
+  if (!buffer.Decode(&dracoCount) || dracoCount != int32_t(count))
+    fail("the Draco point count is not the chunk's");
+  buffer.Init(reinterpret_cast<const char*>(data.data()) + kPointsHeaderSize,
+              data.size() - kPointsHeaderSize);
+  draco::Decoder decoder;
+  draco::StatusOr<std::unique_ptr<draco::PointCloud>> decoded =
+      decoder.DecodePointCloudFromBuffer(&buffer);
+  if (!decoded.ok()) fail("Draco cannot decode the points: " + decoded.status().error_msg_string());
+  const draco::PointCloud& cloud = *decoded.value();
+  if (cloud.num_points() != count) fail("the Draco point cloud has another point count");
+  const bool colors = (attributes & kPointsHaveColors) != 0;
+  const bool normals = (attributes & kPointsHaveNormals) != 0;
+  if (cloud.num_attributes() != 1 + int(colors) + int(normals))
+    fail("the Draco point cloud has " + std::to_string(cloud.num_attributes()) +
+         " attributes, the header says " + std::to_string(1 + int(colors) + int(normals)));
+  const auto attribute = [&](const AttributeRule& rule) -> const draco::PointAttribute& {
+    const draco::PointAttribute* a = cloud.GetNamedAttribute(rule.type);
+    if (a == nullptr || cloud.NumNamedAttributes(rule.type) != 1 ||
+        a->data_type() != rule.dataType || a->num_components() != 3 ||
+        (!a->is_mapping_identity() && a->indices_map_size() < count))
+      fail(std::string("the Draco point cloud has no single 3-component ") + rule.name +
+           " attribute");
+    return *a;
+  };
+  out.offsets = valuesOf<int32_t>(attribute(kPosition), count);
+  if (!withinSpan(out.offsets)) fail("the offsets span 2^31 or more along an axis");
+  if (colors) out.colors = valuesOf<uint16_t>(attribute(kColor), count);
+  if (normals) {
+    out.normals = valuesOf<int16_t>(attribute(kNormal), count);
+    for (const std::array<int16_t, 3>& n : out.normals)
+      for (int16_t c : n)
+        if (c == -32768) fail("a normal component is -32768, which snorm16 does not use");
+  }
+  return out;
+}
+
+std::array<double, 3> pointFramePosition(uint8_t level, uint64_t key, uint8_t stepBits,
+                                         const std::array<int32_t, 3>& offset) {
+  const std::array<uint32_t, 3> cell = mortonDecode(key);
+  std::array<double, 3> out{};
+  for (int a = 0; a < 3; ++a)
+    out[a] = std::ldexp(double(cell[a]), -int(level)) + std::ldexp(double(offset[a]), -int(stepBits));
+  return out;
+}
+
+}  // namespace iso
