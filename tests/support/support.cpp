@@ -1,5 +1,7 @@
 #include "support.h"
 
+#include "iso/points.h"
+
 #define XXH_INLINE_ALL
 #include <unistd.h>
 #include <xxhash.h>
@@ -175,6 +177,32 @@ void writeGoldenFile(const std::filesystem::path& path) {
   Writer writer(path, goldenHeader(), {.zstdLevel = 3});
   for (const GoldenChunk& c : goldenChunks()) writer.addChunk(c.desc, c.data);
   writer.setMetadata(goldenMetadata());
+  writer.finish();
+}
+
+void writePointsSeedFile(const std::filesystem::path& path) {
+  FileHeader header;
+  header.payloadAlignmentLog2 = 3;
+  header.maxLevel = 4;
+  Writer writer(path, header);
+  for (int variant = 0; variant < 2; ++variant) {
+    PointsChunk points;
+    points.stepBits = 20;
+    for (int i = 0; i < 60; ++i) {
+      points.offsets.push_back({i * 97 % 4096, i * 13 % 4096, i * 7 % 4096});
+      if (variant == 1) {
+        points.colors.push_back({uint16_t(i * 1000), uint16_t(65535 - i), 257});
+        points.normals.push_back({int16_t(i * 500), int16_t(-i * 300), 32767});
+      }
+    }
+    ChunkDesc desc;
+    desc.kind = kPointsKind;
+    desc.level = 2;
+    desc.key = uint64_t(variant) * 9;
+    desc.pointCount = points.size();
+    desc.codec = variant == 0 ? Codec::Raw : Codec::Zstd;
+    writer.addChunk(desc, encodePointsChunk(points));
+  }
   writer.finish();
 }
 

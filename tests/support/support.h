@@ -49,5 +49,7 @@ struct GoldenSurface {
 GoldenSurface goldenSurface();
 // Write the golden file's content with the current writer.
 void writeGoldenFile(const std::filesystem::path& path);
+// A small file of two points chunks (with and without colors and normals), payloads 8-aligned.
+void writePointsSeedFile(const std::filesystem::path& path);
 
 }  // namespace iso::test

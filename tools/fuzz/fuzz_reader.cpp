@@ -1,6 +1,6 @@
 // libFuzzer target for the reader: any bytes must give a FileError or a reader whose every call
-// (verify, decode of every chunk, surface chunks and the surface model with a ray and a
-// projection) works, never a crash or undefined behaviour. Each input is also
+// (verify, decode of every chunk, surface and points chunks, and the surface model with a ray and
+// a projection) works, never a crash or undefined behaviour. Each input is also
 // tried with its checksums recomputed, so the fuzzer reaches the structural checks behind them.
 #include <cstddef>
 #include <cstdint>
@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "iso/error.h"
+#include "iso/points.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
 #include "iso/surface_model.h"
@@ -31,9 +32,10 @@ void exercise(const std::vector<std::byte>& bytes) {
     }
     (void)reader.metadata();
     for (const iso::ChunkInfo& c : reader.chunks()) {
-      if (c.kind != iso::kSurfaceKind || c.rawSize > (1u << 20)) continue;
+      if (c.rawSize > (1u << 20)) continue;
       try {
-        iso::decodeSurfaceChunk(reader, c.id);
+        if (c.kind == iso::kSurfaceKind) iso::decodeSurfaceChunk(reader, c.id);
+        if (c.kind == iso::kPointsKind) iso::decodePointsChunk(reader, c.id);
       } catch (const iso::FileError&) {
       }
     }
