@@ -231,8 +231,8 @@ using KeepPoints = std::function<KeptPointsStats(Writer&, const FileHeader&)>;
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const KeepPoints& keep,
-                             const ConvertSource& source, StageTimer& timer,
-                             nlohmann::json& report, Clock::time_point started);
+                             const ConvertSource& source, StageTimer& timer, nlohmann::json& report,
+                             Clock::time_point started);
 
 // The point stages in core, timed.
 ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
@@ -320,15 +320,20 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const BuildOptions& options, const ConvertSource& source) {
   std::optional<SpillArea> area;
   if (budget.memory > 0) area.emplace(directory.path(), budget.memory, budget.minSpilledBytes);
-  return convertWith(raw.size(), output, options, source, [&](StageTimer& timer) {
-    const auto stage = [&](const std::string& name, uint64_t total) { timer.next(name, total); };
-    ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage);
-    requireSurface(ready.points);  // known once every chunk's duplicates are merged
-    return ready;
-  }, [&](Writer& writer, const FileHeader& header) {
-    return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
-                      options.keptPointsPerChunk);
-  });
+  return convertWith(
+      raw.size(), output, options, source,
+      [&](StageTimer& timer) {
+        const auto stage = [&](const std::string& name, uint64_t total) {
+          timer.next(name, total);
+        };
+        ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage);
+        requireSurface(ready.points);  // known once every chunk's duplicates are merged
+        return ready;
+      },
+      [&](Writer& writer, const FileHeader& header) {
+        return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
+                          options.keptPointsPerChunk);
+      });
 }
 
 namespace {
@@ -336,8 +341,8 @@ namespace {
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const KeepPoints& keep,
-                             const ConvertSource& source, StageTimer& timer,
-                             nlohmann::json& report, Clock::time_point started) {
+                             const ConvertSource& source, StageTimer& timer, nlohmann::json& report,
+                             Clock::time_point started) {
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;

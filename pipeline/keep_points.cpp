@@ -34,9 +34,12 @@ struct EncodedChunk {
 }  // namespace
 
 nlohmann::json KeptPointsStats::json() const {
-  return {{"chunks", chunks},           {"points", points},
-          {"bytes", bytes},             {"bytes_per_point", points > 0 ? double(bytes) / double(points) : 0.0},
-          {"step_bits", stepBits},      {"coarser_chunks", coarserChunks},
+  return {{"chunks", chunks},
+          {"points", points},
+          {"bytes", bytes},
+          {"bytes_per_point", points > 0 ? double(bytes) / double(points) : 0.0},
+          {"step_bits", stepBits},
+          {"coarser_chunks", coarserChunks},
           {"max_error", maxError}};
 }
 
@@ -71,8 +74,10 @@ void PointsChunkWriter::finish() {
   // chunk of points inside needs a coarser step for them.
   for (size_t first = 0; first < outside_.size(); first += perChunk_) {
     const auto begin = outside_.begin() + ptrdiff_t(first);
-    pending_.push_back({0, 0, std::vector<Point>(begin, begin + ptrdiff_t(std::min<size_t>(
-                                                                  perChunk_, outside_.size() - first)))});
+    pending_.push_back(
+        {0, 0,
+         std::vector<Point>(
+             begin, begin + ptrdiff_t(std::min<size_t>(perChunk_, outside_.size() - first)))});
     if (pending_.size() >= kBatchChunks) flush();
   }
   outside_.clear();
@@ -141,8 +146,9 @@ void PointsChunkWriter::flush() {
     int bits = stepBits_;
     while (bits > 0 && (std::ldexp(reach, bits) > limit || std::ldexp(span, bits) > limit)) --bits;
     if (std::ldexp(reach, bits) > limit || std::ldexp(span, bits) > limit)
-      throw std::runtime_error("a point lies more than 2^30 frame sizes from the frame: it cannot "
-                               "be kept");
+      throw std::runtime_error(
+          "a point lies more than 2^30 frame sizes from the frame: it cannot "
+          "be kept");
     out.coarser = bits < stepBits_;
     PointsChunk chunk;
     chunk.stepBits = uint8_t(bits);
@@ -152,15 +158,16 @@ void PointsChunkWriter::flush() {
     for (size_t i = 0; i < p.points.size(); ++i) {
       const Point& point = p.points[i];
       const glm::dvec3 d = toFrame(point.world, frame_) - cellMin;
-      for (int a = 0; a < 3; ++a) chunk.offsets[i][a] = int32_t(std::llround(std::ldexp(d[a], bits)));
+      for (int a = 0; a < 3; ++a)
+        chunk.offsets[i][a] = int32_t(std::llround(std::ldexp(d[a], bits)));
       const std::array<double, 3> stored =
           pointFramePosition(p.level, p.key, chunk.stepBits, chunk.offsets[i]);
       const glm::dvec3 back = toWorld(glm::dvec3(stored[0], stored[1], stored[2]), frame_);
       out.maxError = std::max(out.maxError, glm::length(back - point.world));
       if (colors_)
         for (int a = 0; a < 3; ++a)
-          chunk.colors[i][a] = uint16_t(std::lround(
-              std::clamp(linearToSrgb(point.color[a]), 0.0f, 1.0f) * 65535.0f));
+          chunk.colors[i][a] = uint16_t(
+              std::lround(std::clamp(linearToSrgb(point.color[a]), 0.0f, 1.0f) * 65535.0f));
       if (normals_) {
         const glm::vec3 n = unitOrZero(point.normal);
         for (int a = 0; a < 3; ++a) chunk.normals[i][a] = encodeSnorm16(n[a]);

@@ -3,8 +3,8 @@
 #pragma once
 
 #include <cstdint>
-#include <glm/vec3.hpp>
 #include <functional>
+#include <glm/vec3.hpp>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <vector>
@@ -27,8 +27,9 @@ inline constexpr uint32_t kPointsPerChunk = uint32_t{1} << 16;
 struct KeptPointsStats {
   uint64_t chunks = 0, points = 0, bytes = 0;  // bytes: the chunks' data
   int stepBits = 0;                            // asked for
-  uint64_t coarserChunks = 0;  // chunks whose offsets needed a coarser step (points outside the frame)
-  double maxError = 0.0;       // largest distance of a stored point from its input, world units
+  uint64_t coarserChunks =
+      0;                  // chunks whose offsets needed a coarser step (points outside the frame)
+  double maxError = 0.0;  // largest distance of a stored point from its input, world units
   nlohmann::json json() const;
 };
 
@@ -75,8 +76,8 @@ class PointsChunkWriter {
   std::vector<Point> buffer_;
   size_t head_ = 0;
   std::vector<Point> outside_;  // points outside the frame's cube
-  uint64_t floor_ = 0;      // keys below belong to chunks already cut
-  bool continues_ = false;  // the last chunk cut a finest cell that goes on
+  uint64_t floor_ = 0;          // keys below belong to chunks already cut
+  bool continues_ = false;      // the last chunk cut a finest cell that goes on
   std::vector<Pending> pending_;
   KeptPointsStats stats_;
 };

@@ -282,8 +282,9 @@ TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
     std::filesystem::path input;
     int bits, colorCodes;
   };
-  for (const Case& c : {Case{std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 24, 0},
-                        Case{shared / "lion_rgb.las", 20, 1}, Case{dir_ / "far.ply", 30, 0}}) {
+  for (const Case& c :
+       {Case{std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 24, 0},
+        Case{shared / "lion_rgb.las", 20, 1}, Case{dir_ / "far.ply", 30, 0}}) {
     SCOPED_TRACE(c.input.string());
     const std::string iso = quoted(dir_ / "k.iso"), ply = quoted(dir_ / "k.ply");
     auto run = runIso("convert -q -f --json --keep-points --point-bits " + std::to_string(c.bits) +
@@ -317,8 +318,8 @@ TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   EXPECT_NE(run.err.find("keeps no points"), std::string::npos) << run.err;
   EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
   const std::vector<std::byte> old = test::readFile(dir_ / "plain.iso");
-  for (const std::string options : {"--keep-points --point-bits 31", "--keep-points --point-bits 7",
-                                    "--point-bits 20"}) {
+  for (const std::string options :
+       {"--keep-points --point-bits 31", "--keep-points --point-bits 7", "--point-bits 20"}) {
     run = runIso("convert -q -f " + options + " " + quoted(dir_ / "sphere.ply") + " -o " + plain);
     EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
   }

@@ -1,6 +1,6 @@
 // tests/data/golden-v1.iso pins the bytes of the current format (1.2): the current writer must
-// reproduce it exactly, the reader must read the expected values from it, and the byte offsets asserted here
-// are the ones of specs/iso-format.md, written independently of format/src/layout.h.
+// reproduce it exactly, the reader must read the expected values from it, and the byte offsets
+// asserted here are the ones of specs/iso-format.md, written independently of format/src/layout.h.
 #include <gtest/gtest.h>
 #define XXH_INLINE_ALL
 #include <xxhash.h>

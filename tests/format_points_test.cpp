@@ -29,8 +29,7 @@ PointsChunk randomPoints(size_t n, bool colors, bool normals, uint64_t seed) {
     const int32_t base = int32_t(rng() % 4) * 1000000;
     c.offsets.push_back({base + int32_t(rng() % 5000), base - int32_t(rng() % 5000),
                          int32_t(rng() % 70000) - 35000});
-    if (colors)
-      c.colors.push_back({uint16_t(rng()), uint16_t(rng() % 256 * 257), uint16_t(65535)});
+    if (colors) c.colors.push_back({uint16_t(rng()), uint16_t(rng() % 256 * 257), uint16_t(65535)});
     if (normals) c.normals.push_back({int16_t(rng() % 65535 - 32767), 0, int16_t(-32767)});
   }
   // The widest spans Draco's coder allows.
@@ -184,8 +183,7 @@ TEST(PointsChunk, hostileChunksAreRejectedWithTheirReason) {
   // The Draco count is not the chunk's: both counts of ours say 299.
   std::vector<std::byte> fewer = good;
   fewer[0] = std::byte{43};  // 300 = 0x12c
-  expectRejected(fileWith(dir, "draco-count.iso", pointsDesc(299), fewer),
-                 "Draco point count");
+  expectRejected(fileWith(dir, "draco-count.iso", pointsDesc(299), fewer), "Draco point count");
   expectRejected(fileWith(dir, "short.iso", pointsDesc(300),
                           std::vector<std::byte>(good.begin(), good.begin() + 8)),
                  "shorter than its header");

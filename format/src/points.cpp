@@ -31,10 +31,8 @@ struct AttributeRule {
 };
 constexpr AttributeRule kPosition{draco::GeometryAttribute::POSITION, draco::DT_INT32,
                                   "POSITION int32"};
-constexpr AttributeRule kColor{draco::GeometryAttribute::COLOR, draco::DT_UINT16,
-                               "COLOR uint16"};
-constexpr AttributeRule kNormal{draco::GeometryAttribute::NORMAL, draco::DT_INT16,
-                                "NORMAL int16"};
+constexpr AttributeRule kColor{draco::GeometryAttribute::COLOR, draco::DT_UINT16, "COLOR uint16"};
+constexpr AttributeRule kNormal{draco::GeometryAttribute::NORMAL, draco::DT_INT16, "NORMAL int16"};
 
 template <typename T>
 void addAttribute(draco::PointCloudBuilder& builder, const AttributeRule& rule,
@@ -192,7 +190,8 @@ std::array<double, 3> pointFramePosition(uint8_t level, uint64_t key, uint8_t st
   const std::array<uint32_t, 3> cell = mortonDecode(key);
   std::array<double, 3> out{};
   for (int a = 0; a < 3; ++a)
-    out[a] = std::ldexp(double(cell[a]), -int(level)) + std::ldexp(double(offset[a]), -int(stepBits));
+    out[a] =
+        std::ldexp(double(cell[a]), -int(level)) + std::ldexp(double(offset[a]), -int(stepBits));
   return out;
 }
 

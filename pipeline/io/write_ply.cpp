@@ -37,8 +37,7 @@ void appendNumber(std::string& out, T value) {
   out.append(text, result.ptr);
 }
 
-std::string pointHeader(uint64_t count, bool normals, bool colors,
-                        const PlyWriteOptions& options) {
+std::string pointHeader(uint64_t count, bool normals, bool colors, const PlyWriteOptions& options) {
   std::string header = "ply\n";
   header += options.binary ? "format binary_little_endian 1.0\n" : "format ascii 1.0\n";
   for (std::string comment : options.comments) {
@@ -51,8 +50,7 @@ std::string pointHeader(uint64_t count, bool normals, bool colors,
   for (const char* axis : {"x", "y", "z"})
     header += fmt::format("property {} {}\n", positionType, axis);
   if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
-  if (colors)
-    header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  if (colors) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
   return header + "end_header\n";
 }
 

@@ -97,12 +97,13 @@ TEST(KeptPoints, cellsAreTheCoarsestThatHoldAtMostTheLimitAndEveryPointComesBack
       EXPECT_GE(end, previousEnd);
     } else {
       EXPECT_EQ(c.pointCount, countIn(c.level, c.key));  // the whole cell
-      EXPECT_GE(begin, previousEnd);                      // disjoint, in Morton order
+      EXPECT_GE(begin, previousEnd);                     // disjoint, in Morton order
     }
     // Coarsest: the parent cell holds more than the limit or reaches into earlier chunks.
     if (c.level > 0 && c.pointCount == countIn(c.level, c.key)) {
       const uint64_t parent = c.key >> 3;
-      EXPECT_TRUE(countIn(uint8_t(c.level - 1), parent) > kLimit || (parent << (shift + 3)) < previousEnd)
+      EXPECT_TRUE(countIn(uint8_t(c.level - 1), parent) > kLimit ||
+                  (parent << (shift + 3)) < previousEnd)
           << "chunk " << c.id;
     }
     previousEnd = end;

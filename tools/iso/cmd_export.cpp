@@ -7,11 +7,11 @@
 
 #include "commands.h"
 #include "export.h"
-#include "keep_points.h"
 #include "io/ply.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
+#include "keep_points.h"
 #include "text.h"
 
 namespace iso::cli {
@@ -50,8 +50,7 @@ int run(const Options& o) {
                       "keeps no points (convert with --keep-points to keep them)");
     const auto started = std::chrono::steady_clock::now();
     // Double positions: float would round them more coarsely than the file keeps them.
-    PlyPointWriter ply(o.points, kept.points, kept.normals, kept.colors,
-                       {.doublePositions = true});
+    PlyPointWriter ply(o.points, kept.points, kept.normals, kept.colors, {.doublePositions = true});
     forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
     ply.commit();
     summary["points"] = {

@@ -83,9 +83,8 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
   j["raw_bytes"] = s.rawBytes;
   j["point_count"] = s.points;
   j["codecs"] = s.codecs;
-  j["kept_points"] = {{"chunks", s.kept.chunks},
-                      {"points", s.kept.points},
-                      {"stored_bytes", s.kept.storedBytes}};
+  j["kept_points"] = {
+      {"chunks", s.kept.chunks}, {"points", s.kept.points}, {"stored_bytes", s.kept.storedBytes}};
   j["levels"] = nlohmann::json::array();
   for (const auto& [level, l] : s.levels)
     j["levels"].push_back({{"level", level},
