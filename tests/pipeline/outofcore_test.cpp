@@ -126,7 +126,7 @@ TEST(OutOfCore, sameFileWithInputNormalsSomeFlippedColorsAndDuplicates) {
   expectSameFiles(cloud, options, 400, 100);
 }
 
-TEST(OutOfCore, texturesAndAmbientOcclusionBakeTheSameFile) {
+TEST(OutOfCore, texturesAmbientOcclusionAndKeptPointsMakeTheSameFile) {
   test::TempDir dir;
   test::writePpm(dir / "tex.ppm", 8, 8, test::randomImage(8, 8, 2));
   PointCloud cloud = test::scanOf("torus", 40000, true, 0.1, 4);
@@ -134,9 +134,13 @@ TEST(OutOfCore, texturesAndAmbientOcclusionBakeTheSameFile) {
   options.orientBlockPoints = 256;
   options.texture = {dir / "tex.ppm", 0.7, 3.0, TextureAt::Points};
   options.occlusion = {true, 8, 0.5};
+  options.keepPoints = true;  // copied as they are into the file with occlusion
+  options.keptPointsPerChunk = 5000;
   const nlohmann::json report = expectSameFiles(cloud, options, 400, 50);
   EXPECT_EQ(report["texture"]["at"], "points");
   EXPECT_GT(report["occlusion"]["corners"].get<uint64_t>(), 1000u);
+  EXPECT_EQ(report["kept_points"]["points"], cloud.size());
+  EXPECT_GE(report["kept_points"]["chunks"].get<uint64_t>(), 8u);
   options.texture.at = TextureAt::Corners;
   cloud.colors.assign(cloud.size(), glm::vec3(0.5f, 0.25f, 1.0f));  // multiplied by the texture
   expectSameFiles(cloud, options, 400, 50);
