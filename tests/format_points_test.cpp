@@ -103,6 +103,25 @@ TEST(PointsChunk, everyAttributeComesBackExactlyThroughAFile) {
   }
 }
 
+TEST(PointsChunk, eightBitColorsTravelAsBytesAndComeBackExactly) {
+  // Colors that are all 257 · (8-bit code) are coded as bytes; one that is not sends the whole
+  // chunk's colors as 16-bit values, which cost the coder 8 more bits a channel.
+  test::TempDir dir;
+  PointsChunk eight = randomPoints(5000, true, false, 11);
+  std::mt19937_64 rng(12);
+  for (std::array<uint16_t, 3>& c : eight.colors)
+    for (uint16_t& v : c) v = uint16_t(rng() % 256 * 257);
+  PointsChunk sixteen = eight;
+  sixteen.colors[17][1] += 1;
+  const std::vector<std::byte> bytes = encodePointsChunk(eight), wide = encodePointsChunk(sixteen);
+  EXPECT_LT(bytes.size() + 5000 * 2, wide.size()) << bytes.size() << " against " << wide.size();
+  for (const PointsChunk* in : {&eight, &sixteen}) {
+    const Reader reader = Reader::open(
+        fileWith(dir, "colors.iso", pointsDesc(5000), encodePointsChunk(*in)));
+    EXPECT_EQ(rowsOf(decodePointsChunk(reader, 0)), rowsOf(*in));
+  }
+}
+
 TEST(PointsChunk, positionsAreTheCellCornerPlusStepsExactly) {
   // Cell (level 3, key 0x1a5 = 0b110'100'101): bit 3j of the key is bit j of x, 3j+1 of y, 3j+2
   // of z, so x = 0b001 = 1, y = 0b100 = 4, z = 0b111 = 7.

@@ -7,6 +7,7 @@
 #include <draco/core/decoder_buffer.h>
 #include <draco/point_cloud/point_cloud_builder.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -32,6 +33,7 @@ struct AttributeRule {
 constexpr AttributeRule kPosition{draco::GeometryAttribute::POSITION, draco::DT_INT32,
                                   "POSITION int32"};
 constexpr AttributeRule kColor{draco::GeometryAttribute::COLOR, draco::DT_UINT16, "COLOR uint16"};
+constexpr AttributeRule kColor8{draco::GeometryAttribute::COLOR, draco::DT_UINT8, "COLOR uint8"};
 constexpr AttributeRule kNormal{draco::GeometryAttribute::NORMAL, draco::DT_INT16, "NORMAL int16"};
 
 template <typename T>
@@ -83,7 +85,21 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
   draco::PointCloudBuilder builder;
   builder.Start(uint32_t(n));
   addAttribute(builder, kPosition, points.offsets);
-  if (!points.colors.empty()) addAttribute(builder, kColor, points.colors);
+  if (!points.colors.empty()) {
+    // Colors that are all 8-bit codes (v = 257 · c) go as bytes: the kd-tree coder codes every
+    // bit of an attribute and cannot see that the low byte repeats the high one.
+    const bool eightBit = std::all_of(points.colors.begin(), points.colors.end(), [](const auto& c) {
+      return c[0] % 257 == 0 && c[1] % 257 == 0 && c[2] % 257 == 0;
+    });
+    if (eightBit) {
+      std::vector<std::array<uint8_t, 3>> bytes(n);
+      for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) bytes[i][a] = uint8_t(points.colors[i][a] / 257);
+      addAttribute(builder, kColor8, bytes);
+    } else {
+      addAttribute(builder, kColor, points.colors);
+    }
+  }
   if (!points.normals.empty()) addAttribute(builder, kNormal, points.normals);
   const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(false);
   draco::ExpertEncoder encoder(*cloud);
@@ -175,7 +191,15 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
   };
   out.offsets = valuesOf<int32_t>(attribute(kPosition), count);
   if (!withinSpan(out.offsets)) fail("the offsets span 2^31 or more along an axis");
-  if (colors) out.colors = valuesOf<uint16_t>(attribute(kColor), count);
+  if (colors) {
+    const draco::PointAttribute* c = cloud.GetNamedAttribute(draco::GeometryAttribute::COLOR);
+    if (c != nullptr && c->data_type() == draco::DT_UINT8) {
+      for (const std::array<uint8_t, 3>& v : valuesOf<uint8_t>(attribute(kColor8), count))
+        out.colors.push_back({uint16_t(v[0] * 257), uint16_t(v[1] * 257), uint16_t(v[2] * 257)});
+    } else {
+      out.colors = valuesOf<uint16_t>(attribute(kColor), count);
+    }
+  }
   if (normals) {
     out.normals = valuesOf<int16_t>(attribute(kNormal), count);
     for (const std::array<int16_t, 3>& n : out.normals)

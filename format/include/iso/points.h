@@ -28,7 +28,8 @@ inline constexpr uint8_t kPointsHaveNormals = 2;
 struct PointsChunk {
   uint8_t stepBits = 0;
   std::vector<std::array<int32_t, 3>> offsets;
-  std::vector<std::array<uint16_t, 3>> colors;  // sRGB, 65535 = 1; empty: the points have none
+  // sRGB, 65535 = 1; empty: the points have none. Stored as bytes when all are 257 · (0 to 255).
+  std::vector<std::array<uint16_t, 3>> colors;
   std::vector<std::array<int16_t, 3>> normals;  // snorm16 (value / 32767); empty: none
 
   size_t size() const { return offsets.size(); }
