@@ -116,8 +116,8 @@ TEST(PointsChunk, eightBitColorsTravelAsBytesAndComeBackExactly) {
   const std::vector<std::byte> bytes = encodePointsChunk(eight), wide = encodePointsChunk(sixteen);
   EXPECT_LT(bytes.size() + 5000 * 2, wide.size()) << bytes.size() << " against " << wide.size();
   for (const PointsChunk* in : {&eight, &sixteen}) {
-    const Reader reader = Reader::open(
-        fileWith(dir, "colors.iso", pointsDesc(5000), encodePointsChunk(*in)));
+    const Reader reader =
+        Reader::open(fileWith(dir, "colors.iso", pointsDesc(5000), encodePointsChunk(*in)));
     EXPECT_EQ(rowsOf(decodePointsChunk(reader, 0)), rowsOf(*in));
   }
 }

@@ -88,9 +88,9 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
   if (!points.colors.empty()) {
     // Colors that are all 8-bit codes (v = 257 · c) go as bytes: the kd-tree coder codes every
     // bit of an attribute and cannot see that the low byte repeats the high one.
-    const bool eightBit = std::all_of(points.colors.begin(), points.colors.end(), [](const auto& c) {
-      return c[0] % 257 == 0 && c[1] % 257 == 0 && c[2] % 257 == 0;
-    });
+    const bool eightBit = std::all_of(
+        points.colors.begin(), points.colors.end(),
+        [](const auto& c) { return c[0] % 257 == 0 && c[1] % 257 == 0 && c[2] % 257 == 0; });
     if (eightBit) {
       std::vector<std::array<uint8_t, 3>> bytes(n);
       for (size_t i = 0; i < n; ++i)
