@@ -347,14 +347,7 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
   c->callback([o, &exitCode] {
-    exitCode = runGuarded("convert", [&] {
-      try {
-        return run(*o);
-      } catch (const std::invalid_argument& error) {  // impossible options
-        fmt::print(stderr, "iso convert: {}\n", error.what());
-        return kExitUsage;
-      }
-    });
+    exitCode = runWithUsageErrors("convert", [&] { return run(*o); });
   });
 }
 

@@ -97,14 +97,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--seed", o->eval.seed, "Random seed")->capture_default_str();
   addShapeOptions(*c, o->truth);
   c->callback([o, &exitCode] {
-    exitCode = runGuarded("eval", [&] {
-      try {
-        return run(*o);
-      } catch (const std::invalid_argument& error) {
-        fmt::print(stderr, "iso eval: {}\n", error.what());
-        return kExitUsage;
-      }
-    });
+    exitCode = runWithUsageErrors("eval", [&] { return run(*o); });
   });
 }
 

@@ -152,14 +152,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   c->add_flag("-f,--force", o->force, "Replace output files that exist");
   c->add_flag("--json", o->json, "Print the summary as JSON");
   c->callback([o, &exitCode] {
-    exitCode = runGuarded("export", [&] {
-      try {
-        return run(*o);
-      } catch (const std::invalid_argument& error) {
-        fmt::print(stderr, "iso export: {}\n", error.what());
-        return kExitUsage;
-      }
-    });
+    exitCode = runWithUsageErrors("export", [&] { return run(*o); });
   });
 }
 

@@ -62,14 +62,7 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   addShapeOptions(*c, o->truth);
   c->callback([o, &exitCode] {
-    exitCode = runGuarded("gen", [&] {
-      try {
-        return run(*o);
-      } catch (const std::invalid_argument& error) {
-        fmt::print(stderr, "iso gen: {}\n", error.what());
-        return kExitUsage;
-      }
-    });
+    exitCode = runWithUsageErrors("gen", [&] { return run(*o); });
   });
 }
 

@@ -12,6 +12,9 @@ inline constexpr int kExitUsage = 2;
 
 // Runs body and turns exceptions into a message on stderr ("iso: ...") and kExitFailure.
 int runGuarded(const char* command, const std::function<int()>& body);
+// The same, and std::invalid_argument (impossible options) is a usage error: its message on
+// stderr and kExitUsage.
+int runWithUsageErrors(const char* command, const std::function<int()>& body);
 
 void addConvertCommand(CLI::App& app, int& exitCode);
 void addEvalCommand(CLI::App& app, int& exitCode);

@@ -27,6 +27,17 @@ int runGuarded(const char* command, const std::function<int()>& body) {
   return kExitFailure;
 }
 
+int runWithUsageErrors(const char* command, const std::function<int()>& body) {
+  return runGuarded(command, [&] {
+    try {
+      return body();
+    } catch (const std::invalid_argument& error) {
+      fmt::print(stderr, "iso {}: {}\n", command, error.what());
+      return kExitUsage;
+    }
+  });
+}
+
 }  // namespace iso::cli
 
 int main(int argc, char** argv) {
