@@ -346,9 +346,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
-  c->callback([o, &exitCode] {
-    exitCode = runWithUsageErrors("convert", [&] { return run(*o); });
-  });
+  c->callback(
+      [o, &exitCode] { exitCode = runWithUsageErrors("convert", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

@@ -96,9 +96,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
   c->add_option("--seed", o->eval.seed, "Random seed")->capture_default_str();
   addShapeOptions(*c, o->truth);
-  c->callback([o, &exitCode] {
-    exitCode = runWithUsageErrors("eval", [&] { return run(*o); });
-  });
+  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("eval", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

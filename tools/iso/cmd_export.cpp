@@ -151,9 +151,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_flag("-f,--force", o->force, "Replace output files that exist");
   c->add_flag("--json", o->json, "Print the summary as JSON");
-  c->callback([o, &exitCode] {
-    exitCode = runWithUsageErrors("export", [&] { return run(*o); });
-  });
+  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("export", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

@@ -61,9 +61,7 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--ascii", o->ascii, "ASCII PLY instead of binary");
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   addShapeOptions(*c, o->truth);
-  c->callback([o, &exitCode] {
-    exitCode = runWithUsageErrors("gen", [&] { return run(*o); });
-  });
+  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("gen", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli
