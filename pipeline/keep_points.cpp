@@ -8,7 +8,6 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <limits>
-#include <numeric>
 #include <stdexcept>
 
 #include "io/color.h"
@@ -196,9 +195,7 @@ KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHe
   const Frame& frame = header.frame;
   const size_t n = cloud.size();
   std::vector<uint64_t> keys(n);
-  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
-    keys[i] = keyOf(glm::vec3(toFrame(cloud.positions[i], frame)));
-  });
+  tbb::parallel_for(size_t{0}, n, [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
   const std::vector<uint32_t> order = sortedOrder(keys);  // stable: input order within a key
   PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk);
   const glm::vec3 none(0.0f);
@@ -225,13 +222,10 @@ KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& 
     const LoadedPoints loaded = distribution.load(chunk);
     const PointCloud& cloud = loaded.cloud;
     std::vector<uint64_t> keys(cloud.size());
-    for (size_t i = 0; i < cloud.size(); ++i)
-      keys[i] = keyOf(glm::vec3(toFrame(cloud.positions[i], frame)));
-    std::vector<uint32_t> order(cloud.size());
-    std::iota(order.begin(), order.end(), 0u);
-    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
-      return keys[a] != keys[b] ? keys[a] < keys[b] : loaded.source[a] < loaded.source[b];
-    });
+    for (size_t i = 0; i < cloud.size(); ++i) keys[i] = keyOfWorld(cloud.positions[i], frame);
+    // A load holds the points of each fine cell in input order, and one key lies in one fine
+    // cell: the stable sort by key gives (key, input index) order, as in core.
+    const std::vector<uint32_t> order = sortedOrder(keys);
     for (const uint32_t i : order)
       out.push(cloud.positions[i], keys[i], cloud.hasNormals() ? cloud.normals[i] : none,
                cloud.hasColors() ? cloud.colors[i] : none);

@@ -56,7 +56,7 @@ void decodeRaw(const std::byte* in, const PointLayout& l, PointCloud& cloud) {
 }
 
 uint64_t fineCellOf(const glm::dvec3& world, const Frame& frame) {
-  return keyOf(glm::vec3(toFrame(world, frame))) >> (3 * (kMaxLevel - Distribution::kFineLevel));
+  return keyOfWorld(world, frame) >> (3 * (kMaxLevel - Distribution::kFineLevel));
 }
 
 }  // namespace

@@ -119,6 +119,11 @@ glm::dvec3 gridToFrame(const GridPoint& p);
 glm::vec3 unitOrZero(const glm::vec3& n);
 // The Morton key at kMaxLevel of a position in frame units (clamped into the cube).
 uint64_t keyOf(const glm::vec3& frameUnits);
+// The same of a world position: the key the point stages and the out-of-core distribution give
+// it (frame units rounded to float first).
+inline uint64_t keyOfWorld(const glm::dvec3& world, const Frame& frame) {
+  return keyOf(glm::vec3(toFrame(world, frame)));
+}
 void sortByKey(PointSet& points);
 // The order that sorts the keys (stable): order[i] is the index of the i-th smallest.
 std::vector<uint32_t> sortedOrder(std::span<const uint64_t> keys);
