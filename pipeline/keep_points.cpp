@@ -195,7 +195,8 @@ KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHe
   const Frame& frame = header.frame;
   const size_t n = cloud.size();
   std::vector<uint64_t> keys(n);
-  tbb::parallel_for(size_t{0}, n, [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
+  tbb::parallel_for(size_t{0}, n,
+                    [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
   const std::vector<uint32_t> order = sortedOrder(keys);  // stable: input order within a key
   PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk);
   const glm::vec3 none(0.0f);
