@@ -18,6 +18,7 @@
 #include "measure.h"
 #include "outofcore.h"
 #include "progress.h"
+#include "visibility.h"
 
 namespace iso {
 namespace {
@@ -151,6 +152,22 @@ PointCloud withoutSources(const PointCloud& cloud, const PointSet& points,
   return out;
 }
 
+// The conversion report's visibility (visibility.h): up to kVisibilityPoints of the accuracy
+// sample, the 6 axis views and 2 random ones, pixels one mean spacing wide.
+constexpr size_t kVisibilityPoints = 20000;
+
+nlohmann::json visibilityReport(const Reader& written, std::span<const glm::dvec3> sample,
+                                double spacing) {
+  const size_t step = std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
+  std::vector<glm::dvec3> points;
+  for (size_t i = 0; i < sample.size(); i += step) points.push_back(sample[i]);
+  VisibilityOptions options;
+  options.randomViews = 2;
+  nlohmann::json v = measureVisibility(written, points, spacing, options).json();
+  v.erase("rays");
+  return v;
+}
+
 nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t passive,
                           size_t splits) {
   std::map<int, uint64_t> leavesPerLevel, passivePerLevel;
@@ -179,7 +196,8 @@ nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t p
           {"patch_splits", stats.testedPatches},
           {"patch_splits_too_far", stats.tooFar},
           {"patch_splits_uncovered", stats.uncovered},
-          {"thin_splits", stats.thinSplits}};
+          {"thin_splits", stats.thinSplits},
+          {"misfit_splits", stats.misfits}};
 }
 
 }  // namespace
@@ -475,7 +493,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
             {"bytes_per_leaf",
              double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
             {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
-        const DistanceStats d = pointsToZeroSet(Reader::open(written), frame, ready.sample);
+        const Reader writtenReader = Reader::open(written);
+        const DistanceStats d = pointsToZeroSet(writtenReader, frame, ready.sample);
         report["accuracy"] = {{"samples", d.samples},
                               {"unprojected", d.unprojected},
                               {"rms", d.rms},
@@ -483,6 +502,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                               {"mean", d.mean},
                               {"rms_over_spacing", d.rms / spacing},
                               {"max_over_spacing", d.max / spacing}};
+        timer.next("visibility");
+        report["visibility"] = visibilityReport(writtenReader, ready.sample, spacing);
         timer.end();
         const double seconds =
             std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;

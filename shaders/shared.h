@@ -60,7 +60,6 @@ ISO_CONST uint kMaxLights = 4u;
 ISO_CONST uint kRayStack = 8u;        // pending reflection/refraction rays per sample
 ISO_CONST uint kMaxSteps = 4096u;     // cells one ray may visit (a guard, never a visible limit)
 ISO_CONST uint kWorkgroupSize = 64u;  // one 8×8 tile of pixels, visited in Z-order
-ISO_CONST uint kSamplesPerLeaf = 4u;  // sign checks per cell crossing before root refinement
 
 // Bits of FrameParams.options.x.
 ISO_CONST uint kOptionShadows = 1u;
@@ -72,6 +71,8 @@ ISO_CONST uint kOptionSwapRB = 32u;       // write BGRA (swapchains) instead of 
 ISO_CONST uint kOptionEnvironment = 64u;  // an environment map is bound
 ISO_CONST uint kOptionRequests = 128u;    // rays request missing chunks (streaming on)
 ISO_CONST uint kOptionOcclusion = 256u;   // the file has baked ambient occlusion
+ISO_CONST uint kOptionBackTint = 512u;    // back faces seen by camera rays take FrameParams.backface
+ISO_CONST uint kOptionBackHide = 1024u;   // camera rays pass through back faces
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;
@@ -104,6 +105,7 @@ struct FrameParams {
   vec4 skyTop;     // rgb: sky color overhead (no environment map)
   vec4 skyBottom;  // rgb: sky color below the horizon
   vec4 worldUp;    // xyz: the scene's up direction (sky and environment map), unit
+  vec4 backface;   // rgb: the tint of back faces (kOptionBackTint)
   Light lights[kMaxLights];
   uvec4 poolAddress[kPoolBuffers / 2u];  // device addresses of the pool buffers, two a vec4
 };

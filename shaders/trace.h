@@ -115,12 +115,91 @@ Corners loadCorners(uint page, uint record) {
   return c;
 }
 
-// The trilinear interpolation at local coordinates u in [0, 1]^3.
-float trilinear(Corners c, vec3 u) {
-  vec4 a = mix(c.d0, c.d1, u.z);  // (x0y0, x1y0, x0y1, x1y1)
-  float x0 = mix(a.x, a.z, u.y);
-  float x1 = mix(a.y, a.w, u.y);
-  return mix(x0, x1, u.x);
+// The trilinear interpolation along the segment of a cell from local coordinates ua to ub, as a
+// cubic in s in [0, 1]: f(s) = k.x + k.y s + k.z s^2 + k.w s^3. Interpolated along x first (4
+// lines), then y (2 quadratics), then z.
+vec4 segmentCubic(Corners c, vec3 ua, vec3 ub) {
+  vec3 e = ub - ua;
+  vec4 lo = vec4(c.d0.x, c.d0.z, c.d1.x, c.d1.z);  // x = 0; (y, z) = 00, 10, 01, 11
+  vec4 hi = vec4(c.d0.y, c.d0.w, c.d1.y, c.d1.w);  // x = 1
+  vec4 a = mix(lo, hi, ua.x);                      // the 4 lines: a + b s
+  vec4 b = (hi - lo) * e.x;
+  vec2 da = vec2(a.y, a.w) - vec2(a.x, a.z);  // y = 1 minus y = 0, for z = 0 and z = 1
+  vec2 db = vec2(b.y, b.w) - vec2(b.x, b.z);
+  vec2 q0 = vec2(a.x, a.z) + da * ua.y;  // the 2 quadratics q0 + q1 s + q2 s^2
+  vec2 q1 = vec2(b.x, b.z) + da * e.y + db * ua.y;
+  vec2 q2 = db * e.y;
+  float r0 = q0.y - q0.x, r1 = q1.y - q1.x, r2 = q2.y - q2.x;
+  return vec4(q0.x + r0 * ua.z, q1.x + r1 * ua.z + r0 * e.z, q2.x + r2 * ua.z + r1 * e.z,
+              r2 * e.z);
+}
+
+float cubicAt(vec4 k, float s) { return ((k.w * s + k.z) * s + k.y) * s + k.x; }
+
+// Whether the sign change from value a to value b is a crossing for a ray on `side`: +1 or -1,
+// the crossing must leave that side; 0, either way. Zero counts as positive (as in
+// SurfaceModel), so the surface is the boundary of {f < 0}.
+bool crossing(float a, float b, float side) {
+  bool negativeA = a < 0.0f;
+  if (negativeA == (b < 0.0f)) return false;
+  return side == 0.0f || (side > 0.0f) != negativeA;
+}
+
+// The first crossing of the cubic k on [0, 1] for a ray on `side`. The cubic is split at its
+// critical points, where it is monotonic, so a root between two close roots (a grazing ray, a
+// thin part) is not skipped. On success, bracket = (sLo, sHi, f(sLo), f(sHi)).
+bool firstCrossing(vec4 k, float side, ISO_INOUT(vec4) bracket) {
+  float qa = 3.0f * k.w, qb = 2.0f * k.z, qc = k.y;  // the derivative
+  float s1 = 1.0f, s2 = 1.0f;
+  float disc = qb * qb - 4.0f * qa * qc;
+  if (disc >= 0.0f) {
+    float q = -0.5f * (qb + (qb >= 0.0f ? sqrt(disc) : -sqrt(disc)));
+    float r1 = qa != 0.0f ? q / qa : 1.0f;
+    float r2 = q != 0.0f ? qc / q : 1.0f;
+    if (!(r1 > 0.0f && r1 < 1.0f)) r1 = 1.0f;
+    if (!(r2 > 0.0f && r2 < 1.0f)) r2 = 1.0f;
+    s1 = min(r1, r2);
+    s2 = max(r1, r2);
+  }
+  float f0 = k.x, f1 = cubicAt(k, s1), f2 = cubicAt(k, s2), f3 = k.x + k.y + k.z + k.w;
+  if (crossing(f0, f1, side)) {
+    bracket = vec4(0.0f, s1, f0, f1);
+    return true;
+  }
+  if (crossing(f1, f2, side)) {
+    bracket = vec4(s1, s2, f1, f2);
+    return true;
+  }
+  if (crossing(f2, f3, side)) {
+    bracket = vec4(s2, 1.0f, f2, f3);
+    return true;
+  }
+  return false;
+}
+
+// The root of the cubic in a bracket (sLo, sHi, f(sLo), f(sHi)) whose ends have opposite signs:
+// regula falsi with the Illinois rule (superlinear, and it never leaves the bracket).
+float refineRoot(vec4 k, vec4 bracket) {
+  float sLo = bracket.x, sHi = bracket.y, fLo = bracket.z, fHi = bracket.w;
+  int kept = 0;
+  for (int i = 0; i < 24 && sHi > sLo; ++i) {
+    float m = clamp(sLo + (sHi - sLo) * fLo / (fLo - fHi), sLo, sHi);
+    float fm = cubicAt(k, m);
+    if ((fm < 0.0f) == (fLo < 0.0f)) {
+      if (m == sLo) break;
+      sLo = m;
+      fLo = fm;
+      if (kept == 1) fHi *= 0.5f;
+      kept = 1;
+    } else {
+      if (m == sHi) break;
+      sHi = m;
+      fHi = fm;
+      if (kept == -1) fLo *= 0.5f;
+      kept = -1;
+    }
+  }
+  return (fLo - fHi) != 0.0f ? clamp(sLo + (sHi - sLo) * fLo / (fLo - fHi), sLo, sHi) : sLo;
 }
 
 // Its gradient (local units).
@@ -137,7 +216,8 @@ vec3 trilinearGradient(Corners c, vec3 u) {
 
 struct Hit {
   float t;
-  vec3 normal;  // unit, pointing outside (where the signed distance is positive)
+  float from;       // the side of the surface the ray came from: +1 (f >= 0, a front face) or -1
+  vec3 normal;      // unit, pointing outside (where the signed distance is positive)
   vec3 color;       // linear RGB: the file's colors, or the material's
   float occlusion;  // baked ambient occlusion (1: open)
 };
@@ -198,15 +278,18 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
   }
 }
 
-// The first crossing of the surface by the ray o + t·d, t in [tMin, tMax], in the direction
-// that leaves the side the ray is on (`inside`: f < 0). Crossings the other way are ignored,
-// so a ray leaving a surface never hits that surface again (the front/back-face flag).
+// The first crossing of the surface by the ray o + t·d, t in [tMin, tMax]: the first sign change
+// of the trilinear along the ray, found exactly in each cell (segmentCubic, firstCrossing), or
+// between the exit of one cell and the entry of the next (the seam rule of SurfaceModel).
+// `side` is the side the ray starts on (+1 outside, -1 inside) when it leaves a surface: a
+// crossing back into that side is the surface it left (self-intersection) and does not count,
+// up to the first empty cell, past which the side is no longer known; 0 takes crossings either
+// way (camera rays see both sides). `strict` keeps the side rule all along (back faces hidden).
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
 // ask for chunks it lacks. Counts one ray in `rays`.
-bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distance, bool request,
-               ISO_INOUT(Hit) hit, ISO_INOUT(uint) rays) {
+bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
+               bool request, ISO_INOUT(Hit) hit, ISO_INOUT(uint) rays) {
   rays += 1u;
-  float side = inside ? -1.0f : 1.0f;
   vec3 dir = d;
   if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
   if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
@@ -223,12 +306,14 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
   vec3 p = o + d * t;
   uvec3 g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
   bool havePrevious = false;
-  float previous = 0.0f;  // f × side at the end of the previous surface cell
+  float previous = 0.0f;  // f at the exit of the previous surface cell
   // The traversal only brackets the first crossing; the root and the attributes are computed once
   // after it (in SIMD execution, work inside the loop costs every lane every step).
   bool found = false;
   Cell hitCell;
-  float tLo = 0.0f, tHi = 0.0f, fLo = 0.0f, fHi = 0.0f;
+  float tIn = 0.0f, tOut = 0.0f;  // the hit cell's segment
+  vec4 bracket = vec4(0.0f);  // s in [bracket.x, bracket.y] of that segment (equal: at its entry
+                              // face), the values at both ends (before and after, at a face)
   for (uint step = 0u; step < kMaxSteps && !found; ++step) {
     Cell cell = locate(g, distance + t, request);
     float size = 1.0f / float(1u << cell.level);
@@ -240,33 +325,43 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
     float tStop = min(tExit, tEnd);
     if (cell.filled) {
       Corners c = loadCorners(cell.page, cell.record);
-      float ta0 = t;
-      float fa = side * trilinear(c, clamp((o + d * ta0 - lo) / size, vec3(0.0f), vec3(1.0f)));
-      if (havePrevious && previous > 0.0f && fa <= 0.0f) {  // the sign changed at the face
-        found = true;
-        tLo = t;
-        tHi = t;
-        fLo = 0.0f;
-        fHi = 0.0f;
-      }
-      for (uint k = 1u; k <= kSamplesPerLeaf && !found; ++k) {
-        float tb0 = mix(t, tStop, float(k) / float(kSamplesPerLeaf));
-        float fb = side * trilinear(c, clamp((o + d * tb0 - lo) / size, vec3(0.0f), vec3(1.0f)));
-        if (fa > 0.0f && fb <= 0.0f) {
+      float least = min(min(min(c.d0.x, c.d0.y), min(c.d0.z, c.d0.w)),
+                        min(min(c.d1.x, c.d1.y), min(c.d1.z, c.d1.w)));
+      float most = max(max(max(c.d0.x, c.d0.y), max(c.d0.z, c.d0.w)),
+                       max(max(c.d1.x, c.d1.y), max(c.d1.z, c.d1.w)));
+      float entry, exit;
+      if (least >= 0.0f || most < 0.0f) {
+        // One sign at every corner, and so everywhere in the cell: no crossing inside it.
+        entry = least >= 0.0f ? 1.0f : -1.0f;
+        exit = entry;
+        if (havePrevious && crossing(previous, entry, side)) {
           found = true;
-          tLo = ta0;
-          tHi = tb0;
-          fLo = fa;
-          fHi = fb;
+          bracket = vec4(0.0f, 0.0f, previous, entry);
         }
-        ta0 = tb0;
-        fa = fb;
+      } else {
+        vec3 ua = clamp((o + d * t - lo) / size, vec3(0.0f), vec3(1.0f));
+        vec3 ub = clamp((o + d * tStop - lo) / size, vec3(0.0f), vec3(1.0f));
+        vec4 k = segmentCubic(c, ua, ub);
+        entry = k.x;
+        exit = k.x + k.y + k.z + k.w;
+        if (havePrevious && crossing(previous, entry, side)) {
+          found = true;  // the sign changed at the face
+          bracket = vec4(0.0f, 0.0f, previous, entry);
+        } else {
+          found = firstCrossing(k, side, bracket);
+        }
       }
-      hitCell = cell;
+      if (found) {
+        hitCell = cell;
+        tIn = t;
+        tOut = tStop;
+        hit.from = bracket.z < 0.0f ? -1.0f : 1.0f;
+      }
       havePrevious = true;
-      previous = fa;
+      previous = exit;
     } else {
       havePrevious = false;
+      if (!strict) side = 0.0f;
     }
     if (!found) {
       if (tExit >= tEnd) return false;
@@ -288,30 +383,23 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, bool inside, float distan
     }
   }
   if (!found) return false;
-  // Solve f(t) = 0 on [tLo, tHi]: regula falsi with the Illinois rule, then a last secant step.
+  // The root in the bracket, once, on the hit cell's cubic.
   float size = 1.0f / float(1u << hitCell.level);
   vec3 lo = vec3(hitCell.coord) * size;
+  vec3 ua = clamp((o + d * tIn - lo) / size, vec3(0.0f), vec3(1.0f));
+  vec3 ub = clamp((o + d * tOut - lo) / size, vec3(0.0f), vec3(1.0f));
   Corners c = loadCorners(hitCell.page, hitCell.record);
-  int kept = 0;
-  for (int i = 0; i < 12 && tHi > tLo; ++i) {
-    float m = (fLo - fHi) != 0.0f ? tLo + (tHi - tLo) * fLo / (fLo - fHi) : 0.5f * (tLo + tHi);
-    m = clamp(m, tLo, tHi);
-    float fm = side * trilinear(c, clamp((o + d * m - lo) / size, vec3(0.0f), vec3(1.0f)));
-    if (fm > 0.0f) {
-      tLo = m;
-      fLo = fm;
-      if (kept == 1) fHi *= 0.5f;
-      kept = 1;
-    } else {
-      tHi = m;
-      fHi = fm;
-      if (kept == -1) fLo *= 0.5f;
-      kept = -1;
-    }
+  vec4 k = segmentCubic(c, ua, ub);
+  float s = 0.0f;
+  if (bracket.y > bracket.x) {
+    // The ends again from the cubic just computed (the same arithmetic as in the loop).
+    bracket.z = cubicAt(k, bracket.x);
+    bracket.w = cubicAt(k, bracket.y);
+    s = (bracket.z < 0.0f) == (bracket.w < 0.0f) ? 0.5f * (bracket.x + bracket.y)
+                                                  : refineRoot(k, bracket);
   }
-  hit.t = (fLo - fHi) != 0.0f ? tLo + (tHi - tLo) * fLo / (fLo - fHi) : tHi;
-  vec3 u = clamp((o + d * hit.t - lo) / size, vec3(0.0f), vec3(1.0f));
-  surfaceAttributes(hitCell, c, u, hit);
+  hit.t = tIn + (tOut - tIn) * s;
+  surfaceAttributes(hitCell, c, mix(ua, ub, s), hit);
   return true;
 }
 
@@ -359,7 +447,8 @@ vec3 background(vec3 d) {
   return mix(bottom, top, clamp(0.5f + 0.5f * h, 0.0f, 1.0f));
 }
 
-// Phong lighting at p with the shading normal n seen from direction -d, with shadow rays.
+// Phong lighting at p with the shading normal hit.normal (facing the ray) seen from direction
+// -d, with shadow rays that leave the surface on the side `from` of the hit.
 vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
   vec3 n = hit.normal;
   vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
@@ -388,7 +477,7 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       bool lit = lambert > 0.0f;
       if (lit && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
-        lit = !intersect(origin, l, 0.0f, lengthL, false, distance, false, blocker, rays);
+        lit = !intersect(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker, rays);
       }
       if (lit) {
         vec3 r = reflect(-l, n);
@@ -402,20 +491,29 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
   return color;
 }
 
+// A pending ray's side of the surface (-1, 0, +1) and whether it travels inside a transparent
+// object, packed into one float of the ray stack.
+float packRayState(float side, bool inMedium) { return side + 1.0f + (inMedium ? 4.0f : 0.0f); }
+
 // The color seen along a camera ray, with reflection and refraction rays up to the bounce limit.
+// Camera rays see both sides of the surface: a back face (crossed from f < 0) is shaded with the
+// flipped normal, tinted (kOptionBackTint) or passed through (kOptionBackHide). Every hit is shaded
+// with the normal facing the ray; the rays that leave it keep the side they leave on.
 // Pending rays wait on a small stack of vec4s: origin and path length before it, direction and
-// bounce count, weight and whether the ray travels inside.
+// bounce count, weight and the ray's state (packRayState).
 vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
   vec4 stackOrigin[kRayStack];
   vec4 stackDirection[kRayStack];
   vec4 stackWeight[kRayStack];
+  bool hideBack = (P.options.x & kOptionBackHide) != 0u;
   // The camera ray first.
   vec3 origin = o;
   vec3 direction = d;
   vec3 weight = vec3(1.0f);
   float before = 0.0f;  // path length before origin
   uint depth = 0u;
-  bool inside = false;
+  float side = hideBack ? 1.0f : 0.0f;
+  bool inMedium = false;
   uint count = 0u;
   vec3 color = vec3(0.0f);
   float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
@@ -426,16 +524,19 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
   while (more) {
     Hit hit;
     bool primary = depth == 0u;
-    if (!intersect(origin, direction, 0.0f, 1e30f, inside, before,
+    if (!intersect(origin, direction, 0.0f, 1e30f, side, primary && hideBack, before,
                    primary && (P.options.x & kOptionRequests) != 0u, hit, rays)) {
       color += weight * background(direction);
     } else {
       vec3 p = origin + direction * hit.t;
-      vec3 n = hit.normal;
+      vec3 n = hit.from * hit.normal;  // facing the ray
+      hit.normal = n;
       float distance = before + hit.t;
       bool bounce = depth < P.options.y;
-      if (!inside) {
-        // A front face: local shading, then the transmitted and the mirror rays.
+      if (!inMedium) {
+        // Local shading, then the transmitted and the mirror rays.
+        if (hit.from < 0.0f && (P.options.x & kOptionBackTint) != 0u)
+          hit.color *= vec3(P.backface.x, P.backface.y, P.backface.z);
         color += weight * (1.0f - reflectivity - transparency) *
                  shade(p, direction, hit, distance, rng, rays);
         float mirror = reflectivity;
@@ -444,7 +545,7 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
           if (dot(r, r) > 0.0f && count < kRayStack) {
             stackOrigin[count] = vec4(p - n * offset, distance);
             stackDirection[count] = vec4(normalize(r), float(depth + 1u));
-            stackWeight[count] = vec4(weight * transparency, 1.0f);
+            stackWeight[count] = vec4(weight * transparency, packRayState(-hit.from, true));
             count += 1u;
           } else {
             mirror += transparency;
@@ -453,18 +554,20 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
         if (bounce && mirror > 0.0f && count < kRayStack) {
           stackOrigin[count] = vec4(p + n * offset, distance);
           stackDirection[count] = vec4(reflect(direction, n), float(depth + 1u));
-          stackWeight[count] = vec4(weight * mirror, 0.0f);
+          stackWeight[count] = vec4(weight * mirror, packRayState(hit.from, false));
           count += 1u;
         }
       } else if (bounce && count < kRayStack) {
-        // A back face from inside: absorption along the way, then out or totally reflected.
+        // Leaving a transparent object: absorption along the way, then out or totally reflected.
         vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
-        vec3 r = refract(direction, -n, eta);
+        vec3 r = refract(direction, n, eta);
         bool leaves = dot(r, r) > 0.0f;
-        stackOrigin[count] = vec4(leaves ? p + n * offset : p - n * offset, distance);
+        stackOrigin[count] = vec4(leaves ? p - n * offset : p + n * offset, distance);
         stackDirection[count] =
-            vec4(leaves ? normalize(r) : reflect(direction, -n), float(depth + 1u));
-        stackWeight[count] = vec4(weight * exp(-absorption * hit.t), leaves ? 0.0f : 1.0f);
+            vec4(leaves ? normalize(r) : reflect(direction, n), float(depth + 1u));
+        stackWeight[count] = vec4(weight * exp(-absorption * hit.t),
+                                  leaves ? packRayState(-hit.from, false)
+                                         : packRayState(hit.from, true));
         count += 1u;
       }
     }
@@ -476,7 +579,9 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
       direction = vec3(stackDirection[count].x, stackDirection[count].y, stackDirection[count].z);
       depth = uint(stackDirection[count].w);
       weight = vec3(stackWeight[count].x, stackWeight[count].y, stackWeight[count].z);
-      inside = stackWeight[count].w > 0.5f;
+      uint state = uint(stackWeight[count].w + 0.5f);
+      side = float(state & 3u) - 1.0f;
+      inMedium = state >= 4u;
     }
   }
   return color;

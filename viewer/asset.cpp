@@ -17,11 +17,7 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
   const FileHeader& header = a->reader.header();
   if (a->tree.topChunk() == kNoParent)
     throw FileError(a->reader.name(), std::nullopt, "the file holds no surface to view");
-  for (const AttributeDesc& d : header.attributes) {
-    if (d.semantic == Semantic::Normal) a->blob.normals = true;
-    if (d.semantic == Semantic::Color) a->blob.colors = true;
-    if (d.semantic == Semantic::Occlusion) a->blob.occlusion = true;
-  }
+  a->blob = blobOptionsOf(header);
   // Bounds from the coarsest chunk's deepest level.
   a->reader.checkPayload(a->tree.topChunk());
   const SurfaceChunk top = decodeSurfaceChunk(a->reader, a->tree.topChunk());
@@ -47,6 +43,22 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
     for (const auto& input : meta["inputs"])
       if (input.is_object() && input.value("format", "").rfind("las", 0) == 0) a->up = {0, 0, 1};
   return a;
+}
+
+FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
+                         const Environment* environment) {
+  FrameSetup setup;
+  setup.width = width;
+  setup.height = height;
+  setup.topChunk = asset.tree.topChunk();
+  setup.chunkCount = uint32_t(asset.reader.chunks().size());
+  setup.normals = asset.blob.normals;
+  setup.colors = asset.blob.colors;
+  setup.occlusion = asset.blob.occlusion;
+  setup.requests = false;
+  setup.environmentWidth = environment ? environment->width : 0;
+  setup.environmentHeight = environment ? environment->height : 0;
+  return setup;
 }
 
 }  // namespace iso::viewer

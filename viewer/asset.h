@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "blob.h"
+#include "image.h"
 #include "iso/reader.h"
 #include "scene.h"
 
@@ -24,5 +25,9 @@ struct Asset {
  private:
   explicit Asset(Reader r);
 };
+
+// The frame setup of the CPU reference tracer for an asset (everything resident, no requests).
+FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
+                         const Environment* environment);
 
 }  // namespace iso::viewer

@@ -78,6 +78,16 @@ uint32_t ChunkTree::childCovering(uint32_t parent, uint8_t level, uint64_t key) 
   return kNoParent;
 }
 
+BlobOptions blobOptionsOf(const FileHeader& header) {
+  BlobOptions o;
+  for (const AttributeDesc& d : header.attributes) {
+    if (d.semantic == Semantic::Normal) o.normals = true;
+    if (d.semantic == Semantic::Color) o.colors = true;
+    if (d.semantic == Semantic::Occlusion) o.occlusion = true;
+  }
+  return o;
+}
+
 uint32_t recordWords(const BlobOptions& options) {
   return gpu::kRecordDistanceWords + (options.normals ? gpu::kRecordNormalWords : 0) +
          (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);

@@ -32,6 +32,9 @@ struct BlobOptions {
   bool occlusion = false;  // ... and occlusion (in the color words, white without colors)
 };
 
+// What a file's corner records carry, from its attributes.
+BlobOptions blobOptionsOf(const FileHeader& header);
+
 // Words per corner record with these options.
 uint32_t recordWords(const BlobOptions& options);
 

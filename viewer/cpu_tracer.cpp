@@ -1,6 +1,7 @@
 // The CPU reference tracer (cpu_tracer.h): shaders/trace.h inside a C++ class.
 #include "cpu_tracer.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <atomic>
@@ -8,6 +9,7 @@
 #include <glm/packing.hpp>
 
 #include "iso/check.h"
+#include "iso/error.h"
 
 namespace iso::viewer {
 namespace shader {
@@ -46,16 +48,20 @@ class Tracer {
 #undef ISO_INOUT
 }  // namespace shader
 
-CpuPool buildCpuPool(const Asset& asset) {
+CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
   CpuPool pool;
-  const auto chunks = asset.reader.chunks();
+  const auto chunks = reader.chunks();
+  const ChunkTree tree(chunks);
+  if (tree.topChunk() == kNoParent)
+    throw FileError(reader.name(), std::nullopt, "the file holds no surface to trace");
+  pool.topChunk = tree.topChunk();
+  pool.blob = blobOptionsOf(reader.header());
   pool.chunks.resize(chunks.size());
   std::vector<std::vector<uint32_t>> blobs(chunks.size());
   tbb::parallel_for(size_t(0), chunks.size(), [&](size_t i) {
-    if (chunks[i].kind != kSurfaceKind) return;
-    asset.reader.checkPayload(uint32_t(i));
-    blobs[i] = buildBlob(decodeSurfaceChunk(asset.reader, uint32_t(i)), uint32_t(i), asset.tree,
-                         asset.blob);
+    if (chunks[i].kind != kSurfaceKind || (holds && !holds(chunks[i]))) return;
+    reader.checkPayload(uint32_t(i));
+    blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
   });
   size_t pages = 0;
   for (const auto& b : blobs) pages += blobPages(b.size());
@@ -72,24 +78,9 @@ CpuPool buildCpuPool(const Asset& asset) {
     std::copy(b.begin(), b.end(), pool.words.begin() + size_t(next) * gpu::kPageWords);
     e.state.x = next;
     next += n;
+    std::vector<uint32_t>().swap(b);
   }
   return pool;
-}
-
-FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
-                         const Environment* environment) {
-  FrameSetup setup;
-  setup.width = width;
-  setup.height = height;
-  setup.topChunk = asset.tree.topChunk();
-  setup.chunkCount = uint32_t(asset.reader.chunks().size());
-  setup.normals = asset.blob.normals;
-  setup.colors = asset.blob.colors;
-  setup.occlusion = asset.blob.occlusion;
-  setup.requests = false;
-  setup.environmentWidth = environment ? environment->width : 0;
-  setup.environmentHeight = environment ? environment->height : 0;
-  return setup;
 }
 
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
@@ -109,14 +100,45 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
   return frame;
 }
 
+gpu::FrameParams finestFrameParams(const CpuPool& pool) {
+  gpu::FrameParams p{};
+  // The record layout follows what the records carry.
+  uint32_t options = 0;
+  if (pool.blob.normals) options |= gpu::kOptionNormals;
+  if (pool.blob.colors) options |= gpu::kOptionColors;
+  if (pool.blob.occlusion) options |= gpu::kOptionOcclusion;
+  p.options = {options, 0u, pool.topChunk, uint32_t(pool.chunks.size())};
+  p.lod = glm::vec4(-1.0f, 0.0f, 0.0f, 0.0f);  // no chunk's error is below a negative bound
+  p.eye.w = 1.0f;
+  return p;
+}
+
 std::optional<CpuHit> traceCpu(const CpuPool& pool, const gpu::FrameParams& params,
-                               glm::vec3 origin, glm::vec3 direction, bool inside) {
+                               glm::vec3 origin, glm::vec3 direction, float side, bool strict) {
   shader::Tracer tracer(pool, params, nullptr);
   shader::Tracer::Hit hit;
   uint32_t rays = 0;
-  if (!tracer.intersect(origin, direction, 0.0f, 1e30f, inside, 0.0f, false, hit, rays))
+  if (!tracer.intersect(origin, direction, 0.0f, 1e30f, side, strict, 0.0f, false, hit, rays))
     return std::nullopt;
-  return CpuHit{hit.t, hit.normal};
+  return CpuHit{hit.t, hit.from, hit.normal};
+}
+
+void traceCpu(const CpuPool& pool, const gpu::FrameParams& params, std::span<const CpuRay> rays,
+              std::span<std::optional<CpuHit>> hits) {
+  ISO_CHECK(rays.size() == hits.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 1024),
+                    [&](const tbb::blocked_range<size_t>& range) {
+                      shader::Tracer tracer(pool, params, nullptr);
+                      uint32_t count = 0;
+                      for (size_t i = range.begin(); i < range.end(); ++i) {
+                        shader::Tracer::Hit hit;
+                        if (tracer.intersect(rays[i].origin, rays[i].direction, rays[i].tMin,
+                                             rays[i].tMax, 0.0f, false, 0.0f, false, hit, count))
+                          hits[i] = CpuHit{hit.t, hit.from, hit.normal};
+                        else
+                          hits[i].reset();
+                      }
+                    });
 }
 
 }  // namespace iso::viewer

@@ -1,45 +1,68 @@
 // The CPU reference tracer: the shaders' tracing code (shaders/trace.h) compiled as C++ and run
 // over every pixel with TBB, on the whole file resident. Golden tests compare the GPU's pictures
-// with its pictures; it is also `iso view --cpu`.
+// with its pictures; it is also `iso view --cpu`, and it traces the rays of the visibility
+// measure (pipeline/visibility.h), so that what is measured is what the viewer draws.
+//
+// Threading: a CpuPool is read-only once built; every function here may run from many threads.
 #pragma once
 
 #include <cstdint>
-#include <memory>
+#include <functional>
 #include <optional>
+#include <span>
 #include <vector>
 
-#include "asset.h"
+#include "blob.h"
 #include "image.h"
+#include "iso/reader.h"
 #include "shared.h"
 
 namespace iso::viewer {
 
-// Every surface chunk of an asset as blobs in one host page pool, and the chunk table.
+// The surface chunks of a file as blobs in one host page pool, and the chunk table.
 struct CpuPool {
   std::vector<uint32_t> words;
   std::vector<gpu::ChunkEntry> chunks;
+  uint32_t topChunk = 0;  // the chunk holding the octree's root
+  BlobOptions blob;       // what the corner records carry
 };
-CpuPool buildCpuPool(const Asset& asset);
+// Every surface chunk, or those `holds` accepts (the others are not resident: a ray that needs
+// one draws the coarser level, as the GPU does until it arrives). Throws iso::FileError for files
+// whose payloads are damaged or that hold no surface.
+using ChunkFilter = std::function<bool(const ChunkInfo&)>;
+CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds = {});
 
 struct CpuFrame {
   std::vector<uint32_t> pixels;  // RGBA8
   uint64_t rays = 0;
 };
 
-// The frame setup of the CPU tracer for an asset (everything resident, no requests).
-FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
-                         const Environment* environment);
-
 // Render a frame. params.pool is ignored (the host pool is one array).
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment);
 
-// The first surface hit of one ray (frame units) with the tracer's rules, for tests.
+// Parameters under which rays see the finest leaves everywhere (no coarser level of detail is
+// drawn) and nothing is shaded: for tracing single rays.
+gpu::FrameParams finestFrameParams(const CpuPool& pool);
+
+// The first surface hit of one ray (frame units) with the tracer's rules (trace.h, intersect):
+// `side` 0 takes a crossing either way, as camera rays do; +1 or -1 is the side a ray leaving a
+// surface starts on; `strict` keeps that rule past empty cells (back faces hidden).
 struct CpuHit {
   float t = 0;
-  glm::vec3 normal{};
+  float from = 1;     // the side the ray came from: +1 a front face, -1 a back face
+  glm::vec3 normal{};  // unit, pointing outside
 };
 std::optional<CpuHit> traceCpu(const CpuPool& pool, const gpu::FrameParams& params,
-                               glm::vec3 origin, glm::vec3 direction, bool inside = false);
+                               glm::vec3 origin, glm::vec3 direction, float side = 0.0f,
+                               bool strict = false);
+
+// Many rays at once (in parallel): hits[i] is ray i's first hit with t in [tMin, tMax], side 0.
+struct CpuRay {
+  glm::vec3 origin{}, direction{};
+  float tMin = 0.0f, tMax = 1e30f;
+};
+void traceCpu(const CpuPool& pool, const gpu::FrameParams& params, std::span<const CpuRay> rays,
+              std::span<std::optional<CpuHit>> hits);
 
 }  // namespace iso::viewer

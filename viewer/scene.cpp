@@ -96,6 +96,13 @@ struct Fields {
 
 }  // namespace
 
+BackFaces parseBackFaces(const std::string& text) {
+  if (text == "show") return BackFaces::Show;
+  if (text == "tint") return BackFaces::Tint;
+  if (text == "hide") return BackFaces::Hide;
+  throw std::invalid_argument("back faces: '" + text + "' is not show, tint or hide");
+}
+
 Vec3d parseVec3(const std::string& text) {
   const auto v = parseNumbers(text, 3, "vector");
   return {v[0], v[1], v[2]};
@@ -144,7 +151,7 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   f.known(j, "",
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
-           "lod_pixels"});
+           "lod_pixels", "backfaces", "backface_tint"});
   if (j.contains("camera")) {
     const json& c = j["camera"];
     f.known(c, "camera", {"eye", "target", "up", "fov"});
@@ -242,6 +249,15 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
     scene.lodPixels = float(f.number(j["lod_pixels"], "lod_pixels"));
     if (!(scene.lodPixels >= 0)) f.fail("lod_pixels", "not negative");
   }
+  if (j.contains("backfaces")) {
+    if (!j["backfaces"].is_string()) f.fail("backfaces", "show, tint or hide");
+    try {
+      scene.backFaces = parseBackFaces(j["backfaces"].get<std::string>());
+    } catch (const std::invalid_argument&) {
+      f.fail("backfaces", "show, tint or hide");
+    }
+  }
+  if (j.contains("backface_tint")) scene.backTint = f.color(j["backface_tint"], "backface_tint");
 }
 
 Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {
@@ -306,6 +322,8 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.swapRedBlue) options |= gpu::kOptionSwapRB;
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;
+  if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
+  if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
   p.pool = {s.poolWordsLog2, s.poolWords, s.environmentWidth, s.environmentHeight};
   // Rays leave surfaces a hundredth of the finest cell away (the side flag does the rest).
@@ -322,6 +340,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   p.skyBottom = rgb(scene.skyBottom);
   const Vec3d worldUp = normalized(scene.up.value_or(c.up));
   p.worldUp = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]), 0);
+  p.backface = rgb(scene.backTint);
   for (size_t i = 0; i < scene.lights.size() && i < gpu::kMaxLights; ++i) {
     const LightSpec& l = scene.lights[i];
     gpu::Light& g = p.lights[i];

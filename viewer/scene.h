@@ -40,6 +40,12 @@ struct Material {
   std::array<float, 3> absorption{0, 0, 0};  // per world unit, inside
 };
 
+// What camera rays do at a back face (reached from the inside, f < 0, as an open scan seen from
+// behind): shade it with the flipped normal, also tint it, or pass through it.
+enum class BackFaces { Show, Tint, Hide };
+// "show", "tint", "hide"; std::invalid_argument naming the accepted words otherwise.
+BackFaces parseBackFaces(const std::string& text);
+
 struct Scene {
   std::optional<Camera> camera;      // none: framed on the surface's bounds
   std::optional<double> fovDegrees;  // overrides the camera's field of view
@@ -54,6 +60,8 @@ struct Scene {
   int bounces = 3;
   int samples = 1;         // per pixel (supersampling)
   float lodPixels = 1.0f;  // screen-space error allowed, pixels
+  BackFaces backFaces = BackFaces::Show;
+  std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
 };
 
 // Read a scene file over `scene` (keys it does not set stay). Throws iso::FileError naming the

@@ -137,7 +137,7 @@ int viewCpu(const ViewOptions& options) {
   const Scene scene = completeScene(options, *asset);
   const auto env = environmentOf(scene);
   const auto t0 = Clock::now();
-  const CpuPool pool = buildCpuPool(*asset);
+  const CpuPool pool = buildCpuPool(asset->reader);
   const double load = seconds(Clock::now() - t0);
   const auto params =
       frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel,

@@ -27,7 +27,7 @@ using Clock = std::chrono::steady_clock;
 struct Input {
   double wheel = 0;
   bool screenshot = false, reload = false;
-  int toggled = 0;  // 1 shadows, 2 reflections, 3 refractions
+  int toggled = 0;  // 1 shadows, 2 reflections, 3 refractions, 4 back faces (next mode)
   int samples = 0;  // +1 / -1
 };
 
@@ -177,6 +177,7 @@ int viewWindow(const ViewOptions& options) {
       if (key == GLFW_KEY_R) in.reload = true;
       if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
         in.toggled = key - GLFW_KEY_0;
+      if (key == GLFW_KEY_B) in.toggled = 4;
       if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
       if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
     });
@@ -242,6 +243,7 @@ int viewWindow(const ViewOptions& options) {
       if (input.toggled == 1) scene.shadows = !scene.shadows;
       if (input.toggled == 2) scene.reflections = !scene.reflections;
       if (input.toggled == 3) scene.refractions = !scene.refractions;
+      if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
       input.toggled = 0;
       if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
       input.samples = 0;

@@ -52,7 +52,9 @@ double refineRoot(const std::array<double, 4>& c, double a, double b) {
   return 0.5 * (a + b);
 }
 
-// The first root of the cubic in [0, length]: split at the critical points, where g is monotonic.
+// The first sign change of the cubic in [0, length] (zero counts as positive, as in the viewer's
+// tracer: the surface is the boundary of {f < 0}): split at the critical points, where g is
+// monotonic.
 std::optional<double> firstRoot(const std::array<double, 4>& c, double length) {
   std::array<double, 4> splits{0.0, length, length, length};
   int count = 1;
@@ -74,7 +76,6 @@ std::optional<double> firstRoot(const std::array<double, 4>& c, double length) {
   for (int i = 0; i < count; ++i) {
     const double a = splits[size_t(i)], b = splits[size_t(i + 1)];
     const double ga = evalCubic(c, a), gb = evalCubic(c, b);
-    if (ga == 0.0) return a;
     if (sign(ga) != sign(gb)) return gb == 0.0 ? b : refineRoot(c, a, b);
   }
   return std::nullopt;

@@ -81,6 +81,7 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"skyTop", offsetof(FrameParams, skyTop)},
       {"skyBottom", offsetof(FrameParams, skyBottom)},
       {"worldUp", offsetof(FrameParams, worldUp)},
+      {"backface", offsetof(FrameParams, backface)},
       {"lights", offsetof(FrameParams, lights)},
       {"poolAddress", offsetof(FrameParams, poolAddress)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);

@@ -65,7 +65,7 @@ Scene sceneFor(const Asset& asset) {
 
 std::vector<uint32_t> renderReference(const Asset& asset, const Scene& scene, uint32_t w,
                                       uint32_t h, const Environment* env = nullptr) {
-  const CpuPool pool = buildCpuPool(asset);
+  const CpuPool pool = buildCpuPool(asset.reader);
   const auto header = asset.reader.header();
   return renderCpu(
              pool,
@@ -249,7 +249,7 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
 TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const auto asset = Asset::open(files().sphere);
   const SurfaceModel model = SurfaceModel::load(asset->reader);
-  const CpuPool pool = buildCpuPool(*asset);
+  const CpuPool pool = buildCpuPool(asset->reader);
   const Frame& frame = asset->reader.header().frame;
   const Scene scene = sceneFor(*asset);
   const auto params = frameParams(scene, frame, asset->reader.header().maxLevel,

@@ -130,6 +130,14 @@ void printReport(const nlohmann::json& r, const Options& o) {
       withSeparators(a["samples"].get<uint64_t>()), a["rms_over_spacing"].get<double>(),
       a["max_over_spacing"].get<double>(), r["mean_spacing"].get<double>(),
       withSeparators(a["unprojected"].get<uint64_t>()));
+  const auto& v = r["visibility"];
+  fmt::print(
+      "  visibility: {:.3f} % of {} points seen through in {} views (worst view {:.3f} %, {} "
+      "inside the points' outline), depth error median {:.3f} mean spacings\n",
+      100.0 * v["seen_through_fraction"].get<double>(), withSeparators(v["points"].get<uint64_t>()),
+      v["views"].get<uint64_t>(), 100.0 * v["worst_view_fraction"].get<double>(),
+      withSeparators(v["seen_through_inside"].get<uint64_t>()),
+      v["depth_error_median"].get<double>());
 }
 
 // Bytes from a size (parseSize); "auto": half the physical memory.

@@ -1,4 +1,5 @@
-// `iso eval FILE.iso --shape NAME | --mesh FILE.ply | --points INPUT...`: accuracy as JSON.
+// `iso eval FILE.iso --shape NAME | --mesh FILE.ply | --points INPUT... | --against B.iso`, and
+// `--visibility`: accuracy, and what the viewer shows of the scan, as JSON.
 #include <fmt/core.h>
 
 #include "commands.h"
@@ -7,7 +8,10 @@
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
+#include "keep_points.h"
+#include "measure.h"
 #include "shape_options.h"
+#include "visibility.h"
 
 namespace iso::cli {
 namespace {
@@ -18,6 +22,9 @@ struct Options {
   std::vector<std::string> points;
   std::string against;  // --against B.iso
   bool perLevel = false;
+  bool visibility = false;
+  uint64_t visibilityPoints = 1000000;
+  VisibilityOptions view;
   std::string columns;
   ShapeOptions truth;
   EvalOptions eval;
@@ -33,23 +40,65 @@ double reportedSpacing(const Reader& reader) {
   return 0.0;
 }
 
+// The file's kept points (`iso convert --keep-points`), every step-th up to `limit`.
+std::vector<glm::dvec3> keptPoints(const Reader& reader, uint64_t limit) {
+  const KeptPointsInfo info = keptPointsInfo(reader);
+  if (info.points == 0)
+    throw FileError(reader.name(), std::nullopt,
+                    "keeps no points (convert it with --keep-points); give --points INPUT");
+  const uint64_t step = limit == 0 ? 1 : std::max<uint64_t>(1, (info.points + limit - 1) / limit);
+  std::vector<glm::dvec3> out;
+  uint64_t index = 0;
+  forEachKeptPoints(reader, [&](const PointCloud& chunk) {
+    for (const glm::dvec3& p : chunk.positions)
+      if (index++ % step == 0) out.push_back(p);
+  });
+  return out;
+}
+
+// What the viewer shows of the points (`--visibility`), through its own tracer.
+nlohmann::json visibilityOf(const Reader& reader, std::span<const glm::dvec3> points,
+                            double spacing, const VisibilityOptions& options) {
+  return measureVisibility(reader, points, spacing, options).json();
+}
+
 int run(Options& o) {
   const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty()) +
                      int(!o.against.empty());
-  if (truths != 1)
+  if (truths != 1 && !(o.visibility && truths == 0))
     throw std::invalid_argument(
-        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso");
+        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso "
+        "(or --visibility alone, on the file's kept points)");
   if (o.perLevel && o.points.empty())
     throw std::invalid_argument("--per-level measures against --points");
+  if (o.visibility && !o.against.empty())
+    throw std::invalid_argument("--visibility measures --points or the file's kept points");
+  o.view.seed = o.eval.seed;
   const Reader reader = Reader::open(o.file);
-  const SurfaceModel surface = SurfaceModel::load(reader);
   nlohmann::json result;
+  if (o.visibility && truths == 0) {
+    const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
+    if (!(spacing > 0.0))
+      throw FileError(o.file, std::nullopt, "has no reported mean spacing; give --spacing");
+    result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing,
+                                        o.view);
+    result["mean_spacing"] = spacing;
+    result["file"] = o.file;
+    fmt::print("{}\n", result.dump(2));
+    return kExitOk;
+  }
+  const SurfaceModel surface = SurfaceModel::load(reader);
   if (!o.points.empty()) {
     ReadOptions read;
     read.columns = o.columns;
     const PointCloud cloud = loadPoints(expandInputs(o.points), read).cloud;
     result = evaluateAgainstPoints(surface, cloud);
     if (o.perLevel) result["levels"] = evaluateLevels(reader, cloud);
+    if (o.visibility)
+      result["visibility"] =
+          visibilityOf(reader, samplePoints(cloud, o.visibilityPoints == 0 ? cloud.size()
+                                                                           : o.visibilityPoints),
+                       o.spacing > 0.0 ? o.spacing : result["mean_spacing"].get<double>(), o.view);
   } else if (!o.against.empty()) {
     const Reader other = Reader::open(o.against);
     result = evaluateAgainstFile(surface, SurfaceModel::load(other));
@@ -67,6 +116,9 @@ int run(Options& o) {
     if (!o.shape.empty()) o.truth.params.name = o.shape;
     o.eval.orientedNormals = o.truth.mesh.empty();
     result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
+    if (o.visibility)
+      result["visibility"] =
+          visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o.view);
   }
   result["file"] = o.file;
   fmt::print("{}\n", result.dump(2));
@@ -89,12 +141,26 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
                 "color PSNR between them");
   c->add_flag("--per-level", o->perLevel,
               "With --points: the error of every level-of-detail cut, coarsest first");
+  c->add_flag("--visibility", o->visibility,
+              "What the viewer shows of the scan's points (its own tracer, far views along the "
+              "axes and --views random ones): the share seen through (pixel and 8 neighbours "
+              "empty) per view, and the depth error of the surface at the nearest points, in "
+              "spacings. Points: --points, or the file's kept points");
+  c->add_option("--views", o->view.randomViews, "Random views besides the 6 along the axes")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000));
+  c->add_option("--pixel", o->view.pixelSpacings, "Pixel width in mean point spacings")
+      ->capture_default_str()
+      ->check(CLI::Range(0.01, 1000.0));
+  c->add_option("--visibility-points", o->visibilityPoints,
+                "Points measured at most (every k-th; 0: all)")
+      ->capture_default_str();
   c->add_option("--columns", o->columns, "Column spec of text point files");
   c->add_option("--spacing", o->spacing,
                 "Mean point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
-  c->add_option("--seed", o->eval.seed, "Random seed")->capture_default_str();
+  c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")->capture_default_str();
   addShapeOptions(*c, o->truth);
   c->callback([o, &exitCode] { exitCode = runWithUsageErrors("eval", [&] { return run(*o); }); });
 }

@@ -12,7 +12,7 @@ namespace {
 struct ViewArgs {
   viewer::ViewOptions view;
   bool headless = false, cpu = false, bench = false;
-  std::string vram = "1G", upload = "16M", camera, up, color, ambient, environment;
+  std::string vram = "1G", upload = "16M", camera, up, color, ambient, environment, backFaces;
   double fov = 0;
   std::vector<std::string> lights;
   std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
@@ -77,6 +77,7 @@ void buildScene(ViewArgs& a) {
   if (a.noShadows) s.shadows = false;
   if (a.noReflections) s.reflections = false;
   if (a.noRefractions) s.refractions = false;
+  if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
 }
 
 }  // namespace
@@ -140,6 +141,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_option("--lod-pixels", a->lodPixels,
                 "Screen-space error in pixels below which a coarser level is drawn")
       ->check(CLI::Range(0.0, 1000.0));
+  c->add_option("--backfaces", a->backFaces,
+                "Back faces (the inside of the surface, e.g. an open scan seen from behind): "
+                "show (shaded, the default), tint, or hide (see through them)")
+      ->check(CLI::IsMember({"show", "tint", "hide"}));
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
