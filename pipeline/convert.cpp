@@ -196,8 +196,7 @@ nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t p
           {"patch_splits", stats.testedPatches},
           {"patch_splits_too_far", stats.tooFar},
           {"patch_splits_uncovered", stats.uncovered},
-          {"thin_splits", stats.thinSplits},
-          {"misfit_splits", stats.misfits}};
+          {"thin_splits", stats.thinSplits}};
 }
 
 }  // namespace

@@ -3,8 +3,6 @@
 //   - it holds more than leafPoints points and its own patch (the trilinear interpolation of its
 //     8 corner distances) misses its points by more than the tolerance, or leaves surface where
 //     there are no points (an open boundary, a hole: "coverage"), or
-//   - it holds fewer, and its patch misses one of them by more than a spacing where the
-//     estimator itself does not (a "misfit": the cell is too coarse for the surface there), or
 //   - its points have opposing normals (two sheets, a thin part): regardless of the point count,
 //     because a trilinear patch has at most one zero crossing along an axis.
 // Flat regions therefore stay coarse. Levels are built one at a time; the decisions of a level run
@@ -57,7 +55,7 @@ Patch leafPatch(const OctreeNode& node, const CornerField& corners) {
 
 // What happens to a node: the answer without a patch test, or the need for one, or why a tested
 // node is subdivided.
-enum class Verdict : uint8_t { Leaf, Subdivide, Test, TestFew, TooFar, Uncovered, Misfit };
+enum class Verdict : uint8_t { Leaf, Subdivide, Test, TooFar, Uncovered };
 
 struct ToleranceScale {
   double tolerance, meanSpacing, medianRadius;
@@ -69,8 +67,7 @@ Verdict quickVerdict(const OctreeNode& node, const PointSet& points, const Build
   if (node.level >= options.maxDepth) return Verdict::Leaf;
   if (cellSize(node.level) > maxEdge) return Verdict::Subdivide;
   if (hasOpposingNormals(points, node)) return Verdict::Subdivide;
-  if (node.pointCount() <= options.leafPoints)
-    return node.pointCount() > 0 ? Verdict::TestFew : Verdict::Leaf;
+  if (node.pointCount() <= options.leafPoints) return Verdict::Leaf;
   if (node.pointCount() > options.maxTestedPoints) return Verdict::Subdivide;
   return Verdict::Test;
 }
@@ -81,7 +78,7 @@ void evaluateTestedCorners(const Octree& tree, const std::vector<uint32_t>& fron
                            CornerField& corners) {
   std::vector<uint32_t> missing;
   for (size_t i = 0; i < frontier.size(); ++i) {
-    if (verdict[i] != Verdict::Test && verdict[i] != Verdict::TestFew) continue;
+    if (verdict[i] != Verdict::Test) continue;
     const OctreeNode& node = tree.nodes[frontier[i]];
     for (int c = 0; c < kCorners; ++c) {
       const auto [entry, added] = corners.insert(gridKey(cornerPoint(node.level, node.key, c)));
@@ -144,36 +141,6 @@ Verdict patchTest(const OctreeNode& node, const PointSet& points, const SdfEvalu
       nodeTolerance(node, points, tolerance))
     return Verdict::TooFar;
   return isCovered(patch, sdf, points, node, exact) ? Verdict::Leaf : Verdict::Uncovered;
-}
-
-// A node of few points (at most leafPoints) is not fitted to the tolerance: they are too few to
-// tell shape from noise. But its patch must still draw the estimator's surface where they are: a
-// point farther than kMisfitSpacings mean spacings from the patch's zero set (|f|/|∇f| of the
-// patch) is looked at again with the estimator itself, and when the estimator puts the surface
-// less than half as far from it, the trilinear patch is too coarse for the surface there (a
-// tip, a fold): the node is subdivided. Where the estimator agrees with the patch, subdividing
-// would change nothing.
-constexpr double kMisfitSpacings = 1.0;
-
-Verdict fewPointsTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
-                      const CornerField& corners, double meanSpacing, bool& exact) {
-  for (int c = 0; c < kCorners; ++c)
-    exact = exact && corners.isExact(corners.find(cornerPoint(node.level, node.key, c)));
-  const Patch patch = leafPatch(node, corners);
-  const double far = kMisfitSpacings * meanSpacing;
-  for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) {
-    const glm::dvec3 p(points.position[i]);
-    glm::dvec3 gradient;
-    const double f = patch.value(p, &gradient);
-    const double g = glm::length(gradient);
-    const double distance = g > 1e-12 ? std::abs(f) / g : patch.size;
-    if (distance <= far) continue;
-    bool read = true;
-    const double estimated = std::abs(sdf.evaluate(p, 0.0f, &read).distance);
-    exact = exact && read;
-    if (estimated < 0.5 * distance) return Verdict::Misfit;
-  }
-  return Verdict::Leaf;
 }
 
 float maxRadiusOf(const PointSet& points, uint32_t begin, uint32_t end) {
@@ -369,13 +336,10 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
                       [&](const tbb::blocked_range<size_t>& r) {
                         for (size_t i = r.begin(); i < r.end(); ++i) {
+                          if (verdict[i] != Verdict::Test) continue;
                           bool ok = exact[i];
-                          if (verdict[i] == Verdict::Test)
-                            verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, corners,
-                                                   tolerance, ok);
-                          else if (verdict[i] == Verdict::TestFew)
-                            verdict[i] = fewPointsTest(tree.nodes[frontier[i]], points, sdf,
-                                                       corners, radii.meanSpacing, ok);
+                          verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, corners,
+                                                 tolerance, ok);
                           exact[i] = ok;
                         }
                       });
@@ -390,7 +354,6 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
       if (verdict[i] == Verdict::TooFar || verdict[i] == Verdict::Uncovered) ++stats.testedPatches;
       if (verdict[i] == Verdict::Subdivide && node.pointCount() <= options.leafPoints)
         ++stats.thinSplits;
-      stats.misfits += verdict[i] == Verdict::Misfit;
       tree.split(frontier[i], points);
       const uint32_t first = tree.nodes[frontier[i]].firstChild;
       for (uint32_t c = 0; c < 8; ++c)

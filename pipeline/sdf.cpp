@@ -7,8 +7,9 @@
 // - weights are computed relative to the largest (log-sum-exp shift), so exp() never underflows
 //   however far Q is from the points, and the truncation is relative, so the support always
 //   reaches Q (a large leaf's corners can be farther than every r_i from the points);
-// - when the normals mostly agree, points whose normal is more than 120° from their weighted mean
-//   are left out (a few wrong normals are outvoted);
+// - where the normals turn by more than 60° within the kernel (a sharp edge), the two faces are
+//   fitted on their own and combined as solids, so that the edge stays sharp; points whose normal
+//   opposes the face's (a few wrong normals) are left out;
 // - when they do not (two sheets closer than the radius with opposite normals, whose normals
 //   would cancel), each side is fitted on its own and the two are combined as solids: the slab
 //   between sheets facing away from each other is inside (the larger distance), the gap between
@@ -27,7 +28,12 @@ namespace {
 constexpr size_t kProbe = 4;              // nearest points that set the search radius
 constexpr double kTruncation = 2.0;       // relative log-weight below which weights are 0 (2σ)
 constexpr float kOpposingNormal = -0.5f;  // cos 120°
-constexpr double kMajority = 0.5;         // |Σ w n| / Σ w above which the normals agree
+constexpr float kFaceAngleCos = 0.8660254f;  // cos 30°: the normals of one face of a feature
+constexpr double kFeatureAngleCos = 0.5;     // cos 60°: two faces make a feature
+constexpr size_t kMinGroupPoints = 3;
+// |Σ w n| / Σ w of the second face at least: its normals point one way (a face), not every way
+// (noise, which the one fit averages better).
+constexpr double kCoherentNormals = 0.95;
 constexpr double kMinorGroup = 0.1;       // a group of opposing normals below this count is noise
 constexpr double kReach = 0.25;           // σ floor in distances to the nearest point
 
@@ -109,29 +115,68 @@ struct FitSums {
   }
 };
 
-// The fit over the points whose normal is within 120° of the mean normal (a few wrong normals are
-// outvoted and left out); weight[j] is 0 for truncated points.
-CornerSample agreeingSample(const PointSet& points, const glm::dvec3& q, FitMode fit,
-                            const std::vector<std::pair<uint32_t, float>>& found,
-                            const std::vector<double>& weight, const FitSums& all, double sigma,
-                            const glm::vec3& axis) {
-  const double length = glm::length(all.n);
-  const glm::vec3 reference = length > 1e-9 * all.weight ? glm::vec3(all.n / length) : axis;
-  const auto opposes = [&](size_t j) {
-    return weight[j] > 0.0 && glm::dot(points.normal[found[j].first], reference) < kOpposingNormal;
-  };
-  bool anyOpposing = false;
-  for (size_t j = 0; j < found.size() && !anyOpposing; ++j) anyOpposing = opposes(j);
-  if (!anyOpposing) return all.sample(fit, sigma, reference);
-  FitSums agreeing;
+// Two fitted surfaces combined as solids: where the second group's points lie behind the first's
+// surface (a slab between sheets facing away from each other, a convex edge) the inside is the
+// intersection of the two solids (the larger distance); otherwise (a gap between sheets facing
+// each other, a concave edge) their union (the smaller).
+CornerSample combineSolids(const FitSums& first, const FitSums& second, FitMode fit,
+                           double sigma, const glm::vec3& firstAxis, const glm::vec3& secondAxis) {
+  const CornerSample a = first.sample(fit, sigma, firstAxis);
+  const CornerSample b = second.sample(fit, sigma, secondAxis);
+  const bool intersection =
+      glm::dot(second.p / second.weight - first.p / first.weight, glm::dvec3(a.normal)) < 0.0;
+  return (intersection ? a.distance >= b.distance : a.distance <= b.distance) ? a : b;
+}
+
+// Whether a group of `count` points is large enough beside one of `other` to be a surface of its
+// own rather than a few stray normals.
+bool isGroup(size_t count, size_t other) {
+  return count >= kMinGroupPoints && double(count) >= kMinorGroup * double(other);
+}
+
+// The fit where the normals do not oppose: one surface, or a sharp feature (beyond the paper;
+// specs/pipeline.md §4). The points whose normal is within kFaceAngle of the normal near Q (the
+// dominant point's, averaged over the points that agree with it) are one face; the others whose
+// normal does not oppose it, when they are a group of their own whose normals agree with each
+// other and whose mean normal turns more than 60° from the face's, are another; the two are fitted on their own and combined
+// as solids (convex edge: intersection; concave: union), so that an edge stays sharp instead of
+// being rounded over the kernel's width, with the right sign on both sides of it. Points whose
+// normal opposes the face (a few wrong normals) are left out.
+CornerSample faceSample(const PointSet& points, const glm::dvec3& q, FitMode fit,
+                        const std::vector<std::pair<uint32_t, float>>& found,
+                        const std::vector<double>& weight, const FitSums& all, double sigma,
+                        const glm::vec3& axis) {
+  glm::dvec3 near(0.0);
   for (size_t j = 0; j < found.size(); ++j) {
-    if (weight[j] == 0.0 || opposes(j)) continue;
-    const uint32_t i = found[j].first;
-    const glm::vec3* color = points.hasColors() ? &points.color[i] : nullptr;
-    agreeing.add(weight[j], glm::dvec3(points.position[i]) - q, glm::dvec3(points.normal[i]),
-                 color);
+    const glm::vec3& n = points.normal[found[j].first];
+    if (weight[j] > 0.0 && glm::dot(n, axis) >= kFaceAngleCos) near += weight[j] * glm::dvec3(n);
   }
-  return agreeing.sample(fit, sigma, reference);
+  const double length = glm::length(near);
+  if (!(length > 0.0)) return all.sample(fit, sigma, axis);
+  near /= length;
+  FitSums face, other;
+  size_t opposing = 0;
+  for (size_t j = 0; j < found.size(); ++j) {
+    if (weight[j] == 0.0) continue;
+    const uint32_t i = found[j].first;
+    const double c = glm::dot(near, glm::dvec3(points.normal[i]));
+    if (c < kOpposingNormal) {
+      ++opposing;
+      continue;
+    }
+    const glm::vec3* color = points.hasColors() ? &points.color[i] : nullptr;
+    (c >= kFaceAngleCos ? face : other)
+        .add(weight[j], glm::dvec3(points.position[i]) - q, glm::dvec3(points.normal[i]), color);
+  }
+  if (face.count == 0) return all.sample(fit, sigma, axis);
+  const bool feature = isGroup(other.count, face.count) && isGroup(face.count, other.count) &&
+                       glm::length(other.n) >= kCoherentNormals * other.weight &&
+                       glm::dot(face.n, other.n) <
+                           kFeatureAngleCos * glm::length(face.n) * glm::length(other.n);
+  if (feature)
+    return combineSolids(face, other, fit, sigma, glm::vec3(near), glm::vec3(other.n));
+  if (opposing == 0) return all.sample(fit, sigma, glm::vec3(near));
+  return (other.count > 0 ? face + other : face).sample(fit, sigma, glm::vec3(near));
 }
 
 }  // namespace
@@ -219,14 +264,8 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma, bool* e
   const bool twoSided =
       against.count >= kMinorGroup * double(with.count) &&
       glm::dot(with.n, against.n) < kOpposingNormal * glm::length(with.n) * glm::length(against.n);
-  if (!twoSided) return agreeingSample(points_, q, fit_, found, weight, all, sigma, axis);
-  // The slab between sheets that face away from each other is inside (CSG intersection: the larger
-  // distance), the gap between sheets that face each other is outside (union of the two solids:
-  // the smaller).
-  const CornerSample a = with.sample(fit_, sigma, axis), b = against.sample(fit_, sigma, -axis);
-  const bool slab =
-      glm::dot(against.p / against.weight - with.p / with.weight, glm::dvec3(a.normal)) < 0.0;
-  return (slab ? a.distance >= b.distance : a.distance <= b.distance) ? a : b;
+  if (!twoSided) return faceSample(points_, q, fit_, found, weight, all, sigma, axis);
+  return combineSolids(with, against, fit_, sigma, axis, -axis);
 }
 
 }  // namespace iso

@@ -355,7 +355,6 @@ struct OctreeStats {
   size_t tooFar = 0;         // ... because points were farther than the tolerance
   size_t uncovered = 0;      // ... because the patch had surface where there are no points
   size_t thinSplits = 0;     // subdivisions below leafPoints for opposing normals
-  size_t misfits = 0;        // ... where the patch missed the estimator's surface at a point
 };
 struct CornerField;
 // The corners of tested nodes are evaluated into `corners` (leaf corners are evaluated the same way

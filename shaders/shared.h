@@ -38,11 +38,12 @@ ISO_CONST uint kBlobPageList = 4u;   // the pool pages of the blob, in order
 // a node whose children are roots of other chunks). A link list is the cut node's corner record
 // index, then (chunk, root node index) per existing child in octant order.
 ISO_CONST uint kNodeCut = 0x100u;
-// Corner records: 8 distances in units of the node's cell size (float16, 4 words), then, when the
-// file has them, 8 normals (octahedral snorm8 pairs, 4 words), then, when it has colors or
+// Corner records: 8 distances in units of the node's cell size (float32, 8 words: the file's
+// dequantized values scaled by a power of two, so that the tracer's surface is exactly the one
+// SurfaceModel measures), then, when the file has them, 8 normals (octahedral snorm8 pairs, 4 words), then, when it has colors or
 // occlusion, 8 colors (sRGB RGB8, white without colors, and the occlusion as unorm8 alpha, 255
 // without it; 8 words).
-ISO_CONST uint kRecordDistanceWords = 4u;
+ISO_CONST uint kRecordDistanceWords = 8u;
 ISO_CONST uint kRecordNormalWords = 4u;
 ISO_CONST uint kRecordColorWords = 8u;
 

@@ -7,6 +7,7 @@
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 
 #define ISO_INOUT(T) inout T
+#define ISO_PRECISE precise
 #include "shared.h"
 
 layout(local_size_x = 64) in;
@@ -48,6 +49,8 @@ vec3 environmentTexel(uint x, uint y) {
   vec2 ba = unpackHalf2x16(environment[at + 1u]);
   return vec3(rg.x, rg.y, ba.x);
 }
+
+vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) { return fma(a, b, c); }
 
 #include "trace.h"
 

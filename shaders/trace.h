@@ -8,7 +8,9 @@
 //   void requestChunk(uint chunk);       a ray needs this chunk (streaming)
 //   void useChunk(uint chunk);           a ray went through this chunk (for the LRU)
 //   vec3 environmentTexel(uint x, uint y);  linear RGB of the environment map
-// and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`).
+//   vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c);  a·b + c with one rounding
+// and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`) and ISO_PRECISE (GLSL `precise`: no
+// reassociation; C++ keeps the written order anyway).
 //
 // All coordinates are frame units: the octree root is the cube [0, 1)^3.
 // Float literals carry an `f` so that the C++ build does the same single-precision arithmetic.
@@ -106,13 +108,33 @@ struct Corners {
 
 Corners loadCorners(uint page, uint record) {
   Corners c;
-  vec2 a = unpackHalf2x16(blobWord(page, record));
-  vec2 b = unpackHalf2x16(blobWord(page, record + 1u));
-  vec2 e = unpackHalf2x16(blobWord(page, record + 2u));
-  vec2 f = unpackHalf2x16(blobWord(page, record + 3u));
-  c.d0 = vec4(a.x, a.y, b.x, b.y);
-  c.d1 = vec4(e.x, e.y, f.x, f.y);
+  c.d0 = vec4(uintBitsToFloat(blobWord(page, record)), uintBitsToFloat(blobWord(page, record + 1u)),
+              uintBitsToFloat(blobWord(page, record + 2u)),
+              uintBitsToFloat(blobWord(page, record + 3u)));
+  c.d1 = vec4(uintBitsToFloat(blobWord(page, record + 4u)),
+              uintBitsToFloat(blobWord(page, record + 5u)),
+              uintBitsToFloat(blobWord(page, record + 6u)),
+              uintBitsToFloat(blobWord(page, record + 7u)));
   return c;
+}
+
+// The local coordinates in the cell (lo, size) of the ray's point o + d·t, accurate to a rounding
+// of the result rather than of o: the product and the two sums are carried with their exact
+// errors (Dekker's TwoProduct by a fused multiply-add, Knuth's TwoSum). Without it a cell much
+// smaller than the distance to the ray's origin gets positions off by about 1e-7·|o|, which a
+// ray grazing the surface turns into large errors along it, and into hits or misses that
+// SurfaceModel (in double) does not see.
+vec3 cellCoordinates(vec3 o, vec3 d, float t, vec3 lo, float size) {
+  ISO_PRECISE vec3 product = d * t;
+  ISO_PRECISE vec3 productError = fusedMultiplyAdd(d, vec3(t), -product);
+  ISO_PRECISE vec3 a = o - lo;
+  ISO_PRECISE vec3 aPart = a - o;
+  ISO_PRECISE vec3 aError = (o - (a - aPart)) + (-lo - aPart);
+  ISO_PRECISE vec3 b = a + product;
+  ISO_PRECISE vec3 bPart = b - a;
+  ISO_PRECISE vec3 bError = (a - (b - bPart)) + (product - bPart);
+  ISO_PRECISE vec3 offset = b + ((aError + bError) + productError);
+  return clamp(offset / size, vec3(0.0f), vec3(1.0f));
 }
 
 // The trilinear interpolation along the segment of a cell from local coordinates ua to ub, as a
@@ -323,7 +345,10 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
     vec3 cFar = max(c0, c1);
     float tExit = min(cFar.x, min(cFar.y, cFar.z));
     float tStop = min(tExit, tEnd);
-    if (cell.filled) {
+    if (!(tStop > t)) {
+      // A cell the ray only touches (an edge or a corner, within rounding): nothing in it counts,
+      // as in SurfaceModel.
+    } else if (cell.filled) {
       Corners c = loadCorners(cell.page, cell.record);
       float least = min(min(min(c.d0.x, c.d0.y), min(c.d0.z, c.d0.w)),
                         min(min(c.d1.x, c.d1.y), min(c.d1.z, c.d1.w)));
@@ -339,8 +364,8 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
           bracket = vec4(0.0f, 0.0f, previous, entry);
         }
       } else {
-        vec3 ua = clamp((o + d * t - lo) / size, vec3(0.0f), vec3(1.0f));
-        vec3 ub = clamp((o + d * tStop - lo) / size, vec3(0.0f), vec3(1.0f));
+        vec3 ua = cellCoordinates(o, d, t, lo, size);
+        vec3 ub = cellCoordinates(o, d, tStop, lo, size);
         vec4 k = segmentCubic(c, ua, ub);
         entry = k.x;
         exit = k.x + k.y + k.z + k.w;
@@ -365,13 +390,18 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
     }
     if (!found) {
       if (tExit >= tEnd) return false;
-      // Step into the neighbour across the exit face: exact on the grid, so rays always progress.
-      t = tExit;
+      // Step into the face neighbour across the exit face: one cell along the exit axis, and on
+      // the other axes a point of this cell's face (the rounded point of the ray may lie in a
+      // diagonal neighbour behind it, near an edge, from which the ray would step back), so that
+      // every step moves forward.
+      t = max(t, tExit);
       p = o + d * t;
       uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
-      g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
       uint shift = 21u - cell.level;
-      uint lower = cell.coord[axis] << shift;
+      uvec3 first = cell.coord << shift;
+      g = clamp(uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax)))), first,
+                first + uvec3((1u << shift) - 1u));
+      uint lower = first[axis];
       uint upper = (cell.coord[axis] + 1u) << shift;
       if (dir[axis] > 0.0f) {
         if (upper > kGridMax) return false;
@@ -386,8 +416,8 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   // The root in the bracket, once, on the hit cell's cubic.
   float size = 1.0f / float(1u << hitCell.level);
   vec3 lo = vec3(hitCell.coord) * size;
-  vec3 ua = clamp((o + d * tIn - lo) / size, vec3(0.0f), vec3(1.0f));
-  vec3 ub = clamp((o + d * tOut - lo) / size, vec3(0.0f), vec3(1.0f));
+  vec3 ua = cellCoordinates(o, d, tIn, lo, size);
+  vec3 ub = cellCoordinates(o, d, tOut, lo, size);
   Corners c = loadCorners(hitCell.page, hitCell.record);
   vec4 k = segmentCubic(c, ua, ub);
   float s = 0.0f;

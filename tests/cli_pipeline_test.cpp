@@ -175,7 +175,7 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
   }
   const std::vector<std::string> stages = {"read",   "distribute",      "points",  "orient",
                                            "octree", "passive+balance", "corners", "lod",
-                                           "write",  "accuracy"};
+                                           "write",  "accuracy",        "visibility"};
   EXPECT_EQ(ended, stages);
   const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
   EXPECT_EQ(report["points"]["input"], 20000);
@@ -187,6 +187,12 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
   EXPECT_FALSE(stored.contains("stages"));
   EXPECT_FALSE(stored.contains("peak_rss_bytes"));
   EXPECT_EQ(stored["accuracy"], report["accuracy"]);
+  // What the viewer shows of the scan: a closed sphere, every point seen, none seen through.
+  EXPECT_EQ(stored["visibility"], report["visibility"]);
+  EXPECT_EQ(report["visibility"]["points"].get<uint64_t>(), 20000u);
+  EXPECT_EQ(report["visibility"]["views"].get<uint64_t>(), 8u);
+  EXPECT_EQ(report["visibility"]["seen_through"].get<uint64_t>(), 0u);
+  EXPECT_LT(report["visibility"]["depth_error_median"].get<double>(), 0.5);
 }
 
 TEST_F(CliPipeline, convertBakesATextureAndAmbientOcclusion) {

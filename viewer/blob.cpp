@@ -33,10 +33,10 @@ uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& 
 // Append the corner record of a node: its 8 corners' values, distances in cell units.
 void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
                   const BlobOptions& options) {
-  const float cell = std::ldexp(1.0f, -int(node.level));
-  float d[8];
-  for (int c = 0; c < 8; ++c) d[c] = values.distance.at(node.corners[c]) / cell;
-  for (int c = 0; c < 8; c += 2) out.push_back(glm::packHalf2x16({d[c], d[c + 1]}));
+  // Scaling by a power of two is exact: the tracer reads the values SurfaceModel reads.
+  const float perCell = std::ldexp(1.0f, int(node.level));
+  for (int c = 0; c < 8; ++c)
+    out.push_back(std::bit_cast<uint32_t>(values.distance.at(node.corners[c]) * perCell));
   if (options.normals) {
     for (int c = 0; c < 8; c += 2)
       out.push_back(

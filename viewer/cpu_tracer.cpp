@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <cmath>
 #include <glm/glm.hpp>
 #include <glm/packing.hpp>
 
@@ -17,6 +18,7 @@ namespace shader {
 using namespace glm;
 using namespace iso::gpu;
 #define ISO_INOUT(T) T&
+#define ISO_PRECISE
 
 // The GLSL environment of trace.h: the parameters and accessors that the shader gets from its
 // bindings, here from host memory. Its member functions are the shader's functions.
@@ -31,6 +33,9 @@ class Tracer {
   uvec4 chunkState(uint chunk) { return pool_.chunks[chunk].state; }
   void requestChunk(uint) {}
   void useChunk(uint) {}
+  static vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) {
+    return vec3(std::fma(a.x, b.x, c.x), std::fma(a.y, b.y, c.y), std::fma(a.z, b.z, c.z));
+  }
   vec3 environmentTexel(uint x, uint y) {
     const size_t at = 2 * (size_t(y) * env_->width + x);
     const vec2 rg = unpackHalf2x16(env_->texels[at]);
@@ -46,6 +51,7 @@ class Tracer {
 };
 
 #undef ISO_INOUT
+#undef ISO_PRECISE
 }  // namespace shader
 
 CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {

@@ -71,7 +71,11 @@ std::unique_ptr<Shape> makeShape(const ShapeParams& params) {
     if (!std::isfinite(params.center.x) || !std::isfinite(params.center.y) ||
         !std::isfinite(params.center.z))
       throw std::invalid_argument(params.name + ": the centre must be finite");
-    return s.make(params);
+    const glm::dvec3& r = params.rotation;
+    if (!std::isfinite(r.x) || !std::isfinite(r.y) || !std::isfinite(r.z))
+      throw std::invalid_argument(params.name + ": the rotation must be finite");
+    if (r == glm::dvec3(0.0)) return s.make(params);
+    return makeRotated(s.make(params), r, params.center);
   }
   throw std::invalid_argument("unknown shape '" + params.name + "' (known: " + knownNames() + ")");
 }

@@ -51,13 +51,19 @@ struct ShapeParams {
   double minorRadius = 0.35;    // torus tube radius
   double halfSize = 1.0;        // cube half edge; plane and sheets half extent in x and y
   double gap = 0.02;            // sheets: distance between the two sheets (z = ±gap/2)
+  glm::dvec3 rotation{0.0};     // degrees about x, then y, then z, around the centre
 };
 
 // Make an analytic shape; throws std::invalid_argument for an unknown name or bad parameters.
 // cube: axis-aligned, sharp edges. plane: the square |x|,|y| <= halfSize at z = 0, normal +z, open
 // boundary. sheets: two such squares at z = +gap/2 (normal +z) and z = -gap/2 (normal -z), the two
 // sides of a thin slab without its rim (open).
+// A rotation (params.rotation) turns the shape about its centre.
 std::unique_ptr<Shape> makeShape(const ShapeParams& params);
+
+// The shape turned about `pivot` by `degrees` about the x, then the y, then the z axis.
+std::unique_ptr<Shape> makeRotated(std::unique_ptr<Shape> shape, const glm::dvec3& degrees,
+                                   const glm::dvec3& pivot);
 
 // A triangle mesh as a shape (closest point and ray queries through a bounding volume hierarchy).
 // isClosed() is true when every edge is shared by exactly two triangles (a triangle with a repeated

@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "evaluate.h"
 #include "inputs.h"
+#include "io/ply.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
@@ -24,6 +25,8 @@ struct Options {
   bool perLevel = false;
   bool visibility = false;
   uint64_t visibilityPoints = 1000000;
+  std::string seenThrough;  // --seen-through OUT.ply
+  bool force = false;
   VisibilityOptions view;
   std::string columns;
   ShapeOptions truth;
@@ -56,10 +59,19 @@ std::vector<glm::dvec3> keptPoints(const Reader& reader, uint64_t limit) {
   return out;
 }
 
-// What the viewer shows of the points (`--visibility`), through its own tracer.
+// What the viewer shows of the points (`--visibility`), through its own tracer; the points seen
+// through written to --seen-through.
 nlohmann::json visibilityOf(const Reader& reader, std::span<const glm::dvec3> points,
-                            double spacing, const VisibilityOptions& options) {
-  return measureVisibility(reader, points, spacing, options).json();
+                            double spacing, const Options& o) {
+  const Visibility v = measureVisibility(reader, points, spacing, o.view);
+  nlohmann::json out = v.json();
+  if (!o.seenThrough.empty()) {
+    PointCloud seen;
+    for (const uint32_t i : v.seen) seen.positions.push_back(points[i]);
+    writePly(o.seenThrough, seen, {.comments = {"points of " + o.file + " seen through"}});
+    out["seen_through_file"] = o.seenThrough;
+  }
+  return out;
 }
 
 int run(Options& o) {
@@ -74,14 +86,18 @@ int run(Options& o) {
   if (o.visibility && !o.against.empty())
     throw std::invalid_argument("--visibility measures --points or the file's kept points");
   o.view.seed = o.eval.seed;
+  if (!o.seenThrough.empty()) {
+    if (!o.visibility) throw std::invalid_argument("--seen-through needs --visibility");
+    if (std::filesystem::exists(o.seenThrough) && !o.force)
+      throw FileError(o.seenThrough, std::nullopt, "exists already (use --force to replace it)");
+  }
   const Reader reader = Reader::open(o.file);
   nlohmann::json result;
   if (o.visibility && truths == 0) {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
       throw FileError(o.file, std::nullopt, "has no reported mean spacing; give --spacing");
-    result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing,
-                                        o.view);
+    result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
     result["mean_spacing"] = spacing;
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
@@ -98,7 +114,7 @@ int run(Options& o) {
       result["visibility"] =
           visibilityOf(reader, samplePoints(cloud, o.visibilityPoints == 0 ? cloud.size()
                                                                            : o.visibilityPoints),
-                       o.spacing > 0.0 ? o.spacing : result["mean_spacing"].get<double>(), o.view);
+                       o.spacing > 0.0 ? o.spacing : result["mean_spacing"].get<double>(), o);
   } else if (!o.against.empty()) {
     const Reader other = Reader::open(o.against);
     result = evaluateAgainstFile(surface, SurfaceModel::load(other));
@@ -118,7 +134,7 @@ int run(Options& o) {
     result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
     if (o.visibility)
       result["visibility"] =
-          visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o.view);
+          visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
   }
   result["file"] = o.file;
   fmt::print("{}\n", result.dump(2));
@@ -146,6 +162,10 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
               "axes and --views random ones): the share seen through (pixel and 8 neighbours "
               "empty) per view, and the depth error of the surface at the nearest points, in "
               "spacings. Points: --points, or the file's kept points");
+  c->add_option("--seen-through", o->seenThrough,
+                "With --visibility: write the points seen through in some view here (PLY), to "
+                "look at where the surface is missing");
+  c->add_flag("-f,--force", o->force, "Replace the --seen-through file if it exists");
   c->add_option("--views", o->view.randomViews, "Random views besides the 6 along the axes")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000));

@@ -16,6 +16,9 @@ void addShapeOptions(CLI::App& c, ShapeOptions& o) {
       ->capture_default_str();
   c.add_option("--gap", o.params.gap, "Distance between the two sheets")->capture_default_str();
   c.add_option("--center", o.center, "Shape centre x,y,z")->capture_default_str();
+  c.add_option("--rotate", o.rotate,
+                "Turn the shape about its centre: degrees about x, then y, then z (ax,ay,az)")
+      ->capture_default_str();
   c.add_option("--offset", o.offset, "Added to every position, e.g. 500000,4900000,0 (UTM-like)")
       ->capture_default_str();
 }
@@ -38,12 +41,15 @@ glm::dvec3 parseVector(const std::string& text, const char* option) {
 std::unique_ptr<Shape> makeTruth(const ShapeOptions& o) {
   const glm::dvec3 offset = parseVector(o.offset, "--offset");
   if (!o.mesh.empty()) {
+    if (parseVector(o.rotate, "--rotate") != glm::dvec3(0.0))
+      throw std::invalid_argument("--rotate turns analytic shapes, not --mesh");
     TriangleMesh mesh = readPlyMesh(o.mesh);
     for (glm::dvec3& v : mesh.vertices) v += offset;
     return makeMeshShape(std::move(mesh));
   }
   ShapeParams params = o.params;
   params.center = parseVector(o.center, "--center") + offset;
+  params.rotation = parseVector(o.rotate, "--rotate");
   return makeShape(params);
 }
 

@@ -13,6 +13,7 @@ struct ShapeOptions {
   ShapeParams params;
   std::string center = "0,0,0";
   std::string offset = "0,0,0";  // added to every position (gen) or to the truth (eval)
+  std::string rotate = "0,0,0";  // degrees about x, y, z (analytic shapes)
   std::string mesh;              // a PLY mesh instead of an analytic shape
 };
 
