@@ -56,6 +56,9 @@ struct Box {
   glm::dvec3 lo{-1.0}, hi{2.0};
 };
 
+// The depth error looks for the surface this many spacings before and after each point.
+constexpr double kDepthWindow = 3.0;
+
 // A pixel (ix, iy) as one sortable key.
 uint64_t pixelKey(int64_t ix, int64_t iy) {
   return uint64_t(ix + (int64_t(1) << 31)) << 32 | uint64_t(uint32_t(iy + (int64_t(1) << 31)));
@@ -175,67 +178,77 @@ PixelMap<double> nearestDepths(const std::vector<Projected>& projected) {
 // What one view saw of the points, summed over regions.
 struct Tally {
   ViewVisibility view;
-  std::vector<double> errors;  // the front points' depth errors, in spacings
+  std::vector<double> errors;  // the points' depth errors, in spacings
 };
 
-// One view of some points (frame units; `index` maps them to the measured points): seen-through
-// points appended to `seen`, counts and depth errors added to the tally.
+// Whether each point lies inside the outline of the points' own image in a view: the 3×3 blocks
+// of two-spacing cells around it all hold points (two spacings, so that a surface sampled about
+// once a spacing leaves none empty by chance). Computed on all the points, whatever the regions.
+std::vector<uint8_t> insideOutline(std::span<const glm::dvec3> points, const View& view,
+                                   double spacing) {
+  const std::vector<Projected> projected = project(points, view, 2.0 * spacing);
+  const PixelMap<double> occupied = nearestDepths(projected);
+  std::vector<uint8_t> inside(points.size(), 0);
+  tbb::parallel_for(size_t(0), projected.size(), [&](size_t i) {
+    bool all = true;
+    for (int dy = -1; dy <= 1 && all; ++dy)
+      for (int dx = -1; dx <= 1 && all; ++dx)
+        all = occupied.find(shifted(projected[i].key, dx, dy)) != nullptr;
+    inside[projected[i].index] = all;
+  });
+  return inside;
+}
+
+// One view of the points of a region (frame units; `index` maps them to the measured points,
+// `inside` flags those inside the outline): seen-through points appended to `seen`, counts and
+// depth errors added to the tally.
 void measureView(const viewer::CpuPool& pool, const gpu::FrameParams& params,
                  std::span<const glm::dvec3> points, std::span<const uint32_t> index,
-                 const Box& box, double spacing, double pixel, const View& view, Tally& tally,
-                 std::vector<uint32_t>& seen, uint64_t& rays) {
+                 const std::vector<uint8_t>& inside, const Box& box, double spacing,
+                 double pixel, const View& view, Tally& tally, std::vector<uint32_t>& seen,
+                 uint64_t& rays) {
   ViewVisibility& out = tally.view;
   out.points += points.size();
   const std::vector<Projected> projected = project(points, view, pixel);
-  const PixelMap<double> nearest = nearestDepths(projected);
+  const PixelMap<double> pixels = nearestDepths(projected);
   // Every pixel that holds points, then the 8 neighbours of those that missed.
   PixelHits hits(pool, params, view, box, pixel, rays);
-  hits.trace(nearest.keys);
+  hits.trace(pixels.keys);
   std::vector<uint64_t> around;
-  for (const uint64_t key : nearest.keys)
+  for (const uint64_t key : pixels.keys)
     if (!hits.hit(key))
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) around.push_back(shifted(key, dx, dy));
   hits.trace(std::move(around));
-  // A point splatted over the pixels within a spacing hides what lies more than a spacing behind
-  // it, so that a surface sampled about once a spacing hides what is behind it.
-  const int splat = std::max(1, int(std::ceil(spacing / pixel - 1e-9)));
-  std::vector<viewer::CpuRay> exact;
-  std::vector<double> exactDepth;
-  for (const Projected& q : projected) {
+  std::vector<viewer::CpuRay> exact(projected.size());
+  for (size_t i = 0; i < projected.size(); ++i) {
+    const Projected& q = projected[i];
     bool shown = hits.hit(q.key);
-    bool inside = true;  // the scan's own points fill the 3×3 pixels
     for (int dy = -1; dy <= 1 && !shown; ++dy)
-      for (int dx = -1; dx <= 1 && !shown; ++dx) {
-        shown = hits.hit(shifted(q.key, dx, dy));
-        inside = inside && nearest.find(shifted(q.key, dx, dy)) != nullptr;
-      }
+      for (int dx = -1; dx <= 1 && !shown; ++dx) shown = hits.hit(shifted(q.key, dx, dy));
     if (!shown) {
       ++out.seenThrough;
-      out.seenThroughInside += inside;
+      out.seenThroughInside += inside[index[q.index]];
       seen.push_back(index[q.index]);
     }
-    double front = std::numeric_limits<double>::infinity();
-    for (int dy = -splat; dy <= splat; ++dy)
-      for (int dx = -splat; dx <= splat; ++dx)
-        if (const double* d = nearest.find(shifted(q.key, dx, dy))) front = std::min(front, *d);
-    if (q.depth <= front + spacing) {
-      const glm::dvec3& p = points[q.index];
-      exact.push_back(view.ray(glm::dot(p, view.e1), glm::dot(p, view.e2), box.lo, box.hi));
-      exactDepth.push_back(q.depth);
-    }
+    // The ray through the point itself, from kDepthWindow spacings before it to as far after.
+    const glm::dvec3& p = points[q.index];
+    exact[i] = view.ray(glm::dot(p, view.e1), glm::dot(p, view.e2), box.lo, box.hi);
+    const double before = q.depth - view.start - kDepthWindow * spacing;
+    exact[i].tMin = std::max(exact[i].tMin, float(before));
+    exact[i].tMax = std::min(exact[i].tMax, float(before + 2.0 * kDepthWindow * spacing));
   }
-  // Depth errors along the rays through the front points themselves.
   std::vector<std::optional<viewer::CpuHit>> exactHits(exact.size());
   viewer::traceCpu(pool, params, exact, exactHits);
   rays += exact.size();
-  out.front += exact.size();
   for (size_t i = 0; i < exact.size(); ++i) {
-    if (exactHits[i])
-      tally.errors.push_back(std::abs(view.start + double(exactHits[i]->t) - exactDepth[i]) /
-                             spacing);
-    else
-      ++out.frontMissed;
+    if (!exactHits[i]) {
+      ++out.depthMissed;
+      continue;
+    }
+    ++out.depthMeasured;
+    tally.errors.push_back(
+        std::abs(view.start + double(exactHits[i]->t) - projected[i].depth) / spacing);
   }
 }
 
@@ -289,6 +302,8 @@ Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> p
   const double spacing = meanSpacing / frame.size, pixel = options.pixelSpacings * spacing;
   const std::vector<glm::dvec3> directions = visibilityViews(options.randomViews, options.seed);
   std::vector<Tally> tallies(directions.size());
+  std::vector<std::vector<uint8_t>> inside;
+  for (const glm::dvec3& d : directions) inside.push_back(insideOutline(inFrame, View(d), spacing));
   std::vector<uint32_t> seen;
   const double edge = std::ldexp(1.0, -level), margin = level == 0 ? 1.0 : edge / 16.0;
   for (const auto& [key, which] : regions) {
@@ -311,8 +326,8 @@ Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> p
     std::vector<glm::dvec3> regionPoints(which.size());
     for (size_t j = 0; j < which.size(); ++j) regionPoints[j] = inFrame[which[j]];
     for (size_t v = 0; v < directions.size(); ++v)
-      measureView(pool, params, regionPoints, which, box, spacing, pixel, View(directions[v]),
-                  tallies[v], seen, out.rays);
+      measureView(pool, params, regionPoints, which, inside[v], box, spacing, pixel,
+                  View(directions[v]), tallies[v], seen, out.rays);
   }
   std::vector<double> depths;
   for (size_t v = 0; v < directions.size(); ++v) {
@@ -359,8 +374,8 @@ nlohmann::json Visibility::json() const {
                        {"seen_through", v.seenThrough},
                        {"seen_through_fraction", v.seenThroughFraction()},
                        {"seen_through_inside", v.seenThroughInside},
-                       {"front_points", v.front},
-                       {"front_missed", v.frontMissed},
+                       {"depth_measured", v.depthMeasured},
+                       {"depth_missed", v.depthMissed},
                        {"depth_error_median", v.depthMedian},
                        {"depth_error_p90", v.depthP90},
                        {"depth_error_max", v.depthMax}});

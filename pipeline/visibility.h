@@ -5,13 +5,18 @@
 //
 // A view is an orthographic projection along a direction (a camera far away): 6 along the axes,
 // then random ones. Pixels are square, `pixelSpacings` mean point spacings wide, on a grid
-// anchored at the frame's origin. Each pixel's ray passes through its centre. A point is *front*
-// when no point within a spacing of it across the view (in the pixels that far) is nearer the
-// viewer by more than a spacing; its depth error is |depth of the hit − depth of the point| along
-// the ray through the point itself, in spacings.
+// anchored at the frame's origin. Each pixel's ray passes through its centre. A point is seen
+// through when the rays of its pixel and of the 8 around it all miss the surface; it is seen
+// through *inside the outline* when the points' own image has no gap around it (the 3×3 blocks
+// of two-spacing cells around it all hold points): a hole where the scan looks solid, rather than
+// surface stopping short of the scan's outline or an open boundary.
 //
-// A point is also counted as seen through *inside* when the scan's own points fill its 3×3 pixels:
-// a hole where the points look solid, rather than surface that stops short of the outline.
+// Depth: along the ray through each point itself, the first crossing of the surface within 3
+// spacings before or after the point (whatever lies farther along the ray, in front of the point
+// or behind it, is not looked at: a point hidden by other surface is measured against its own);
+// the depth error is |depth of that hit − depth of the point|, in spacings. Points with no surface
+// within 3 spacings along the view are counted apart (they are also the ones a missing surface
+// leaves, and those at an outline where the surface lies a little inside the points).
 //
 // Threading: runs its rays in parallel (TBB); the result does not depend on the thread count.
 #pragma once
@@ -47,9 +52,9 @@ struct ViewVisibility {
   // ... of which the scan's own points fill those 9 pixels (a hole inside what the points cover,
   // rather than at the edge of their image: an outline, an open boundary)
   uint64_t seenThroughInside = 0;
-  uint64_t front = 0;        // front points
-  uint64_t frontMissed = 0;  // ... whose own ray hits nothing (no depth error for them)
-  // |hit − point| along the view for the front points that hit, in mean spacings.
+  uint64_t depthMeasured = 0;  // points with surface within 3 spacings along the view
+  uint64_t depthMissed = 0;    // points without
+  // |hit − point| along the view for the measured points, in mean spacings.
   double depthMedian = 0.0, depthP90 = 0.0, depthMax = 0.0;
   double seenThroughFraction() const { return points ? double(seenThrough) / double(points) : 0.0; }
 };
