@@ -10,6 +10,7 @@
 #include "asset.h"
 #include "cpu_tracer.h"
 #include "image.h"
+#include "geom/generate.h"
 #include "io/readers.h"
 #include "iso/error.h"
 #include "iso/surface_model.h"
@@ -244,6 +245,56 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
   }
   EXPECT_GT(darker, pictures[0].size() / 100);
   EXPECT_EQ(lighter, 0u);
+}
+
+// An open sheet (a plane turned out of the axes) seen from behind, where the signed distance is
+// negative: the viewer shows that side (shaded with the flipped normal), tints it on request, or
+// hides it, and the GPU draws what the CPU reference draws.
+TEST(ViewerGolden, anOpenSheetSeenFromBehindIsShownTintedOrHidden) {
+  TempDir dir;
+  ShapeParams plane;
+  plane.name = "plane";
+  plane.rotation = {25.0, 15.0, 0.0};
+  GenerateOptions scan;
+  scan.count = 20000;
+  const std::unique_ptr<Shape> shape = makeShape(plane);
+  convertToIso(generateScan(*shape, scan), dir / "plane.iso", BuildOptions{});
+  const auto asset = Asset::open(dir / "plane.iso");
+  // The plane's normal is +z turned the same way.
+  const glm::dvec3 n = shape->closest(glm::dvec3(0.0, 0.0, 1.0)).normal;
+  const uint32_t w = 96, h = 96;
+  std::vector<uint32_t> pictures[3];
+  const BackFaces modes[3] = {BackFaces::Show, BackFaces::Tint, BackFaces::Hide};
+  for (int side = 0; side < 2; ++side) {  // from the front, then from behind
+    for (int m = 0; m < 3; ++m) {
+      Scene scene;
+      const glm::dvec3 eye = (side == 0 ? 4.0 : -4.0) * n + glm::dvec3(0.3, 0.2, 0.0);
+      scene.camera = Camera{eye, {0, 0, 0}, {0, 1, 0}, 40.0};
+      scene.lights.push_back(defaultLight(*scene.camera, asset->bounds));
+      scene.backFaces = modes[m];
+      pictures[m] = renderReference(*asset, scene, w, h);
+      const double differ =
+          differing(renderGpu(*asset, scene, w, h, uint64_t(1) << 30).pixels, pictures[m]);
+      EXPECT_LE(differ, 0.005) << "side " << side << ", mode " << m;
+    }
+    // Showing or hiding: the sheet covers a good part of the picture from either side.
+    const double covered = differing(pictures[0], pictures[2]);
+    const double tinted = differing(pictures[0], pictures[1]);
+    if (side == 0) {  // the front: the same whatever the mode
+      EXPECT_EQ(covered, 0.0);
+      EXPECT_EQ(tinted, 0.0);
+    } else {
+      EXPECT_GT(covered, 0.2);
+      EXPECT_GT(tinted, 0.2);
+      // The tint multiplies the color by (1, 0.45, 0.35): red dominates where it shows.
+      size_t red = 0;
+      for (size_t i = 0; i < pictures[1].size(); ++i) {
+        const uint32_t p = pictures[1][i];
+        red += pictures[1][i] != pictures[0][i] && int(p & 0xFF) > int(p >> 8 & 0xFF) + 20;
+      }
+      EXPECT_GT(double(red), 0.9 * tinted * double(pictures[1].size()));
+    }
+  }
 }
 
 TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
