@@ -388,6 +388,53 @@ TEST_F(CliPipeline, evalComparesTwoFilesAndEveryLevelOfDetail) {
   EXPECT_NE(run.err.find("missing.iso"), std::string::npos) << run.err;
 }
 
+TEST_F(CliPipeline, evalMeasuresWhatTheViewerShowsAndWritesThePointsSeenThrough) {
+  const std::string iso = quoted(dir_ / "s.iso"), ply = quoted(dir_ / "sphere.ply");
+  ASSERT_EQ(runIso("convert -q --keep-points " + ply + " -o " + iso).exitCode, 0);
+  // The input points: a closed sphere shows all of them from every view.
+  auto run = runIso("eval " + iso + " --visibility --points " + ply + " --views 2");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  nlohmann::json v = nlohmann::json::parse(run.out)["visibility"];
+  EXPECT_EQ(v["points"], 20000);
+  EXPECT_EQ(v["views"], 8);
+  EXPECT_EQ(v["per_view"].size(), 8u);
+  EXPECT_EQ(v["seen_through"], 0);
+  EXPECT_LT(v["depth_error_median"].get<double>(), 0.3);
+  // Without --points: the file's kept points, every second one.
+  run = runIso("eval " + iso + " --visibility --visibility-points 10000");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(nlohmann::json::parse(run.out)["visibility"]["points"], 10000);
+  // Points of a cube around the sphere, inside the frame: those outside the sphere's outline in a
+  // view are seen through (a line through a point inside the sphere always meets it), and
+  // written out.
+  ASSERT_EQ(runIso("gen cube -n 4000 --half-size 0.99 --seed 5 -o " + quoted(dir_ / "cube.ply"))
+                .exitCode,
+            0);
+  run = runIso("eval " + iso + " --visibility --points " + quoted(dir_ / "cube.ply") +
+               " --seen-through " + quoted(dir_ / "seen.ply"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  v = nlohmann::json::parse(run.out)["visibility"];
+  EXPECT_GT(v["seen_through"].get<uint64_t>(), 1000u);
+  const PointCloud seen = readPointFile(dir_ / "seen.ply");
+  EXPECT_GT(seen.size(), 100u);
+  for (const glm::dvec3& p : seen.positions) EXPECT_GT(glm::length(p), 1.0);
+  // The file is not replaced without --force; --seen-through needs --visibility; a file without
+  // kept points needs --points.
+  run = runIso("eval " + iso + " --visibility --points " + quoted(dir_ / "cube.ply") +
+               " --seen-through " + quoted(dir_ / "seen.ply"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("seen.ply"), std::string::npos) << run.err;
+  EXPECT_EQ(runIso("eval " + iso + " --points " + ply + " --seen-through " +
+                   quoted(dir_ / "other.ply"))
+                .exitCode,
+            2);
+  ASSERT_EQ(runIso("convert -q " + ply + " -o " + quoted(dir_ / "plain.iso")).exitCode, 0);
+  run = runIso("eval " + quoted(dir_ / "plain.iso") + " --visibility");
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("keeps no points"), std::string::npos) << run.err;
+  EXPECT_EQ(runIso("eval " + iso + " --visibility --pixel 0 --points " + ply).exitCode, 2);
+}
+
 TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
   for (const char* options : {"--threads -1", "--progress sometimes"}) {
     const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +

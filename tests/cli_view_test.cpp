@@ -159,6 +159,9 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
                 .exitCode,
             2);
   EXPECT_EQ(iso("view /nonexistent.iso --headless --out x.png").exitCode, 2);
+  const CommandResult faces = iso("view " + file + " --cpu --out x.png --backfaces invisible");
+  EXPECT_EQ(faces.exitCode, 2);
+  EXPECT_NE(faces.err.find("--backfaces"), std::string::npos) << faces.err;
   const CommandResult small = iso("view " + file + " --headless --out x.png --vram 4K");
   EXPECT_EQ(small.exitCode, 1);
   EXPECT_NE(small.err.find("--vram"), std::string::npos) << small.err;
