@@ -105,10 +105,18 @@ void encodeValue(const AttributeDesc& a, const CornerValues& v, const CornerKey&
   switch (a.semantic) {
     case Semantic::SignedDistance: {
       const float f = v.distance[i];
-      if (a.encoding == Encoding::Snorm8)
-        storeLE<int8_t>(out, encodeSnorm8(f / distanceUnit(key.level, a)));
-      if (a.encoding == Encoding::Snorm16)
-        storeLE<int16_t>(out, encodeSnorm16(f / distanceUnit(key.level, a)));
+      // A negative distance never rounds to 0: the surface is the boundary of {f < 0}, and 0
+      // counts as outside, so that would move the surface across the corner.
+      if (a.encoding == Encoding::Snorm8) {
+        const float x = f / distanceUnit(key.level, a);
+        const int8_t q = encodeSnorm8(x);
+        storeLE<int8_t>(out, q == 0 && x < 0.0f ? int8_t(-1) : q);
+      }
+      if (a.encoding == Encoding::Snorm16) {
+        const float x = f / distanceUnit(key.level, a);
+        const int16_t q = encodeSnorm16(x);
+        storeLE<int16_t>(out, q == 0 && x < 0.0f ? int16_t(-1) : q);
+      }
       if (a.encoding == Encoding::Float32) storeLE<float>(out, f);
       return;
     }
