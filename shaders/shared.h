@@ -38,12 +38,16 @@ ISO_CONST uint kBlobPageList = 4u;   // the pool pages of the blob, in order
 // a node whose children are roots of other chunks). A link list is the cut node's corner record
 // index, then (chunk, root node index) per existing child in octant order.
 ISO_CONST uint kNodeCut = 0x100u;
-// Corner records: 8 distances in units of the node's cell size (float32, 8 words: the file's
-// dequantized values scaled by a power of two, so that the tracer's surface is exactly the one
-// SurfaceModel measures), then, when the file has them, 8 normals (octahedral snorm8 pairs, 4 words), then, when it has colors or
-// occlusion, 8 colors (sRGB RGB8, white without colors, and the occlusion as unorm8 alpha, 255
-// without it; 8 words).
-ISO_CONST uint kRecordDistanceWords = 8u;
+// Corner records: the 8 distances, then, when the file has them, 8 normals (octahedral snorm8
+// pairs, 4 words), then, when it has colors or occlusion, 8 colors (sRGB RGB8, white without
+// colors, and the occlusion as unorm8 alpha, 255 without it; 8 words). The distances are the file's
+// own snorm8 codes (3 words: the codes of corners 0-3 and 4-7, a byte each, then per corner a
+// 4-bit shift e: the distance in units of the node's cell is code / 127 · unit · 2^e, unit =
+// FrameParams.surface.x), or, for files whose distances are not snorm8 (kOptionFloatDistances),
+// float32 in units of the cell (8 words). Either way the tracer reads exactly the values
+// SurfaceModel reads, scaled by a power of two.
+ISO_CONST uint kRecordDistanceWords = 3u;
+ISO_CONST uint kRecordFloatDistanceWords = 8u;
 ISO_CONST uint kRecordNormalWords = 4u;
 ISO_CONST uint kRecordColorWords = 8u;
 
@@ -74,6 +78,7 @@ ISO_CONST uint kOptionRequests = 128u;    // rays request missing chunks (stream
 ISO_CONST uint kOptionOcclusion = 256u;   // the file has baked ambient occlusion
 ISO_CONST uint kOptionBackTint = 512u;    // back faces seen by camera rays take FrameParams.backface
 ISO_CONST uint kOptionBackHide = 1024u;   // camera rays pass through back faces
+ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;
@@ -107,6 +112,7 @@ struct FrameParams {
   vec4 skyBottom;  // rgb: sky color below the horizon
   vec4 worldUp;    // xyz: the scene's up direction (sky and environment map), unit
   vec4 backface;   // rgb: the tint of back faces (kOptionBackTint)
+  vec4 surface;    // x: the unit of a distance code at level 0, float(√3 · the distance scale)
   Light lights[kMaxLights];
   uvec4 poolAddress[kPoolBuffers / 2u];  // device addresses of the pool buffers, two a vec4
 };

@@ -9,6 +9,8 @@
 //   void useChunk(uint chunk);           a ray went through this chunk (for the LRU)
 //   vec3 environmentTexel(uint x, uint y);  linear RGB of the environment map
 //   vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c);  a·b + c with one rounding
+//   bool floatDistances();               records hold float32 distances (kOptionFloatDistances;
+//                                        on the GPU a specialization constant, so no branch runs)
 // and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`) and ISO_PRECISE (GLSL `precise`: no
 // reassociation; C++ keeps the written order anyway).
 //
@@ -22,6 +24,11 @@ uint blobWord(uint firstPage, uint word) {
   uint physical = firstPage;
   if (page != 0u) physical = poolWord(firstPage * kPageWords + kBlobPageList + page);
   return poolWord(physical * kPageWords + (word & (kPageWords - 1u)));
+}
+
+// Words of a corner record's distances.
+uint distanceWords() {
+  return floatDistances() ? kRecordFloatDistanceWords : kRecordDistanceWords;
 }
 
 // The surface cell (filled leaf, or a coarser node drawn in place of what is below it) or the
@@ -45,7 +52,7 @@ Cell locate(uvec3 g, float distance, bool request) {
   uint page = chunkState(chunk).x;
   uint nodes = blobWord(page, kBlobNodes);
   uint data = blobWord(page, kBlobData);
-  uint recordWords = kRecordDistanceWords;
+  uint recordWords = distanceWords();
   if ((P.options.x & kOptionNormals) != 0u) recordWords += kRecordNormalWords;
   if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) recordWords += kRecordColorWords;
   useChunk(chunk);
@@ -106,15 +113,35 @@ struct Corners {
   vec4 d1;
 };
 
+// The distance of corners 0-3 of `codes` in cell units: their snorm8 codes (-128 reads as -127,
+// as the format says) over 127 times the unit scaled by 2^shift (4 bits each in `shifts`). The
+// same arithmetic as the format's decoder up to a power of two: exactly SurfaceModel's values,
+// scaled.
+vec4 decodeDistances(uint codes, uint shifts) {
+  vec4 q = vec4(float(max(int(codes << 24u) >> 24, -127)), float(max(int(codes << 16u) >> 24, -127)),
+                float(max(int(codes << 8u) >> 24, -127)), float(max(int(codes) >> 24, -127)));
+  vec4 unit = P.surface.x * vec4(float(1u << (shifts & 15u)), float(1u << ((shifts >> 4u) & 15u)),
+                                 float(1u << ((shifts >> 8u) & 15u)),
+                                 float(1u << ((shifts >> 12u) & 15u)));
+  return (q / 127.0f) * unit;
+}
+
 Corners loadCorners(uint page, uint record) {
   Corners c;
-  c.d0 = vec4(uintBitsToFloat(blobWord(page, record)), uintBitsToFloat(blobWord(page, record + 1u)),
-              uintBitsToFloat(blobWord(page, record + 2u)),
-              uintBitsToFloat(blobWord(page, record + 3u)));
-  c.d1 = vec4(uintBitsToFloat(blobWord(page, record + 4u)),
-              uintBitsToFloat(blobWord(page, record + 5u)),
-              uintBitsToFloat(blobWord(page, record + 6u)),
-              uintBitsToFloat(blobWord(page, record + 7u)));
+  if (floatDistances()) {
+    c.d0 = vec4(uintBitsToFloat(blobWord(page, record)),
+                uintBitsToFloat(blobWord(page, record + 1u)),
+                uintBitsToFloat(blobWord(page, record + 2u)),
+                uintBitsToFloat(blobWord(page, record + 3u)));
+    c.d1 = vec4(uintBitsToFloat(blobWord(page, record + 4u)),
+                uintBitsToFloat(blobWord(page, record + 5u)),
+                uintBitsToFloat(blobWord(page, record + 6u)),
+                uintBitsToFloat(blobWord(page, record + 7u)));
+    return c;
+  }
+  uint shifts = blobWord(page, record + 2u);
+  c.d0 = decodeDistances(blobWord(page, record), shifts);
+  c.d1 = decodeDistances(blobWord(page, record + 1u), shifts >> 16u);
   return c;
 }
 
@@ -272,7 +299,7 @@ float cornerWeight(uint k, vec3 u) {
 
 // Normal and color at local coordinates u of a surface cell.
 void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
-  uint word = cell.record + kRecordDistanceWords;
+  uint word = cell.record + distanceWords();
   vec3 n = trilinearGradient(c, u);
   if ((P.options.x & kOptionNormals) != 0u) {
     vec3 sum = vec3(0.0f);

@@ -52,9 +52,7 @@ FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
   setup.height = height;
   setup.topChunk = asset.tree.topChunk();
   setup.chunkCount = uint32_t(asset.reader.chunks().size());
-  setup.normals = asset.blob.normals;
-  setup.colors = asset.blob.colors;
-  setup.occlusion = asset.blob.occlusion;
+  setup.blob = asset.blob;
   setup.requests = false;
   setup.environmentWidth = environment ? environment->width : 0;
   setup.environmentHeight = environment ? environment->height : 0;

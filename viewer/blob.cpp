@@ -30,13 +30,39 @@ uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& 
          uint32_t(uint8_t(qb[1])) << 24;
 }
 
-// Append the corner record of a node: its 8 corners' values, distances in cell units.
+// The distances of a record (shared.h): the file's snorm8 codes, found again from the decoded
+// values (value / unit rounds back to the code exactly), with each corner's scale as a shift
+// from the node's level; or float32 in cell units. Either way the tracer's values are the decoded
+// ones times a power of two, which is exact.
+void appendDistances(std::vector<uint32_t>& out, const SurfaceNode& node,
+                     const CornerValues& values, std::span<const CornerKey> keys,
+                     const BlobOptions& options) {
+  if (options.floatDistances) {
+    const float perCell = std::ldexp(1.0f, int(node.level));
+    for (int c = 0; c < 8; ++c)
+      out.push_back(std::bit_cast<uint32_t>(values.distance.at(node.corners[c]) * perCell));
+    return;
+  }
+  uint32_t codes[2] = {0, 0}, shifts = 0;
+  for (int c = 0; c < 8; ++c) {
+    const CornerKey& key = keys[node.corners[c]];
+    const int8_t code = encodeSnorm8(values.distance.at(node.corners[c]) /
+                                     (options.distanceUnit * std::ldexp(1.0f, -int(key.level))));
+    // The corner's scale is its coarsest leaf's, at or above the node's level; a shift beyond 15
+    // (leaves 16 levels apart at one corner, which a 2:1-balanced file never has) is clamped.
+    const int shift = std::clamp(int(node.level) - int(key.level), 0, 15);
+    codes[c / 4] |= uint32_t(uint8_t(code)) << (8 * (c % 4));
+    shifts |= uint32_t(shift) << (4 * c);
+  }
+  out.push_back(codes[0]);
+  out.push_back(codes[1]);
+  out.push_back(shifts);
+}
+
+// Append the corner record of a node: its 8 corners' values.
 void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
-                  const BlobOptions& options) {
-  // Scaling by a power of two is exact: the tracer reads the values SurfaceModel reads.
-  const float perCell = std::ldexp(1.0f, int(node.level));
-  for (int c = 0; c < 8; ++c)
-    out.push_back(std::bit_cast<uint32_t>(values.distance.at(node.corners[c]) * perCell));
+                  std::span<const CornerKey> keys, const BlobOptions& options) {
+  appendDistances(out, node, values, keys, options);
   if (options.normals) {
     for (int c = 0; c < 8; c += 2)
       out.push_back(
@@ -84,12 +110,23 @@ BlobOptions blobOptionsOf(const FileHeader& header) {
     if (d.semantic == Semantic::Normal) o.normals = true;
     if (d.semantic == Semantic::Color) o.colors = true;
     if (d.semantic == Semantic::Occlusion) o.occlusion = true;
+    if (d.semantic == Semantic::SignedDistance) {
+      o.floatDistances = d.encoding != Encoding::Snorm8;
+      o.distanceUnit = float(nodeDiagonal(0) * double(d.scale));  // the format's unit at level 0
+    }
   }
   return o;
 }
 
+uint32_t recordOptionBits(const BlobOptions& o) {
+  return (o.normals ? gpu::kOptionNormals : 0u) | (o.colors ? gpu::kOptionColors : 0u) |
+         (o.occlusion ? gpu::kOptionOcclusion : 0u) |
+         (o.floatDistances ? gpu::kOptionFloatDistances : 0u);
+}
+
 uint32_t recordWords(const BlobOptions& options) {
-  return gpu::kRecordDistanceWords + (options.normals ? gpu::kRecordNormalWords : 0) +
+  return (options.floatDistances ? gpu::kRecordFloatDistanceWords : gpu::kRecordDistanceWords) +
+         (options.normals ? gpu::kRecordNormalWords : 0) +
          (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);
 }
 
@@ -112,7 +149,7 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
     const SurfaceNode& node = nodes[i];
     if (node.isLeaf()) {
       recordOf[i] = uint32_t(records.size() / recordWords(options));
-      appendRecord(records, node, chunk.leafValues, options);
+      appendRecord(records, node, chunk.leafValues, chunk.layout.leafCorners, options);
       continue;
     }
     if (node.level != lastLevel) continue;
@@ -133,7 +170,7 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
       nodeLinks.push_back(it->second++);
     }
     recordOf[i] = uint32_t(records.size() / recordWords(options));
-    appendRecord(records, node, chunk.lodValues, options);
+    appendRecord(records, node, chunk.lodValues, chunk.layout.lodCorners, options);
     if (complete) {  // else (a file without the child chunk) the node is drawn as its patch
       linkOf[i] = uint32_t(links.size());
       links.push_back(recordOf[i]);

@@ -30,6 +30,9 @@ struct BlobOptions {
   bool normals = false;  // the records carry normals
   bool colors = false;   // the records carry colors
   bool occlusion = false;  // ... and occlusion (in the color words, white without colors)
+  // Distances as float32 (files whose distances are not snorm8), else as the file's codes.
+  bool floatDistances = false;
+  float distanceUnit = 0.0f;  // a code's unit at level 0: float(√3 · the distance scale)
 };
 
 // What a file's corner records carry, from its attributes.
@@ -37,6 +40,9 @@ BlobOptions blobOptionsOf(const FileHeader& header);
 
 // Words per corner record with these options.
 uint32_t recordWords(const BlobOptions& options);
+
+// The option bits of FrameParams.options.x that say what records carry (kOptionNormals, ...).
+uint32_t recordOptionBits(const BlobOptions& options);
 
 // The blob of a decoded chunk, without its page list (filled in when its pages are known):
 // words [kBlobPageList, kBlobPageList + pageCount) are left zero for it.

@@ -33,6 +33,7 @@ class Tracer {
   uvec4 chunkState(uint chunk) { return pool_.chunks[chunk].state; }
   void requestChunk(uint) {}
   void useChunk(uint) {}
+  bool floatDistances() const { return (P.options.x & kOptionFloatDistances) != 0u; }
   static vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) {
     return vec3(std::fma(a.x, b.x, c.x), std::fma(a.y, b.y, c.y), std::fma(a.z, b.z, c.z));
   }
@@ -109,11 +110,8 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
 gpu::FrameParams finestFrameParams(const CpuPool& pool) {
   gpu::FrameParams p{};
   // The record layout follows what the records carry.
-  uint32_t options = 0;
-  if (pool.blob.normals) options |= gpu::kOptionNormals;
-  if (pool.blob.colors) options |= gpu::kOptionColors;
-  if (pool.blob.occlusion) options |= gpu::kOptionOcclusion;
-  p.options = {options, 0u, pool.topChunk, uint32_t(pool.chunks.size())};
+  p.options = {recordOptionBits(pool.blob), 0u, pool.topChunk, uint32_t(pool.chunks.size())};
+  p.surface = glm::vec4(pool.blob.distanceUnit, 0.0f, 0.0f, 0.0f);
   p.lod = glm::vec4(-1.0f, 0.0f, 0.0f, 0.0f);  // no chunk's error is below a negative bound
   p.eye.w = 1.0f;
   return p;

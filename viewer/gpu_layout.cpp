@@ -27,9 +27,10 @@ static_assert(offsetof(FrameParams, skyTop) == 192);
 static_assert(offsetof(FrameParams, skyBottom) == 208);
 static_assert(offsetof(FrameParams, worldUp) == 224);
 static_assert(offsetof(FrameParams, backface) == 240);
-static_assert(offsetof(FrameParams, lights) == 256);
-static_assert(offsetof(FrameParams, poolAddress) == 256 + kMaxLights * 64);
-static_assert(sizeof(FrameParams) == 256 + kMaxLights * 64 + kPoolBuffers * 8);
+static_assert(offsetof(FrameParams, surface) == 256);
+static_assert(offsetof(FrameParams, lights) == 272);
+static_assert(offsetof(FrameParams, poolAddress) == 272 + kMaxLights * 64);
+static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8);
 static_assert(sizeof(ChunkEntry) == 16);
 static_assert(kPageWords == 8192 && kWorkgroupSize == 64);
 

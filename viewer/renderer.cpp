@@ -120,7 +120,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                         glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
 
     const uint32_t counts[] = {1, 1, 1, 1};
-    pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts);
+    const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u};  // kFloatDistances
+    pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants);
     std::vector<VkDescriptorBufferInfo> infos;
     infos.push_back({params_.buffer, 0, VK_WHOLE_SIZE});
     infos.push_back({chunkTable_.buffer, 0, VK_WHOLE_SIZE});
@@ -149,9 +150,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.poolWords = uint32_t(std::min<uint64_t>(poolPages * gpu::kPageWords, UINT32_MAX));
   setup_.environmentWidth = environment ? environment->width : 0;
   setup_.environmentHeight = environment ? environment->height : 0;
-  setup_.normals = asset.blob.normals;
-  setup_.colors = asset.blob.colors;
-  setup_.occlusion = asset.blob.occlusion;
+  setup_.blob = asset.blob;
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
   stats_.poolBytes = poolPages * kPageBytes;

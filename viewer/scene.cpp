@@ -316,9 +316,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (scene.shadows) options |= gpu::kOptionShadows;
   if (scene.reflections) options |= gpu::kOptionReflections;
   if (scene.refractions) options |= gpu::kOptionRefractions;
-  if (s.normals) options |= gpu::kOptionNormals;
-  if (s.colors) options |= gpu::kOptionColors;
-  if (s.occlusion) options |= gpu::kOptionOcclusion;
+  options |= recordOptionBits(s.blob);
   if (s.swapRedBlue) options |= gpu::kOptionSwapRB;
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;
@@ -341,6 +339,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   const Vec3d worldUp = normalized(scene.up.value_or(c.up));
   p.worldUp = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]), 0);
   p.backface = rgb(scene.backTint);
+  p.surface = vec4(s.blob.distanceUnit, 0, 0, 0);
   for (size_t i = 0; i < scene.lights.size() && i < gpu::kMaxLights; ++i) {
     const LightSpec& l = scene.lights[i];
     gpu::Light& g = p.lights[i];

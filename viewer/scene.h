@@ -12,6 +12,7 @@
 
 #include <glm/vec3.hpp>
 
+#include "blob.h"
 #include "iso/format.h"
 #include "shared.h"
 
@@ -96,7 +97,8 @@ struct FrameSetup {
   uint32_t topChunk = 0, chunkCount = 0;
   uint32_t poolWordsLog2 = 0, poolWords = 0;  // per pool buffer; all of them
   uint32_t environmentWidth = 0, environmentHeight = 0;
-  bool normals = false, colors = false, occlusion = false, swapRedBlue = false, requests = true;
+  BlobOptions blob;  // what the corner records carry
+  bool swapRedBlue = false, requests = true;
 };
 
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.

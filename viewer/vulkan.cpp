@@ -311,7 +311,8 @@ void destroyBuffer(Gpu& gpu, Buffer& b) {
 }
 
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
-                                      std::span<const uint32_t> storageCounts) {
+                                      std::span<const uint32_t> storageCounts,
+                                      std::span<const uint32_t> constants) {
   ComputePipeline p;
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   bindings.push_back(
@@ -340,6 +341,11 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
   info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
   info.stage.module = module;
   info.stage.pName = "main";
+  std::vector<VkSpecializationMapEntry> entries(constants.size());
+  for (uint32_t i = 0; i < constants.size(); ++i) entries[i] = {i, 4 * i, 4};
+  VkSpecializationInfo specialization{uint32_t(entries.size()), entries.data(),
+                                      constants.size_bytes(), constants.data()};
+  if (!constants.empty()) info.stage.pSpecializationInfo = &specialization;
   info.layout = p.layout;
   const VkResult made =
       vkCreateComputePipelines(gpu.device, VK_NULL_HANDLE, 1, &info, nullptr, &p.pipeline);

@@ -77,9 +77,11 @@ struct ComputePipeline {
 };
 
 // A compute pipeline whose one descriptor set has a uniform buffer at binding 0 and storage
-// buffers at bindings 1 to storageBindings (each binding an array of `counts[i]` buffers).
+// buffers at bindings 1 to storageBindings (each binding an array of `counts[i]` buffers), with
+// the 32-bit specialization constants `constants` (constant_id i is constants[i]).
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
-                                      std::span<const uint32_t> storageCounts);
+                                      std::span<const uint32_t> storageCounts,
+                                      std::span<const uint32_t> constants = {});
 void destroyComputePipeline(Gpu& gpu, ComputePipeline& pipeline);
 
 VkCommandBuffer allocateCommandBuffer(Gpu& gpu);

@@ -9,6 +9,18 @@ PointCloud scanOf(const std::string& shape, uint64_t count, bool normals, double
                   uint64_t seed) {
   ShapeParams params;
   params.name = shape;
+  return scanOf(params, count, normals, noise, seed);
+}
+
+ShapeParams turnedShape(const std::string& name) {
+  ShapeParams params;
+  params.name = name;
+  params.rotation = {25.0, 15.0, 0.0};
+  return params;
+}
+
+PointCloud scanOf(const ShapeParams& params, uint64_t count, bool normals, double noise,
+                  uint64_t seed) {
   const std::unique_ptr<Shape> truth = makeShape(params);
   GenerateOptions options;
   options.count = count;

@@ -18,6 +18,12 @@ namespace iso::test {
 // A scan of an analytic shape.
 PointCloud scanOf(const std::string& shape, uint64_t count, bool normals = true, double noise = 0.0,
                   uint64_t seed = 1);
+PointCloud scanOf(const ShapeParams& shape, uint64_t count, bool normals = true,
+                  double noise = 0.0, uint64_t seed = 1);
+
+// A shape turned out of the axes, 25° about x and 15° about y: a square along the axes is a line
+// seen from 4 of the axis views.
+ShapeParams turnedShape(const std::string& name);
 
 struct Converted {
   nlohmann::json report;

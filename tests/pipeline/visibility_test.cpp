@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <glm/geometric.hpp>
 
-#include "geom/generate.h"
 #include "pipeline_support.h"
 #include "visibility.h"
 
@@ -82,12 +81,7 @@ TEST(Visibility, findsThePointsWhereTheSurfaceIsMissing) {
 // the viewer shows both of its sides, so no point is seen through from any side.
 TEST(Visibility, seesAnOpenSheetFromBothSides) {
   TempDir dir;
-  ShapeParams plane;
-  plane.name = "plane";
-  plane.rotation = {25.0, 15.0, 0.0};
-  GenerateOptions options;
-  options.count = 30000;
-  const PointCloud points = generateScan(*makeShape(plane), options);
+  const PointCloud points = scanOf(turnedShape("plane"), 30000);
   convertToIso(points, dir / "plane.iso", BuildOptions{});
   const Measured m = measure(dir / "plane.iso", points);
   for (const ViewVisibility& v : m.visibility.views) EXPECT_EQ(v.seenThrough, 0u);

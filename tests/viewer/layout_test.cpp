@@ -82,6 +82,7 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"skyBottom", offsetof(FrameParams, skyBottom)},
       {"worldUp", offsetof(FrameParams, worldUp)},
       {"backface", offsetof(FrameParams, backface)},
+      {"surface", offsetof(FrameParams, surface)},
       {"lights", offsetof(FrameParams, lights)},
       {"poolAddress", offsetof(FrameParams, poolAddress)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);

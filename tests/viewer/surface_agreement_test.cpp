@@ -9,7 +9,6 @@
 #include <random>
 
 #include "cpu_tracer.h"
-#include "geom/generate.h"
 #include "io/readers.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
@@ -99,22 +98,12 @@ std::filesystem::path converted(const TempDir& dir, const std::string& name,
   return file;
 }
 
-// A scan of a shape turned out of the axes (an axis-aligned plane seen edge-on is a line).
-PointCloud turnedScan(const std::string& shape, uint64_t count) {
-  ShapeParams params;
-  params.name = shape;
-  params.rotation = {25.0, 15.0, 0.0};
-  GenerateOptions options;
-  options.count = count;
-  return generateScan(*makeShape(params), options);
-}
-
 TEST(OneSurface, theTracerAndTheSurfaceModelFindTheSameFirstHitOnGeneratedShapes) {
   TempDir dir;
   expectOneSurface("sphere", converted(dir, "sphere", scanOf("sphere", 50000)));
   expectOneSurface("torus", converted(dir, "torus", scanOf("torus", 50000)));
   expectOneSurface("cube", converted(dir, "cube", scanOf("cube", 50000)));
-  expectOneSurface("open sheets", converted(dir, "sheets", turnedScan("sheets", 50000)));
+  expectOneSurface("open sheets", converted(dir, "sheets", scanOf(turnedShape("sheets"), 50000)));
 }
 
 TEST(OneSurface, theTracerAndTheSurfaceModelFindTheSameFirstHitOnScans) {

@@ -10,9 +10,9 @@
 #include "asset.h"
 #include "cpu_tracer.h"
 #include "image.h"
-#include "geom/generate.h"
 #include "io/readers.h"
 #include "iso/error.h"
+#include "iso/writer.h"
 #include "iso/surface_model.h"
 #include "pipeline/pipeline_support.h"
 #include "renderer.h"
@@ -252,13 +252,9 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
 // hides it, and the GPU draws what the CPU reference draws.
 TEST(ViewerGolden, anOpenSheetSeenFromBehindIsShownTintedOrHidden) {
   TempDir dir;
-  ShapeParams plane;
-  plane.name = "plane";
-  plane.rotation = {25.0, 15.0, 0.0};
-  GenerateOptions scan;
-  scan.count = 20000;
+  const ShapeParams plane = turnedShape("plane");
   const std::unique_ptr<Shape> shape = makeShape(plane);
-  convertToIso(generateScan(*shape, scan), dir / "plane.iso", BuildOptions{});
+  convertToIso(scanOf(plane, 20000), dir / "plane.iso", BuildOptions{});
   const auto asset = Asset::open(dir / "plane.iso");
   // The plane's normal is +z turned the same way.
   const glm::dvec3 n = shape->closest(glm::dvec3(0.0, 0.0, 1.0)).normal;
@@ -295,6 +291,40 @@ TEST(ViewerGolden, anOpenSheetSeenFromBehindIsShownTintedOrHidden) {
       EXPECT_GT(double(red), 0.9 * tinted * double(pictures[1].size()));
     }
   }
+}
+
+// The file again with its distances stored as float32: the same decoded values, another record
+// layout on the GPU (float32 distances, a specialization constant of the pipeline).
+std::filesystem::path withFloatDistances(const std::filesystem::path& file,
+                                         const std::filesystem::path& out) {
+  const Reader reader = Reader::open(file);
+  FileHeader header = reader.header();
+  for (AttributeDesc& a : header.attributes)
+    if (a.semantic == Semantic::SignedDistance) a = {a.semantic, Encoding::Float32, 1, a.scale};
+  Writer writer(out, header);
+  for (const ChunkInfo& c : reader.chunks()) {
+    const SurfaceChunk chunk = decodeSurfaceChunk(reader, c.id);
+    writer.addChunk({c.kind, c.level, c.key, c.parent, c.pointCount, c.nodeCount, c.leafCount,
+                     c.geometricError, Codec::Zstd},
+                    encodeSurfaceChunk(chunk.topology, chunk.layout, header.attributes,
+                                       chunk.leafValues, chunk.lodValues));
+  }
+  writer.setMetadata(std::string(reader.metadata()));
+  writer.finish();
+  return out;
+}
+
+TEST(ViewerGolden, float32DistancesDrawTheSamePictureAsTheirSnorm8Codes) {
+  TempDir dir;
+  const auto codes = Asset::open(files().torus);
+  const auto floats = Asset::open(withFloatDistances(files().torus, dir / "float.iso"));
+  ASSERT_FALSE(codes->blob.floatDistances);
+  ASSERT_TRUE(floats->blob.floatDistances);
+  const Scene scene = sceneFor(*codes);
+  const uint32_t w = 128, h = 96;
+  const std::vector<uint32_t> reference = renderReference(*codes, scene, w, h);
+  EXPECT_EQ(differing(renderReference(*floats, scene, w, h), reference, 0), 0.0);
+  EXPECT_LE(differing(renderGpu(*floats, scene, w, h, uint64_t(1) << 30).pixels, reference), 0.005);
 }
 
 TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
