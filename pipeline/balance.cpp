@@ -24,7 +24,6 @@ namespace {
 struct Request {
   uint8_t level;
   uint64_t key;
-  bool inexact;  // in a chunk run: asked only by a leaf that may differ from the run on all points
   auto operator<=>(const Request&) const = default;
 };
 
@@ -46,17 +45,13 @@ void requestsOf(const Octree& tree, uint32_t id, std::vector<Request>& out) {
     const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
     const OctreeNode& other = tree.nodes[tree.find(level, key)];
     if (other.isFilled() && other.level + 1 < level)
-      out.push_back({uint8_t(level - 1), key >> 3, !tree.isExact(id)});
+      out.push_back({uint8_t(level - 1), key >> 3});
   }
 }
 
-// Sorted requests without repeats: the first for a cell (an exact one before an inexact one).
+// Sorted requests without repeats.
 void unique(std::vector<Request>& sorted) {
-  sorted.erase(std::unique(sorted.begin(), sorted.end(),
-                           [](const Request& a, const Request& b) {
-                             return a.level == b.level && a.key == b.key;
-                           }),
-               sorted.end());
+  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
 }
 
 // The requests of all leaves on the work list, sorted and without repeats (in parallel). Neighbours
@@ -101,19 +96,14 @@ void splitFilled(Octree& tree, const PointSet& points, const std::vector<uint32_
   tbb::parallel_for(tbb::blocked_range<size_t>(0, empty.size(), 16),
                     [&](const tbb::blocked_range<size_t>& r) {
                       for (size_t i = r.begin(); i < r.end(); ++i)
-                        covered[i] = isEmptyCoveredByDisk(tree, points, empty[i]);
+                        covered[i] = isCoveredByDisk(tree, points, empty[i]);
                     });
   for (size_t i = 0; i < empty.size(); ++i)
     if (covered[i]) tree.nodes[empty[i]].kind = NodeKind::Passive;
   for (size_t i = 0; i < nodes.size(); ++i) {
     const uint32_t first = tree.nodes[nodes[i]].firstChild;
-    bool anyFilled = false, anyInexact = false;
-    for (uint32_t c = 0; c < 8; ++c) {
-      anyFilled = anyFilled || tree.nodes[first + c].isFilled();
-      anyInexact = anyInexact || !tree.isExact(first + c);
-    }
-    if (wasPassive[i] && anyInexact)  // whether any child is filled decides them all
-      for (uint32_t c = 0; c < 8; ++c) tree.markInexact(first + c);
+    bool anyFilled = false;
+    for (uint32_t c = 0; c < 8; ++c) anyFilled = anyFilled || tree.nodes[first + c].isFilled();
     for (uint32_t c = 0; c < 8; ++c) {
       if (wasPassive[i] && !anyFilled) tree.nodes[first + c].kind = NodeKind::Passive;
       if (tree.nodes[first + c].isFilled()) created.push_back(first + c);
@@ -125,34 +115,24 @@ void splitFilled(Octree& tree, const PointSet& points, const std::vector<uint32_
 size_t balanceRounds(Octree& tree, const PointSet& points, std::vector<uint32_t> work,
                      std::vector<uint32_t>* createdOut) {
   size_t splits = 0;
-  int round = 1;
-  for (; !work.empty(); ++round) {
+  while (!work.empty()) {
     const std::vector<Request> requests = requestsOf(tree, work);
     std::vector<uint32_t> created;
     // Walk down the requested paths one level at a time: the filled nodes at the ends of the
     // paths are split together (in key order), then the paths are followed again.
     for (;;) {
-      std::vector<std::pair<uint32_t, bool>> ends;  // node, asked by inexact leaves only
+      std::vector<uint32_t> nodes;
       for (const Request& r : requests) {
         const uint32_t node = tree.find(r.level, r.key);
-        if (tree.nodes[node].isFilled() && tree.nodes[node].level < r.level)
-          ends.push_back({node, r.inexact});
+        if (tree.nodes[node].isFilled() && tree.nodes[node].level < r.level) nodes.push_back(node);
       }
-      if (ends.empty()) break;
-      const auto byCell = [&](const auto& a, const auto& b) {
-        const OctreeNode &x = tree.nodes[a.first], &y = tree.nodes[b.first];
-        if (x.level != y.level) return x.level < y.level;
-        return x.key != y.key ? x.key < y.key : a.second < b.second;
+      if (nodes.empty()) break;
+      const auto byCell = [&](uint32_t a, uint32_t b) {
+        const OctreeNode &x = tree.nodes[a], &y = tree.nodes[b];
+        return x.level != y.level ? x.level < y.level : x.key < y.key;
       };
-      std::sort(ends.begin(), ends.end(), byCell);  // an exact request first
-      ends.erase(std::unique(ends.begin(), ends.end(),
-                             [](const auto& a, const auto& b) { return a.first == b.first; }),
-                 ends.end());
-      std::vector<uint32_t> nodes;
-      for (const auto& [node, inexact] : ends) {
-        if (inexact) tree.markInexact(node);  // the run on all points may not split it
-        nodes.push_back(node);
-      }
+      std::sort(nodes.begin(), nodes.end(), byCell);
+      nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
       splitFilled(tree, points, nodes, created);
       splits += nodes.size();
     }
@@ -160,9 +140,7 @@ size_t balanceRounds(Octree& tree, const PointSet& points, std::vector<uint32_t>
     for (uint32_t id : created)
       if (tree.nodes[id].isFilled()) work.push_back(id);  // not split again in this round
     if (createdOut) createdOut->insert(createdOut->end(), work.begin(), work.end());
-    if (tree.box) spreadBalanceRound(tree, round);
   }
-  if (tree.box) spreadRemainingBalanceRounds(tree, round);
   return splits;
 }
 

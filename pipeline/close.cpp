@@ -54,8 +54,7 @@ FaceSquare faceSquare(const Distances& f, const OctreeNode& leaf, int axis, int 
 
 // A point where the leaf's zero set crosses the square near the points (within the radius of
 // influence of the nearest one), if there is one: the crossings along its 4 edges are tried.
-bool crossesNearPoints(const FaceSquare& square, const SdfEvaluator& sdf, const PointSet& points,
-                       bool& exact) {
+bool crossesNearPoints(const FaceSquare& square, const SdfEvaluator& sdf, const PointSet& points) {
   const double unit = std::ldexp(1.0, -kMaxLevel);
   for (size_t e = 0; e < 4; ++e) {
     const double fa = square.value[e], fb = square.value[(e + 1) % 4];
@@ -65,9 +64,7 @@ bool crossesNearPoints(const FaceSquare& square, const SdfEvaluator& sdf, const 
     const glm::dvec3& b = square.corner[(e + 1) % 4];
     const glm::dvec3 x = (a + t * (b - a)) * unit;
     float distance = 0.0f;
-    bool found = true;
-    const uint32_t nearest = sdf.nearest(x, distance, &found);
-    exact = exact && found;
+    const uint32_t nearest = sdf.nearest(x, distance);
     if (distance <= points.radius[nearest]) return true;
   }
   return false;
@@ -96,12 +93,10 @@ bool hasSurface(const Distances& f) {
   return negative != 0 && negative != kCorners;
 }
 
-// An empty cell the surface runs into; inexact (in a chunk run): found only from what may differ
-// from the run on all points.
+// An empty cell the surface runs into.
 struct Exit {
   uint8_t level;
   uint64_t key;
-  bool inexact;
   auto operator<=>(const Exit&) const = default;
 };
 
@@ -109,18 +104,17 @@ struct Exit {
 // (axis, side)) that touch the face and into which the leaf's zero set runs near the points.
 void finerExits(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                 const Distances& f, const OctreeNode& leaf, int axis, int side, uint32_t across,
-                bool exact, std::vector<Exit>& out) {
+                std::vector<Exit>& out) {
   const OctreeNode& node = tree.nodes[across];
   for (int octant = 0; octant < 8; ++octant) {
     if (((octant >> axis) & 1) != (side ? 0 : 1)) continue;  // not on the shared face
     const uint32_t child = node.firstChild + uint32_t(octant);
     const OctreeNode& c = tree.nodes[child];
     if (c.kind == NodeKind::Internal) {
-      finerExits(tree, points, sdf, f, leaf, axis, side, child, exact, out);
-    } else if (c.kind == NodeKind::Empty) {
-      bool found = exact && tree.isExact(child);
-      if (crossesNearPoints(faceSquare(f, leaf, axis, side, c.level, c.key), sdf, points, found))
-        out.push_back({c.level, c.key, !found});
+      finerExits(tree, points, sdf, f, leaf, axis, side, child, out);
+    } else if (c.kind == NodeKind::Empty &&
+               crossesNearPoints(faceSquare(f, leaf, axis, side, c.level, c.key), sdf, points)) {
+      out.push_back({c.level, c.key});
     }
   }
 }
@@ -130,13 +124,9 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
              const CornerField& field, uint32_t id, std::vector<Exit>& out) {
   const OctreeNode& leaf = tree.nodes[id];
   if (!leaf.isFilled()) return;
-  bool exact = tree.isExact(id);
   Distances f{};
-  for (int c = 0; c < kCorners; ++c) {
-    const uint32_t entry = field.find(cornerPoint(leaf.level, leaf.key, c));
-    f[size_t(c)] = field.value[entry].distance;
-    exact = exact && field.isExact(entry);
-  }
+  for (int c = 0; c < kCorners; ++c)
+    f[size_t(c)] = field.value[field.find(cornerPoint(leaf.level, leaf.key, c))].distance;
   const auto cell = mortonDecode(leaf.key);
   const bool lost = leaf.pointCount() > 0 && !hasSurface(f);
   const int toward = lost ? faceTowardSurface(f) : -1;
@@ -151,16 +141,15 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
       // Finer cells across the face: the empty ones the zero set runs into through their part
       // of it (without this, a coarse leaf's surface could run into the empty child of a finer
       // neighbour).
-      finerExits(tree, points, sdf, f, leaf, axis, side, across, exact, out);
+      finerExits(tree, points, sdf, f, leaf, axis, side, across, out);
       continue;
     }
     if (tree.nodes[across].kind != NodeKind::Empty) continue;
     // The zero set runs out through this face near the points, or the leaf holds points but no
     // zero set (a displaced estimate) and this face is the nearest to it.
-    bool found = exact;
     if (face == toward ||
-        crossesNearPoints(faceSquare(f, leaf, axis, side, leaf.level, key), sdf, points, found))
-      out.push_back({leaf.level, key, !found});
+        crossesNearPoints(faceSquare(f, leaf, axis, side, leaf.level, key), sdf, points))
+      out.push_back({leaf.level, key});
   }
 }
 
@@ -173,18 +162,13 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
       collectInParallel<Exit>(leaves.size(), 1024, [&](size_t i, std::vector<Exit>& out) {
         exitsOf(tree, points, sdf, field, leaves[i], out);
       });
-  std::sort(targets.begin(), targets.end());  // an exact exit before an inexact one
-  targets.erase(std::unique(targets.begin(), targets.end(),
-                            [](const Exit& a, const Exit& b) {
-                              return a.level == b.level && a.key == b.key;
-                            }),
-                targets.end());
+  std::sort(targets.begin(), targets.end());
+  targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
   std::vector<uint32_t> filled;
-  for (const auto& [level, key, inexact] : targets) {
+  for (const auto& [level, key] : targets) {
     const uint32_t node = tree.materialize(level, key, points);
     if (tree.nodes[node].kind != NodeKind::Empty) continue;  // inside a cell filled before
     tree.nodes[node].kind = NodeKind::Passive;
-    if (inexact) tree.markInexact(node);  // the run on all points may not fill it
     filled.push_back(node);
   }
   return filled;
@@ -200,13 +184,9 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
   for (uint32_t i = 0; i < tree.nodes.size(); ++i)
     if (tree.nodes[i].isFilled()) fresh.push_back(i);
   addLeafCorners(closure.corners, tree, fresh, sdf);
-  // A chunk run spreads its marks as far as the passes of the run on all points that fill cells.
-  const size_t spreadPasses =
-      tree.box ? std::min<size_t>(kMaxClosurePasses, tree.box->fillPasses) : 0;
   // Exits are found on the sampled values: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
     std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
-    if (closure.passes <= spreadPasses) spreadClosurePass(tree, points);
     if (filled.empty()) break;
     closure.filled += filled.size();
     std::vector<uint32_t> created;
@@ -214,12 +194,6 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     fresh = std::move(filled);
     fresh.insert(fresh.end(), created.begin(), created.end());
     addLeafCorners(closure.corners, tree, fresh, sdf);
-  }
-  // A chunk run: the run on all points may go on filling (and balancing after) next to inexact
-  // nodes in the passes left.
-  for (size_t pass = closure.passes; pass <= spreadPasses; ++pass) {
-    spreadRemainingBalanceRounds(tree, 1);
-    if (pass < spreadPasses) spreadClosurePass(tree, points);
   }
   // Splits left corners of leaves that are leaves no more: the levels are set from the final
   // leaves (every corner they use is in the field), then hanging corners are snapped.

@@ -33,7 +33,6 @@ std::pair<uint32_t, bool> CornerField::insert(const Key128& key) {
   if (added) {
     coarsestLevel.push_back(kUnusedCorner);
     value.emplace_back();
-    if (marksInexact) inexact.push_back(0);
   }
   return {entry, added};
 }
@@ -62,10 +61,7 @@ void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
                       for (size_t i = r.begin(); i < r.end(); ++i) {
                         const uint32_t entry = entries[i];
                         const GridPoint p = field.point(entry);
-                        bool exact = true;
-                        field.value[entry] =
-                            sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f, &exact);
-                        if (field.marksInexact) field.inexact[entry] = !exact;
+                        field.value[entry] = sdf.evaluate(glm::dvec3(p.x, p.y, p.z) * unit, 0.0f);
                       }
                     });
 }

@@ -91,7 +91,7 @@ void evaluateTestedCorners(const Octree& tree, const std::vector<uint32_t>& fron
 // Whether every zero crossing of the patch along a grid of lines lies within the radius of
 // influence of its nearest point: surface only where points are.
 bool isCovered(const Patch& patch, const SdfEvaluator& sdf, const PointSet& points,
-               const OctreeNode& node, bool& exact) {
+               const OctreeNode& node) {
   glm::vec3 mean(0.0f);
   for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) mean += points.normal[i];
   const glm::vec3 a = glm::abs(mean);
@@ -108,9 +108,7 @@ bool isCovered(const Patch& patch, const SdfEvaluator& sdf, const PointSet& poin
       glm::dvec3 x = lo;
       x[axis] += patch.size * f0 / (f0 - f1);
       float distance = 0.0f;
-      bool found = true;
-      const uint32_t nearest = sdf.nearest(x, distance, &found);
-      exact = exact && found;
+      const uint32_t nearest = sdf.nearest(x, distance);
       if (distance > points.radius[nearest]) return false;
     }
   return true;
@@ -131,16 +129,13 @@ double nodeTolerance(const OctreeNode& node, const PointSet& points, const Toler
   return std::max(scale.tolerance * localSpacing, kNoiseFactor * std::sqrt(squares / n));
 }
 
-// exact: whether every value and query the test read is exact (always, on all points).
 Verdict patchTest(const OctreeNode& node, const PointSet& points, const SdfEvaluator& sdf,
-                  const CornerField& corners, const ToleranceScale& tolerance, bool& exact) {
-  for (int c = 0; c < kCorners; ++c)
-    exact = exact && corners.isExact(corners.find(cornerPoint(node.level, node.key, c)));
+                  const CornerField& corners, const ToleranceScale& tolerance) {
   const Patch patch = leafPatch(node, corners);
   if (patch.maxPointDistance(points, node.pointBegin, node.pointEnd) >
       nodeTolerance(node, points, tolerance))
     return Verdict::TooFar;
-  return isCovered(patch, sdf, points, node, exact) ? Verdict::Leaf : Verdict::Uncovered;
+  return isCovered(patch, sdf, points, node) ? Verdict::Leaf : Verdict::Uncovered;
 }
 
 float maxRadiusOf(const PointSet& points, uint32_t begin, uint32_t end) {
@@ -205,31 +200,6 @@ void Octree::split(uint32_t id, const PointSet& points) {
   }
   nodes[id].kind = NodeKind::Internal;
   nodes[id].firstChild = first;
-  if (flags.empty()) return;
-  // A chunk run: children inherit the parent's flags; a child without loaded points whose points
-  // may not all be loaded may not be empty.
-  const uint8_t inherited = flags[id];
-  flags.resize(nodes.size(), inherited);
-  for (uint32_t c = first; c < first + 8; ++c) {
-    flags[c] |= completeness(c);
-    OctreeNode& child = nodes[c];
-    if (child.pointCount() > 0 || isComplete(c)) continue;
-    // No loaded points, but maybe some that were not: the coarse cells tell, else it may differ.
-    if (box->coarse && child.level <= kCoarseLevel) {
-      if (box->coarse->pointsIn(child.level, child.key) > 0) child.kind = NodeKind::Leaf;
-    } else {
-      flags[c] |= kInexact;
-    }
-  }
-}
-
-uint8_t Octree::completeness(uint32_t id) const {
-  const OctreeNode& n = nodes[id];
-  if (box->holdsCell(n.level, n.key)) return kComplete;
-  if (box->coarse && n.level <= kCoarseLevel &&
-      box->coarse->pointsIn(n.level, n.key) == n.pointCount())
-    return kComplete;
-  return 0;
 }
 
 uint32_t Octree::materialize(uint8_t level, uint64_t key, const PointSet& points) {
@@ -287,15 +257,6 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   root.pointEnd = uint32_t(points.size());
   root.kind = root.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
   tree.nodes.push_back(root);
-  const LoadedBox* box = sdf.box();
-  if (box) {  // a chunk run
-    tree.box = box;
-    corners.marksInexact = true;
-    corners.inexact.resize(corners.size(), 0);
-    tree.flags.assign(1, 0);
-    tree.flags[0] = tree.completeness(0);
-    if (root.pointCount() == 0 && !tree.isComplete(0)) tree.markInexact(0);
-  }
   const ToleranceScale tolerance{options.tolerance, radii.meanSpacing,
                                  std::max(radii.medianRadius, 1e-12)};
   // Tested nodes are at most this wide, so that no test reads points much farther away.
@@ -304,47 +265,21 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   OctreeStats stats;
   while (!frontier.empty()) {  // one level at a time
     std::vector<Verdict> verdict(frontier.size());
-    std::vector<uint8_t> exact(frontier.size(), 1);  // the decision's inputs, in a chunk run
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 64),
                       [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t i = r.begin(); i < r.end(); ++i) {
-                          const OctreeNode& node = tree.nodes[frontier[i]];
-                          if (box && box->isOwnAncestor(node.level, node.key)) {
-                            verdict[i] = Verdict::Subdivide;
-                            continue;
-                          }
-                          verdict[i] = quickVerdict(node, points, options, maxEdge);
-                          // A cell whose points were not all loaded is decided as with all of
-                          // them only by its depth, or by holding more points than are tested.
-                          if (box && !tree.isComplete(frontier[i]) &&
-                              node.level < options.maxDepth) {
-                            if (!box->meetsCell(node.level, node.key)) {
-                              verdict[i] = Verdict::Leaf;  // outside: left as it is, inexact
-                              exact[i] = 0;
-                              continue;
-                            }
-                            const uint32_t all =
-                                box->coarse && node.level <= kCoarseLevel
-                                    ? box->coarse->pointsIn(node.level, node.key)
-                                    : node.pointCount();
-                            if (all > options.maxTestedPoints) verdict[i] = Verdict::Subdivide;
-                            else exact[i] = 0;
-                          }
-                        }
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          verdict[i] =
+                              quickVerdict(tree.nodes[frontier[i]], points, options, maxEdge);
                       });
     evaluateTestedCorners(tree, frontier, verdict, sdf, corners);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
                       [&](const tbb::blocked_range<size_t>& r) {
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           if (verdict[i] != Verdict::Test) continue;
-                          bool ok = exact[i];
-                          verdict[i] = patchTest(tree.nodes[frontier[i]], points, sdf, corners,
-                                                 tolerance, ok);
-                          exact[i] = ok;
+                          verdict[i] =
+                              patchTest(tree.nodes[frontier[i]], points, sdf, corners, tolerance);
                         }
                       });
-    for (size_t i = 0; i < frontier.size(); ++i)
-      if (!exact[i]) tree.markInexact(frontier[i]);  // before its children inherit it
     std::vector<uint32_t> next;
     for (size_t i = 0; i < frontier.size(); ++i) {
       const OctreeNode& node = tree.nodes[frontier[i]];

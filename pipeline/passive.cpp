@@ -90,7 +90,7 @@ size_t markPassiveLeaves(Octree& tree, const PointSet& points) {
   tbb::parallel_for(tbb::blocked_range<size_t>(0, empty.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
                       for (size_t i = r.begin(); i < r.end(); ++i)
-                        covered[i] = isEmptyCoveredByDisk(tree, points, empty[i]);
+                        covered[i] = isCoveredByDisk(tree, points, empty[i]);
                     });
   size_t count = 0;
   for (size_t i = 0; i < empty.size(); ++i)
@@ -99,17 +99,6 @@ size_t markPassiveLeaves(Octree& tree, const PointSet& points) {
       ++count;
     }
   return count;
-}
-
-bool isEmptyCoveredByDisk(Octree& tree, const PointSet& points, uint32_t node) {
-  const OctreeNode& n = tree.nodes[node];
-  const LoadedBox* box = tree.box;
-  if (box && !box->holdsCell(n.level, n.key, box->maxRadius)) {  // disks may not be loaded
-    if (box->coarse && n.level <= kCoarseLevel && tree.isComplete(node))
-      return box->coarse->isTouched(n.level, n.key);
-    tree.markInexact(node);  // (flags of distinct nodes: safe from parallel callers)
-  }
-  return isCoveredByDisk(tree, points, node);
 }
 
 }  // namespace iso

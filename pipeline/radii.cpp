@@ -100,26 +100,4 @@ std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neigh
   return flagged;
 }
 
-void removePoints(PointSet& points, const std::vector<uint8_t>& flagged) {
-  size_t out = 0;
-  for (size_t i = 0; i < points.size(); ++i) {
-    if (flagged[i]) continue;
-    points.position[out] = points.position[i];
-    points.key[out] = points.key[i];
-    points.source[out] = points.source[i];
-    points.weight[out] = points.weight[i];
-    if (!points.normal.empty()) points.normal[out] = points.normal[i];
-    if (!points.color.empty()) points.color[out] = points.color[i];
-    if (!points.radius.empty()) points.radius[out] = points.radius[i];
-    ++out;
-  }
-  points.position.resize(out);
-  points.key.resize(out);
-  points.source.resize(out);
-  points.weight.resize(out);
-  if (!points.normal.empty()) points.normal.resize(out);
-  if (!points.color.empty()) points.color.resize(out);
-  if (!points.radius.empty()) points.radius.resize(out);
-}
-
 }  // namespace iso

@@ -182,30 +182,24 @@ CornerSample faceSample(const PointSet& points, const glm::dvec3& q, FitMode fit
 }  // namespace
 
 SdfEvaluator::SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing,
-                           FitMode fit, const LoadedBox* box)
-    : points_(points), tree_(tree), box_(box), smoothing_(smoothing), fit_(fit) {}
+                           FitMode fit)
+    : points_(points), tree_(tree), smoothing_(smoothing), fit_(fit) {}
 
-uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance, bool* exact) const {
+uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
   uint32_t index = 0;
   float d2 = 0.0f;
-  const size_t found = tree_.nearest(glm::vec3(q), 1, &index, &d2);
+  tree_.nearest(glm::vec3(q), 1, &index, &d2);
   distance = std::sqrt(d2);
-  if (exact) *exact = !box_ || box_->holdsBall(q, found == 1 ? double(distance) : HUGE_VAL);
   return index;
 }
 
-CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma, bool* exact) const {
+CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   thread_local std::vector<std::pair<uint32_t, float>> found;
   thread_local std::vector<double> logWeight, weight;
   const glm::vec3 qf(q);
   std::array<uint32_t, kProbe> probe{};
   std::array<float, kProbe> probeD2{};
   const size_t probes = tree_.nearest(qf, kProbe, probe.data(), probeD2.data());
-  // The probes are the nearest points of all when their ball holds no unloaded point; fewer
-  // than kProbe are the nearest only when nothing was left out.
-  if (exact)
-    *exact = !box_ || box_->holdsBall(q, probes == kProbe ? std::sqrt(double(probeD2[kProbe - 1]))
-                                                          : HUGE_VAL);
   if (probes == 0) return {};
   // σ grows with the distance to the nearest point: far from the points a common scale ranks them
   // by distance, where their own radii would rank them by radius.
@@ -220,7 +214,6 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma, bool* e
   const double sigma0 = sigmaOf(probe[0]);
   const double radius =
       sigmaMax * std::sqrt(double(probeD2[0]) / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
-  if (exact && *exact && box_) *exact = box_->holdsBall(q, radius);
   tree_.withinRadius(qf, float(radius), found);
   if (found.empty()) found.push_back({probe[0], probeD2[0]});
 

@@ -11,7 +11,6 @@
 //   balance.cpp   2:1 balance between face-, edge- and corner-adjacent filled leaves
 //   corners.cpp   leaf corner sampling: each distinct corner evaluated once
 //   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
-//   exact.cpp     chunk runs: what may differ from the run on all points, and the check
 //   lod.cpp       level of detail: corners of internal nodes from point proxies, chunk errors
 //   texture.cpp   triplanar textures baked at the points or at the corners
 //   chunks.cpp    cutting the octree into file chunks, quantization, writing through format/
@@ -149,8 +148,6 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
 std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors);
 // The median of values (reordered); 0 for none.
 float medianOf(std::span<float> values);
-// Keep the points not flagged (order kept).
-void removePoints(PointSet& points, const std::vector<uint8_t>& flagged);
 
 // ---- normals.cpp / orient.cpp
 struct NormalStats {
@@ -208,54 +205,6 @@ float roughnessOf(const PointSet& points, uint32_t i, const uint32_t* neighbors,
 
 inline constexpr uint8_t kMaxClosurePasses = 8;  // close.cpp
 
-// ---- exact.cpp (chunk runs of the octree stages, specs/pipeline.md §15)
-// What a chunk run knows of all points beforehand, for the cells of levels 1 to kCoarseLevel:
-// how many points each holds, and which ones the disk of a point outside them touches. So a chunk
-// run decides as the run on all points does a large cell that reaches past its box: whether it
-// is empty, holds too many points to be tested, or is a passive leaf.
-inline constexpr uint8_t kCoarseLevel = 7;
-struct CoarseCells {
-  FlatMap<uint64_t, uint32_t> points;  // cellCode → points, for cells that hold any
-  FlatMap<uint64_t, uint8_t> touched;  // cellCode → 1, for cells a disk from outside touches
-  static uint64_t cellCode(uint8_t level, uint64_t key) { return uint64_t{1} << (3 * level) | key; }
-  uint32_t pointsIn(uint8_t level, uint64_t key) const {
-    const uint32_t* n = points.find(cellCode(level, key));
-    return n ? *n : 0;
-  }
-  bool isTouched(uint8_t level, uint64_t key) const {
-    return touched.find(cellCode(level, key)) != nullptr;
-  }
-};
-// Add points [begin, end) of a set with radii and normals (all points, or chunk by chunk).
-void addCoarseCells(CoarseCells& cells, const PointSet& points, size_t begin, size_t end);
-
-// The box whose points a chunk run loaded: every point inside it (closed), none outside. Its
-// faces on the frame cube's faces lie at infinity (no point is beyond them), so the box of a run
-// on all points holds everything.
-struct LoadedBox {
-  glm::dvec3 lo{-HUGE_VAL}, hi{HUGE_VAL};
-  float maxRadius = 0.0f;  // the largest r_i of all points, loaded or not (disks reach this far)
-  // A bound on the whole run's leaf levels before balance (how fine a requester can be).
-  uint8_t maxLeafLevel = kMaxLevel;
-  // A bound on the closure passes of the whole run that fill cells (how far fills chain).
-  uint8_t fillPasses = kMaxClosurePasses;
-  // The chunk's own cell: the whole run subdivides its ancestors (the driver checks that they
-  // hold more than 4,096 points), so the chunk run does too, whatever it loaded of them.
-  uint8_t ownLevel = 0;
-  uint64_t ownKey = 0;
-  const CoarseCells* coarse = nullptr;
-  // Whether a query ball lies inside (with room for float rounding): then it sees exactly the
-  // points a run on all points would.
-  bool holdsBall(const glm::dvec3& center, double radius) const;
-  // Whether the cell, widened by margin, lies inside.
-  bool holdsCell(uint8_t level, uint64_t key, double margin = 0.0) const;
-  // Whether the cell and the box share any point.
-  bool meetsCell(uint8_t level, uint64_t key) const;
-  bool isOwnAncestor(uint8_t level, uint64_t key) const {
-    return level < ownLevel && (ownKey >> (3 * (ownLevel - level))) == key;
-  }
-};
-
 // ---- sdf.cpp
 struct CornerSample {
   float distance = 0.0f;
@@ -265,21 +214,16 @@ struct CornerSample {
 // f(Q) = (Q - p̄)·n̄ with truncated Gaussian weights (specs/pipeline.md, "Signed distance").
 class SdfEvaluator {
  public:
-  // box: in a chunk run, the box the points were loaded from (then `exact` answers whether the
-  // points a query read are all the points a run on all points would read).
-  SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit,
-               const LoadedBox* box = nullptr);
+  SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit);
   // minSigma widens every σ_i (level of detail: a fraction of the node size).
-  CornerSample evaluate(const glm::dvec3& q, float minSigma, bool* exact = nullptr) const;
+  CornerSample evaluate(const glm::dvec3& q, float minSigma) const;
   // The point nearest to q and its distance.
-  uint32_t nearest(const glm::dvec3& q, float& distance, bool* exact = nullptr) const;
+  uint32_t nearest(const glm::dvec3& q, float& distance) const;
   const PointSet& points() const { return points_; }
-  const LoadedBox* box() const { return box_; }
 
  private:
   const PointSet& points_;
   const PointIndex& tree_;
-  const LoadedBox* box_;
   double smoothing_;
   FitMode fit_;
   // 1 / 2(smoothing · r_i)², in float (computed when needed rather than stored: 4 bytes a point).
@@ -320,21 +264,6 @@ struct Octree {
   // Node 0: the root (level 0). Nodes are made a level at a time in key order, and balance and
   // closure add theirs in key order: spillable (buffers.h).
   SpillVector<OctreeNode> nodes;
-  // In a chunk run: the box of the loaded points, and per node whether it may differ from the run
-  // on all points (its kind, its points, anything below it; children inherit it, and a child
-  // whose cell leaves the box gets it). Null and empty in a run on all points.
-  // Per node in a chunk run: kInexact, and kComplete when every point of its cell was loaded.
-  static constexpr uint8_t kInexact = 1, kComplete = 2;
-  const LoadedBox* box = nullptr;
-  std::vector<uint8_t> flags;
-  bool isExact(uint32_t node) const { return flags.empty() || !(flags[node] & kInexact); }
-  bool isComplete(uint32_t node) const { return flags.empty() || (flags[node] & kComplete); }
-  void markInexact(uint32_t node) {
-    if (!flags.empty()) flags[node] |= kInexact;
-  }
-  // The flags of a new node in a chunk run: kComplete when it lies in the box or holds the
-  // points the coarse cells count.
-  uint8_t completeness(uint32_t node) const;
   // Make the cell (level, key) a node, splitting empty nodes above it; returns the node there or
   // the filled or internal node that holds it.
   uint32_t materialize(uint8_t level, uint64_t key, const PointSet& points);
@@ -366,9 +295,6 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
 bool diskTouchesBox(const PointSet& points, uint32_t i, const glm::dvec3& lo, const glm::dvec3& hi);
 bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node);
-// The same for an empty node; in a chunk run, from the coarse cells where its disks may not all
-// be loaded, and marked inexact where neither tells.
-bool isEmptyCoveredByDisk(Octree& tree, const PointSet& points, uint32_t node);
 // Mark Empty children of Internal nodes Passive when a disk touches them; returns how many.
 size_t markPassiveLeaves(Octree& tree, const PointSet& points);
 
@@ -396,15 +322,12 @@ struct CornerField {
   KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // gridKey → entry
   SpillVector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
   SpillVector<CornerSample> value;
-  std::vector<uint8_t> inexact;  // in a chunk run: per entry, the value may differ (else empty)
-  bool marksInexact = false;     // a chunk run: `inexact` has an entry per corner
   uint32_t find(const GridPoint& p) const;
   uint32_t find(const Key128& key) const { return index.find(key); }
   GridPoint point(uint32_t entry) const;
   size_t size() const { return index.size(); }
   // The entry of key, added when new (value to be set, no leaf using it); second: whether added.
   std::pair<uint32_t, bool> insert(const Key128& key);
-  bool isExact(uint32_t entry) const { return inexact.empty() || !inexact[entry]; }
 };
 // Set the coarsest levels of a field's corners from the tree's filled leaves now (kUnusedCorner
 // for corners no filled leaf uses, such as those of leaves split since); returns the number of
@@ -443,26 +366,6 @@ struct Closure {
 // `corners` holds the values evaluated while building; it becomes the closure's field.
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerField&& corners);
-
-// ---- exact.cpp (continued)
-// Whether an inexact node lies in or touches the cell (level, key): shares a face, an edge or a
-// corner with it.
-bool touchesInexact(const Octree& tree, uint8_t level, uint64_t key);
-// After balance round `round` (from 1) of a chunk run: the same round of the run on all points
-// may split filled leaves next to inexact nodes (a finer leaf there may ask for it), if they are
-// coarse enough to be asked (level ≤ maxLeafLevel − round − 1): they are marked inexact. Returns
-// whether any was.
-bool spreadBalanceRound(Octree& tree, int round);
-// The balance rounds after a chunk run's balance ends, which the run on all points may still
-// make: spreadBalanceRound from `round` until no leaf is coarse enough.
-void spreadRemainingBalanceRounds(Octree& tree, int round);
-// After a closure pass of a chunk run: the same pass of the run on all points may fill (part of)
-// an empty cell next to an inexact node: such empty nodes are marked inexact.
-void spreadClosurePass(Octree& tree, const PointSet& points);
-// Whether the chunk's own cell (tree.box) comes out of a chunk run exactly as out of the run on
-// all points: no inexact node in or touching it, and every corner value its filled leaves use
-// (through hanging corners too) exact, with exact leaves around it.
-bool ownCellIsExact(const Octree& tree, const Closure& closure);
 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.

@@ -56,7 +56,8 @@ ISO_CONST uint kRecordColorWords = 8u;
 ISO_CONST uint kFeedbackRays = 0u;
 ISO_CONST uint kFeedbackHeaderWords = 4u;
 
-// The finest grid: 2^21 cells along an axis (the format's kMaxLevel).
+// The finest grid: 2^kGridLevels cells along an axis (the format's kMaxLevel).
+ISO_CONST uint kGridLevels = 21u;
 ISO_CONST float kGridSize = 2097152.0f;
 ISO_CONST uint kGridMax = 2097151u;
 

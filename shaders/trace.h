@@ -58,7 +58,7 @@ Cell locate(uvec3 g, float distance, bool request) {
   useChunk(chunk);
   uint node = 0u;
   uint level = 0u;
-  for (; level < 21u; ++level) {
+  for (; level < kGridLevels; ++level) {
     uint w0 = blobWord(page, nodes + 2u * node);
     uint w1 = blobWord(page, nodes + 2u * node + 1u);
     uint mask = w0 & 0xFFu;
@@ -67,7 +67,7 @@ Cell locate(uvec3 g, float distance, bool request) {
       cell.record = data + w1 * recordWords;
       break;
     }
-    uint shift = 20u - level;
+    uint shift = kGridLevels - 1u - level;
     uint octant =
         ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) | (((g.z >> shift) & 1u) << 2u);
     if (((mask >> octant) & 1u) == 0u) {  // an empty child
@@ -101,7 +101,7 @@ Cell locate(uvec3 g, float distance, bool request) {
     useChunk(chunk);
   }
   cell.level = level;
-  cell.coord = g >> (21u - level);
+  cell.coord = g >> (kGridLevels - level);
   cell.page = page;
   return cell;
 }
@@ -424,7 +424,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
       t = max(t, tExit);
       p = o + d * t;
       uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
-      uint shift = 21u - cell.level;
+      uint shift = kGridLevels - cell.level;
       uvec3 first = cell.coord << shift;
       g = clamp(uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax)))), first,
                 first + uvec3((1u << shift) - 1u));

@@ -1,5 +1,5 @@
 // The GPU form of a surface chunk ("blob", specs/viewer.md): node records that the tracer walks
-// with popcounts, corner records with float32 distances, octahedral normals and sRGB colors, and
+// with popcounts, corner records with the file's distance codes, octahedral normals and sRGB colors, and
 // for cut nodes the links to the roots of the child chunks. Built on the CPU by the loader thread.
 #pragma once
 

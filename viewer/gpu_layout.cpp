@@ -3,9 +3,14 @@
 // by tests/viewer/layout_test.cpp).
 #include <cstddef>
 
+#include "iso/format.h"
 #include "shared.h"
 
 namespace iso::gpu {
+
+// The shader's grid is the format's finest level.
+static_assert(kGridLevels == kMaxLevel && kGridSize == float(1u << kMaxLevel) &&
+              kGridMax == (1u << kMaxLevel) - 1u);
 
 static_assert(sizeof(vec4) == 16 && sizeof(uvec4) == 16);
 static_assert(sizeof(Light) == 64);

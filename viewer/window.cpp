@@ -2,8 +2,8 @@
 // buffer and copies it to the swapchain image (compute only, no graphics pipeline).
 //
 // Mouse: left drag orbits, right or middle drag pans, the wheel zooms. Keys: W A S D fly, Q E
-// down and up, 1 shadows, 2 reflections, 3 refractions, + and - samples per pixel, P screenshot,
-// R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
+// down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden), + and
+// - samples per pixel, P screenshot, R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
 #include <fmt/core.h>
