@@ -18,6 +18,7 @@
 #include <string>
 #include <thread>
 
+#include "iso/check.h"
 #include "progress.h"
 
 namespace iso {
@@ -195,7 +196,7 @@ SpillArea::SpillArea(const std::filesystem::path& directory, uint64_t residentLi
                      uint64_t minBytes) {
   SpillState& s = state();
   std::lock_guard lock(s.mutex);
-  if (s.active) throw std::logic_error("one spill area at a time");
+  ISO_CHECK(!s.active);  // one spill area at a time
   s.active = true;
   s.directory = directory;
   s.residentLimit = residentLimit;

@@ -57,7 +57,7 @@ using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
 // the rest in its page cache while memory allows or writes it to disk when not.
 class SpillArea {
  public:
-  // One area at a time in a process (std::logic_error otherwise).
+  // One area at a time in a process (a failed check otherwise).
   SpillArea(const std::filesystem::path& directory, uint64_t residentLimit,
             uint64_t minBytes = uint64_t{2} << 20);
   ~SpillArea();

@@ -19,6 +19,7 @@
 #include "outofcore.h"
 #include "progress.h"
 #include "visibility.h"
+#include "iso/error.h"
 
 namespace iso {
 namespace {
@@ -61,7 +62,7 @@ class StageTimer {
 
 void validateOptions(const BuildOptions& o) {
   const auto require = [](bool ok, const char* what) {
-    if (!ok) throw std::invalid_argument(what);
+    if (!ok) throw UsageError(what);
   };
   require(o.neighbors >= 3 && o.neighbors <= 64, "--neighbors must be 3 to 64");
   require(std::isfinite(o.smoothing) && o.smoothing > 0.0, "--smoothing must be positive");

@@ -11,6 +11,7 @@
 #include "io/point_cloud.h"
 #include "progress.h"
 #include "stages.h"
+#include "iso/error.h"
 
 namespace iso {
 
@@ -62,7 +63,7 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
 
-// Throws std::invalid_argument naming the option (as on the command line) that is out of range.
+// Throws UsageError naming the option (as on the command line) that is out of range.
 void validateOptions(const BuildOptions& options);
 
 // The options as JSON (the file's "parameters").

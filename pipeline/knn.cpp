@@ -9,6 +9,7 @@
 #include <glm/common.hpp>
 #include <limits>
 
+#include "iso/check.h"
 #include "progress.h"
 #include "stages.h"
 
@@ -407,7 +408,7 @@ void PointIndex::collectLeaves(const float lo[3], const float hi[3], float radiu
 void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const {
   const uint32_t n = uint32_t(size());
   if (k == 0 || n == 0) return;
-  if (k >= n) throw std::invalid_argument("allNearest: k must be below the number of points");
+  ISO_CHECK(k < n);  // k must be below the number of points
   // For each bucket: a radius R that likely holds every point's k nearest (the previous bucket's
   // largest k-th distance, or for the first bucket of a run the k-th distances within a window
   // of Morton neighbours), the points of every bucket within R of this one gathered once, and
@@ -497,7 +498,7 @@ void PointIndex::allNearest(size_t k, uint32_t* indices, float* distances) const
               radius2 = largest * 1.5625f;  // (1.25 R)² for the next bucket
               break;
             }
-            if (fromWindow) throw std::logic_error("allNearest: the window bound failed");
+            ISO_CHECK(!fromWindow);  // the window bound holds
             fromWindow = true;
           }
           counted += leaf.end - leaf.begin;

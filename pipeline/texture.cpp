@@ -8,15 +8,16 @@
 #include <stdexcept>
 
 #include "stages.h"
+#include "iso/error.h"
 
 namespace iso {
 
 TriplanarTexture::TriplanarTexture(LinearImage image, double scale, double sharpness)
     : image_(std::move(image)), scale_(scale), sharpness_(sharpness) {
   if (image_.width == 0 || image_.height == 0 || image_.texels.empty())
-    throw std::invalid_argument("a texture needs a non-empty image");
+    throw UsageError("a texture needs a non-empty image");
   if (!(scale_ > 0.0) || !std::isfinite(scale_))
-    throw std::invalid_argument("the texture scale must be positive");
+    throw UsageError("the texture scale must be positive");
 }
 
 glm::vec3 TriplanarTexture::sample(double u, double v) const {

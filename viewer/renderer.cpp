@@ -169,9 +169,8 @@ void Renderer::release() {
 }
 
 void Renderer::resize(uint32_t width, uint32_t height) {
-  if (width == 0 || height == 0 || width > options_.capacityWidth ||
-      height > options_.capacityHeight)
-    throw std::invalid_argument("Renderer::resize: larger than the output's capacity");
+  ISO_CHECK(width > 0 && height > 0 && width <= options_.capacityWidth &&
+            height <= options_.capacityHeight);
   options_.width = setup_.width = width;
   options_.height = setup_.height = height;
 }

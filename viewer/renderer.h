@@ -46,7 +46,7 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
-  // Draw at another size, up to the capacity asked for (std::invalid_argument beyond).
+  // Draw at another size, up to the capacity asked for (a failed check beyond).
   void resize(uint32_t width, uint32_t height);
 
   // Host work of a frame. params come from frameParams() without the pool fields (set here).

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "iso/check.h"
 #include "iso/error.h"
 
 namespace iso::viewer {
@@ -19,7 +20,7 @@ using nlohmann::json;
 
 Vec3d normalized(const Vec3d& v) {
   const double n = glm::length(v);
-  if (!(n > 0.0) || !std::isfinite(n)) throw std::invalid_argument("a zero or non-finite vector");
+  if (!(n > 0.0) || !std::isfinite(n)) throw UsageError("a zero or non-finite vector");
   return v / n;
 }
 
@@ -41,11 +42,11 @@ std::vector<double> parseNumbers(const std::string& text, size_t count, const st
       used = 0;
     }
     if (used == 0 || used != item.size() || !std::isfinite(v))
-      throw std::invalid_argument(what + ": '" + item + "' is not a finite number");
+      throw UsageError(what + ": '" + item + "' is not a finite number");
     out.push_back(v);
   }
   if (out.size() != count)
-    throw std::invalid_argument(what + ": expected " + std::to_string(count) + " numbers, got '" +
+    throw UsageError(what + ": expected " + std::to_string(count) + " numbers, got '" +
                                 text + "'");
   return out;
 }
@@ -100,7 +101,7 @@ BackFaces parseBackFaces(const std::string& text) {
   if (text == "show") return BackFaces::Show;
   if (text == "tint") return BackFaces::Tint;
   if (text == "hide") return BackFaces::Hide;
-  throw std::invalid_argument("back faces: '" + text + "' is not show, tint or hide");
+  throw UsageError("back faces: '" + text + "' is not show, tint or hide");
 }
 
 Vec3d parseVec3(const std::string& text) {
@@ -111,13 +112,13 @@ Vec3d parseVec3(const std::string& text) {
 LightSpec parseLight(const std::string& text) {
   const auto parts = split(text, ':');
   LightSpec light;
-  if (parts.size() < 2) throw std::invalid_argument("light '" + text + "': expected KIND:X,Y,Z");
+  if (parts.size() < 2) throw UsageError("light '" + text + "': expected KIND:X,Y,Z");
   size_t next = 2;
   if (parts[0] == "point") {
     light.position = parseVec3(parts[1]);
   } else if (parts[0] == "area") {
     if (parts.size() < 4)
-      throw std::invalid_argument("light '" + text + "': an area light needs X,Y,Z:U:V");
+      throw UsageError("light '" + text + "': an area light needs X,Y,Z:U:V");
     light.area = true;
     light.position = parseVec3(parts[1]);
     light.u = parseVec3(parts[2]);
@@ -126,18 +127,18 @@ LightSpec parseLight(const std::string& text) {
     if (parts.size() > next) {
       const double s = parseNumbers(parts[next++], 1, "light samples")[0];
       if (s < 1 || s > 1024 || s != std::floor(s))
-        throw std::invalid_argument("light samples: expected a whole number from 1 to 1024");
+        throw UsageError("light samples: expected a whole number from 1 to 1024");
       light.samples = int(s);
     }
   } else {
-    throw std::invalid_argument("light '" + text + "': the kind is point or area");
+    throw UsageError("light '" + text + "': the kind is point or area");
   }
   if (parts.size() > next) {
     const Vec3d c = parseVec3(parts[next++]);
     light.color = {float(c[0]), float(c[1]), float(c[2])};
   }
   if (parts.size() > next) light.intensity = float(parseNumbers(parts[next++], 1, "intensity")[0]);
-  if (parts.size() > next) throw std::invalid_argument("light '" + text + "': too many parts");
+  if (parts.size() > next) throw UsageError("light '" + text + "': too many parts");
   return light;
 }
 
@@ -253,7 +254,7 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
     if (!j["backfaces"].is_string()) f.fail("backfaces", "show, tint or hide");
     try {
       scene.backFaces = parseBackFaces(j["backfaces"].get<std::string>());
-    } catch (const std::invalid_argument&) {
+    } catch (const UsageError&) {
       f.fail("backfaces", "show, tint or hide");
     }
   }
@@ -286,7 +287,7 @@ LightSpec defaultLight(const Camera& c, const Bounds& b) {
 gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
                              const FrameSetup& s) {
   using glm::vec4;
-  if (!scene.camera) throw std::logic_error("frameParams: the scene has no camera");
+  ISO_CHECK(scene.camera.has_value());
   const Camera& c = *scene.camera;
   const auto toFrame = [&](const Vec3d& p) {
     return vec4(float((p[0] - frame.origin[0]) / frame.size),

@@ -15,6 +15,7 @@
 #include "blob.h"
 #include "iso/format.h"
 #include "shared.h"
+#include "iso/error.h"
 
 namespace iso::viewer {
 
@@ -44,7 +45,7 @@ struct Material {
 // What camera rays do at a back face (reached from the inside, f < 0, as an open scan seen from
 // behind): shade it with the flipped normal, also tint it, or pass through it.
 enum class BackFaces { Show, Tint, Hide };
-// "show", "tint", "hide"; std::invalid_argument naming the accepted words otherwise.
+// "show", "tint", "hide"; UsageError naming the accepted words otherwise.
 BackFaces parseBackFaces(const std::string& text);
 
 struct Scene {
@@ -70,13 +71,13 @@ struct Scene {
 void loadScene(const std::filesystem::path& path, Scene& scene);
 
 // Parse "a,b,c,..." (exactly count finite numbers), "x,y,z" and light specs for the command line;
-// std::invalid_argument naming `what` on error.
+// UsageError naming `what` on error.
 std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& what);
 Vec3d parseVec3(const std::string& text);
 // "point:X,Y,Z[:R,G,B[:INTENSITY]]" or "area:X,Y,Z:UX,UY,UZ:VX,VY,VZ[:SAMPLES[:R,G,B[:I]]]".
 LightSpec parseLight(const std::string& text);
 
-// A unit vector along v; std::invalid_argument for a zero or non-finite v.
+// A unit vector along v; UsageError for a zero or non-finite v.
 Vec3d normalized(const Vec3d& v);
 // v turned by angle (radians) around the unit vector axis.
 Vec3d rotated(const Vec3d& v, const Vec3d& axis, double angle);

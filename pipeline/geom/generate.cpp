@@ -11,6 +11,7 @@
 #include <string>
 
 #include "geom/random.h"
+#include "iso/error.h"
 
 namespace iso {
 namespace {
@@ -19,15 +20,15 @@ namespace {
 constexpr uint64_t kBlockSize = uint64_t{1} << 16;
 
 void validate(const GenerateOptions& o) {
-  if (o.count == 0) throw std::invalid_argument("generate: the point count must be positive");
+  if (o.count == 0) throw UsageError("generate: the point count must be positive");
   if (!std::isfinite(o.noise) || o.noise < 0.0)
-    throw std::invalid_argument("generate: noise must be a finite number >= 0, not " +
+    throw UsageError("generate: noise must be a finite number >= 0, not " +
                                 std::to_string(o.noise));
   if (!std::isfinite(o.densityRatio) || o.densityRatio < 1.0)
-    throw std::invalid_argument("generate: the density ratio must be a finite number >= 1, not " +
+    throw UsageError("generate: the density ratio must be a finite number >= 1, not " +
                                 std::to_string(o.densityRatio));
   if (!std::isfinite(o.offset.x) || !std::isfinite(o.offset.y) || !std::isfinite(o.offset.z))
-    throw std::invalid_argument("generate: the offset must be finite");
+    throw UsageError("generate: the offset must be finite");
 }
 
 class ScanSampler {

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "geom/analytic.h"
+#include "iso/error.h"
 
 namespace iso {
 namespace {
@@ -13,7 +14,7 @@ void requirePositive(const std::string& shape, const char* what, double value) {
   if (std::isfinite(value) && value > 0.0) return;
   std::ostringstream message;
   message << shape << ": " << what << " must be a positive finite number, not " << value;
-  throw std::invalid_argument(message.str());
+  throw UsageError(message.str());
 }
 
 std::unique_ptr<Shape> sphere(const ShapeParams& p) {
@@ -28,7 +29,7 @@ std::unique_ptr<Shape> torus(const ShapeParams& p) {
     std::ostringstream message;
     message << "torus: minor radius " << p.minorRadius << " must be smaller than the major radius "
             << p.radius << " (a ring torus)";
-    throw std::invalid_argument(message.str());
+    throw UsageError(message.str());
   }
   return makeTorus(p.center, p.radius, p.minorRadius);
 }
@@ -70,14 +71,14 @@ std::unique_ptr<Shape> makeShape(const ShapeParams& params) {
     if (params.name != s.name) continue;
     if (!std::isfinite(params.center.x) || !std::isfinite(params.center.y) ||
         !std::isfinite(params.center.z))
-      throw std::invalid_argument(params.name + ": the centre must be finite");
+      throw UsageError(params.name + ": the centre must be finite");
     const glm::dvec3& r = params.rotation;
     if (!std::isfinite(r.x) || !std::isfinite(r.y) || !std::isfinite(r.z))
-      throw std::invalid_argument(params.name + ": the rotation must be finite");
+      throw UsageError(params.name + ": the rotation must be finite");
     if (r == glm::dvec3(0.0)) return s.make(params);
     return makeRotated(s.make(params), r, params.center);
   }
-  throw std::invalid_argument("unknown shape '" + params.name + "' (known: " + knownNames() + ")");
+  throw UsageError("unknown shape '" + params.name + "' (known: " + knownNames() + ")");
 }
 
 }  // namespace iso

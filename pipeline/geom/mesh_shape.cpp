@@ -16,6 +16,7 @@
 #include "geom/random.h"
 #include "geom/shape.h"
 #include "geom/triangle.h"
+#include "iso/error.h"
 
 namespace iso {
 namespace {
@@ -114,7 +115,7 @@ class MeshShape final : public Shape {
   explicit MeshShape(TriangleMesh mesh) : mesh_(std::move(mesh)) {
     validate();
     const std::vector<uint32_t> kept = weighTriangles();
-    if (kept.empty()) throw std::invalid_argument("mesh: no triangle has a positive area");
+    if (kept.empty()) throw UsageError("mesh: no triangle has a positive area");
     buildHierarchy(kept);
     isClosed_ = everyEdgeSharedByTwo();
   }
@@ -171,15 +172,15 @@ class MeshShape final : public Shape {
 void MeshShape::validate() const {
   const size_t vertexCount = mesh_.vertices.size();
   if (mesh_.triangles.size() >= std::numeric_limits<uint32_t>::max())
-    throw std::invalid_argument("mesh: too many triangles (at most 2^32 - 2)");
+    throw UsageError("mesh: too many triangles (at most 2^32 - 2)");
   for (size_t i = 0; i < mesh_.triangles.size(); ++i) {
     for (uint32_t v : mesh_.triangles[i]) {
       if (v >= vertexCount)
-        throw std::invalid_argument("mesh: triangle " + std::to_string(i) + " uses vertex " +
+        throw UsageError("mesh: triangle " + std::to_string(i) + " uses vertex " +
                                     std::to_string(v) + " of " + std::to_string(vertexCount));
       const glm::dvec3& p = mesh_.vertices[v];
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-        throw std::invalid_argument("mesh: vertex " + std::to_string(v) + " is not finite");
+        throw UsageError("mesh: vertex " + std::to_string(v) + " is not finite");
     }
   }
 }

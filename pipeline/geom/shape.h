@@ -12,6 +12,7 @@
 #include <string>
 
 #include "io/point_cloud.h"
+#include "iso/error.h"
 
 namespace iso {
 
@@ -54,7 +55,7 @@ struct ShapeParams {
   glm::dvec3 rotation{0.0};     // degrees about x, then y, then z, around the centre
 };
 
-// Make an analytic shape; throws std::invalid_argument for an unknown name or bad parameters.
+// Make an analytic shape; throws UsageError for an unknown name or bad parameters.
 // cube: axis-aligned, sharp edges. plane: the square |x|,|y| <= halfSize at z = 0, normal +z, open
 // boundary. sheets: two such squares at z = +gap/2 (normal +z) and z = -gap/2 (normal -z), the two
 // sides of a thin slab without its rim (open).
@@ -69,7 +70,7 @@ std::unique_ptr<Shape> makeRotated(std::unique_ptr<Shape> shape, const glm::dvec
 // isClosed() is true when every edge is shared by exactly two triangles (a triangle with a repeated
 // vertex index has no edges). Normals are the triangles' geometric normals (winding order).
 // Zero-area triangles are never sampled nor met by queries; closest() of a non-finite query has a
-// NaN distance. Throws std::invalid_argument for an index out of range, a non-finite vertex, or no
+// NaN distance. Throws UsageError for an index out of range, a non-finite vertex, or no
 // triangle of positive area. Builds with TBB in about a second per million triangles.
 std::unique_ptr<Shape> makeMeshShape(TriangleMesh mesh);
 

@@ -27,6 +27,7 @@
 #include "io/readers.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
+#include "iso/error.h"
 
 namespace {
 
@@ -106,7 +107,7 @@ int main(int argc, char** argv) {
       else if (a == "--voxel-scale" && i + 1 < argc)
         voxelScale = std::stod(argv[++i]);
       else
-        throw std::invalid_argument("unknown argument " + a);
+        throw UsageError("unknown argument " + a);
     }
     openvdb::initialize();
     const PointCloud cloud = readPointFile(scan);

@@ -159,18 +159,18 @@ uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path
 
 int run(Options& o) {
   if (o.fit != "sphere" && o.fit != "plane")
-    throw std::invalid_argument("--fit must be sphere or plane");
+    throw UsageError("--fit must be sphere or plane");
   o.build.fit = o.fit == "plane" ? FitMode::Plane : FitMode::Sphere;
   const std::map<std::string, OrientMode> orients = {
       {"auto", OrientMode::Auto}, {"up", OrientMode::Up}, {"propagate", OrientMode::Propagate}};
   if (!orients.contains(o.orient))
-    throw std::invalid_argument("--orient must be auto, up or propagate");
+    throw UsageError("--orient must be auto, up or propagate");
   o.build.orient = orients.at(o.orient);
   o.build.removeOutliers = !o.keepOutliers;
   validateOptions(o.build);  // before any file is read
   if (!o.texture.empty()) {
     if (o.textureAt != "points" && o.textureAt != "corners")
-      throw std::invalid_argument("--texture-at must be points or corners");
+      throw UsageError("--texture-at must be points or corners");
     o.build.texture.image = o.texture;
     o.build.texture.at = o.textureAt == "points" ? TextureAt::Points : TextureAt::Corners;
     checkImageReadable(o.build.texture.image);  // before the points are read
@@ -195,8 +195,8 @@ int run(Options& o) {
       {"json", ProgressMode::Json},
       {"none", ProgressMode::None}};
   if (!progressModes.contains(o.progress))
-    throw std::invalid_argument("--progress must be auto, line, json or none");
-  if (o.threads < 0) throw std::invalid_argument("--threads must be 0 (all cores) or more");
+    throw UsageError("--progress must be auto, line, json or none");
+  if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.report.empty() && std::filesystem::is_directory(o.report))
     throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
   std::optional<tbb::global_control> threads;
@@ -355,7 +355,7 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
   c->callback(
-      [o, &exitCode] { exitCode = runWithUsageErrors("convert", [&] { return run(*o); }); });
+      [o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

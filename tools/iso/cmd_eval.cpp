@@ -78,16 +78,16 @@ int run(Options& o) {
   const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty()) +
                      int(!o.against.empty());
   if (truths != 1 && !(o.visibility && truths == 0))
-    throw std::invalid_argument(
+    throw UsageError(
         "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso "
         "(or --visibility alone, on the file's kept points)");
   if (o.perLevel && o.points.empty())
-    throw std::invalid_argument("--per-level measures against --points");
+    throw UsageError("--per-level measures against --points");
   if (o.visibility && !o.against.empty())
-    throw std::invalid_argument("--visibility measures --points or the file's kept points");
+    throw UsageError("--visibility measures --points or the file's kept points");
   o.view.seed = o.eval.seed;
   if (!o.seenThrough.empty()) {
-    if (!o.visibility) throw std::invalid_argument("--seen-through needs --visibility");
+    if (!o.visibility) throw UsageError("--seen-through needs --visibility");
     if (std::filesystem::exists(o.seenThrough) && !o.force)
       throw FileError(o.seenThrough, std::nullopt, "exists already (use --force to replace it)");
   }
@@ -182,7 +182,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
   c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")->capture_default_str();
   addShapeOptions(*c, o->truth);
-  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("eval", [&] { return run(*o); }); });
+  c->callback([o, &exitCode] { exitCode = runGuarded("eval", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

@@ -32,8 +32,8 @@ void refuseToReplace(const std::string& path, bool force) {
 
 int run(const Options& o) {
   if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
-    throw std::invalid_argument("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
-  if (!(o.band >= 1.0 && o.band <= 64.0)) throw std::invalid_argument("--band must be 1 to 64");
+    throw UsageError("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
+  if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
   for (const std::string& out : {o.mesh, o.vdb, o.points})
     if (!out.empty()) refuseToReplace(out, o.force);
   const Reader reader = Reader::open(o.file);
@@ -151,7 +151,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_flag("-f,--force", o->force, "Replace output files that exist");
   c->add_flag("--json", o->json, "Print the summary as JSON");
-  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("export", [&] { return run(*o); }); });
+  c->callback([o, &exitCode] { exitCode = runGuarded("export", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

@@ -21,7 +21,7 @@ struct Options {
 
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
-    throw std::invalid_argument(
+    throw UsageError(
         "name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
   if (std::filesystem::exists(o.output) && !o.force)
     throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
@@ -61,7 +61,7 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--ascii", o->ascii, "ASCII PLY instead of binary");
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   addShapeOptions(*c, o->truth);
-  c->callback([o, &exitCode] { exitCode = runWithUsageErrors("gen", [&] { return run(*o); }); });
+  c->callback([o, &exitCode] { exitCode = runGuarded("gen", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

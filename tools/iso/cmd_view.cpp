@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "text.h"
 #include "view.h"
+#include "iso/error.h"
 
 namespace iso::cli {
 namespace {
@@ -43,13 +44,13 @@ void buildScene(ViewArgs& a) {
     s.camera = c;
   }
   if (a.fov != 0) {
-    if (!(a.fov > 1 && a.fov < 179)) throw std::invalid_argument("--fov: from 1 to 179 degrees");
+    if (!(a.fov > 1 && a.fov < 179)) throw UsageError("--fov: from 1 to 179 degrees");
     s.fovDegrees = a.fov;
   }
   if (!a.up.empty()) s.up = parseUp(a.up);
   if (!a.lights.empty()) {
     if (a.lights.size() > gpu::kMaxLights)
-      throw std::invalid_argument(fmt::format("at most {} --light options", gpu::kMaxLights));
+      throw UsageError(fmt::format("at most {} --light options", gpu::kMaxLights));
     s.lights.clear();
     for (const std::string& l : a.lights) s.lights.push_back(viewer::parseLight(l));
   }
@@ -60,7 +61,7 @@ void buildScene(ViewArgs& a) {
   if (!a.ambient.empty()) {
     const auto c = viewer::parseVec3(a.ambient);
     if (!(c[0] >= 0.0 && c[1] >= 0.0 && c[2] >= 0.0))
-      throw std::invalid_argument("--ambient must not be negative");
+      throw UsageError("--ambient must not be negative");
     s.ambient = {float(c[0]), float(c[1]), float(c[2])};
   }
   if (a.reflectivity) s.material.reflectivity = *a.reflectivity;
@@ -68,7 +69,7 @@ void buildScene(ViewArgs& a) {
   if (a.ior) s.material.ior = *a.ior;
   if (a.shininess) s.material.shininess = *a.shininess;
   if (s.material.reflectivity + s.material.transparency > 1.0f)
-    throw std::invalid_argument("--reflectivity + --transparency must be at most 1");
+    throw UsageError("--reflectivity + --transparency must be at most 1");
   if (!a.environment.empty()) s.environment = a.environment;
   if (a.environmentIntensity) s.environmentIntensity = *a.environmentIntensity;
   if (a.lodPixels) s.lodPixels = *a.lodPixels;
@@ -171,14 +172,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
         fmt::print(stderr, "iso view: --headless and --cpu need --out FILE\n");
         return kExitUsage;
       }
-      try {
-        a->view.vram = parseSize(a->vram, "--vram");
-        a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
-        buildScene(*a);
-      } catch (const std::invalid_argument& e) {
-        fmt::print(stderr, "iso view: {}\n", e.what());
-        return kExitUsage;
-      }
+      a->view.vram = parseSize(a->vram, "--vram");
+      a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
+      buildScene(*a);
       if (a->cpu) return viewer::viewCpu(a->view);
       if (a->headless) return viewer::viewHeadless(a->view);
       if (a->bench) return viewer::viewBench(a->view);

@@ -10,11 +10,9 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitUsage = 2;
 
-// Runs body and turns exceptions into a message on stderr ("iso: ...") and kExitFailure.
+// Runs body and turns an exception into its message on stderr ("iso COMMAND: ...") and an exit
+// code: kExitUsage for a UsageError, kExitFailure for anything else (iso/error.h).
 int runGuarded(const char* command, const std::function<int()>& body);
-// The same, and std::invalid_argument (impossible options) is a usage error: its message on
-// stderr and kExitUsage.
-int runWithUsageErrors(const char* command, const std::function<int()>& body);
 
 void addConvertCommand(CLI::App& app, int& exitCode);
 void addEvalCommand(CLI::App& app, int& exitCode);

@@ -2,6 +2,7 @@
 #include <fmt/core.h>
 
 #include <exception>
+#include <new>
 
 #include "commands.h"
 #include "iso/check.h"
@@ -15,27 +16,11 @@ namespace iso::cli {
 int runGuarded(const char* command, const std::function<int()>& body) {
   try {
     return body();
-  } catch (const FileError& error) {
-    fmt::print(stderr, "iso {}: {}\n", command, error.what());
-  } catch (const InternalError& error) {
-    fmt::print(stderr, "iso {}: {}\n", command, error.what());
-  } catch (const std::bad_alloc&) {
-    fmt::print(stderr, "iso {}: out of memory\n", command);
-  } catch (const std::exception& error) {
-    fmt::print(stderr, "iso {}: {}\n", command, error.what());
+  } catch (const std::exception& error) {  // the taxonomy: iso/error.h
+    const bool memory = dynamic_cast<const std::bad_alloc*>(&error) != nullptr;
+    fmt::print(stderr, "iso {}: {}\n", command, memory ? "out of memory" : error.what());
+    return dynamic_cast<const UsageError*>(&error) ? kExitUsage : kExitFailure;
   }
-  return kExitFailure;
-}
-
-int runWithUsageErrors(const char* command, const std::function<int()>& body) {
-  return runGuarded(command, [&] {
-    try {
-      return body();
-    } catch (const std::invalid_argument& error) {
-      fmt::print(stderr, "iso {}: {}\n", command, error.what());
-      return kExitUsage;
-    }
-  });
 }
 
 }  // namespace iso::cli

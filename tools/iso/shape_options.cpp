@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "io/ply.h"
+#include "iso/error.h"
 
 namespace iso::cli {
 
@@ -31,7 +32,7 @@ glm::dvec3 parseVector(const std::string& text, const char* option) {
     const auto [next, error] = std::from_chars(p, end, v[i]);
     if (error != std::errc() || (i < 2 && (next == end || *next != ',')) ||
         (i == 2 && next != end) || !std::isfinite(v[i]))
-      throw std::invalid_argument(std::string(option) + " must be three numbers x,y,z, not '" +
+      throw UsageError(std::string(option) + " must be three numbers x,y,z, not '" +
                                   text + "'");
     p = next + 1;
   }
@@ -42,7 +43,7 @@ std::unique_ptr<Shape> makeTruth(const ShapeOptions& o) {
   const glm::dvec3 offset = parseVector(o.offset, "--offset");
   if (!o.mesh.empty()) {
     if (parseVector(o.rotate, "--rotate") != glm::dvec3(0.0))
-      throw std::invalid_argument("--rotate turns analytic shapes, not --mesh");
+      throw UsageError("--rotate turns analytic shapes, not --mesh");
     TriangleMesh mesh = readPlyMesh(o.mesh);
     for (glm::dvec3& v : mesh.vertices) v += offset;
     return makeMeshShape(std::move(mesh));

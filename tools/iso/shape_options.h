@@ -6,6 +6,7 @@
 #include <string>
 
 #include "geom/shape.h"
+#include "iso/error.h"
 
 namespace iso::cli {
 
@@ -19,7 +20,7 @@ struct ShapeOptions {
 
 void addShapeOptions(CLI::App& command, ShapeOptions& options);
 
-// "x,y,z" → vector; throws std::invalid_argument naming the option.
+// "x,y,z" → vector; throws UsageError naming the option.
 glm::dvec3 parseVector(const std::string& text, const char* option);
 
 // The truth the options describe (the offset included).

@@ -76,7 +76,7 @@ uint64_t parseSize(const std::string& text, const char* option) {
   const std::map<std::string, double> units = {
       {"", 1.0}, {"K", 1024.0}, {"M", 1048576.0}, {"G", 1073741824.0}, {"T", 1099511627776.0}};
   if (used == 0 || !units.contains(unit) || !(value > 0.0) || !std::isfinite(value))
-    throw std::invalid_argument(std::string(option) +
+    throw UsageError(std::string(option) +
                                 " must be a size like 2G, 512M or 100000, not '" + text + "'");
   return uint64_t(value * units.at(unit));
 }

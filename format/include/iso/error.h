@@ -1,4 +1,19 @@
-// Errors about files: unreadable, malformed, truncated or hostile input, and failed writes.
+// What can go wrong, and what each becomes at the command line (tools/iso/main.cpp, runGuarded):
+//
+//   UsageError     an impossible option or parameter, found before any work: its message, exit 2.
+//                  The only error that exits with 2.
+//   FileError      a problem with a file (unreadable, malformed, truncated or hostile input, a
+//                  failed write): the file's name, the byte offset when there is one, the reason;
+//                  exit 1.
+//   InternalError  a failed ISO_CHECK (iso/check.h): a bug in iso, never a property of the input;
+//                  exit 1 with the expression and the source line.
+//   other          std::bad_alloc ("out of memory"), errors of the libraries underneath (Vulkan,
+//                  OpenVDB) and of a stage (ConvertError: the points define no surface): exit 1.
+//
+// Nothing the user had is replaced or left half written in any of these cases (iso/writer.h,
+// iso/atomic_file.h). The format library's own API checks of what its callers pass (a header that
+// breaks the format's rules, a chunk out of range) throw std::invalid_argument: a bug of the
+// caller, exit 1 at the command line.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +37,12 @@ class FileError : public std::runtime_error {
   std::string file_;
   std::optional<uint64_t> offset_;
   std::string reason_;
+};
+
+// An impossible option or parameter: the message names the option as the user wrote it.
+class UsageError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
 };
 
 }  // namespace iso
