@@ -96,52 +96,48 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
         fmt::format("--vram {} is too small: the frame buffers and tables alone take {} bytes",
                     options.vram, fixed));
   cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages));
-  try {
-    params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
-    chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
-    feedback_ = createBuffer(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4,
-                             storage, true);
-    output_ = createBuffer(gpu, pixelsBytes, storage | src, true);
-    environment_ = createBuffer(gpu, envBytes, storage, true);
-    staging_ = createBuffer(gpu, stagingBytes, src, true);
-    for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
-      const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
-      pool_.push_back(createBuffer(gpu, pages * kPageBytes,
-                                   dst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
-    }
-    if (environment)
-      std::memcpy(environment_.mapped, environment->texels.data(), envBytes);
-    else
-      std::memset(environment_.mapped, 0, envBytes);
-    std::memset(feedback_.mapped, 0, feedback_.size);
-    auto* table = static_cast<gpu::ChunkEntry*>(chunkTable_.mapped);
-    for (uint32_t i = 0; i < chunkCount; ++i)
-      table[i].state = {gpu::kNotResident, chunks[i].level,
-                        glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
-
-    const uint32_t counts[] = {1, 1, 1, 1};
-    const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u};  // kFloatDistances
-    pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants);
-    std::vector<VkDescriptorBufferInfo> infos;
-    infos.push_back({params_.buffer, 0, VK_WHOLE_SIZE});
-    infos.push_back({chunkTable_.buffer, 0, VK_WHOLE_SIZE});
-    infos.push_back({feedback_.buffer, 0, VK_WHOLE_SIZE});
-    infos.push_back({output_.buffer, 0, VK_WHOLE_SIZE});
-    infos.push_back({environment_.buffer, 0, VK_WHOLE_SIZE});
-    std::vector<VkWriteDescriptorSet> writes(5, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
-    for (uint32_t i = 0; i < 5; ++i) {
-      writes[i].dstSet = pipeline_.set;
-      writes[i].dstBinding = i;
-      writes[i].descriptorCount = 1;
-      writes[i].descriptorType =
-          i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-      writes[i].pBufferInfo = &infos[i];
-    }
-    vkUpdateDescriptorSets(gpu.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
-  } catch (...) {
-    release();
-    throw;
+  // What is made here is destroyed with its member if a later step throws.
+  params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
+  chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
+  feedback_ = createBuffer(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4,
+                           storage, true);
+  output_ = createBuffer(gpu, pixelsBytes, storage | src, true);
+  environment_ = createBuffer(gpu, envBytes, storage, true);
+  staging_ = createBuffer(gpu, stagingBytes, src, true);
+  for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
+    const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
+    pool_.push_back(createBuffer(gpu, pages * kPageBytes,
+                                 dst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
   }
+  if (environment)
+    std::memcpy(environment_.mapped, environment->texels.data(), envBytes);
+  else
+    std::memset(environment_.mapped, 0, envBytes);
+  std::memset(feedback_.mapped, 0, feedback_.size);
+  auto* table = static_cast<gpu::ChunkEntry*>(chunkTable_.mapped);
+  for (uint32_t i = 0; i < chunkCount; ++i)
+    table[i].state = {gpu::kNotResident, chunks[i].level,
+                      glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
+
+  const uint32_t counts[] = {1, 1, 1, 1};
+  const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u};  // kFloatDistances
+  pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants);
+  std::vector<VkDescriptorBufferInfo> infos;
+  infos.push_back({params_.buffer, 0, VK_WHOLE_SIZE});
+  infos.push_back({chunkTable_.buffer, 0, VK_WHOLE_SIZE});
+  infos.push_back({feedback_.buffer, 0, VK_WHOLE_SIZE});
+  infos.push_back({output_.buffer, 0, VK_WHOLE_SIZE});
+  infos.push_back({environment_.buffer, 0, VK_WHOLE_SIZE});
+  std::vector<VkWriteDescriptorSet> writes(5, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
+  for (uint32_t i = 0; i < 5; ++i) {
+    writes[i].dstSet = pipeline_.set;
+    writes[i].dstBinding = i;
+    writes[i].descriptorCount = 1;
+    writes[i].descriptorType =
+        i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[i].pBufferInfo = &infos[i];
+  }
+  vkUpdateDescriptorSets(gpu.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
   setup_.width = options.width;
   setup_.height = options.height;
   setup_.topChunk = asset.tree.topChunk();
@@ -156,16 +152,10 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   stats_.poolBytes = poolPages * kPageBytes;
 }
 
-Renderer::~Renderer() { release(); }
-
-void Renderer::release() {
+Renderer::~Renderer() {
+  // The buffers and the pipeline go with their members, once the device is done with them.
   if (gpu_.device) vkDeviceWaitIdle(gpu_.device);
   cache_.reset();
-  destroyComputePipeline(gpu_, pipeline_);
-  for (Buffer* b : {&params_, &chunkTable_, &feedback_, &output_, &environment_, &staging_})
-    destroyBuffer(gpu_, *b);
-  for (Buffer& b : pool_) destroyBuffer(gpu_, b);
-  pool_.clear();
 }
 
 void Renderer::resize(uint32_t width, uint32_t height) {

@@ -65,7 +65,6 @@ class Renderer {
   uint32_t frameNumber() const { return frame_; }
 
  private:
-  void release();  // frees everything (idempotent)
 
   Gpu& gpu_;
   const Asset& asset_;

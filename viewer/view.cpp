@@ -28,16 +28,12 @@ std::optional<Environment> environmentOf(const Scene& scene) {
   return loadEnvironment(scene.environment);
 }
 
-struct GpuSession {
-  Gpu gpu;
-  explicit GpuSession(const ViewOptions& o) {
-    GpuOptions g;
-    g.validation = o.validation;
-    g.deviceName = o.device;
-    gpu = createGpu(g);
-  }
-  ~GpuSession() { destroyGpu(gpu); }
-};
+Gpu gpuFor(const ViewOptions& o) {
+  GpuOptions g;
+  g.validation = o.validation;
+  g.deviceName = o.device;
+  return createGpu(g);
+}
 
 RendererOptions rendererOptions(const ViewOptions& o) {
   RendererOptions r;
@@ -54,30 +50,24 @@ struct GpuView {
   std::unique_ptr<Asset> asset;
   Scene scene;
   std::optional<Environment> env;
-  GpuSession session;  // outlives the renderer (members are destroyed in reverse order)
-  std::unique_ptr<Renderer> renderer;
-  VkCommandBuffer cb = VK_NULL_HANDLE;
-  VkFence fence = VK_NULL_HANDLE;
+  Gpu gpu;  // outlives what is made from it (members are destroyed in reverse order)
+  Renderer renderer;
+  VkCommandBuffer cb;
+  Owned<VkFence> fence;
 
   explicit GpuView(const ViewOptions& o)
       : asset(Asset::open(o.file)),
         scene(completeScene(o, *asset)),
         env(environmentOf(scene)),
-        session(o) {
-    renderer =
-        std::make_unique<Renderer>(session.gpu, *asset, env ? &*env : nullptr, rendererOptions(o));
-    cb = allocateCommandBuffer(session.gpu);
-    fence = createFence(session.gpu, false);
-  }
-  ~GpuView() {
-    renderer.reset();
-    if (fence) vkDestroyFence(session.gpu.device, fence, nullptr);
-  }
+        gpu(gpuFor(o)),
+        renderer(gpu, *asset, env ? &*env : nullptr, rendererOptions(o)),
+        cb(allocateCommandBuffer(gpu)),
+        fence(createFence(gpu, false)) {}
   // Render a frame of `s` and wait for it; the seconds from submit to done.
   double frame(const Scene& s) {
     const FileHeader& header = asset->reader.header();
-    return renderFrame(session.gpu, *renderer,
-                       frameParams(s, header.frame, header.maxLevel, renderer->setup()), cb, fence);
+    return renderFrame(gpu, renderer,
+                       frameParams(s, header.frame, header.maxLevel, renderer.setup()), cb, fence);
   }
 };
 
@@ -94,8 +84,8 @@ Scene completeScene(const ViewOptions& options, const Asset& asset) {
 
 int viewHeadless(const ViewOptions& options) {
   GpuView view(options);
-  Gpu& gpu = view.session.gpu;
-  Renderer& renderer = *view.renderer;
+  Gpu& gpu = view.gpu;
+  Renderer& renderer = view.renderer;
   const Asset* asset = view.asset.get();
   const auto start = Clock::now();
   double lastFrame = 0;
@@ -155,8 +145,8 @@ int viewCpu(const ViewOptions& options) {
 
 int viewBench(const ViewOptions& options) {
   GpuView view(options);
-  Gpu& gpu = view.session.gpu;
-  Renderer& renderer = *view.renderer;
+  Gpu& gpu = view.gpu;
+  Renderer& renderer = view.renderer;
   const Asset* asset = view.asset.get();
   const Scene& base = view.scene;
   // The camera path: a full orbit around the target at the starting distance.

@@ -122,7 +122,7 @@ std::string describeDevices(VkInstance instance) {
 
 Gpu createGpu(const GpuOptions& options) {
   Gpu gpu;
-  gpu.validationErrors = new std::atomic<uint32_t>(0);
+  gpu.validationErrors = std::make_unique<std::atomic<uint32_t>>(0);
   const char* env = std::getenv("ISO_VK_VALIDATION");
   const bool validation = (options.validation || (env && std::string(env) == "1")) &&
                           hasLayer("VK_LAYER_KHRONOS_validation");
@@ -141,111 +141,119 @@ Gpu createGpu(const GpuOptions& options) {
   instanceInfo.ppEnabledExtensionNames = extensions.data();
   instanceInfo.enabledLayerCount = uint32_t(layers.size());
   instanceInfo.ppEnabledLayerNames = layers.data();
+  // What is made below is destroyed by gpu's destructor if a later step throws.
   ISO_VK(vkCreateInstance(&instanceInfo, nullptr, &gpu.instance));
-  try {
-    if (validation) {
-      VkDebugUtilsMessengerCreateInfoEXT m{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
-      m.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT |
-                          VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
-      m.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT |
-                      VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
-                      VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
-      m.pfnUserCallback = onMessage;
-      m.pUserData = gpu.validationErrors;
-      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
-          vkGetInstanceProcAddr(gpu.instance, "vkCreateDebugUtilsMessengerEXT"));
-      if (create) ISO_VK(create(gpu.instance, &m, nullptr, &gpu.messenger));
-    }
-    uint32_t count = 0;
-    ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, nullptr));
-    std::vector<VkPhysicalDevice> devices(count);
-    ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, devices.data()));
-    const char* envName = std::getenv("ISO_VK_DEVICE");
-    const std::string wanted = !options.deviceName.empty() ? options.deviceName
-                               : envName                   ? envName
-                                                           : "";
-    int best = 1 << 30;
-    for (VkPhysicalDevice d : devices) {
-      VkPhysicalDeviceProperties p;
-      vkGetPhysicalDeviceProperties(d, &p);
-      if (p.apiVersion < VK_API_VERSION_1_2) continue;
-      if (!wanted.empty() && std::string(p.deviceName).find(wanted) == std::string::npos) continue;
-      uint32_t families = 0;
-      vkGetPhysicalDeviceQueueFamilyProperties(d, &families, nullptr);
-      std::vector<VkQueueFamilyProperties> props(families);
-      vkGetPhysicalDeviceQueueFamilyProperties(d, &families, props.data());
-      for (uint32_t f = 0; f < families; ++f) {
-        if (!(props[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
-        if (deviceRank(p.deviceType) < best) {
-          best = deviceRank(p.deviceType);
-          gpu.physical = d;
-          gpu.queueFamily = f;
-        }
-        break;
-      }
-    }
-    if (gpu.physical == VK_NULL_HANDLE)
-      throw std::runtime_error(fmt::format(
-          "no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
-          "mesa-vulkan-drivers for the CPU one",
-          wanted.empty() ? "" : " named like '" + wanted + "'", describeDevices(gpu.instance)));
-    vkGetPhysicalDeviceProperties(gpu.physical, &gpu.properties);
-    vkGetPhysicalDeviceMemoryProperties(gpu.physical, &gpu.memory);
-    const float priority = 1.0f;
-    VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
-    queueInfo.queueFamilyIndex = gpu.queueFamily;
-    queueInfo.queueCount = 1;
-    queueInfo.pQueuePriorities = &priority;
-    std::vector<const char*> deviceExtensions;
-    if (options.swapchain) deviceExtensions.push_back(VK_KHR_SWAPCHAIN_EXTENSION_NAME);
-    // The page pool is read through buffer device addresses (64-bit).
-    VkPhysicalDeviceVulkan12Features has12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
-    VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
-    has.pNext = &has12;
-    vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
-    if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
-      throw std::runtime_error(
-          fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
-                      "shaderInt64, which the viewer needs",
-                      gpu.properties.deviceName));
-    VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
-    use12.bufferDeviceAddress = VK_TRUE;
-    VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
-    use.pNext = &use12;
-    use.features.shaderInt64 = VK_TRUE;
-    VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
-    deviceInfo.pNext = &use;
-    deviceInfo.queueCreateInfoCount = 1;
-    deviceInfo.pQueueCreateInfos = &queueInfo;
-    deviceInfo.enabledExtensionCount = uint32_t(deviceExtensions.size());
-    deviceInfo.ppEnabledExtensionNames = deviceExtensions.data();
-    ISO_VK(vkCreateDevice(gpu.physical, &deviceInfo, nullptr, &gpu.device));
-    vkGetDeviceQueue(gpu.device, gpu.queueFamily, 0, &gpu.queue);
-    VkCommandPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
-    poolInfo.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    poolInfo.queueFamilyIndex = gpu.queueFamily;
-    ISO_VK(vkCreateCommandPool(gpu.device, &poolInfo, nullptr, &gpu.commandPool));
-  } catch (...) {
-    destroyGpu(gpu);
-    throw;
+  if (validation) {
+    VkDebugUtilsMessengerCreateInfoEXT m{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
+    m.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT |
+                        VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    m.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT |
+                    VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+                    VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+    m.pfnUserCallback = onMessage;
+    m.pUserData = gpu.validationErrors.get();
+    auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+        vkGetInstanceProcAddr(gpu.instance, "vkCreateDebugUtilsMessengerEXT"));
+    if (create) ISO_VK(create(gpu.instance, &m, nullptr, &gpu.messenger));
   }
+  uint32_t count = 0;
+  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, nullptr));
+  std::vector<VkPhysicalDevice> devices(count);
+  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, devices.data()));
+  const char* envName = std::getenv("ISO_VK_DEVICE");
+  const std::string wanted = !options.deviceName.empty() ? options.deviceName
+                             : envName                   ? envName
+                                                         : "";
+  int best = 1 << 30;
+  for (VkPhysicalDevice d : devices) {
+    VkPhysicalDeviceProperties p;
+    vkGetPhysicalDeviceProperties(d, &p);
+    if (p.apiVersion < VK_API_VERSION_1_2) continue;
+    if (!wanted.empty() && std::string(p.deviceName).find(wanted) == std::string::npos) continue;
+    uint32_t families = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, nullptr);
+    std::vector<VkQueueFamilyProperties> props(families);
+    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, props.data());
+    for (uint32_t f = 0; f < families; ++f) {
+      if (!(props[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
+      if (deviceRank(p.deviceType) < best) {
+        best = deviceRank(p.deviceType);
+        gpu.physical = d;
+        gpu.queueFamily = f;
+      }
+      break;
+    }
+  }
+  if (gpu.physical == VK_NULL_HANDLE)
+    throw std::runtime_error(fmt::format(
+        "no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
+        "mesa-vulkan-drivers for the CPU one",
+        wanted.empty() ? "" : " named like '" + wanted + "'", describeDevices(gpu.instance)));
+  vkGetPhysicalDeviceProperties(gpu.physical, &gpu.properties);
+  vkGetPhysicalDeviceMemoryProperties(gpu.physical, &gpu.memory);
+  const float priority = 1.0f;
+  VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+  queueInfo.queueFamilyIndex = gpu.queueFamily;
+  queueInfo.queueCount = 1;
+  queueInfo.pQueuePriorities = &priority;
+  std::vector<const char*> deviceExtensions;
+  if (options.swapchain) deviceExtensions.push_back(VK_KHR_SWAPCHAIN_EXTENSION_NAME);
+  // The page pool is read through buffer device addresses (64-bit).
+  VkPhysicalDeviceVulkan12Features has12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+  VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+  has.pNext = &has12;
+  vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
+  if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
+    throw std::runtime_error(
+        fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
+                    "shaderInt64, which the viewer needs",
+                    gpu.properties.deviceName));
+  VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+  use12.bufferDeviceAddress = VK_TRUE;
+  VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+  use.pNext = &use12;
+  use.features.shaderInt64 = VK_TRUE;
+  VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+  deviceInfo.pNext = &use;
+  deviceInfo.queueCreateInfoCount = 1;
+  deviceInfo.pQueueCreateInfos = &queueInfo;
+  deviceInfo.enabledExtensionCount = uint32_t(deviceExtensions.size());
+  deviceInfo.ppEnabledExtensionNames = deviceExtensions.data();
+  ISO_VK(vkCreateDevice(gpu.physical, &deviceInfo, nullptr, &gpu.device));
+  vkGetDeviceQueue(gpu.device, gpu.queueFamily, 0, &gpu.queue);
+  VkCommandPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  poolInfo.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  poolInfo.queueFamilyIndex = gpu.queueFamily;
+  ISO_VK(vkCreateCommandPool(gpu.device, &poolInfo, nullptr, &gpu.commandPool));
   return gpu;
 }
 
-void destroyGpu(Gpu& gpu) {
-  if (gpu.device) {
-    vkDeviceWaitIdle(gpu.device);
-    if (gpu.commandPool) vkDestroyCommandPool(gpu.device, gpu.commandPool, nullptr);
-    vkDestroyDevice(gpu.device, nullptr);
+Gpu::Gpu(Gpu&& o) noexcept
+    : instance(std::exchange(o.instance, VK_NULL_HANDLE)),
+      messenger(std::exchange(o.messenger, VK_NULL_HANDLE)),
+      physical(o.physical),
+      device(std::exchange(o.device, VK_NULL_HANDLE)),
+      queue(o.queue),
+      queueFamily(o.queueFamily),
+      properties(o.properties),
+      memory(o.memory),
+      commandPool(std::exchange(o.commandPool, VK_NULL_HANDLE)),
+      memoryInUse(o.memoryInUse),
+      memoryPeak(o.memoryPeak),
+      validationErrors(std::move(o.validationErrors)) {}
+
+Gpu::~Gpu() {
+  if (device) {
+    vkDeviceWaitIdle(device);
+    if (commandPool) vkDestroyCommandPool(device, commandPool, nullptr);
+    vkDestroyDevice(device, nullptr);
   }
-  if (gpu.messenger) {
+  if (messenger) {
     auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
-        vkGetInstanceProcAddr(gpu.instance, "vkDestroyDebugUtilsMessengerEXT"));
-    if (destroy) destroy(gpu.instance, gpu.messenger, nullptr);
+        vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+    if (destroy) destroy(instance, messenger, nullptr);
   }
-  if (gpu.instance) vkDestroyInstance(gpu.instance, nullptr);
-  delete gpu.validationErrors;
-  gpu = Gpu{};
+  if (instance) vkDestroyInstance(instance, nullptr);
 }
 
 VkDeviceSize bufferFootprint(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage) {
@@ -261,7 +269,8 @@ VkDeviceSize bufferFootprint(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usa
 }
 
 Buffer createBuffer(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage, bool hostVisible) {
-  Buffer b;
+  Buffer b;  // destroyed if a step below throws
+  b.gpu = &gpu;
   b.size = size;
   VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   info.size = size;
@@ -274,20 +283,15 @@ Buffer createBuffer(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage, bool 
                   : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
   uint32_t type = memoryType(gpu, req.memoryTypeBits, wanted);
   if (type == UINT32_MAX && !hostVisible) type = memoryType(gpu, req.memoryTypeBits, 0);
-  if (type == UINT32_MAX) {
-    vkDestroyBuffer(gpu.device, b.buffer, nullptr);
-    throw std::runtime_error("Vulkan: no memory type for a buffer");
-  }
+  if (type == UINT32_MAX) throw std::runtime_error("Vulkan: no memory type for a buffer");
   VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
   VkMemoryAllocateFlagsInfo flags{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_FLAGS_INFO};
   flags.flags = VK_MEMORY_ALLOCATE_DEVICE_ADDRESS_BIT;
   if (usage & VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT) alloc.pNext = &flags;
   alloc.allocationSize = req.size;
   alloc.memoryTypeIndex = type;
-  if (VkResult r = vkAllocateMemory(gpu.device, &alloc, nullptr, &b.memory); r != VK_SUCCESS) {
-    vkDestroyBuffer(gpu.device, b.buffer, nullptr);
+  if (VkResult r = vkAllocateMemory(gpu.device, &alloc, nullptr, &b.memory); r != VK_SUCCESS)
     throw VulkanError(fmt::format("vkAllocateMemory({} bytes)", req.size), r);
-  }
   b.allocated = req.size;
   gpu.memoryInUse += req.size;
   gpu.memoryPeak = std::max(gpu.memoryPeak, gpu.memoryInUse);
@@ -301,19 +305,40 @@ Buffer createBuffer(Gpu& gpu, VkDeviceSize size, VkBufferUsageFlags usage, bool 
   return b;
 }
 
-void destroyBuffer(Gpu& gpu, Buffer& b) {
-  if (b.buffer) vkDestroyBuffer(gpu.device, b.buffer, nullptr);
-  if (b.memory) {
-    vkFreeMemory(gpu.device, b.memory, nullptr);
-    gpu.memoryInUse -= b.allocated;
+Buffer& Buffer::operator=(Buffer&& o) noexcept {
+  if (this != &o) {
+    release();
+    gpu = std::exchange(o.gpu, nullptr);
+    buffer = std::exchange(o.buffer, VK_NULL_HANDLE);
+    memory = std::exchange(o.memory, VK_NULL_HANDLE);
+    size = std::exchange(o.size, 0);
+    allocated = std::exchange(o.allocated, 0);
+    mapped = std::exchange(o.mapped, nullptr);
+    address = std::exchange(o.address, 0);
   }
-  b = Buffer{};
+  return *this;
+}
+
+void Buffer::release() {
+  if (!gpu) return;
+  if (buffer) vkDestroyBuffer(gpu->device, buffer, nullptr);
+  if (memory) {
+    vkFreeMemory(gpu->device, memory, nullptr);
+    gpu->memoryInUse -= allocated;
+  }
+  gpu = nullptr;
+  buffer = VK_NULL_HANDLE;
+  memory = VK_NULL_HANDLE;
+  size = allocated = 0;
+  mapped = nullptr;
+  address = 0;
 }
 
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts,
                                       std::span<const uint32_t> constants) {
-  ComputePipeline p;
+  ComputePipeline p;  // destroyed if a step below throws
+  p.gpu = &gpu;
   std::vector<VkDescriptorSetLayoutBinding> bindings;
   bindings.push_back(
       {0, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr});
@@ -366,12 +391,32 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
   return p;
 }
 
-void destroyComputePipeline(Gpu& gpu, ComputePipeline& p) {
-  if (p.descriptorPool) vkDestroyDescriptorPool(gpu.device, p.descriptorPool, nullptr);
-  if (p.pipeline) vkDestroyPipeline(gpu.device, p.pipeline, nullptr);
-  if (p.layout) vkDestroyPipelineLayout(gpu.device, p.layout, nullptr);
-  if (p.setLayout) vkDestroyDescriptorSetLayout(gpu.device, p.setLayout, nullptr);
-  p = ComputePipeline{};
+ComputePipeline& ComputePipeline::operator=(ComputePipeline&& o) noexcept {
+  if (this != &o) {
+    release();
+    gpu = std::exchange(o.gpu, nullptr);
+    setLayout = std::exchange(o.setLayout, VK_NULL_HANDLE);
+    layout = std::exchange(o.layout, VK_NULL_HANDLE);
+    pipeline = std::exchange(o.pipeline, VK_NULL_HANDLE);
+    descriptorPool = std::exchange(o.descriptorPool, VK_NULL_HANDLE);
+    set = std::exchange(o.set, VK_NULL_HANDLE);
+  }
+  return *this;
+}
+
+void ComputePipeline::release() {
+  if (!gpu) return;
+  VkDevice device = gpu->device;
+  if (descriptorPool) vkDestroyDescriptorPool(device, descriptorPool, nullptr);
+  if (pipeline) vkDestroyPipeline(device, pipeline, nullptr);
+  if (layout) vkDestroyPipelineLayout(device, layout, nullptr);
+  if (setLayout) vkDestroyDescriptorSetLayout(device, setLayout, nullptr);
+  gpu = nullptr;
+  setLayout = VK_NULL_HANDLE;
+  layout = VK_NULL_HANDLE;
+  pipeline = VK_NULL_HANDLE;
+  descriptorPool = VK_NULL_HANDLE;
+  set = VK_NULL_HANDLE;
 }
 
 VkCommandBuffer allocateCommandBuffer(Gpu& gpu) {
@@ -384,12 +429,21 @@ VkCommandBuffer allocateCommandBuffer(Gpu& gpu) {
   return cb;
 }
 
-VkFence createFence(Gpu& gpu, bool signaled) {
+Owned<VkFence> createFence(Gpu& gpu, bool signaled) {
   VkFenceCreateInfo info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
   if (signaled) info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
   VkFence fence;
   ISO_VK(vkCreateFence(gpu.device, &info, nullptr, &fence));
-  return fence;
+  VkDevice device = gpu.device;
+  return {fence, [device](VkFence f) { vkDestroyFence(device, f, nullptr); }};
+}
+
+Owned<VkSemaphore> createSemaphore(Gpu& gpu) {
+  VkSemaphoreCreateInfo info{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
+  VkSemaphore semaphore;
+  ISO_VK(vkCreateSemaphore(gpu.device, &info, nullptr, &semaphore));
+  VkDevice device = gpu.device;
+  return {semaphore, [device](VkSemaphore s) { vkDestroySemaphore(device, s, nullptr); }};
 }
 
 }  // namespace iso::viewer

@@ -32,7 +32,7 @@ struct Input {
 };
 
 struct Swapchain {
-  VkSwapchainKHR swapchain = VK_NULL_HANDLE;
+  Owned<VkSwapchainKHR> swapchain;
   VkFormat format = VK_FORMAT_UNDEFINED;
   VkExtent2D extent{};
   std::vector<VkImage> images;
@@ -74,10 +74,13 @@ Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32
   info.presentMode = VK_PRESENT_MODE_FIFO_KHR;
   info.clipped = VK_TRUE;
   info.oldSwapchain = old;
-  ISO_VK(vkCreateSwapchainKHR(gpu.device, &info, nullptr, &s.swapchain));
-  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, s.swapchain, &count, nullptr));
+  VkSwapchainKHR handle;
+  ISO_VK(vkCreateSwapchainKHR(gpu.device, &info, nullptr, &handle));
+  VkDevice device = gpu.device;
+  s.swapchain = {handle, [device](VkSwapchainKHR h) { vkDestroySwapchainKHR(device, h, nullptr); }};
+  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, handle, &count, nullptr));
   s.images.resize(count);
-  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, s.swapchain, &count, s.images.data()));
+  ISO_VK(vkGetSwapchainImagesKHR(gpu.device, handle, &count, s.images.data()));
   return s;
 }
 
@@ -132,267 +135,253 @@ int viewWindow(const ViewOptions& options) {
   g.swapchain = true;
   g.validation = options.validation;
   g.deviceName = options.device;
+  // Everything below is destroyed in reverse order when this function leaves, normally or by an
+  // exception: the renderer first (it waits for the device), the device last.
   Gpu gpu = createGpu(g);
-  VkSurfaceKHR surface = VK_NULL_HANDLE;
-  Swapchain swapchain;
-  VkSemaphore acquired = VK_NULL_HANDLE, rendered = VK_NULL_HANDLE;
-  VkFence fence = VK_NULL_HANDLE;
   int exitCode = 0;
-  try {
-    ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &surface));
-    VkBool32 canPresent = VK_FALSE;
-    ISO_VK(
-        vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface, &canPresent));
-    if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
-    swapchain = createSwapchain(gpu, surface, options.width, options.height);
-    const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
-    RendererOptions ro;
-    ro.width = swapchain.extent.width;
-    ro.height = swapchain.extent.height;
-    // Room in the output for the window at the screen's size, so that resizing needs no new
-    // GPU memory (the budget holds for any size up to it).
-    const GLFWvidmode* mode = glfwGetVideoMode(glfwGetPrimaryMonitor());
-    ro.capacityWidth = std::max(ro.width, mode ? uint32_t(mode->width) : 0u);
-    ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
-    ro.vram = options.vram;
-    ro.uploadBytes = options.uploadBytes;
-    ro.swapRedBlue = bgra;
-    Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
-    VkSemaphoreCreateInfo si{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
-    ISO_VK(vkCreateSemaphore(gpu.device, &si, nullptr, &acquired));
-    ISO_VK(vkCreateSemaphore(gpu.device, &si, nullptr, &rendered));
-    fence = createFence(gpu, false);
-    VkCommandBuffer cb = allocateCommandBuffer(gpu);
-
-    Input input;
-    glfwSetWindowUserPointer(window, &input);
-    glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
-      static_cast<Input*>(glfwGetWindowUserPointer(w))->wheel += dy;
-    });
-    glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
-      if (action != GLFW_PRESS) return;
-      Input& in = *static_cast<Input*>(glfwGetWindowUserPointer(w));
-      if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
-      if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
-      if (key == GLFW_KEY_R) in.reload = true;
-      if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
-        in.toggled = key - GLFW_KEY_0;
-      if (key == GLFW_KEY_B) in.toggled = 4;
-      if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
-      if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
-    });
-
-    std::filesystem::file_time_type sceneTime{};
-    if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
-    bool stale = false;  // the swapchain no longer matches the window
-    double mouseX = 0, mouseY = 0;
-    glfwGetCursorPos(window, &mouseX, &mouseY);
-    auto last = Clock::now(), titleTime = last;
-    uint32_t frames = 0, titleFrames = 0, screenshots = 0;
-    uint64_t titleRays = 0;
-    double titleGpu = 0;
-    const auto header = asset->reader.header();
-    while (!glfwWindowShouldClose(window)) {
-      glfwPollEvents();
-      const auto now = Clock::now();
-      const double dt = std::chrono::duration<double>(now - last).count();
-      last = now;
-      // Camera controls.
-      Camera& cam = *scene.camera;
-      double x, y;
-      glfwGetCursorPos(window, &x, &y);
-      const double dx = x - mouseX, dy = y - mouseY;
-      mouseX = x;
-      mouseY = y;
-      const Vec3d forward = glm::normalize(cam.target - cam.eye);
-      const Vec3d right = glm::normalize(glm::cross(forward, cam.up));
-      const Vec3d up = glm::cross(right, forward);
-      const double distance = glm::length(cam.target - cam.eye);
-      if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
-        Vec3d offset = cam.eye - cam.target;
-        offset = rotated(offset, glm::normalize(cam.up), -dx * 0.008);
-        const Vec3d pitched = rotated(offset, right, -dy * 0.008);
-        if (std::abs(glm::dot(glm::normalize(pitched), glm::normalize(cam.up))) < 0.98)
-          offset = pitched;
-        cam.eye = cam.target + offset;
-      }
-      if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
-          glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
-        const double k =
-            distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / swapchain.extent.height;
-        const Vec3d move = right * (-dx * k) + up * (dy * k);
-        cam.eye = cam.eye + move;
-        cam.target = cam.target + move;
-      }
-      if (input.wheel != 0) {
-        cam.eye = cam.target + (cam.eye - cam.target) * std::pow(0.9, input.wheel);
-        input.wheel = 0;
-      }
-      Vec3d fly{0, 0, 0};
-      if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) fly = fly + forward;
-      if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) fly = fly - forward;
-      if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) fly = fly + right;
-      if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
-      if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
-      if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
-      if (glm::dot(fly, fly) > 0) {
-        const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
-        cam.eye = cam.eye + move;
-        cam.target = cam.target + move;
-      }
-      if (input.toggled == 1) scene.shadows = !scene.shadows;
-      if (input.toggled == 2) scene.reflections = !scene.reflections;
-      if (input.toggled == 3) scene.refractions = !scene.refractions;
-      if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
-      input.toggled = 0;
-      if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
-      input.samples = 0;
-      // The scene file: reloaded on R or when it changes; the camera stays where it is.
-      if (!options.sceneFile.empty()) {
-        std::error_code ec;
-        const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
-        if (input.reload || (!ec && t != sceneTime)) {
-          sceneTime = t;
-          Scene next = options.scene;
-          try {
-            loadScene(options.sceneFile, next);
-            next.camera = scene.camera;
-            if (next.lights.empty())
-              next.lights.push_back(defaultLight(*next.camera, asset->bounds));
-            scene = next;
-            fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
-          } catch (const std::exception& e) {
-            fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
-          }
-        }
-        input.reload = false;
-      }
-
-      // A new window size: a new swapchain, and the renderer draws at that size.
-      int fbWidth = 0, fbHeight = 0;
-      glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
-      if (fbWidth == 0 || fbHeight == 0) {  // minimized
-        glfwWaitEvents();
-        continue;
-      }
-      if (stale || uint32_t(fbWidth) != swapchain.extent.width ||
-          uint32_t(fbHeight) != swapchain.extent.height) {
-        ISO_VK(vkDeviceWaitIdle(gpu.device));
-        Swapchain next = createSwapchain(gpu, surface, uint32_t(fbWidth), uint32_t(fbHeight),
-                                         swapchain.swapchain);
-        vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
-        swapchain = next;
-        // Beyond the screen's size (another monitor) the picture is drawn at the capacity.
-        renderer.resize(std::min(swapchain.extent.width, ro.capacityWidth),
-                        std::min(swapchain.extent.height, ro.capacityHeight));
-        stale = false;
-      }
-      uint32_t index = 0;
-      const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
-                                                     acquired, VK_NULL_HANDLE, &index);
-      if (acquire == VK_ERROR_OUT_OF_DATE_KHR) {
-        stale = true;
-        continue;
-      }
-      if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
-        checkVk(acquire, "vkAcquireNextImageKHR");
-      renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-      ISO_VK(vkResetCommandBuffer(cb, 0));
-      VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-      begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-      ISO_VK(vkBeginCommandBuffer(cb, &begin));
-      renderer.record(cb);
-      VkImage image = swapchain.images[index];
-      imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
-                   VK_ACCESS_TRANSFER_WRITE_BIT);
-      VkBufferImageCopy copy{};
-      copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-      copy.bufferRowLength = renderer.setup().width;
-      copy.imageExtent = {renderer.setup().width, renderer.setup().height, 1};
-      vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
-                             VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
-      imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
-                   VK_ACCESS_TRANSFER_WRITE_BIT, 0);
-      ISO_VK(vkEndCommandBuffer(cb));
-      const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
-      VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-      submit.waitSemaphoreCount = 1;
-      submit.pWaitSemaphores = &acquired;
-      submit.pWaitDstStageMask = &waitStage;
-      submit.commandBufferCount = 1;
-      submit.pCommandBuffers = &cb;
-      submit.signalSemaphoreCount = 1;
-      submit.pSignalSemaphores = &rendered;
-      ISO_VK(vkResetFences(gpu.device, 1, &fence));
-      const auto t0 = Clock::now();
-      ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
-      VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
-      present.waitSemaphoreCount = 1;
-      present.pWaitSemaphores = &rendered;
-      present.swapchainCount = 1;
-      present.pSwapchains = &swapchain.swapchain;
-      present.pImageIndices = &index;
-      const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
-      if (presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR)
-        stale = true;
-      else
-        checkVk(presented, "vkQueuePresentKHR");
-      ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
-      titleGpu += std::chrono::duration<double>(Clock::now() - t0).count();
-      renderer.collect();
-      ++frames;
-      ++titleFrames;
-      titleRays += renderer.stats().rays;
-      const bool last = options.frames > 0 && frames >= options.frames;
-      if (input.screenshot || (last && !options.screenshot.empty())) {
-        const std::filesystem::path file =
-            last && !options.screenshot.empty()
-                ? options.screenshot
-                : std::filesystem::path(fmt::format("iso-screenshot-{}.png", ++screenshots));
-        writeImage(file, renderer.setup().width, renderer.setup().height,
-                   toRgba(renderer.pixels(), bgra));
-        fmt::print("iso view: saved {}\n", file.string());
-        input.screenshot = false;
-      }
-      const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
-      if (sinceTitle > 0.5 || last) {
-        const FrameStats& s = renderer.stats();
-        const std::string text = fmt::format(
-            "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
-            "resident, {} requested",
-            title, titleGpu / titleFrames * 1e3, titleFrames / sinceTitle,
-            titleRays / std::max(titleGpu, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident,
-            s.pending);
-        glfwSetWindowTitle(window, text.c_str());
-        if (last) fmt::print("{}\n", text);
-        titleTime = Clock::now();
-        titleFrames = 0;
-        titleRays = 0;
-        titleGpu = 0;
-      }
-      if (last) break;
-    }
-    vkDeviceWaitIdle(gpu.device);
-    if (*gpu.validationErrors > 0) {
-      fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
-      exitCode = 1;
-    }
-  } catch (...) {
-    if (gpu.device) vkDeviceWaitIdle(gpu.device);
-    if (fence) vkDestroyFence(gpu.device, fence, nullptr);
-    if (acquired) vkDestroySemaphore(gpu.device, acquired, nullptr);
-    if (rendered) vkDestroySemaphore(gpu.device, rendered, nullptr);
-    if (swapchain.swapchain) vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
-    if (surface) vkDestroySurfaceKHR(gpu.instance, surface, nullptr);
-    destroyGpu(gpu);
-    throw;
+  Owned<VkSurfaceKHR> surface;
+  {
+    VkSurfaceKHR handle;
+    ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &handle));
+    VkInstance instance = gpu.instance;
+    surface = {handle, [instance](VkSurfaceKHR h) { vkDestroySurfaceKHR(instance, h, nullptr); }};
   }
-  vkDestroyFence(gpu.device, fence, nullptr);
-  vkDestroySemaphore(gpu.device, acquired, nullptr);
-  vkDestroySemaphore(gpu.device, rendered, nullptr);
-  vkDestroySwapchainKHR(gpu.device, swapchain.swapchain, nullptr);
-  vkDestroySurfaceKHR(gpu.instance, surface, nullptr);
-  destroyGpu(gpu);
+  VkBool32 canPresent = VK_FALSE;
+  ISO_VK(
+      vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface, &canPresent));
+  if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
+  Swapchain swapchain = createSwapchain(gpu, surface, options.width, options.height);
+  const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+  RendererOptions ro;
+  ro.width = swapchain.extent.width;
+  ro.height = swapchain.extent.height;
+  // Room in the output for the window at the screen's size, so that resizing needs no new
+  // GPU memory (the budget holds for any size up to it).
+  const GLFWvidmode* mode = glfwGetVideoMode(glfwGetPrimaryMonitor());
+  ro.capacityWidth = std::max(ro.width, mode ? uint32_t(mode->width) : 0u);
+  ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
+  ro.vram = options.vram;
+  ro.uploadBytes = options.uploadBytes;
+  ro.swapRedBlue = bgra;
+  const Owned<VkSemaphore> acquired = createSemaphore(gpu), rendered = createSemaphore(gpu);
+  const Owned<VkFence> fence = createFence(gpu, false);
+  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
+  VkCommandBuffer cb = allocateCommandBuffer(gpu);
+
+  Input input;
+  glfwSetWindowUserPointer(window, &input);
+  glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
+    static_cast<Input*>(glfwGetWindowUserPointer(w))->wheel += dy;
+  });
+  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+    if (action != GLFW_PRESS) return;
+    Input& in = *static_cast<Input*>(glfwGetWindowUserPointer(w));
+    if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
+    if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
+    if (key == GLFW_KEY_R) in.reload = true;
+    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
+      in.toggled = key - GLFW_KEY_0;
+    if (key == GLFW_KEY_B) in.toggled = 4;
+    if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
+    if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
+  });
+
+  std::filesystem::file_time_type sceneTime{};
+  if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
+  bool stale = false;  // the swapchain no longer matches the window
+  double mouseX = 0, mouseY = 0;
+  glfwGetCursorPos(window, &mouseX, &mouseY);
+  auto last = Clock::now(), titleTime = last;
+  uint32_t frames = 0, titleFrames = 0, screenshots = 0;
+  uint64_t titleRays = 0;
+  double titleGpu = 0;
+  const auto header = asset->reader.header();
+  while (!glfwWindowShouldClose(window)) {
+    glfwPollEvents();
+    const auto now = Clock::now();
+    const double dt = std::chrono::duration<double>(now - last).count();
+    last = now;
+    // Camera controls.
+    Camera& cam = *scene.camera;
+    double x, y;
+    glfwGetCursorPos(window, &x, &y);
+    const double dx = x - mouseX, dy = y - mouseY;
+    mouseX = x;
+    mouseY = y;
+    const Vec3d forward = glm::normalize(cam.target - cam.eye);
+    const Vec3d right = glm::normalize(glm::cross(forward, cam.up));
+    const Vec3d up = glm::cross(right, forward);
+    const double distance = glm::length(cam.target - cam.eye);
+    if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+      Vec3d offset = cam.eye - cam.target;
+      offset = rotated(offset, glm::normalize(cam.up), -dx * 0.008);
+      const Vec3d pitched = rotated(offset, right, -dy * 0.008);
+      if (std::abs(glm::dot(glm::normalize(pitched), glm::normalize(cam.up))) < 0.98)
+        offset = pitched;
+      cam.eye = cam.target + offset;
+    }
+    if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
+        glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
+      const double k =
+          distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / swapchain.extent.height;
+      const Vec3d move = right * (-dx * k) + up * (dy * k);
+      cam.eye = cam.eye + move;
+      cam.target = cam.target + move;
+    }
+    if (input.wheel != 0) {
+      cam.eye = cam.target + (cam.eye - cam.target) * std::pow(0.9, input.wheel);
+      input.wheel = 0;
+    }
+    Vec3d fly{0, 0, 0};
+    if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) fly = fly + forward;
+    if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) fly = fly - forward;
+    if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) fly = fly + right;
+    if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
+    if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
+    if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
+    if (glm::dot(fly, fly) > 0) {
+      const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
+      cam.eye = cam.eye + move;
+      cam.target = cam.target + move;
+    }
+    if (input.toggled == 1) scene.shadows = !scene.shadows;
+    if (input.toggled == 2) scene.reflections = !scene.reflections;
+    if (input.toggled == 3) scene.refractions = !scene.refractions;
+    if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
+    input.toggled = 0;
+    if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
+    input.samples = 0;
+    // The scene file: reloaded on R or when it changes; the camera stays where it is.
+    if (!options.sceneFile.empty()) {
+      std::error_code ec;
+      const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
+      if (input.reload || (!ec && t != sceneTime)) {
+        sceneTime = t;
+        Scene next = options.scene;
+        try {
+          loadScene(options.sceneFile, next);
+          next.camera = scene.camera;
+          if (next.lights.empty())
+            next.lights.push_back(defaultLight(*next.camera, asset->bounds));
+          scene = next;
+          fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+        } catch (const std::exception& e) {
+          fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
+        }
+      }
+      input.reload = false;
+    }
+
+    // A new window size: a new swapchain, and the renderer draws at that size.
+    int fbWidth = 0, fbHeight = 0;
+    glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
+    if (fbWidth == 0 || fbHeight == 0) {  // minimized
+      glfwWaitEvents();
+      continue;
+    }
+    if (stale || uint32_t(fbWidth) != swapchain.extent.width ||
+        uint32_t(fbHeight) != swapchain.extent.height) {
+      ISO_VK(vkDeviceWaitIdle(gpu.device));
+      swapchain = createSwapchain(gpu, surface, uint32_t(fbWidth), uint32_t(fbHeight),
+                                  swapchain.swapchain);  // the old one goes after
+      // Beyond the screen's size (another monitor) the picture is drawn at the capacity.
+      renderer.resize(std::min(swapchain.extent.width, ro.capacityWidth),
+                      std::min(swapchain.extent.height, ro.capacityHeight));
+      stale = false;
+    }
+    uint32_t index = 0;
+    const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
+                                                   acquired, VK_NULL_HANDLE, &index);
+    if (acquire == VK_ERROR_OUT_OF_DATE_KHR) {
+      stale = true;
+      continue;
+    }
+    if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
+      checkVk(acquire, "vkAcquireNextImageKHR");
+    renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+    ISO_VK(vkResetCommandBuffer(cb, 0));
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    ISO_VK(vkBeginCommandBuffer(cb, &begin));
+    renderer.record(cb);
+    VkImage image = swapchain.images[index];
+    imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
+                 VK_ACCESS_TRANSFER_WRITE_BIT);
+    VkBufferImageCopy copy{};
+    copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+    copy.bufferRowLength = renderer.setup().width;
+    copy.imageExtent = {renderer.setup().width, renderer.setup().height, 1};
+    vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
+                           VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
+    imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
+                 VK_ACCESS_TRANSFER_WRITE_BIT, 0);
+    ISO_VK(vkEndCommandBuffer(cb));
+    const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+    const VkSemaphore waitOn = acquired, signal = rendered;
+    const VkFence done = fence;
+    const VkSwapchainKHR presentTo = swapchain.swapchain;
+    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    submit.waitSemaphoreCount = 1;
+    submit.pWaitSemaphores = &waitOn;
+    submit.pWaitDstStageMask = &waitStage;
+    submit.commandBufferCount = 1;
+    submit.pCommandBuffers = &cb;
+    submit.signalSemaphoreCount = 1;
+    submit.pSignalSemaphores = &signal;
+    ISO_VK(vkResetFences(gpu.device, 1, &done));
+    const auto t0 = Clock::now();
+    ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
+    VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
+    present.waitSemaphoreCount = 1;
+    present.pWaitSemaphores = &signal;
+    present.swapchainCount = 1;
+    present.pSwapchains = &presentTo;
+    present.pImageIndices = &index;
+    const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
+    if (presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR)
+      stale = true;
+    else
+      checkVk(presented, "vkQueuePresentKHR");
+    ISO_VK(vkWaitForFences(gpu.device, 1, &done, VK_TRUE, UINT64_MAX));
+    titleGpu += std::chrono::duration<double>(Clock::now() - t0).count();
+    renderer.collect();
+    ++frames;
+    ++titleFrames;
+    titleRays += renderer.stats().rays;
+    const bool last = options.frames > 0 && frames >= options.frames;
+    if (input.screenshot || (last && !options.screenshot.empty())) {
+      const std::filesystem::path file =
+          last && !options.screenshot.empty()
+              ? options.screenshot
+              : std::filesystem::path(fmt::format("iso-screenshot-{}.png", ++screenshots));
+      writeImage(file, renderer.setup().width, renderer.setup().height,
+                 toRgba(renderer.pixels(), bgra));
+      fmt::print("iso view: saved {}\n", file.string());
+      input.screenshot = false;
+    }
+    const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
+    if (sinceTitle > 0.5 || last) {
+      const FrameStats& s = renderer.stats();
+      const std::string text = fmt::format(
+          "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
+          "resident, {} requested",
+          title, titleGpu / titleFrames * 1e3, titleFrames / sinceTitle,
+          titleRays / std::max(titleGpu, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident,
+          s.pending);
+      glfwSetWindowTitle(window, text.c_str());
+      if (last) fmt::print("{}\n", text);
+      titleTime = Clock::now();
+      titleFrames = 0;
+      titleRays = 0;
+      titleGpu = 0;
+    }
+    if (last) break;
+  }
+  vkDeviceWaitIdle(gpu.device);
+  if (*gpu.validationErrors > 0) {
+    fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
+    exitCode = 1;
+  }
   return exitCode;
 }
 

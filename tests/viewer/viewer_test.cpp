@@ -98,7 +98,7 @@ GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h,
     o.uploadBytes = 64 << 10;  // a few chunks a frame, so that streaming takes frames
     Renderer renderer(g, asset, env, o);
     VkCommandBuffer cb = allocateCommandBuffer(g);
-    VkFence fence = createFence(g, false);
+    const Owned<VkFence> fence = createFence(g, false);
     const auto header = asset.reader.header();
     for (uint32_t f = 0; f < maxFrames; ++f) {
       renderFrame(g, renderer, frameParams(scene, header.frame, header.maxLevel, renderer.setup()),
@@ -112,7 +112,6 @@ GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h,
     }
     run.pixels = renderer.pixels();
     run.stats = renderer.stats();
-    vkDestroyFence(g.device, fence, nullptr);
     vkFreeCommandBuffers(g.device, g.commandPool, 1, &cb);
   }
   run.peak = g.memoryPeak - before;
