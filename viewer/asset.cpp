@@ -13,7 +13,7 @@ namespace iso::viewer {
 Asset::Asset(Reader r) : reader(std::move(r)), tree(reader.chunks()) {}
 
 std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
-  std::unique_ptr<Asset> a(new Asset(Reader::open(path)));
+  auto a = std::make_unique<Asset>(Reader::open(path));
   const FileHeader& header = a->reader.header();
   if (a->tree.topChunk() == kNoParent)
     throw FileError(a->reader.name(), std::nullopt, "the file holds no surface to view");

@@ -22,8 +22,7 @@ struct Asset {
   // Throws iso::FileError for files that are not valid or hold no surface.
   static std::unique_ptr<Asset> open(const std::filesystem::path& path);
 
- private:
-  explicit Asset(Reader r);
+  explicit Asset(Reader r);  // the reader and its chunk tree only: use open()
 };
 
 // The frame setup of the CPU reference tracer for an asset (everything resident, no requests).
