@@ -2,8 +2,9 @@
 // buffer and copies it to the swapchain image (compute only, no graphics pipeline).
 //
 // Mouse: left drag orbits, right or middle drag pans, the wheel zooms. Keys: W A S D fly, Q E
-// down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden), + and
-// - samples per pixel, P screenshot, R reloads the scene file (it also reloads by itself when the file changes), Esc quits.
+// down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden),
+// + and - samples per pixel, P screenshot, R reloads the scene file (it also reloads by itself
+// when the file changes), Esc quits.
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
 #include <fmt/core.h>
@@ -104,6 +105,207 @@ std::vector<uint32_t> toRgba(std::vector<uint32_t> pixels, bool bgra) {
   return pixels;
 }
 
+// The window's callbacks write what was pressed into `input` (the window's user pointer).
+void listen(GLFWwindow* window, Input& input) {
+  glfwSetWindowUserPointer(window, &input);
+  glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
+    static_cast<Input*>(glfwGetWindowUserPointer(w))->wheel += dy;
+  });
+  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
+    if (action != GLFW_PRESS) return;
+    Input& in = *static_cast<Input*>(glfwGetWindowUserPointer(w));
+    if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
+    if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
+    if (key == GLFW_KEY_R) in.reload = true;
+    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
+      in.toggled = key - GLFW_KEY_0;
+    if (key == GLFW_KEY_B) in.toggled = 4;
+    if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
+    if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
+  });
+}
+
+struct Mouse {
+  double x = 0, y = 0;  // where it was at the last frame
+};
+
+// The camera after dt seconds of mouse and keys: left drag orbits, right or middle drag pans (a
+// pixel of a picture `height` pixels high), the wheel zooms, W A S D Q E fly.
+void moveCamera(GLFWwindow* window, Camera& cam, Input& input, Mouse& mouse, double dt,
+                uint32_t height) {
+  double x, y;
+  glfwGetCursorPos(window, &x, &y);
+  const double dx = x - mouse.x, dy = y - mouse.y;
+  mouse = {x, y};
+  const Vec3d forward = glm::normalize(cam.target - cam.eye);
+  const Vec3d right = glm::normalize(glm::cross(forward, cam.up));
+  const Vec3d up = glm::cross(right, forward);
+  const double distance = glm::length(cam.target - cam.eye);
+  if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
+    Vec3d offset = cam.eye - cam.target;
+    offset = rotated(offset, glm::normalize(cam.up), -dx * 0.008);
+    const Vec3d pitched = rotated(offset, right, -dy * 0.008);
+    if (std::abs(glm::dot(glm::normalize(pitched), glm::normalize(cam.up))) < 0.98)
+      offset = pitched;
+    cam.eye = cam.target + offset;
+  }
+  if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
+      glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
+    const double k = distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / height;
+    const Vec3d move = right * (-dx * k) + up * (dy * k);
+    cam.eye = cam.eye + move;
+    cam.target = cam.target + move;
+  }
+  if (input.wheel != 0) {
+    cam.eye = cam.target + (cam.eye - cam.target) * std::pow(0.9, input.wheel);
+    input.wheel = 0;
+  }
+  Vec3d fly{0, 0, 0};
+  if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) fly = fly + forward;
+  if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) fly = fly - forward;
+  if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) fly = fly + right;
+  if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
+  if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
+  if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
+  if (glm::dot(fly, fly) > 0) {
+    const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
+    cam.eye = cam.eye + move;
+    cam.target = cam.target + move;
+  }
+}
+
+// Keys 1, 2, 3, B, + and -.
+void applySwitches(Input& input, Scene& scene) {
+  if (input.toggled == 1) scene.shadows = !scene.shadows;
+  if (input.toggled == 2) scene.reflections = !scene.reflections;
+  if (input.toggled == 3) scene.refractions = !scene.refractions;
+  if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
+  input.toggled = 0;
+  if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
+  input.samples = 0;
+}
+
+// The scene file: reloaded on R or when it changes (its time was `sceneTime`); the camera stays
+// where it is, and a file that fails keeps the scene as it was.
+void reloadScene(const ViewOptions& options, const Asset& asset, Input& input, Scene& scene,
+                 std::filesystem::file_time_type& sceneTime) {
+  if (options.sceneFile.empty()) return;
+  std::error_code ec;
+  const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
+  if (input.reload || (!ec && t != sceneTime)) {
+    sceneTime = t;
+    Scene next = options.scene;
+    try {
+      loadScene(options.sceneFile, next);
+      next.camera = scene.camera;
+      if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset.bounds));
+      scene = next;
+      fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
+    }
+  }
+  input.reload = false;
+}
+
+struct Presented {
+  double seconds;  // from submit to done
+  bool stale;      // the swapchain no longer matches the window
+};
+
+// Trace the prepared frame, copy it into swapchain image `index` (acquired, signalling
+// `acquired`), present it and wait for it.
+Presented drawAndPresent(Gpu& gpu, Renderer& renderer, VkCommandBuffer cb,
+                         const Swapchain& swapchain, uint32_t index, VkSemaphore acquired,
+                         VkSemaphore rendered, VkFence fence) {
+  ISO_VK(vkResetCommandBuffer(cb, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  renderer.record(cb);
+  VkImage image = swapchain.images[index];
+  imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
+               VK_ACCESS_TRANSFER_WRITE_BIT);
+  VkBufferImageCopy copy{};
+  copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  copy.bufferRowLength = renderer.setup().width;
+  copy.imageExtent = {renderer.setup().width, renderer.setup().height, 1};
+  vkCmdCopyBufferToImage(cb, renderer.output().buffer, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
+                         1, &copy);
+  imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
+               VK_ACCESS_TRANSFER_WRITE_BIT, 0);
+  ISO_VK(vkEndCommandBuffer(cb));
+  const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  const VkSwapchainKHR presentTo = swapchain.swapchain;
+  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  submit.waitSemaphoreCount = 1;
+  submit.pWaitSemaphores = &acquired;
+  submit.pWaitDstStageMask = &waitStage;
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &cb;
+  submit.signalSemaphoreCount = 1;
+  submit.pSignalSemaphores = &rendered;
+  ISO_VK(vkResetFences(gpu.device, 1, &fence));
+  const auto t0 = Clock::now();
+  ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
+  VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
+  present.waitSemaphoreCount = 1;
+  present.pWaitSemaphores = &rendered;
+  present.swapchainCount = 1;
+  present.pSwapchains = &presentTo;
+  present.pImageIndices = &index;
+  const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
+  const bool stale = presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR;
+  if (!stale) checkVk(presented, "vkQueuePresentKHR");
+  ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
+  return {std::chrono::duration<double>(Clock::now() - t0).count(), stale};
+}
+
+// The window's surface, which the device must be able to present to.
+Owned<VkSurfaceKHR> surfaceOf(Gpu& gpu, GLFWwindow* window) {
+  VkSurfaceKHR handle;
+  ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &handle));
+  VkInstance instance = gpu.instance;
+  Owned<VkSurfaceKHR> surface = {
+      handle, [instance](VkSurfaceKHR h) { vkDestroySurfaceKHR(instance, h, nullptr); }};
+  VkBool32 canPresent = VK_FALSE;
+  ISO_VK(vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, handle, &canPresent));
+  if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
+  return surface;
+}
+
+// The renderer of a window: the swapchain's size, and room in the output for the window at the
+// screen's size, so that resizing needs no new GPU memory (the budget holds for any size up to
+// it).
+RendererOptions windowRendererOptions(const ViewOptions& options, const Swapchain& swapchain) {
+  RendererOptions ro;
+  ro.width = swapchain.extent.width;
+  ro.height = swapchain.extent.height;
+  const GLFWvidmode* mode = glfwGetVideoMode(glfwGetPrimaryMonitor());
+  ro.capacityWidth = std::max(ro.width, mode ? uint32_t(mode->width) : 0u);
+  ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
+  ro.vram = options.vram;
+  ro.uploadBytes = options.uploadBytes;
+  ro.swapRedBlue = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+  return ro;
+}
+
+// The frames since the title last changed.
+struct TitleStats {
+  uint32_t frames = 0;
+  uint64_t rays = 0;
+  double gpuSeconds = 0;
+};
+
+std::string titleText(const std::string& title, const TitleStats& t, double seconds,
+                      const FrameStats& s) {
+  return fmt::format(
+      "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
+      "resident, {} requested",
+      title, t.gpuSeconds / t.frames * 1e3, t.frames / seconds,
+      t.rays / std::max(t.gpuSeconds, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident, s.pending);
+}
+
 }  // namespace
 
 int viewWindow(const ViewOptions& options) {
@@ -138,139 +340,35 @@ int viewWindow(const ViewOptions& options) {
   // Everything below is destroyed in reverse order when this function leaves, normally or by an
   // exception: the renderer first (it waits for the device), the device last.
   Gpu gpu = createGpu(g);
-  int exitCode = 0;
-  Owned<VkSurfaceKHR> surface;
-  {
-    VkSurfaceKHR handle;
-    ISO_VK(glfwCreateWindowSurface(gpu.instance, window, nullptr, &handle));
-    VkInstance instance = gpu.instance;
-    surface = {handle, [instance](VkSurfaceKHR h) { vkDestroySurfaceKHR(instance, h, nullptr); }};
-  }
-  VkBool32 canPresent = VK_FALSE;
-  ISO_VK(
-      vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, surface, &canPresent));
-  if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
+  const Owned<VkSurfaceKHR> surface = surfaceOf(gpu, window);
   Swapchain swapchain = createSwapchain(gpu, surface, options.width, options.height);
   const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
-  RendererOptions ro;
-  ro.width = swapchain.extent.width;
-  ro.height = swapchain.extent.height;
-  // Room in the output for the window at the screen's size, so that resizing needs no new
-  // GPU memory (the budget holds for any size up to it).
-  const GLFWvidmode* mode = glfwGetVideoMode(glfwGetPrimaryMonitor());
-  ro.capacityWidth = std::max(ro.width, mode ? uint32_t(mode->width) : 0u);
-  ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
-  ro.vram = options.vram;
-  ro.uploadBytes = options.uploadBytes;
-  ro.swapRedBlue = bgra;
+  const RendererOptions ro = windowRendererOptions(options, swapchain);
   const Owned<VkSemaphore> acquired = createSemaphore(gpu), rendered = createSemaphore(gpu);
   const Owned<VkFence> fence = createFence(gpu, false);
   Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
   VkCommandBuffer cb = allocateCommandBuffer(gpu);
 
   Input input;
-  glfwSetWindowUserPointer(window, &input);
-  glfwSetScrollCallback(window, [](GLFWwindow* w, double, double dy) {
-    static_cast<Input*>(glfwGetWindowUserPointer(w))->wheel += dy;
-  });
-  glfwSetKeyCallback(window, [](GLFWwindow* w, int key, int, int action, int) {
-    if (action != GLFW_PRESS) return;
-    Input& in = *static_cast<Input*>(glfwGetWindowUserPointer(w));
-    if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
-    if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
-    if (key == GLFW_KEY_R) in.reload = true;
-    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
-      in.toggled = key - GLFW_KEY_0;
-    if (key == GLFW_KEY_B) in.toggled = 4;
-    if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
-    if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
-  });
+  listen(window, input);
 
   std::filesystem::file_time_type sceneTime{};
   if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
   bool stale = false;  // the swapchain no longer matches the window
-  double mouseX = 0, mouseY = 0;
-  glfwGetCursorPos(window, &mouseX, &mouseY);
+  Mouse mouse;
+  glfwGetCursorPos(window, &mouse.x, &mouse.y);
   auto last = Clock::now(), titleTime = last;
-  uint32_t frames = 0, titleFrames = 0, screenshots = 0;
-  uint64_t titleRays = 0;
-  double titleGpu = 0;
+  uint32_t frames = 0, screenshots = 0;
+  TitleStats shownStats;
   const auto header = asset->reader.header();
   while (!glfwWindowShouldClose(window)) {
     glfwPollEvents();
     const auto now = Clock::now();
     const double dt = std::chrono::duration<double>(now - last).count();
     last = now;
-    // Camera controls.
-    Camera& cam = *scene.camera;
-    double x, y;
-    glfwGetCursorPos(window, &x, &y);
-    const double dx = x - mouseX, dy = y - mouseY;
-    mouseX = x;
-    mouseY = y;
-    const Vec3d forward = glm::normalize(cam.target - cam.eye);
-    const Vec3d right = glm::normalize(glm::cross(forward, cam.up));
-    const Vec3d up = glm::cross(right, forward);
-    const double distance = glm::length(cam.target - cam.eye);
-    if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS) {
-      Vec3d offset = cam.eye - cam.target;
-      offset = rotated(offset, glm::normalize(cam.up), -dx * 0.008);
-      const Vec3d pitched = rotated(offset, right, -dy * 0.008);
-      if (std::abs(glm::dot(glm::normalize(pitched), glm::normalize(cam.up))) < 0.98)
-        offset = pitched;
-      cam.eye = cam.target + offset;
-    }
-    if (glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS ||
-        glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS) {
-      const double k =
-          distance * 2 * std::tan(cam.fovDegrees * M_PI / 360) / swapchain.extent.height;
-      const Vec3d move = right * (-dx * k) + up * (dy * k);
-      cam.eye = cam.eye + move;
-      cam.target = cam.target + move;
-    }
-    if (input.wheel != 0) {
-      cam.eye = cam.target + (cam.eye - cam.target) * std::pow(0.9, input.wheel);
-      input.wheel = 0;
-    }
-    Vec3d fly{0, 0, 0};
-    if (glfwGetKey(window, GLFW_KEY_W) == GLFW_PRESS) fly = fly + forward;
-    if (glfwGetKey(window, GLFW_KEY_S) == GLFW_PRESS) fly = fly - forward;
-    if (glfwGetKey(window, GLFW_KEY_D) == GLFW_PRESS) fly = fly + right;
-    if (glfwGetKey(window, GLFW_KEY_A) == GLFW_PRESS) fly = fly - right;
-    if (glfwGetKey(window, GLFW_KEY_E) == GLFW_PRESS) fly = fly + up;
-    if (glfwGetKey(window, GLFW_KEY_Q) == GLFW_PRESS) fly = fly - up;
-    if (glm::dot(fly, fly) > 0) {
-      const Vec3d move = fly * (0.5 * distance * std::min(dt, 0.1));
-      cam.eye = cam.eye + move;
-      cam.target = cam.target + move;
-    }
-    if (input.toggled == 1) scene.shadows = !scene.shadows;
-    if (input.toggled == 2) scene.reflections = !scene.reflections;
-    if (input.toggled == 3) scene.refractions = !scene.refractions;
-    if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
-    input.toggled = 0;
-    if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
-    input.samples = 0;
-    // The scene file: reloaded on R or when it changes; the camera stays where it is.
-    if (!options.sceneFile.empty()) {
-      std::error_code ec;
-      const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
-      if (input.reload || (!ec && t != sceneTime)) {
-        sceneTime = t;
-        Scene next = options.scene;
-        try {
-          loadScene(options.sceneFile, next);
-          next.camera = scene.camera;
-          if (next.lights.empty())
-            next.lights.push_back(defaultLight(*next.camera, asset->bounds));
-          scene = next;
-          fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
-        } catch (const std::exception& e) {
-          fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
-        }
-      }
-      input.reload = false;
-    }
+    moveCamera(window, *scene.camera, input, mouse, dt, swapchain.extent.height);
+    applySwitches(input, scene);
+    reloadScene(options, *asset, input, scene, sceneTime);
 
     // A new window size: a new swapchain, and the renderer draws at that size.
     int fbWidth = 0, fbHeight = 0;
@@ -299,55 +397,14 @@ int viewWindow(const ViewOptions& options) {
     if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
       checkVk(acquire, "vkAcquireNextImageKHR");
     renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-    ISO_VK(vkResetCommandBuffer(cb, 0));
-    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    ISO_VK(vkBeginCommandBuffer(cb, &begin));
-    renderer.record(cb);
-    VkImage image = swapchain.images[index];
-    imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
-                 VK_ACCESS_TRANSFER_WRITE_BIT);
-    VkBufferImageCopy copy{};
-    copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-    copy.bufferRowLength = renderer.setup().width;
-    copy.imageExtent = {renderer.setup().width, renderer.setup().height, 1};
-    vkCmdCopyBufferToImage(cb, renderer.output().buffer, image,
-                           VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
-    imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
-                 VK_ACCESS_TRANSFER_WRITE_BIT, 0);
-    ISO_VK(vkEndCommandBuffer(cb));
-    const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
-    const VkSemaphore waitOn = acquired, signal = rendered;
-    const VkFence done = fence;
-    const VkSwapchainKHR presentTo = swapchain.swapchain;
-    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-    submit.waitSemaphoreCount = 1;
-    submit.pWaitSemaphores = &waitOn;
-    submit.pWaitDstStageMask = &waitStage;
-    submit.commandBufferCount = 1;
-    submit.pCommandBuffers = &cb;
-    submit.signalSemaphoreCount = 1;
-    submit.pSignalSemaphores = &signal;
-    ISO_VK(vkResetFences(gpu.device, 1, &done));
-    const auto t0 = Clock::now();
-    ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
-    VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
-    present.waitSemaphoreCount = 1;
-    present.pWaitSemaphores = &signal;
-    present.swapchainCount = 1;
-    present.pSwapchains = &presentTo;
-    present.pImageIndices = &index;
-    const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
-    if (presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR)
-      stale = true;
-    else
-      checkVk(presented, "vkQueuePresentKHR");
-    ISO_VK(vkWaitForFences(gpu.device, 1, &done, VK_TRUE, UINT64_MAX));
-    titleGpu += std::chrono::duration<double>(Clock::now() - t0).count();
+    const Presented shown =
+        drawAndPresent(gpu, renderer, cb, swapchain, index, acquired, rendered, fence);
+    stale = stale || shown.stale;
     renderer.collect();
     ++frames;
-    ++titleFrames;
-    titleRays += renderer.stats().rays;
+    ++shownStats.frames;
+    shownStats.gpuSeconds += shown.seconds;
+    shownStats.rays += renderer.stats().rays;
     const bool last = options.frames > 0 && frames >= options.frames;
     if (input.screenshot || (last && !options.screenshot.empty())) {
       const std::filesystem::path file =
@@ -361,28 +418,18 @@ int viewWindow(const ViewOptions& options) {
     }
     const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
     if (sinceTitle > 0.5 || last) {
-      const FrameStats& s = renderer.stats();
-      const std::string text = fmt::format(
-          "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
-          "resident, {} requested",
-          title, titleGpu / titleFrames * 1e3, titleFrames / sinceTitle,
-          titleRays / std::max(titleGpu, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident,
-          s.pending);
+      const std::string text = titleText(title, shownStats, sinceTitle, renderer.stats());
       glfwSetWindowTitle(window, text.c_str());
       if (last) fmt::print("{}\n", text);
       titleTime = Clock::now();
-      titleFrames = 0;
-      titleRays = 0;
-      titleGpu = 0;
+      shownStats = {};
     }
     if (last) break;
   }
   vkDeviceWaitIdle(gpu.device);
-  if (*gpu.validationErrors > 0) {
-    fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
-    exitCode = 1;
-  }
-  return exitCode;
+  if (*gpu.validationErrors == 0) return 0;
+  fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
+  return 1;
 }
 
 }  // namespace iso::viewer
