@@ -356,6 +356,89 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
 
 namespace {
 
+// The texture (`--texture`), read before any work. Sampled at the points, it becomes their
+// colors here, in or out of core alike.
+std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image,
+                                          const TextureOptions& t, PointSet& points,
+                                          const Frame& frame, StageTimer& timer,
+                                          nlohmann::json& report) {
+  if (!image) return std::nullopt;
+  const double scale = t.scale > 0.0 ? t.scale : frame.size;
+  report["texture"] = {{"image", t.image.filename().string()},
+                       {"width", image->width},
+                       {"height", image->height},
+                       {"scale", scale},
+                       {"sharpness", t.sharpness},
+                       {"at", t.at == TextureAt::Points ? "points" : "corners"},
+                       {"modulates_point_colors", points.hasColors()}};
+  std::optional<TriplanarTexture> texture(std::in_place, std::move(*image), scale, t.sharpness);
+  if (t.at == TextureAt::Points) {
+    timer.next("texture", points.size());
+    texturePoints(points, frame, *texture);
+  }
+  return texture;
+}
+
+// What the point stages did, in the report.
+void reportPoints(const ReadyPoints& ready, uint64_t input, uint64_t nonFinite,
+                  nlohmann::json& report) {
+  const PointSet& points = ready.points;
+  report["points"] = {{"input", input},
+                      {"non_finite_dropped", nonFinite},
+                      {"duplicates_merged", ready.duplicates},
+                      {"outliers_removed", ready.outliers},
+                      {"used", points.size()}};
+  report["normals"] = {{"estimated", ready.normals.estimated},
+                       {"from_input", points.size() - ready.normals.estimated},
+                       {"flipped_to_agree", ready.normals.flipped}};
+  if (!ready.outOfCore.is_null()) report["out_of_core"] = ready.outOfCore;
+  report["mean_spacing"] = ready.radii.meanSpacing * ready.frame.size;
+  report["median_radius"] = ready.radii.medianRadius * ready.frame.size;
+}
+
+// The written file in the report: its size, and what it makes of the sampled input points (the
+// distance to its zero set, what the viewer shows of them).
+void reportWritten(const std::filesystem::path& written, const WriteStats& stats,
+                   const std::vector<glm::dvec3>& sample, uint64_t inputPoints, double spacing,
+                   const Frame& frame, StageTimer& timer, nlohmann::json& report) {
+  timer.next("accuracy");
+  const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
+  report["file"] = {
+      {"chunks", stats.chunks},
+      {"bytes_without_metadata", stats.fileBytesWithoutMetadata},
+      {"bytes_per_leaf",
+       double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
+      {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
+  const Reader writtenReader = Reader::open(written);
+  const DistanceStats d = pointsToZeroSet(writtenReader, frame, sample);
+  report["accuracy"] = {{"samples", d.samples},
+                        {"unprojected", d.unprojected},
+                        {"rms", d.rms},
+                        {"max", d.max},
+                        {"mean", d.mean},
+                        {"rms_over_spacing", d.rms / spacing},
+                        {"max_over_spacing", d.max / spacing}};
+  timer.next("visibility");
+  report["visibility"] = visibilityReport(writtenReader, sample, spacing);
+  timer.end();
+}
+
+// Time, speed, memory and temporary disk of the whole conversion, in the report.
+void reportRun(double seconds, double pointsPerSecond, nlohmann::json& report) {
+  report["seconds"] = seconds;
+  report["points_per_second"] = pointsPerSecond;
+  report["peak_rss_bytes"] = peakRssBytes();
+  if (report["out_of_core"].is_null()) return;
+  const SpillArea::Stats spilled = SpillArea::stats();
+  report["out_of_core"]["spilled_bytes_peak"] = spilled.peakBytes;
+  report["out_of_core"]["spilled_arrays"] = spilled.arrays;
+  report["out_of_core"]["page_releases"] = spilled.releases;
+  // All temporary files at once: the points' record files and the spilled arrays.
+  const TemporaryDiskStats disk = temporaryDiskStats();
+  report["out_of_core"]["temporary_disk_peak"] = disk.peakBytes;
+  if (disk.limit > 0) report["out_of_core"]["temporary_disk_limit"] = disk.limit;
+}
+
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const KeepPoints& keep,
@@ -364,28 +447,11 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;
-  const NormalStats& normals = ready.normals;
   points.source = {};  // the octree stages do not need it: 4 bytes a point
 
-  // A texture sampled at the points becomes their colors here, in or out of core alike.
   const bool inputColors = points.hasColors();
-  std::optional<TriplanarTexture> texture;
-  if (textureImage) {
-    const TextureOptions& t = options.texture;
-    const double scale = t.scale > 0.0 ? t.scale : frame.size;
-    report["texture"] = {{"image", t.image.filename().string()},
-                         {"width", textureImage->width},
-                         {"height", textureImage->height},
-                         {"scale", scale},
-                         {"sharpness", t.sharpness},
-                         {"at", t.at == TextureAt::Points ? "points" : "corners"},
-                         {"modulates_point_colors", inputColors}};
-    texture.emplace(std::move(*textureImage), scale, t.sharpness);
-    if (t.at == TextureAt::Points) {
-      timer.next("texture", points.size());
-      texturePoints(points, frame, *texture);
-    }
-  }
+  std::optional<TriplanarTexture> texture =
+      textureOf(std::move(textureImage), options.texture, points, frame, timer, report);
   timer.next("octree");
 
   // The signed distance and its point index are needed until the level-of-detail corners.
@@ -420,17 +486,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   timer.next("write");
 
   const double spacing = radii.meanSpacing * frame.size;
-  report["points"] = {{"input", inputPoints + source.nonFiniteDropped},
-                      {"non_finite_dropped", source.nonFiniteDropped},
-                      {"duplicates_merged", ready.duplicates},
-                      {"outliers_removed", ready.outliers},
-                      {"used", points.size()}};
-  report["normals"] = {{"estimated", normals.estimated},
-                       {"from_input", points.size() - normals.estimated},
-                       {"flipped_to_agree", normals.flipped}};
-  if (!ready.outOfCore.is_null()) report["out_of_core"] = ready.outOfCore;
-  report["mean_spacing"] = spacing;
-  report["median_radius"] = radii.medianRadius * frame.size;
+  reportPoints(ready, inputPoints + source.nonFiniteDropped, source.nonFiniteDropped, report);
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
   report["octree"]["closure_filled"] = closure.filled;
   report["corners"] = {
@@ -485,41 +541,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   };
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
-        timer.next("accuracy");
-        const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
-        report["file"] = {
-            {"chunks", stats.chunks},
-            {"bytes_without_metadata", stats.fileBytesWithoutMetadata},
-            {"bytes_per_leaf",
-             double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
-            {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
-        const Reader writtenReader = Reader::open(written);
-        const DistanceStats d = pointsToZeroSet(writtenReader, frame, ready.sample);
-        report["accuracy"] = {{"samples", d.samples},
-                              {"unprojected", d.unprojected},
-                              {"rms", d.rms},
-                              {"max", d.max},
-                              {"mean", d.mean},
-                              {"rms_over_spacing", d.rms / spacing},
-                              {"max_over_spacing", d.max / spacing}};
-        timer.next("visibility");
-        report["visibility"] = visibilityReport(writtenReader, ready.sample, spacing);
-        timer.end();
+        reportWritten(written, stats, ready.sample, inputPoints, spacing, frame, timer, report);
         const double seconds =
             std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;
-        report["seconds"] = seconds;
-        report["points_per_second"] = double(inputPoints + source.nonFiniteDropped) / seconds;
-        report["peak_rss_bytes"] = peakRssBytes();
-        if (!report["out_of_core"].is_null()) {
-          const SpillArea::Stats spilled = SpillArea::stats();
-          report["out_of_core"]["spilled_bytes_peak"] = spilled.peakBytes;
-          report["out_of_core"]["spilled_arrays"] = spilled.arrays;
-          report["out_of_core"]["page_releases"] = spilled.releases;
-          // All temporary files at once: the points' record files and the spilled arrays.
-          const TemporaryDiskStats disk = temporaryDiskStats();
-          report["out_of_core"]["temporary_disk_peak"] = disk.peakBytes;
-          if (disk.limit > 0) report["out_of_core"]["temporary_disk_limit"] = disk.limit;
-        }
+        reportRun(seconds, double(inputPoints + source.nonFiniteDropped) / seconds, report);
         return metadata(report).dump();
       });
   return report;
