@@ -142,85 +142,82 @@ LightSpec parseLight(const std::string& text) {
   return light;
 }
 
-void loadScene(const std::filesystem::path& path, Scene& scene) {
-  const std::string file = path.string();
-  std::ifstream in(path);
-  if (!in) throw FileError(file, std::nullopt, "cannot open the scene file");
-  json j = json::parse(in, nullptr, false);
-  if (j.is_discarded()) throw FileError(file, std::nullopt, "not valid JSON");
-  const Fields f{file};
-  f.known(j, "",
-          {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
-           "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
-           "lod_pixels", "backfaces", "backface_tint"});
-  if (j.contains("camera")) {
-    const json& c = j["camera"];
-    f.known(c, "camera", {"eye", "target", "up", "fov"});
-    Camera cam = scene.camera.value_or(Camera{});
-    if (!c.contains("eye") || !c.contains("target")) f.fail("camera", "needs eye and target");
-    cam.eye = f.vec3(c["eye"], "camera.eye");
-    cam.target = f.vec3(c["target"], "camera.target");
-    if (c.contains("up")) cam.up = f.vec3(c["up"], "camera.up");
-    if (c.contains("fov")) cam.fovDegrees = f.number(c["fov"], "camera.fov");
-    if (!(cam.fovDegrees > 1 && cam.fovDegrees < 179)) f.fail("camera.fov", "from 1 to 179");
-    scene.camera = cam;
-  }
-  if (j.contains("lights")) {
-    if (!j["lights"].is_array()) f.fail("lights", "expected an array");
-    scene.lights.clear();
-    for (const json& l : j["lights"]) {
-      f.known(l, "lights[]", {"type", "position", "u", "v", "color", "intensity", "samples"});
-      LightSpec light;
-      const std::string type = l.value("type", "point");
-      if (type != "point" && type != "area") f.fail("lights[].type", "point or area");
-      light.area = type == "area";
-      if (!l.contains("position")) f.fail("lights[].position", "missing");
-      light.position = f.vec3(l["position"], "lights[].position");
-      if (light.area) {
-        if (!l.contains("u") || !l.contains("v")) f.fail("lights[]", "an area light needs u, v");
-        light.u = f.vec3(l["u"], "lights[].u");
-        light.v = f.vec3(l["v"], "lights[].v");
-      }
-      if (l.contains("color")) light.color = f.color(l["color"], "lights[].color");
-      if (l.contains("intensity"))
-        light.intensity = float(f.number(l["intensity"], "lights[].intensity"));
-      if (l.contains("samples")) {
-        const double s = f.number(l["samples"], "lights[].samples");
-        if (s < 1 || s > 1024 || s != std::floor(s)) f.fail("lights[].samples", "1 to 1024");
-        light.samples = int(s);
-      }
-      scene.lights.push_back(light);
+namespace {
+
+// The scene file's camera: eye and target, up and fov optional.
+void readCamera(const Fields& f, const json& c, Scene& scene) {
+  f.known(c, "camera", {"eye", "target", "up", "fov"});
+  Camera cam = scene.camera.value_or(Camera{});
+  if (!c.contains("eye") || !c.contains("target")) f.fail("camera", "needs eye and target");
+  cam.eye = f.vec3(c["eye"], "camera.eye");
+  cam.target = f.vec3(c["target"], "camera.target");
+  if (c.contains("up")) cam.up = f.vec3(c["up"], "camera.up");
+  if (c.contains("fov")) cam.fovDegrees = f.number(c["fov"], "camera.fov");
+  if (!(cam.fovDegrees > 1 && cam.fovDegrees < 179)) f.fail("camera.fov", "from 1 to 179");
+  scene.camera = cam;
+}
+
+// The scene file's lights, which replace the scene's.
+void readLights(const Fields& f, const json& lights, Scene& scene) {
+  if (!lights.is_array()) f.fail("lights", "expected an array");
+  scene.lights.clear();
+  for (const json& l : lights) {
+    f.known(l, "lights[]", {"type", "position", "u", "v", "color", "intensity", "samples"});
+    LightSpec light;
+    const std::string type = l.value("type", "point");
+    if (type != "point" && type != "area") f.fail("lights[].type", "point or area");
+    light.area = type == "area";
+    if (!l.contains("position")) f.fail("lights[].position", "missing");
+    light.position = f.vec3(l["position"], "lights[].position");
+    if (light.area) {
+      if (!l.contains("u") || !l.contains("v")) f.fail("lights[]", "an area light needs u, v");
+      light.u = f.vec3(l["u"], "lights[].u");
+      light.v = f.vec3(l["v"], "lights[].v");
     }
-    if (scene.lights.size() > gpu::kMaxLights)
-      f.fail("lights", "at most " + std::to_string(gpu::kMaxLights) + " lights");
-  }
-  if (j.contains("material")) {
-    const json& m = j["material"];
-    f.known(m, "material",
-            {"color", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior",
-             "absorption"});
-    Material& mat = scene.material;
-    if (m.contains("color")) mat.color = f.color(m["color"], "material.color");
-    auto unit = [&](const char* key, float& out) {
-      if (!m.contains(key)) return;
-      const double v = f.number(m[key], std::string("material.") + key);
-      if (v < 0 || v > 1) f.fail(std::string("material.") + key, "from 0 to 1");
-      out = float(v);
-    };
-    unit("diffuse", mat.diffuse);
-    unit("specular", mat.specular);
-    unit("reflectivity", mat.reflectivity);
-    unit("transparency", mat.transparency);
-    if (m.contains("shininess"))
-      mat.shininess = float(f.number(m["shininess"], "material.shininess"));
-    if (m.contains("ior")) {
-      mat.ior = float(f.number(m["ior"], "material.ior"));
-      if (!(mat.ior >= 1.0f && mat.ior <= 4.0f)) f.fail("material.ior", "from 1 to 4");
+    if (l.contains("color")) light.color = f.color(l["color"], "lights[].color");
+    if (l.contains("intensity"))
+      light.intensity = float(f.number(l["intensity"], "lights[].intensity"));
+    if (l.contains("samples")) {
+      const double s = f.number(l["samples"], "lights[].samples");
+      if (s < 1 || s > 1024 || s != std::floor(s)) f.fail("lights[].samples", "1 to 1024");
+      light.samples = int(s);
     }
-    if (m.contains("absorption")) mat.absorption = f.color(m["absorption"], "material.absorption");
-    if (mat.reflectivity + mat.transparency > 1.0f)
-      f.fail("material", "reflectivity + transparency is at most 1");
+    scene.lights.push_back(light);
   }
+  if (scene.lights.size() > gpu::kMaxLights)
+    f.fail("lights", "at most " + std::to_string(gpu::kMaxLights) + " lights");
+}
+
+// The scene file's material: what it names replaces the scene's.
+void readMaterial(const Fields& f, const json& m, Material& mat) {
+  f.known(m, "material",
+          {"color", "diffuse", "specular", "shininess", "reflectivity", "transparency", "ior",
+           "absorption"});
+  if (m.contains("color")) mat.color = f.color(m["color"], "material.color");
+  auto unit = [&](const char* key, float& out) {
+    if (!m.contains(key)) return;
+    const double v = f.number(m[key], std::string("material.") + key);
+    if (v < 0 || v > 1) f.fail(std::string("material.") + key, "from 0 to 1");
+    out = float(v);
+  };
+  unit("diffuse", mat.diffuse);
+  unit("specular", mat.specular);
+  unit("reflectivity", mat.reflectivity);
+  unit("transparency", mat.transparency);
+  if (m.contains("shininess"))
+    mat.shininess = float(f.number(m["shininess"], "material.shininess"));
+  if (m.contains("ior")) {
+    mat.ior = float(f.number(m["ior"], "material.ior"));
+    if (!(mat.ior >= 1.0f && mat.ior <= 4.0f)) f.fail("material.ior", "from 1 to 4");
+  }
+  if (m.contains("absorption")) mat.absorption = f.color(m["absorption"], "material.absorption");
+  if (mat.reflectivity + mat.transparency > 1.0f)
+    f.fail("material", "reflectivity + transparency is at most 1");
+}
+
+// The scene file's light environment and rendering switches.
+void readRendering(const Fields& f, const json& j, const std::filesystem::path& path,
+                   Scene& scene) {
   if (j.contains("ambient")) scene.ambient = f.color(j["ambient"], "ambient");
   if (j.contains("sky_top")) scene.skyTop = f.color(j["sky_top"], "sky_top");
   if (j.contains("sky_bottom")) scene.skyBottom = f.color(j["sky_bottom"], "sky_bottom");
@@ -259,6 +256,25 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
     }
   }
   if (j.contains("backface_tint")) scene.backTint = f.color(j["backface_tint"], "backface_tint");
+}
+
+}  // namespace
+
+void loadScene(const std::filesystem::path& path, Scene& scene) {
+  const std::string file = path.string();
+  std::ifstream in(path);
+  if (!in) throw FileError(file, std::nullopt, "cannot open the scene file");
+  json j = json::parse(in, nullptr, false);
+  if (j.is_discarded()) throw FileError(file, std::nullopt, "not valid JSON");
+  const Fields f{file};
+  f.known(j, "",
+          {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
+           "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
+           "lod_pixels", "backfaces", "backface_tint"});
+  if (j.contains("camera")) readCamera(f, j["camera"], scene);
+  if (j.contains("lights")) readLights(f, j["lights"], scene);
+  if (j.contains("material")) readMaterial(f, j["material"], scene.material);
+  readRendering(f, j, path, scene);
 }
 
 Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {
