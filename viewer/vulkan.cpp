@@ -120,6 +120,80 @@ std::string describeDevices(VkInstance instance) {
   return out.empty() ? "none" : out;
 }
 
+namespace {
+
+// The physical device and its compute queue family: the first whose name holds `name` (or
+// $ISO_VK_DEVICE), of the best kind (discrete, integrated, virtual, CPU), with Vulkan 1.2.
+void choosePhysicalDevice(Gpu& gpu, const std::string& name) {
+  uint32_t count = 0;
+  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, nullptr));
+  std::vector<VkPhysicalDevice> devices(count);
+  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, devices.data()));
+  const char* envName = std::getenv("ISO_VK_DEVICE");
+  const std::string wanted = !name.empty() ? name : envName ? envName : "";
+  int best = 1 << 30;
+  for (VkPhysicalDevice d : devices) {
+    VkPhysicalDeviceProperties p;
+    vkGetPhysicalDeviceProperties(d, &p);
+    if (p.apiVersion < VK_API_VERSION_1_2) continue;
+    if (!wanted.empty() && std::string(p.deviceName).find(wanted) == std::string::npos) continue;
+    uint32_t families = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, nullptr);
+    std::vector<VkQueueFamilyProperties> props(families);
+    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, props.data());
+    for (uint32_t f = 0; f < families; ++f) {
+      if (!(props[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
+      if (deviceRank(p.deviceType) < best) {
+        best = deviceRank(p.deviceType);
+        gpu.physical = d;
+        gpu.queueFamily = f;
+      }
+      break;
+    }
+  }
+  if (gpu.physical == VK_NULL_HANDLE)
+    throw std::runtime_error(fmt::format(
+        "no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
+        "mesa-vulkan-drivers for the CPU one",
+        wanted.empty() ? "" : " named like '" + wanted + "'", describeDevices(gpu.instance)));
+}
+
+// The logical device with the features the tracer needs, and its queue.
+void createDevice(Gpu& gpu, bool swapchain) {
+  const float priority = 1.0f;
+  VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+  queueInfo.queueFamilyIndex = gpu.queueFamily;
+  queueInfo.queueCount = 1;
+  queueInfo.pQueuePriorities = &priority;
+  std::vector<const char*> deviceExtensions;
+  if (swapchain) deviceExtensions.push_back(VK_KHR_SWAPCHAIN_EXTENSION_NAME);
+  // The page pool is read through buffer device addresses (64-bit).
+  VkPhysicalDeviceVulkan12Features has12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+  VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+  has.pNext = &has12;
+  vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
+  if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
+    throw std::runtime_error(
+        fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
+                    "shaderInt64, which the viewer needs",
+                    gpu.properties.deviceName));
+  VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+  use12.bufferDeviceAddress = VK_TRUE;
+  VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+  use.pNext = &use12;
+  use.features.shaderInt64 = VK_TRUE;
+  VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+  deviceInfo.pNext = &use;
+  deviceInfo.queueCreateInfoCount = 1;
+  deviceInfo.pQueueCreateInfos = &queueInfo;
+  deviceInfo.enabledExtensionCount = uint32_t(deviceExtensions.size());
+  deviceInfo.ppEnabledExtensionNames = deviceExtensions.data();
+  ISO_VK(vkCreateDevice(gpu.physical, &deviceInfo, nullptr, &gpu.device));
+  vkGetDeviceQueue(gpu.device, gpu.queueFamily, 0, &gpu.queue);
+}
+
+}  // namespace
+
 Gpu createGpu(const GpuOptions& options) {
   Gpu gpu;
   gpu.validationErrors = std::make_unique<std::atomic<uint32_t>>(0);
@@ -156,71 +230,10 @@ Gpu createGpu(const GpuOptions& options) {
         vkGetInstanceProcAddr(gpu.instance, "vkCreateDebugUtilsMessengerEXT"));
     if (create) ISO_VK(create(gpu.instance, &m, nullptr, &gpu.messenger));
   }
-  uint32_t count = 0;
-  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, nullptr));
-  std::vector<VkPhysicalDevice> devices(count);
-  ISO_VK(vkEnumeratePhysicalDevices(gpu.instance, &count, devices.data()));
-  const char* envName = std::getenv("ISO_VK_DEVICE");
-  const std::string wanted = !options.deviceName.empty() ? options.deviceName
-                             : envName                   ? envName
-                                                         : "";
-  int best = 1 << 30;
-  for (VkPhysicalDevice d : devices) {
-    VkPhysicalDeviceProperties p;
-    vkGetPhysicalDeviceProperties(d, &p);
-    if (p.apiVersion < VK_API_VERSION_1_2) continue;
-    if (!wanted.empty() && std::string(p.deviceName).find(wanted) == std::string::npos) continue;
-    uint32_t families = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, nullptr);
-    std::vector<VkQueueFamilyProperties> props(families);
-    vkGetPhysicalDeviceQueueFamilyProperties(d, &families, props.data());
-    for (uint32_t f = 0; f < families; ++f) {
-      if (!(props[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
-      if (deviceRank(p.deviceType) < best) {
-        best = deviceRank(p.deviceType);
-        gpu.physical = d;
-        gpu.queueFamily = f;
-      }
-      break;
-    }
-  }
-  if (gpu.physical == VK_NULL_HANDLE)
-    throw std::runtime_error(fmt::format(
-        "no Vulkan 1.2 device with a compute queue{} (devices: {}); install "
-        "mesa-vulkan-drivers for the CPU one",
-        wanted.empty() ? "" : " named like '" + wanted + "'", describeDevices(gpu.instance)));
+  choosePhysicalDevice(gpu, options.deviceName);
   vkGetPhysicalDeviceProperties(gpu.physical, &gpu.properties);
   vkGetPhysicalDeviceMemoryProperties(gpu.physical, &gpu.memory);
-  const float priority = 1.0f;
-  VkDeviceQueueCreateInfo queueInfo{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
-  queueInfo.queueFamilyIndex = gpu.queueFamily;
-  queueInfo.queueCount = 1;
-  queueInfo.pQueuePriorities = &priority;
-  std::vector<const char*> deviceExtensions;
-  if (options.swapchain) deviceExtensions.push_back(VK_KHR_SWAPCHAIN_EXTENSION_NAME);
-  // The page pool is read through buffer device addresses (64-bit).
-  VkPhysicalDeviceVulkan12Features has12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
-  VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
-  has.pNext = &has12;
-  vkGetPhysicalDeviceFeatures2(gpu.physical, &has);
-  if (!has12.bufferDeviceAddress || !has.features.shaderInt64)
-    throw std::runtime_error(
-        fmt::format("the Vulkan device {} lacks bufferDeviceAddress or "
-                    "shaderInt64, which the viewer needs",
-                    gpu.properties.deviceName));
-  VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
-  use12.bufferDeviceAddress = VK_TRUE;
-  VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
-  use.pNext = &use12;
-  use.features.shaderInt64 = VK_TRUE;
-  VkDeviceCreateInfo deviceInfo{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
-  deviceInfo.pNext = &use;
-  deviceInfo.queueCreateInfoCount = 1;
-  deviceInfo.pQueueCreateInfos = &queueInfo;
-  deviceInfo.enabledExtensionCount = uint32_t(deviceExtensions.size());
-  deviceInfo.ppEnabledExtensionNames = deviceExtensions.data();
-  ISO_VK(vkCreateDevice(gpu.physical, &deviceInfo, nullptr, &gpu.device));
-  vkGetDeviceQueue(gpu.device, gpu.queueFamily, 0, &gpu.queue);
+  createDevice(gpu, options.swapchain);
   VkCommandPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
   poolInfo.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   poolInfo.queueFamilyIndex = gpu.queueFamily;
