@@ -125,6 +125,61 @@ void Extractor::tetrahedron(const std::array<Sample, 4>& s, const std::array<Poi
   }
 }
 
+// A face point in half-edges from the face's lowest corner: (0..2, 0..2) along its two axes.
+using Corner = std::array<int, 2>;
+using FaceTriangle = std::array<Corner, 3>;
+
+// The triangles of a leaf's face, to be fanned to the leaf's centre: two along the diagonal from
+// the lowest corner when nothing finer touches the face, else a fan from the face's centre over
+// its corners and the midpoints of its split edges (e0 along u at v = 0, e1 along v at u = 2, e2
+// along u at v = 2, e3 along v at u = 0), where a quarter with a finer leaf across (`fine`, both
+// its edges split then) takes that leaf's diagonal, from its lowest corner, instead. So the
+// triangles match those of the finer leaves' faces, and the mesh has no cracks.
+std::vector<FaceTriangle> faceTriangles(bool e0, bool e1, bool e2, bool e3,
+                                        const std::array<bool, 4>& fine) {
+  std::vector<FaceTriangle> triangles;
+  if (!(e0 || e1 || e2 || e3 || fine[0] || fine[1] || fine[2] || fine[3])) {
+    // The diagonal from the lowest corner, as a finer leaf's face across a quarter has it.
+    triangles.push_back({Corner{0, 0}, Corner{2, 0}, Corner{2, 2}});
+    triangles.push_back({Corner{0, 0}, Corner{2, 2}, Corner{0, 2}});
+  } else {
+    // A fan from the centre over the corners and the midpoints of split edges; a quarter with
+    // a finer leaf across (both its edges split then) takes that leaf's diagonal, from its
+    // lowest corner, instead.
+    std::vector<Corner> ring = {{0, 0}};
+    if (e0) ring.push_back({1, 0});
+    ring.push_back({2, 0});
+    if (e1) ring.push_back({2, 1});
+    ring.push_back({2, 2});
+    if (e2) ring.push_back({1, 2});
+    ring.push_back({0, 2});
+    if (e3) ring.push_back({0, 1});
+    const auto quarterOf = [](const Corner& k) { return (k[0] / 2) | (k[1] / 2) << 1; };
+    const auto isCorner = [](const Corner& k) { return k[0] != 1 && k[1] != 1; };
+    for (size_t i = 0; i < ring.size(); ++i) {
+      const Corner& a = ring[i];
+      const Corner& b = ring[(i + 1) % ring.size()];
+      const bool half = isCorner(a) != isCorner(b);  // a corner and a midpoint
+      const Corner& k = isCorner(a) ? a : b;
+      if (half && fine[size_t(quarterOf(k))]) continue;  // the quarter's own triangles below
+      triangles.push_back({Corner{1, 1}, a, b});
+    }
+    for (int q = 0; q < 4; ++q) {
+      if (!fine[size_t(q)]) continue;
+      const Corner k = {(q & 1) * 2, (q >> 1) * 2};
+      const Corner alongU = {1, k[1]}, alongV = {k[0], 1};  // the two edge midpoints
+      if (k[0] == k[1]) {  // the lowest or highest corner: the diagonal through the centre
+        triangles.push_back({Corner{1, 1}, alongU, k});
+        triangles.push_back({Corner{1, 1}, k, alongV});
+      } else {  // the diagonal between the midpoints
+        triangles.push_back({alongU, k, alongV});
+        triangles.push_back({alongU, alongV, Corner{1, 1}});
+      }
+    }
+  }
+  return triangles;
+}
+
 void Extractor::leaf(uint32_t id) {
   const SurfaceModel::Leaf& leaf = surface_.leaves()[id];
   ++stats.leaves;
@@ -180,52 +235,11 @@ void Extractor::leaf(uint32_t id) {
       p[size_t(v)] += hv * half;
       return p;
     };
-    using Corner = std::array<int, 2>;
-    std::vector<std::array<Corner, 3>> triangles;
     // The face's edges: along u at v = 0 (e0) and v = 2 (e2), along v at u = 2 (e1) and u = 0
     // (e3). An edge along u has offsets (v, axis) in splitEdge[u]; one along v (axis, u).
-    const bool e0 = splitEdge[u][0][side], e2 = splitEdge[u][1][side];
-    const bool e3 = splitEdge[v][side][0], e1 = splitEdge[v][side][1];
-    const auto& fine = fineQuarter[size_t(face)];
-    if (!(e0 || e1 || e2 || e3 || fine[0] || fine[1] || fine[2] || fine[3])) {
-      // The diagonal from the lowest corner, as a finer leaf's face across a quarter has it.
-      triangles.push_back({Corner{0, 0}, Corner{2, 0}, Corner{2, 2}});
-      triangles.push_back({Corner{0, 0}, Corner{2, 2}, Corner{0, 2}});
-    } else {
-      // A fan from the centre over the corners and the midpoints of split edges; a quarter with
-      // a finer leaf across (both its edges split then) takes that leaf's diagonal, from its
-      // lowest corner, instead.
-      std::vector<Corner> ring = {{0, 0}};
-      if (e0) ring.push_back({1, 0});
-      ring.push_back({2, 0});
-      if (e1) ring.push_back({2, 1});
-      ring.push_back({2, 2});
-      if (e2) ring.push_back({1, 2});
-      ring.push_back({0, 2});
-      if (e3) ring.push_back({0, 1});
-      const auto quarterOf = [](const Corner& k) { return (k[0] / 2) | (k[1] / 2) << 1; };
-      const auto isCorner = [](const Corner& k) { return k[0] != 1 && k[1] != 1; };
-      for (size_t i = 0; i < ring.size(); ++i) {
-        const Corner& a = ring[i];
-        const Corner& b = ring[(i + 1) % ring.size()];
-        const bool half = isCorner(a) != isCorner(b);  // a corner and a midpoint
-        const Corner& k = isCorner(a) ? a : b;
-        if (half && fine[size_t(quarterOf(k))]) continue;  // the quarter's own triangles below
-        triangles.push_back({Corner{1, 1}, a, b});
-      }
-      for (int q = 0; q < 4; ++q) {
-        if (!fine[size_t(q)]) continue;
-        const Corner k = {(q & 1) * 2, (q >> 1) * 2};
-        const Corner alongU = {1, k[1]}, alongV = {k[0], 1};  // the two edge midpoints
-        if (k[0] == k[1]) {  // the lowest or highest corner: the diagonal through the centre
-          triangles.push_back({Corner{1, 1}, alongU, k});
-          triangles.push_back({Corner{1, 1}, k, alongV});
-        } else {  // the diagonal between the midpoints
-          triangles.push_back({alongU, k, alongV});
-          triangles.push_back({alongU, alongV, Corner{1, 1}});
-        }
-      }
-    }
+    const std::vector<FaceTriangle> triangles =
+        faceTriangles(splitEdge[u][0][side], splitEdge[v][side][1], splitEdge[u][1][side],
+                      splitEdge[v][side][0], fineQuarter[size_t(face)]);
     for (const auto& t : triangles) {
       std::array<Point, 4> p = {centre, facePoint(t[0][0], t[0][1]), facePoint(t[1][0], t[1][1]),
                                 facePoint(t[2][0], t[2][1])};
