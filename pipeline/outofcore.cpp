@@ -378,6 +378,82 @@ class ChunkRunner {
   const std::vector<uint8_t>* keep_;
 };
 
+// After outliers were removed: the chunks whose boxes held one run again (the others would load
+// the same points and give the same results) into a small set of results, then every chunk's
+// results are placed in order over the old ones. Returns how many ran again.
+size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
+                           const BuildOptions& options, bool inputNormals,
+                           const std::vector<uint8_t>& keep,
+                           const std::vector<glm::vec3>& outliers, Accumulated& done) {
+  Accumulated again;
+  ChunkRunner rerun(distribution, frame, options, false, inputNormals, &keep);
+  std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
+  size_t preparedAgain = 0;
+  for (size_t c = 0; c < distribution.chunks().size(); ++c) {
+    const ChunkRecord& record = done.chunks[c];
+    const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
+      return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
+             u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
+    });
+    if (touched) {
+      againOf[c] = again.chunks.size();
+      rerun.run(distribution.chunks()[c], again);
+      ++preparedAgain;
+    } else {
+      progressAdvance(distribution.chunks()[c].size());
+    }
+  }
+  const std::vector<ChunkRecord> old = done.chunks;
+  InPlaceResults results(done);
+  for (size_t c = 0; c < old.size(); ++c)
+    if (againOf[c] == kNoNode)
+      results.place(done, old[c]);
+    else
+      results.place(again, again.chunks[againOf[c]]);
+  results.finish();
+  done.haloPoints += again.haloPoints;
+  done.widenings += again.widenings;
+  done.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
+  return preparedAgain;
+}
+
+// The chunks' points as one set: the boundary points and their neighbours become indices into
+// it, the orientation components are aligned across chunks (when `align`), and the boundary
+// points' roughness, which compares normals across components, is computed after that.
+void joinChunks(Accumulated& done, uint64_t rawSize, bool align) {
+  PointSet& points = done.points;
+  SpillVector<uint32_t> ordinal(rawSize, kNoNode);
+  for (size_t i = 0; i < points.size(); ++i) ordinal[points.source[i]] = uint32_t(i);
+  SpillVector<uint32_t>& from = done.boundarySource;
+  UninitializedSpillVector<uint32_t>& near = done.boundaryNeighbor;
+  for (uint32_t& s : from) s = ordinal[s];
+  for (uint32_t& s : near) s = ordinal[s];
+  ordinal = {};
+  if (align) alignComponents(points.normal, done.components, from, near, done.k);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size(), 1024),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t b = r.begin(); b < r.end(); ++b)
+                        points.roughness[from[b]] =
+                            roughnessOf(points, from[b], near.data() + b * done.k, done.k);
+                    });
+}
+
+// Every k-th kept input point (world units), for the accuracy measure, as in core.
+std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<uint8_t>& keep) {
+  size_t kept = 0;
+  for (uint64_t i = 0; i < raw.size(); ++i) kept += keep.empty() || keep[i] ? 1 : 0;
+  const size_t step = sampleStep(kept, kAccuracySamples);
+  std::vector<glm::dvec3> sample;
+  size_t ordinalKept = 0;
+  raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
+    for (size_t i = 0; i < batch.size(); ++i) {
+      if (!keep.empty() && !keep[first + i]) continue;
+      if (ordinalKept++ % step == 0) sample.push_back(batch.positions[i]);
+    }
+  });
+  return sample;
+}
+
 }  // namespace
 
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
@@ -431,36 +507,8 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       continue;
     }
     stage("points", distribution.size());
-    // The touched chunks run again into a small set of results, then every chunk's results are
-    // placed in order over the old ones.
-    Accumulated again;
-    ChunkRunner rerun(distribution, ready.frame, options, false, raw.layout().normals, &keep);
-    std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
-    for (size_t c = 0; c < distribution.chunks().size(); ++c) {
-      const ChunkRecord& record = done.chunks[c];
-      const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
-        return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
-               u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
-      });
-      if (touched) {
-        againOf[c] = again.chunks.size();
-        rerun.run(distribution.chunks()[c], again);
-        ++preparedAgain;
-      } else {
-        progressAdvance(distribution.chunks()[c].size());
-      }
-    }
-    const std::vector<ChunkRecord> old = done.chunks;
-    InPlaceResults results(done);
-    for (size_t c = 0; c < old.size(); ++c)
-      if (againOf[c] == kNoNode)
-        results.place(done, old[c]);
-      else
-        results.place(again, again.chunks[againOf[c]]);
-    results.finish();
-    done.haloPoints += again.haloPoints;
-    done.widenings += again.widenings;
-    done.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
+    preparedAgain = prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals,
+                                        keep, outliers, done);
     break;
   }
   size_t blocks = 0;
@@ -474,25 +522,8 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   stage("orient", done.points.size());
   PointSet& points = done.points;
   const size_t n = points.size();
-  {
-    // The boundary points and their neighbours as indices into the assembled points.
-    SpillVector<uint32_t> ordinal(raw.size(), kNoNode);
-    for (size_t i = 0; i < n; ++i) ordinal[points.source[i]] = uint32_t(i);
-    SpillVector<uint32_t>& from = done.boundarySource;
-    UninitializedSpillVector<uint32_t>& near = done.boundaryNeighbor;
-    for (uint32_t& s : from) s = ordinal[s];
-    for (uint32_t& s : near) s = ordinal[s];
-    ordinal = {};
-    if (options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0)
-      alignComponents(points.normal, done.components, from, near, done.k);
-    // Their roughness compares normals across components: after those are all oriented.
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size(), 1024),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        for (size_t b = r.begin(); b < r.end(); ++b)
-                          points.roughness[from[b]] =
-                              roughnessOf(points, from[b], near.data() + b * done.k, done.k);
-                      });
-  }
+  joinChunks(done, raw.size(),
+             options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0);
   progressAdvance(n);
 
   double spacingSum = 0.0;  // in key order, the additions of the in-core sum
@@ -503,16 +534,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   ready.points = std::move(points);
   ready.index = std::make_unique<PointIndex>(ready.points.position);
 
-  size_t kept = 0;
-  for (uint64_t i = 0; i < raw.size(); ++i) kept += keep.empty() || keep[i] ? 1 : 0;
-  const size_t step = sampleStep(kept, kAccuracySamples);
-  size_t ordinalKept = 0;
-  raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
-    for (size_t i = 0; i < batch.size(); ++i) {
-      if (!keep.empty() && !keep[first + i]) continue;
-      if (ordinalKept++ % step == 0) ready.sample.push_back(batch.positions[i]);
-    }
-  });
+  ready.sample = accuracySample(raw, keep);
   ready.outOfCore = {{"chunks", chunks},
                      {"max_chunk_points", maxChunkPoints},
                      {"largest_loaded_points", done.maxLoaded},
