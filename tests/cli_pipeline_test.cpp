@@ -15,10 +15,10 @@
 
 #include <glm/geometric.hpp>
 
-#include "cli_support.h"
-#include "io/ply.h"
-#include "io/readers.h"
-#include "pipeline/same_points.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/io/readers.h"
+#include "tests/cli_support.h"
+#include "tests/pipeline/same_points.h"
 
 namespace iso {
 namespace {

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <string>
 
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso::test {
 

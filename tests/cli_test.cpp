@@ -5,8 +5,8 @@
 #include <cstring>
 #include <nlohmann/json.hpp>
 
-#include "cli_support.h"
 #include "iso/writer.h"
+#include "tests/cli_support.h"
 
 namespace iso {
 namespace {

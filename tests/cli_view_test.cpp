@@ -4,9 +4,9 @@
 #include <fstream>
 #include <set>
 
-#include "cli_support.h"
-#include "image.h"
 #include "iso/reader.h"
+#include "tests/cli_support.h"
+#include "viewer/image.h"
 
 namespace iso::test {
 namespace {

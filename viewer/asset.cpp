@@ -1,5 +1,5 @@
 // Opening .iso files for viewing (asset.h).
-#include "asset.h"
+#include "viewer/asset.h"
 
 #include <cmath>
 #include <limits>

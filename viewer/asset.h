@@ -5,10 +5,10 @@
 #include <filesystem>
 #include <memory>
 
-#include "blob.h"
-#include "image.h"
 #include "iso/reader.h"
-#include "scene.h"
+#include "viewer/blob.h"
+#include "viewer/image.h"
+#include "viewer/scene.h"
 
 namespace iso::viewer {
 

@@ -1,5 +1,5 @@
 // Building the GPU form of surface chunks (specs/viewer.md, "Chunks on the GPU").
-#include "blob.h"
+#include "viewer/blob.h"
 
 #include <algorithm>
 #include <bit>
@@ -10,7 +10,7 @@
 
 #include "iso/check.h"
 #include "iso/quantize.h"
-#include "shared.h"
+#include "shaders/shared.h"
 
 namespace iso::viewer {
 namespace {

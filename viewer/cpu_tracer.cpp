@@ -1,5 +1,5 @@
 // The CPU reference tracer (cpu_tracer.h): shaders/trace.h inside a C++ class.
-#include "cpu_tracer.h"
+#include "viewer/cpu_tracer.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -44,7 +44,7 @@ class Tracer {
     return vec3(rg.x, rg.y, ba.x);
   }
 
-#include "trace.h"
+#include "shaders/trace.h"
 
  private:
   const CpuPool& pool_;

@@ -12,10 +12,10 @@
 #include <span>
 #include <vector>
 
-#include "blob.h"
-#include "image.h"
 #include "iso/reader.h"
-#include "shared.h"
+#include "shaders/shared.h"
+#include "viewer/blob.h"
+#include "viewer/image.h"
 
 namespace iso::viewer {
 

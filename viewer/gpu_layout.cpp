@@ -4,7 +4,7 @@
 #include <cstddef>
 
 #include "iso/format.h"
-#include "shared.h"
+#include "shaders/shared.h"
 
 namespace iso::gpu {
 

@@ -1,14 +1,14 @@
 // Image files through OpenImageIO (image.h).
-#include "image.h"
+#include "viewer/image.h"
 
 #include <OpenImageIO/imageio.h>
 
 #include <glm/glm.hpp>
 #include <glm/packing.hpp>
 
-#include "io/image.h"
 #include "iso/atomic_file.h"
 #include "iso/error.h"
+#include "pipeline/io/image.h"
 
 namespace iso::viewer {
 namespace OIIO = OIIO_NAMESPACE;

@@ -1,5 +1,5 @@
 // The viewer's GPU frames and streaming uploads (renderer.h).
-#include "renderer.h"
+#include "viewer/renderer.h"
 
 #include <fmt/core.h>
 #include <algorithm>

@@ -10,10 +10,10 @@
 #include <memory>
 #include <vector>
 
-#include "asset.h"
-#include "image.h"
-#include "streaming.h"
-#include "vulkan.h"
+#include "viewer/asset.h"
+#include "viewer/image.h"
+#include "viewer/streaming.h"
+#include "viewer/vulkan.h"
 
 namespace iso::viewer {
 

@@ -1,5 +1,5 @@
 // Scene files, command-line scene options and the shaders' frame parameters (scene.h).
-#include "scene.h"
+#include "viewer/scene.h"
 
 #include <cmath>
 #include <fstream>

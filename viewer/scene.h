@@ -12,10 +12,10 @@
 
 #include <glm/vec3.hpp>
 
-#include "blob.h"
-#include "iso/format.h"
-#include "shared.h"
 #include "iso/error.h"
+#include "iso/format.h"
+#include "shaders/shared.h"
+#include "viewer/blob.h"
 
 namespace iso::viewer {
 

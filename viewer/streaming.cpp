@@ -1,12 +1,12 @@
 // The page pool's residency and the loader thread (streaming.h, specs/viewer.md "Streaming").
-#include "streaming.h"
+#include "viewer/streaming.h"
 
 #include <algorithm>
 #include <stdexcept>
 
 #include "iso/error.h"
 #include "iso/surface.h"
-#include "shared.h"
+#include "shaders/shared.h"
 
 namespace iso::viewer {
 

@@ -15,8 +15,8 @@
 #include <thread>
 #include <vector>
 
-#include "blob.h"
 #include "iso/reader.h"
+#include "viewer/blob.h"
 
 namespace iso::viewer {
 

@@ -1,5 +1,5 @@
 // Headless pictures, the CPU reference picture and the benchmark of `iso view` (view.h).
-#include "view.h"
+#include "viewer/view.h"
 
 #include <fmt/core.h>
 
@@ -9,10 +9,10 @@
 #include <numeric>
 #include <optional>
 
-#include "asset.h"
-#include "cpu_tracer.h"
-#include "image.h"
-#include "renderer.h"
+#include "viewer/asset.h"
+#include "viewer/cpu_tracer.h"
+#include "viewer/image.h"
+#include "viewer/renderer.h"
 
 namespace iso::viewer {
 namespace {

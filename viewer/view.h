@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-#include "scene.h"
+#include "viewer/scene.h"
 
 namespace iso::viewer {
 

@@ -1,5 +1,5 @@
 // The viewer's Vulkan layer (vulkan.h).
-#include "vulkan.h"
+#include "viewer/vulkan.h"
 
 #include <fmt/core.h>
 #include <cstdlib>

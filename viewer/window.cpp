@@ -15,10 +15,10 @@
 #include <cmath>
 #include <filesystem>
 
-#include "asset.h"
-#include "image.h"
-#include "renderer.h"
-#include "view.h"
+#include "viewer/asset.h"
+#include "viewer/image.h"
+#include "viewer/renderer.h"
+#include "viewer/view.h"
 
 namespace iso::viewer {
 namespace {

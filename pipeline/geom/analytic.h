@@ -5,7 +5,7 @@
 #include <glm/vec3.hpp>
 #include <memory>
 
-#include "geom/shape.h"
+#include "pipeline/geom/shape.h"
 
 namespace iso {
 

@@ -1,7 +1,7 @@
 // Binned SAH build (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", 2007):
 // at each node the centroids are binned along every axis and the split between bins with the
 // smallest surface area cost is taken; subtrees are built as parallel TBB tasks.
-#include "geom/bvh.h"
+#include "pipeline/geom/bvh.h"
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>

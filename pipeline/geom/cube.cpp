@@ -6,8 +6,8 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
-#include "geom/analytic.h"
-#include "geom/random.h"
+#include "pipeline/geom/analytic.h"
+#include "pipeline/geom/random.h"
 
 namespace iso {
 namespace {

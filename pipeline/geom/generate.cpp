@@ -1,7 +1,7 @@
 // Synthetic scans: area-uniform samples thinned by a density ramp along x, displaced along the true
 // normal by Gaussian noise, generated in fixed blocks with independent seeds so that the result
 // does not depend on the number of threads.
-#include "geom/generate.h"
+#include "pipeline/geom/generate.h"
 
 #include <tbb/parallel_for.h>
 
@@ -10,8 +10,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "geom/random.h"
 #include "iso/error.h"
+#include "pipeline/geom/random.h"
 
 namespace iso {
 namespace {

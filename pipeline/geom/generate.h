@@ -4,8 +4,8 @@
 #include <cstdint>
 #include <glm/vec3.hpp>
 
-#include "geom/shape.h"
-#include "io/point_cloud.h"
+#include "pipeline/geom/shape.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso {
 

@@ -4,8 +4,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "geom/analytic.h"
 #include "iso/error.h"
+#include "pipeline/geom/analytic.h"
 
 namespace iso {
 namespace {

@@ -12,11 +12,11 @@
 #include <stdexcept>
 #include <string>
 
-#include "geom/bvh.h"
-#include "geom/random.h"
-#include "geom/shape.h"
-#include "geom/triangle.h"
 #include "iso/error.h"
+#include "pipeline/geom/bvh.h"
+#include "pipeline/geom/random.h"
+#include "pipeline/geom/shape.h"
+#include "pipeline/geom/triangle.h"
 
 namespace iso {
 namespace {

@@ -3,7 +3,7 @@
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 
-#include "geom/shape.h"
+#include "pipeline/geom/shape.h"
 
 namespace iso {
 namespace {

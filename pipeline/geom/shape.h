@@ -11,8 +11,8 @@
 #include <random>
 #include <string>
 
-#include "io/point_cloud.h"
 #include "iso/error.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso {
 

@@ -4,8 +4,8 @@
 #include <glm/geometric.hpp>
 #include <numbers>
 
-#include "geom/analytic.h"
-#include "geom/random.h"
+#include "pipeline/geom/analytic.h"
+#include "pipeline/geom/random.h"
 
 namespace iso {
 namespace {

@@ -6,8 +6,8 @@
 #include <limits>
 #include <numbers>
 
-#include "geom/analytic.h"
-#include "geom/random.h"
+#include "pipeline/geom/analytic.h"
+#include "pipeline/geom/random.h"
 
 namespace iso {
 namespace {

@@ -1,9 +1,9 @@
-#include "io/color_table.h"
+#include "pipeline/io/color_table.h"
 
 #include <array>
 #include <cmath>
 
-#include "io/color.h"
+#include "pipeline/io/color.h"
 
 namespace iso::io {
 namespace {

@@ -1,5 +1,5 @@
 // Images through OpenImageIO (image.h).
-#include "io/image.h"
+#include "pipeline/io/image.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

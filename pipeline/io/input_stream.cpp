@@ -1,4 +1,4 @@
-#include "io/input_stream.h"
+#include "pipeline/io/input_stream.h"
 
 #include <zlib.h>
 

@@ -1,4 +1,4 @@
-#include "io/non_finite.h"
+#include "pipeline/io/non_finite.h"
 
 #include <algorithm>
 

@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <glm/vec3.hpp>
 
-#include "io/point_cloud.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso::io {
 

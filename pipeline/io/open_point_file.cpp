@@ -3,10 +3,10 @@
 #include <cctype>
 #include <cstring>
 
-#include "io/input_stream.h"
-#include "io/point_readers.h"
-#include "io/readers.h"
 #include "iso/error.h"
+#include "pipeline/io/input_stream.h"
+#include "pipeline/io/point_readers.h"
+#include "pipeline/io/readers.h"
 
 namespace iso {
 namespace {

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "io/point_cloud.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso {
 

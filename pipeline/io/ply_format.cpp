@@ -1,10 +1,10 @@
-#include "io/ply_format.h"
+#include "pipeline/io/ply_format.h"
 
 #include <fmt/format.h>
 
 #include <limits>
 
-#include "io/text_fields.h"
+#include "pipeline/io/text_fields.h"
 
 namespace iso::io {
 namespace {

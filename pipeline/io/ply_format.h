@@ -12,7 +12,7 @@
 #include <string_view>
 #include <vector>
 
-#include "io/input_stream.h"
+#include "pipeline/io/input_stream.h"
 
 namespace iso::io {
 

@@ -1,4 +1,4 @@
-#include "io/ply_vertices.h"
+#include "pipeline/io/ply_vertices.h"
 
 #include <fmt/format.h>
 
@@ -7,12 +7,12 @@
 #include <string_view>
 #include <type_traits>
 
-#include "io/color_table.h"
-#include "io/narrow.h"
-#include "io/non_finite.h"
-#include "io/text_fields.h"
 #include "iso/check.h"
 #include "iso/error.h"
+#include "pipeline/io/color_table.h"
+#include "pipeline/io/narrow.h"
+#include "pipeline/io/non_finite.h"
+#include "pipeline/io/text_fields.h"
 
 namespace iso::io {
 namespace {

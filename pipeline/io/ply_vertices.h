@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "io/input_stream.h"
-#include "io/ply_format.h"
-#include "io/point_cloud.h"
+#include "pipeline/io/input_stream.h"
+#include "pipeline/io/ply_format.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso::io {
 

@@ -5,8 +5,8 @@
 #include <memory>
 #include <string>
 
-#include "io/input_stream.h"
-#include "io/readers.h"
+#include "pipeline/io/input_stream.h"
+#include "pipeline/io/readers.h"
 
 namespace iso::io {
 

@@ -8,11 +8,11 @@
 #include <cmath>
 #include <cstring>
 
-#include "io/color_table.h"
-#include "io/little_endian.h"
-#include "io/non_finite.h"
-#include "io/point_readers.h"
 #include "iso/error.h"
+#include "pipeline/io/color_table.h"
+#include "pipeline/io/little_endian.h"
+#include "pipeline/io/non_finite.h"
+#include "pipeline/io/point_readers.h"
 
 namespace iso::io {
 namespace {

@@ -1,10 +1,10 @@
 // The PLY point reader: the vertex element of ASCII and binary PLY files.
 #include <fmt/format.h>
 
-#include "io/ply_format.h"
-#include "io/ply_vertices.h"
-#include "io/point_readers.h"
 #include "iso/error.h"
+#include "pipeline/io/ply_format.h"
+#include "pipeline/io/ply_vertices.h"
+#include "pipeline/io/point_readers.h"
 
 namespace iso::io {
 namespace {

@@ -3,11 +3,11 @@
 
 #include <algorithm>
 
-#include "io/ply.h"
-#include "io/ply_format.h"
-#include "io/ply_vertices.h"
-#include "io/text_fields.h"
 #include "iso/error.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/io/ply_format.h"
+#include "pipeline/io/ply_vertices.h"
+#include "pipeline/io/text_fields.h"
 
 namespace iso {
 namespace {

@@ -7,12 +7,12 @@
 #include <cmath>
 #include <vector>
 
-#include "io/color_table.h"
-#include "io/narrow.h"
-#include "io/non_finite.h"
-#include "io/point_readers.h"
-#include "io/text_fields.h"
 #include "iso/error.h"
+#include "pipeline/io/color_table.h"
+#include "pipeline/io/narrow.h"
+#include "pipeline/io/non_finite.h"
+#include "pipeline/io/point_readers.h"
+#include "pipeline/io/text_fields.h"
 
 namespace iso::io {
 namespace {

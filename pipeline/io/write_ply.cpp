@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "io/color.h"
-#include "io/narrow.h"
 #include "iso/atomic_file.h"
-#include "io/ply.h"
 #include "iso/check.h"
+#include "pipeline/io/color.h"
+#include "pipeline/io/narrow.h"
+#include "pipeline/io/ply.h"
 
 namespace iso {
 namespace {

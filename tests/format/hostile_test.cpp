@@ -12,7 +12,7 @@
 #include "iso/reader.h"
 #include "iso/surface.h"
 #include "iso/verify.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

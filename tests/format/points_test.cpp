@@ -15,7 +15,7 @@
 #include "iso/surface.h"
 #include "iso/verify.h"
 #include "iso/writer.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

@@ -7,7 +7,7 @@
 #include "iso/reader.h"
 #include "iso/verify.h"
 #include "iso/writer.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

@@ -14,7 +14,7 @@
 #include "iso/reader.h"
 #include "iso/surface.h"
 #include "iso/surface_model.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

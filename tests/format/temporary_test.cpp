@@ -8,7 +8,7 @@
 
 #include "iso/atomic_file.h"
 #include "iso/temporary_files.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

@@ -8,9 +8,9 @@
 #include <limits>
 #include <stdexcept>
 
-#include "geom/generate.h"
-#include "geom/shape.h"
-#include "meshes.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/geom/shape.h"
+#include "tests/geom/meshes.h"
 
 namespace iso {
 namespace {

@@ -9,10 +9,10 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "geom/shape.h"
-#include "geom/triangle.h"
-#include "meshes.h"
-#include "shape_checks.h"
+#include "pipeline/geom/shape.h"
+#include "pipeline/geom/triangle.h"
+#include "tests/geom/meshes.h"
+#include "tests/geom/shape_checks.h"
 
 namespace iso {
 namespace {

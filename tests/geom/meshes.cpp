@@ -1,4 +1,4 @@
-#include "meshes.h"
+#include "tests/geom/meshes.h"
 
 #include <algorithm>
 #include <cmath>

@@ -3,7 +3,7 @@
 
 #include <glm/vec3.hpp>
 
-#include "io/point_cloud.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso::test {
 

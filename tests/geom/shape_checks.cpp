@@ -1,4 +1,4 @@
-#include "shape_checks.h"
+#include "tests/geom/shape_checks.h"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
-#include "geom/random.h"
+#include "pipeline/geom/random.h"
 
 namespace iso::test {
 

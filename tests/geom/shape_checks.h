@@ -7,7 +7,7 @@
 #include <random>
 #include <vector>
 
-#include "geom/shape.h"
+#include "pipeline/geom/shape.h"
 
 namespace iso::test {
 

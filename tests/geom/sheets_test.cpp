@@ -4,8 +4,8 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
-#include "geom/shape.h"
-#include "shape_checks.h"
+#include "pipeline/geom/shape.h"
+#include "tests/geom/shape_checks.h"
 
 namespace iso {
 namespace {

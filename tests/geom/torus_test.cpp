@@ -6,8 +6,8 @@
 #include <glm/geometric.hpp>
 #include <numbers>
 
-#include "geom/shape.h"
-#include "shape_checks.h"
+#include "pipeline/geom/shape.h"
+#include "tests/geom/shape_checks.h"
 
 namespace iso {
 namespace {

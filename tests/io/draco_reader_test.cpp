@@ -9,8 +9,8 @@
 #include <glm/geometric.hpp>
 #include <limits>
 
-#include "io/color.h"
-#include "io_test_util.h"
+#include "pipeline/io/color.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

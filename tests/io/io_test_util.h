@@ -15,9 +15,9 @@
 #include <string_view>
 #include <vector>
 
-#include "io/readers.h"
 #include "iso/error.h"
-#include "support/support.h"
+#include "pipeline/io/readers.h"
+#include "tests/support/support.h"
 
 namespace iso::test {
 

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <optional>
 
-#include "io_test_util.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

@@ -1,7 +1,7 @@
 // Choosing the reader (content before extension), gzip input, the batch contract, and errors for
 // files that cannot be read at all.
-#include "io/ply.h"
-#include "io_test_util.h"
+#include "pipeline/io/ply.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

@@ -15,8 +15,8 @@
 #include <string>
 #include <vector>
 
-#include "io/color.h"
-#include "io_test_util.h"
+#include "pipeline/io/color.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

@@ -1,7 +1,7 @@
 // The PLY mesh reader: vertices and faces in either order, polygons fanned into triangles, index
 // and count types, indices validated, truncation and missing faces rejected.
-#include "io/ply.h"
-#include "io_test_util.h"
+#include "pipeline/io/ply.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

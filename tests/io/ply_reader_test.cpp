@@ -5,8 +5,8 @@
 #include <limits>
 #include <sstream>
 
-#include "io/color.h"
-#include "io_test_util.h"
+#include "pipeline/io/color.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

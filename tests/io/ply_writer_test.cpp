@@ -7,9 +7,9 @@
 
 #include <random>
 
-#include "io/color.h"
-#include "io/ply.h"
-#include "io_test_util.h"
+#include "pipeline/io/color.h"
+#include "pipeline/io/ply.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

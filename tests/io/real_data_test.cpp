@@ -4,8 +4,8 @@
 #include <glm/common.hpp>
 #include <set>
 
-#include "io/ply.h"
-#include "io_test_util.h"
+#include "pipeline/io/ply.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

@@ -2,8 +2,8 @@
 // ranges, and errors that name the line and column.
 #include <cmath>
 
-#include "io/color.h"
-#include "io_test_util.h"
+#include "pipeline/io/color.h"
+#include "tests/io/io_test_util.h"
 
 namespace iso {
 namespace {

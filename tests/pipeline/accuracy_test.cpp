@@ -2,8 +2,9 @@
 // (specs/pipeline.md; iso eval's metric): 200k-point scans of a sphere and a torus.
 #include <gtest/gtest.h>
 
-#include "measure.h"
-#include "pipeline_support.h"
+#include "pipeline/analysis/measure.h"
+#include "pipeline/base/options.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

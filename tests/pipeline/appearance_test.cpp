@@ -7,9 +7,11 @@
 
 #include "iso/error.h"
 #include "iso/quantize.h"
-#include "occlusion.h"
-#include "pipeline_support.h"
-#include "texture.h"
+#include "pipeline/base/options.h"
+#include "pipeline/output/occlusion.h"
+#include "pipeline/output/texture.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

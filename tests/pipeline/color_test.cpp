@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "iso/quantize.h"
-#include "pipeline_support.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

@@ -6,9 +6,12 @@
 
 #include <cmath>
 
-#include "knn.h"
-#include "pipeline_support.h"
-#include "stages.h"
+#include "pipeline/base/options.h"
+#include "pipeline/octree/field.h"
+#include "pipeline/octree/octree.h"
+#include "pipeline/points/knn.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

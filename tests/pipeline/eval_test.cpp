@@ -5,7 +5,8 @@
 #include <cmath>
 
 #include "iso/quantize.h"
-#include "pipeline_support.h"
+#include "pipeline/base/options.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

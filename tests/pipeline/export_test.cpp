@@ -8,8 +8,9 @@
 #include <numbers>
 #include <random>
 
-#include "export.h"
-#include "pipeline_support.h"
+#include "pipeline/analysis/export.h"
+#include "pipeline/base/options.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

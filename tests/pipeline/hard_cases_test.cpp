@@ -7,10 +7,12 @@
 #include <glm/geometric.hpp>
 #include <random>
 
-#include "io/readers.h"
 #include "iso/verify.h"
-#include "knn.h"
-#include "pipeline_support.h"
+#include "pipeline/base/options.h"
+#include "pipeline/io/readers.h"
+#include "pipeline/points/knn.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

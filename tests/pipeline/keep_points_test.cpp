@@ -10,15 +10,17 @@
 #include <random>
 #include <unordered_map>
 
-#include "convert.h"
-#include "io/color.h"
 #include "iso/reader.h"
 #include "iso/verify.h"
 #include "iso/writer.h"
-#include "keep_points.h"
-#include "pipeline_support.h"
-#include "same_points.h"
-#include "spill.h"
+#include "pipeline/base/options.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/io/color.h"
+#include "pipeline/outofcore/spill.h"
+#include "pipeline/output/keep_points.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
+#include "tests/pipeline/same_points.h"
 
 namespace iso {
 namespace {

@@ -7,8 +7,7 @@
 #include <random>
 
 #include "iso/check.h"
-#include "knn.h"
-#include "stages.h"
+#include "pipeline/points/knn.h"
 
 namespace iso {
 namespace {

@@ -8,11 +8,13 @@
 #include <random>
 #include <set>
 
-#include "convert.h"
-#include "outofcore.h"
-#include "progress.h"
-#include "pipeline_support.h"
-#include "spill.h"
+#include "pipeline/base/options.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/outofcore/outofcore.h"
+#include "pipeline/outofcore/spill.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

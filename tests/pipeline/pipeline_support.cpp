@@ -1,4 +1,5 @@
-#include "pipeline_support.h"
+#include "pipeline/base/options.h"
+#include "tests/pipeline/pipeline_support.h"
 
 #include <cstring>
 #include <random>

@@ -5,13 +5,14 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "convert.h"
-#include "evaluate.h"
-#include "geom/generate.h"
-#include "geom/shape.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "support/support.h"
+#include "pipeline/analysis/evaluate.h"
+#include "pipeline/base/options.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/geom/shape.h"
+#include "tests/support/support.h"
 
 namespace iso::test {
 

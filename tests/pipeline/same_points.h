@@ -10,8 +10,8 @@
 #include <map>
 #include <vector>
 
-#include "io/color.h"
-#include "io/point_cloud.h"
+#include "pipeline/io/color.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso::test {
 

@@ -9,9 +9,9 @@
 #include <filesystem>
 #include <numeric>
 
-#include "buffers.h"
-#include "spill.h"
-#include "support/support.h"
+#include "pipeline/base/buffers.h"
+#include "pipeline/outofcore/spill.h"
+#include "tests/support/support.h"
 
 namespace iso {
 namespace {

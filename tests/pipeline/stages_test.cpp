@@ -7,9 +7,13 @@
 #include <numeric>
 #include <random>
 
-#include "knn.h"
-#include "pipeline_support.h"
-#include "stages.h"
+#include "pipeline/base/options.h"
+#include "pipeline/octree/field.h"
+#include "pipeline/octree/octree.h"
+#include "pipeline/output/chunks.h"
+#include "pipeline/points/knn.h"
+#include "pipeline/points/points.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
 namespace {

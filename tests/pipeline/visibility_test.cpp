@@ -5,8 +5,9 @@
 #include <algorithm>
 #include <glm/geometric.hpp>
 
-#include "pipeline_support.h"
-#include "visibility.h"
+#include "pipeline/analysis/visibility.h"
+#include "pipeline/base/options.h"
+#include "tests/pipeline/pipeline_support.h"
 
 namespace iso::test {
 namespace {

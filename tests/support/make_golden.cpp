@@ -3,7 +3,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "support.h"
+#include "tests/support/support.h"
 
 int main(int argc, char** argv) {
   if (argc == 3 && std::strcmp(argv[1], "--points") == 0) {

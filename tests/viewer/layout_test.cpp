@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "shared.h"
+#include "shaders/shared.h"
 
 namespace iso::test {
 namespace {

@@ -8,11 +8,12 @@
 #include <glm/geometric.hpp>
 #include <random>
 
-#include "cpu_tracer.h"
-#include "io/readers.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "pipeline/pipeline_support.h"
+#include "pipeline/base/options.h"
+#include "pipeline/io/readers.h"
+#include "tests/pipeline/pipeline_support.h"
+#include "viewer/cpu_tracer.h"
 
 namespace iso::test {
 namespace {

@@ -7,17 +7,18 @@
 #include <fstream>
 #include <random>
 
-#include "asset.h"
-#include "cpu_tracer.h"
-#include "image.h"
-#include "io/readers.h"
 #include "iso/error.h"
-#include "iso/writer.h"
 #include "iso/surface_model.h"
-#include "pipeline/pipeline_support.h"
-#include "renderer.h"
-#include "scene.h"
-#include "vulkan.h"
+#include "iso/writer.h"
+#include "pipeline/base/options.h"
+#include "pipeline/io/readers.h"
+#include "tests/pipeline/pipeline_support.h"
+#include "viewer/asset.h"
+#include "viewer/cpu_tracer.h"
+#include "viewer/image.h"
+#include "viewer/renderer.h"
+#include "viewer/scene.h"
+#include "viewer/vulkan.h"
 
 namespace iso::test {
 namespace {

@@ -19,14 +19,15 @@
 #include <string>
 #include <vector>
 
-#include "convert.h"
-#include "evaluate.h"
-#include "geom/generate.h"
-#include "geom/shape.h"
-#include "io/readers.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "texture.h"
+#include "pipeline/analysis/evaluate.h"
+#include "pipeline/base/options.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/geom/shape.h"
+#include "pipeline/io/readers.h"
+#include "pipeline/output/texture.h"
 
 namespace {
 

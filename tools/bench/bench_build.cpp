@@ -11,9 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "convert.h"
-#include "geom/generate.h"
-#include "geom/shape.h"
+#include "pipeline/base/options.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/geom/shape.h"
 
 namespace {
 

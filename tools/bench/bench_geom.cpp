@@ -15,10 +15,10 @@
 #include <glm/geometric.hpp>
 #include <vector>
 
-#include "geom/generate.h"
-#include "geom/random.h"
-#include "geom/shape.h"
-#include "meshes.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/geom/random.h"
+#include "pipeline/geom/shape.h"
+#include "tests/geom/meshes.h"
 
 namespace {
 

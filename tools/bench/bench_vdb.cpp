@@ -19,15 +19,15 @@
 #include <cstring>
 #include <nlohmann/json.hpp>
 
-#include "convert.h"
-#include "evaluate.h"
-#include "export.h"
-#include "geom/shape.h"
-#include "io/ply.h"
-#include "io/readers.h"
+#include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "iso/error.h"
+#include "pipeline/analysis/evaluate.h"
+#include "pipeline/analysis/export.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/geom/shape.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/io/readers.h"
 
 namespace {
 

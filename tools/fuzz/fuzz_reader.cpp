@@ -13,7 +13,7 @@
 #include "iso/surface.h"
 #include "iso/surface_model.h"
 #include "iso/verify.h"
-#include "support/support.h"
+#include "tests/support/support.h"
 
 namespace {
 

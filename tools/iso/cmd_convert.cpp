@@ -7,14 +7,16 @@
 #include <map>
 #include <optional>
 
-#include "commands.h"
-#include "convert.h"
-#include "inputs.h"
-#include "io/image.h"
 #include "iso/error.h"
 #include "iso/temporary_files.h"
-#include "spill.h"
-#include "text.h"
+#include "pipeline/base/options.h"
+#include "pipeline/convert/convert.h"
+#include "pipeline/io/image.h"
+#include "pipeline/octree/octree.h"
+#include "pipeline/outofcore/spill.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/inputs.h"
+#include "tools/iso/text.h"
 
 namespace iso::cli {
 namespace {

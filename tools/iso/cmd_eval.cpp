@@ -2,17 +2,17 @@
 // `--visibility`: accuracy, and what the viewer shows of the scan, as JSON.
 #include <fmt/core.h>
 
-#include "commands.h"
-#include "evaluate.h"
-#include "inputs.h"
-#include "io/ply.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "keep_points.h"
-#include "measure.h"
-#include "shape_options.h"
-#include "visibility.h"
+#include "pipeline/analysis/evaluate.h"
+#include "pipeline/analysis/measure.h"
+#include "pipeline/analysis/visibility.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/output/keep_points.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/inputs.h"
+#include "tools/iso/shape_options.h"
 
 namespace iso::cli {
 namespace {

@@ -5,14 +5,14 @@
 #include <chrono>
 #include <nlohmann/json.hpp>
 
-#include "commands.h"
-#include "export.h"
-#include "io/ply.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
-#include "keep_points.h"
-#include "text.h"
+#include "pipeline/analysis/export.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/output/keep_points.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/text.h"
 
 namespace iso::cli {
 namespace {

@@ -1,12 +1,12 @@
 // `iso gen SHAPE -o OUT.ply`: a synthetic scan with a known answer.
 #include <fmt/core.h>
 
-#include "commands.h"
-#include "geom/generate.h"
-#include "io/ply.h"
 #include "iso/error.h"
-#include "shape_options.h"
-#include "text.h"
+#include "pipeline/geom/generate.h"
+#include "pipeline/io/ply.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/shape_options.h"
+#include "tools/iso/text.h"
 
 namespace iso::cli {
 namespace {

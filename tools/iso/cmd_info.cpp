@@ -4,9 +4,9 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
-#include "commands.h"
 #include "iso/reader.h"
-#include "text.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/text.h"
 
 namespace iso::cli {
 namespace {

@@ -3,10 +3,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "commands.h"
 #include "iso/error.h"
 #include "iso/verify.h"
-#include "text.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/text.h"
 
 namespace iso::cli {
 namespace {

@@ -2,10 +2,10 @@
 // or a benchmark (--bench), streaming its chunks under a GPU memory budget (specs/viewer.md).
 #include <fmt/core.h>
 
-#include "commands.h"
-#include "text.h"
-#include "view.h"
 #include "iso/error.h"
+#include "tools/iso/commands.h"
+#include "tools/iso/text.h"
+#include "viewer/view.h"
 
 namespace iso::cli {
 namespace {

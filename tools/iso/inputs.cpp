@@ -1,4 +1,4 @@
-#include "inputs.h"
+#include "tools/iso/inputs.h"
 
 #include <algorithm>
 #include <chrono>

@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "io/point_cloud.h"
-#include "io/readers.h"
-#include "progress.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/io/point_cloud.h"
+#include "pipeline/io/readers.h"
 
 namespace iso::cli {
 

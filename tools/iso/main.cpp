@@ -4,12 +4,12 @@
 #include <exception>
 #include <new>
 
-#include "commands.h"
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/format.h"
 #include "iso/temporary_files.h"
 #include "iso/version.h"
+#include "tools/iso/commands.h"
 
 namespace iso::cli {
 

@@ -1,10 +1,10 @@
-#include "shape_options.h"
+#include "tools/iso/shape_options.h"
 
 #include <charconv>
 #include <stdexcept>
 
-#include "io/ply.h"
 #include "iso/error.h"
+#include "pipeline/io/ply.h"
 
 namespace iso::cli {
 

@@ -5,8 +5,8 @@
 #include <memory>
 #include <string>
 
-#include "geom/shape.h"
 #include "iso/error.h"
+#include "pipeline/geom/shape.h"
 
 namespace iso::cli {
 

@@ -1,4 +1,4 @@
-#include "text.h"
+#include "tools/iso/text.h"
 
 #include <fmt/core.h>
 

@@ -1,0 +1,290 @@
+// Exports of an .iso file's surface (pipeline/analysis/export.h): the mesh of the zero set, leaf by
+// leaf.
+#include "pipeline/analysis/export.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "iso/flat_map.h"
+#include "pipeline/points/points.h"
+
+namespace iso {
+namespace {
+
+using Point = std::array<int64_t, 3>;  // on the grid of kMaxLevel
+
+Key128 pointKey(const Point& p) { return {uint64_t(p[0]) | uint64_t(p[1]) << 32, uint64_t(p[2])}; }
+
+struct Sample {
+  uint32_t id = 0;  // the point's number
+  float value = 0;  // the signed distance there (frame units)
+};
+
+class Extractor {
+ public:
+  explicit Extractor(const SurfaceModel& surface)
+      : surface_(surface),
+        frame_(surface.header().frame),
+        samples_(surface.leaves().size() * 6),
+        vertexOf_(surface.leaves().size() * 8) {}
+
+  void leaf(uint32_t id);
+  TriangleMesh mesh;
+  MeshStats stats;
+
+ private:
+  // The level of the filled leaf holding a frame position, or -1 (empty, outside).
+  int levelAt(const glm::dvec3& p) const {
+    for (int a = 0; a < 3; ++a)
+      if (!(p[a] >= 0.0 && p[a] < 1.0)) return -1;
+    const uint32_t leaf = surface_.findLeaf({p.x, p.y, p.z});
+    return leaf == kNoNode ? -1 : int(surface_.leaves()[leaf].level);
+  }
+  // The value at p: the first (coarsest) leaf's patch that asked for it.
+  Sample sample(uint32_t leaf, const Point& p) {
+    const auto [slot, added] = samples_.insert(pointKey(p), Sample{});
+    if (added) {
+      const double unit = std::ldexp(1.0, -kMaxLevel);
+      slot->id = nextId_++;
+      slot->value =
+          float(surface_.evaluate(leaf, {p[0] * unit, p[1] * unit, p[2] * unit}).distance);
+    }
+    return *slot;
+  }
+  uint32_t vertex(Sample a, Point pa, Sample b, Point pb);
+  void tetrahedron(const std::array<Sample, 4>& s, const std::array<Point, 4>& p);
+
+  const SurfaceModel& surface_;
+  Frame frame_;
+  FlatMap<Key128, Sample> samples_;
+  FlatMap<Key128, uint32_t> vertexOf_;  // by the two samples' numbers
+  uint32_t nextId_ = 0;
+};
+
+// A value of exactly 0 counts as a tiny positive one.
+float signedValue(float f) { return f == 0.0f ? 1e-30f : f; }
+
+uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
+  if (b.id < a.id) {  // one order for every tetrahedron sharing the edge
+    std::swap(a, b);
+    std::swap(pa, pb);
+  }
+  const auto [slot, added] = vertexOf_.insert({a.id, b.id}, uint32_t(mesh.vertices.size()));
+  if (added) {
+    const double fa = signedValue(a.value), fb = signedValue(b.value);
+    const double t = fa / (fa - fb);
+    const glm::dvec3 from{double(pa[0]), double(pa[1]), double(pa[2])};
+    const glm::dvec3 to{double(pb[0]), double(pb[1]), double(pb[2])};
+    mesh.vertices.push_back(
+        toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
+  }
+  return *slot;
+}
+
+void Extractor::tetrahedron(const std::array<Sample, 4>& s, const std::array<Point, 4>& p) {
+  ++stats.tetrahedra;
+  std::array<int, 4> in{}, out{};
+  int ni = 0, no = 0;
+  for (int c = 0; c < 4; ++c) (signedValue(s[size_t(c)].value) < 0.0f ? in[ni++] : out[no++]) = c;
+  if (ni == 0 || no == 0) return;
+  const auto at = [&](int c) {
+    return glm::dvec3(double(p[size_t(c)][0]), double(p[size_t(c)][1]), double(p[size_t(c)][2]));
+  };
+  // Triangles face from the negative side to the positive one: the tetrahedron's linear field
+  // grows from any negative corner to any positive one. The facing is decided on the edges'
+  // midpoints: a triangle's vertices move along three edges that share no plane, so any
+  // crossings inside the edges give it the same facing, also where a 0 puts one on a corner.
+  const glm::dvec3 outward = at(out[0]) - at(in[0]);
+  using Edge = std::pair<int, int>;
+  const auto emit = [&](Edge e0, Edge e1, Edge e2) {
+    const auto mid = [&](Edge e) { return 0.5 * (at(e.first) + at(e.second)); };
+    if (glm::dot(glm::cross(mid(e1) - mid(e0), mid(e2) - mid(e0)), outward) < 0.0)
+      std::swap(e1, e2);
+    std::array<uint32_t, 3> t{};
+    const std::array<Edge, 3> edges = {e0, e1, e2};
+    for (size_t i = 0; i < 3; ++i) {
+      const auto [a, b] = edges[i];
+      t[i] = vertex(s[size_t(a)], p[size_t(a)], s[size_t(b)], p[size_t(b)]);
+    }
+    mesh.triangles.push_back(t);
+  };
+  if (ni == 1 || no == 1) {
+    const bool single = ni == 1;
+    const int apex = single ? in[0] : out[0];
+    const std::array<int, 4>& others = single ? out : in;
+    emit({apex, others[0]}, {apex, others[1]}, {apex, others[2]});
+  } else {  // two and two: a quad around the tetrahedron
+    const Edge a{in[0], out[0]}, b{in[0], out[1]}, c{in[1], out[1]}, d{in[1], out[0]};
+    emit(a, b, c);
+    emit(a, c, d);
+  }
+}
+
+// A face point in half-edges from the face's lowest corner: (0..2, 0..2) along its two axes.
+using Corner = std::array<int, 2>;
+using FaceTriangle = std::array<Corner, 3>;
+
+// The triangles of a leaf's face, to be fanned to the leaf's centre: two along the diagonal from
+// the lowest corner when nothing finer touches the face, else a fan from the face's centre over
+// its corners and the midpoints of its split edges (e0 along u at v = 0, e1 along v at u = 2, e2
+// along u at v = 2, e3 along v at u = 0), where a quarter with a finer leaf across (`fine`, both
+// its edges split then) takes that leaf's diagonal, from its lowest corner, instead. So the
+// triangles match those of the finer leaves' faces, and the mesh has no cracks.
+std::vector<FaceTriangle> faceTriangles(bool e0, bool e1, bool e2, bool e3,
+                                        const std::array<bool, 4>& fine) {
+  std::vector<FaceTriangle> triangles;
+  if (!(e0 || e1 || e2 || e3 || fine[0] || fine[1] || fine[2] || fine[3])) {
+    // The diagonal from the lowest corner, as a finer leaf's face across a quarter has it.
+    triangles.push_back({Corner{0, 0}, Corner{2, 0}, Corner{2, 2}});
+    triangles.push_back({Corner{0, 0}, Corner{2, 2}, Corner{0, 2}});
+  } else {
+    // A fan from the centre over the corners and the midpoints of split edges; a quarter with
+    // a finer leaf across (both its edges split then) takes that leaf's diagonal, from its
+    // lowest corner, instead.
+    std::vector<Corner> ring = {{0, 0}};
+    if (e0) ring.push_back({1, 0});
+    ring.push_back({2, 0});
+    if (e1) ring.push_back({2, 1});
+    ring.push_back({2, 2});
+    if (e2) ring.push_back({1, 2});
+    ring.push_back({0, 2});
+    if (e3) ring.push_back({0, 1});
+    const auto quarterOf = [](const Corner& k) { return (k[0] / 2) | (k[1] / 2) << 1; };
+    const auto isCorner = [](const Corner& k) { return k[0] != 1 && k[1] != 1; };
+    for (size_t i = 0; i < ring.size(); ++i) {
+      const Corner& a = ring[i];
+      const Corner& b = ring[(i + 1) % ring.size()];
+      const bool half = isCorner(a) != isCorner(b);  // a corner and a midpoint
+      const Corner& k = isCorner(a) ? a : b;
+      if (half && fine[size_t(quarterOf(k))]) continue;  // the quarter's own triangles below
+      triangles.push_back({Corner{1, 1}, a, b});
+    }
+    for (int q = 0; q < 4; ++q) {
+      if (!fine[size_t(q)]) continue;
+      const Corner k = {(q & 1) * 2, (q >> 1) * 2};
+      const Corner alongU = {1, k[1]}, alongV = {k[0], 1};  // the two edge midpoints
+      if (k[0] == k[1]) {  // the lowest or highest corner: the diagonal through the centre
+        triangles.push_back({Corner{1, 1}, alongU, k});
+        triangles.push_back({Corner{1, 1}, k, alongV});
+      } else {  // the diagonal between the midpoints
+        triangles.push_back({alongU, k, alongV});
+        triangles.push_back({alongU, alongV, Corner{1, 1}});
+      }
+    }
+  }
+  return triangles;
+}
+
+void Extractor::leaf(uint32_t id) {
+  const SurfaceModel::Leaf& leaf = surface_.leaves()[id];
+  ++stats.leaves;
+  const int level = leaf.level;
+  const int64_t size = int64_t{1} << (kMaxLevel - level), half = size / 2;
+  const auto cell = mortonDecode(leaf.key);
+  const Point origin = {int64_t(cell[0]) * size, int64_t(cell[1]) * size, int64_t(cell[2]) * size};
+  const double unit = std::ldexp(1.0, -kMaxLevel), nudge = std::ldexp(1.0, -kMaxLevel - 2);
+  const auto frameOf = [&](const Point& p) {
+    return glm::dvec3(double(p[0]), double(p[1]), double(p[2])) * unit;
+  };
+  // Which quarters of each face have a finer leaf across them, and which edges touch one (2:1
+  // balance: one level finer at most), from the leaves around points a little off them.
+  std::array<std::array<bool, 4>, 6> fineQuarter{};
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, side = face % 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+    for (int q = 0; q < 4; ++q) {
+      glm::dvec3 p = frameOf(origin);
+      p[axis] += double(side * size) * unit + (side ? nudge : -nudge);
+      p[u] += double((q & 1 ? 3 : 1) * size) * unit / 4;
+      p[v] += double((q & 2 ? 3 : 1) * size) * unit / 4;
+      fineQuarter[size_t(face)][size_t(q)] = levelAt(p) > level;
+    }
+    const auto& f = fineQuarter[size_t(face)];
+    stats.splitFaces += f[0] || f[1] || f[2] || f[3];
+  }
+  // splitEdge[a][i][j]: the edge along axis a at offsets i, j of axes (a+1)%3 and (a+2)%3.
+  bool splitEdge[3][2][2] = {};
+  for (int a = 0; a < 3; ++a)
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) {
+        const int b = (a + 1) % 3, c = (a + 2) % 3;
+        bool split = false;
+        for (int k = 0; k < 8 && !split; ++k) {
+          glm::dvec3 p = frameOf(origin);
+          p[a] += double((k & 1 ? 3 : 1) * size) * unit / 4;
+          p[b] += double(i * size) * unit + (k & 2 ? nudge : -nudge);
+          p[c] += double(j * size) * unit + (k & 4 ? nudge : -nudge);
+          split = levelAt(p) > level;
+        }
+        splitEdge[a][i][j] = split;
+      }
+  // The centre, then a tetrahedron to every triangle of every face.
+  const Point centre = {origin[0] + half, origin[1] + half, origin[2] + half};
+  const Sample centreSample = sample(id, centre);
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, side = face % 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
+    // A face point at (hu, hv) half-edges from its corner.
+    const auto facePoint = [&](int hu, int hv) {
+      Point p = origin;
+      p[size_t(axis)] += side * size;
+      p[size_t(u)] += hu * half;
+      p[size_t(v)] += hv * half;
+      return p;
+    };
+    // The face's edges: along u at v = 0 (e0) and v = 2 (e2), along v at u = 2 (e1) and u = 0
+    // (e3). An edge along u has offsets (v, axis) in splitEdge[u]; one along v (axis, u).
+    const std::vector<FaceTriangle> triangles =
+        faceTriangles(splitEdge[u][0][side], splitEdge[v][side][1], splitEdge[u][1][side],
+                      splitEdge[v][side][0], fineQuarter[size_t(face)]);
+    for (const auto& t : triangles) {
+      std::array<Point, 4> p = {centre, facePoint(t[0][0], t[0][1]), facePoint(t[1][0], t[1][1]),
+                                facePoint(t[2][0], t[2][1])};
+      tetrahedron({centreSample, sample(id, p[1]), sample(id, p[2]), sample(id, p[3])}, p);
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
+  std::vector<uint32_t> order(surface.leaves().size());
+  for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+    return surface.leaves()[a].level < surface.leaves()[b].level;
+  });
+  return order;
+}
+
+TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
+  // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
+  // one's value, which the finer ones' corners there only approximate (quantized).
+  const std::vector<uint32_t> order = leavesCoarseFirst(surface);
+  // Leaf centres are points of the finest grid: leaves of level kMaxLevel have none.
+  if (!order.empty() && surface.leaves()[order.back()].level >= kMaxLevel)
+    throw std::runtime_error("leaves of level " + std::to_string(kMaxLevel) +
+                                " are too fine for the mesh export (at most " +
+                                std::to_string(kMaxLevel - 1) + ")");
+  Extractor extractor(surface);
+  for (uint32_t id : order) extractor.leaf(id);
+  if (stats) *stats = extractor.stats;
+  return std::move(extractor.mesh);
+}
+
+uint64_t openEdges(const TriangleMesh& mesh) {
+  FlatMap<Key128, uint32_t> uses(mesh.triangles.size() * 2);
+  for (const auto& t : mesh.triangles)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
+      ++*uses.insert({std::min(a, b), std::max(a, b)}, 0).first;
+    }
+  uint64_t open = 0;
+  uses.forEach([&](const Key128&, uint32_t count) { open += count == 1; });
+  return open;
+}
+
+}  // namespace iso

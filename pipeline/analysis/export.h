@@ -1,0 +1,64 @@
+// Exports of an .iso file's surface for other tools (specs/pipeline.md §17): a triangle mesh of
+// the zero set, crack-free across levels.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <glm/vec3.hpp>
+#include <span>
+#include <vector>
+
+#include "iso/surface_model.h"
+#include "pipeline/io/point_cloud.h"
+
+namespace iso {
+
+struct MeshStats {
+  uint64_t leaves = 0;      // filled leaves
+  uint64_t tetrahedra = 0;  // the leaves are cut into
+  uint64_t splitFaces = 0;  // leaf faces next to finer leaves
+};
+
+// The zero set as triangles (world coordinates, counter-clockwise seen from outside, where the
+// signed distance is positive), extracted leaf by leaf:
+// - each face of a leaf is triangulated: in quarters where a finer leaf lies across it, fanned
+//   from its centre where one of its edges touches a finer leaf, else by the diagonal from its
+//   lowest corner; both leaves sharing a face triangulate it alike;
+// - the leaf is cut into the tetrahedra joining its centre to those triangles, and each
+//   tetrahedron's zero set (the linear interpolation of its corners' values) is a triangle or two;
+// - the value at a point on leaf boundaries is the coarsest leaf's patch there, so every leaf that
+//   uses the point reads one number; vertices lie on tetrahedron edges and are shared by edge.
+// So the mesh has no cracks, also where leaves of different levels meet (2:1 balanced, as the
+// pipeline writes them). A value of exactly 0 counts as a tiny positive one: the mesh is that of a
+// field without zeros, edge-manifold, and closed where the file's zero set stays inside its filled
+// leaves. Throws std::runtime_error for leaves of level kMaxLevel (the pipeline makes none).
+TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr);
+
+// The surface's leaves, coarsest first (stable): where leaves of several levels meet, the exports
+// take the first one's value.
+std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface);
+
+// The edges used by one triangle only: where the surface is open (or leaves the filled leaves).
+uint64_t openEdges(const TriangleMesh& mesh);
+
+struct VdbStats {
+  uint64_t activeVoxels = 0;
+  double voxelSize = 0.0;  // world units: the finest leaf's edge
+  int level = 0;           // the finest leaves' level
+};
+
+// The surface as an OpenVDB narrow-band level set (pipeline/analysis/export_vdb.cpp): a float grid
+// named "surface" of class level set, voxel size the finest leaf's edge, voxel (i, j, k) at the
+// frame's origin + (i, j, k)·size (the lattice points of the finest leaves). Every lattice point of
+// a filled leaf whose signed distance (world units; the coarsest leaf's value where leaves meet) is
+// within `bandVoxels` voxels of 0 is active; the rest of space takes ±bandVoxels·size by a signed
+// flood fill (negative inside). Written atomically. Throws iso::FileError when it cannot write.
+VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path,
+                  double bandVoxels = 3.0);
+
+// The first float grid of a .vdb file, trilinearly interpolated at world positions (OpenVDB's box
+// sampler): for round trips and for measuring level sets made by other tools. Throws
+// iso::FileError for files OpenVDB cannot read or without a float grid.
+std::vector<double> sampleVdb(const std::filesystem::path& path, std::span<const glm::dvec3> world);
+
+}  // namespace iso

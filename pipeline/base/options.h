@@ -1,0 +1,67 @@
+// The options of a conversion, for every stage: the command line's `iso convert` options
+// (tools/iso/cmd_convert.cpp) and a few that only tests change. Validated by validateOptions
+// (pipeline/convert/convert.h); written into the file's "parameters".
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+
+namespace iso {
+
+enum class OrientMode { Auto, Up, Propagate };
+// The local surface fitted at a corner: the paper's plane, or an algebraic sphere (APSS,
+// Guennebaud & Gross 2007), which has no curvature bias (specs/pipeline.md measures both).
+enum class FitMode { Plane, Sphere };
+
+// Where a texture is sampled: at every point (its colors then reach the corners as point colors
+// do, averaged by the signed distance's weights), or at every corner's projection onto the zero
+// set (the image's detail down to the leaf size, without the points' averaging).
+enum class TextureAt { Points, Corners };
+
+struct TextureOptions {
+  std::filesystem::path image;  // empty: no texture
+  double scale = 0.0;           // world units one repeat of the image spans; 0: the frame's size
+  double sharpness = 4.0;       // P of the blend weights |n·axis|^P
+  TextureAt at = TextureAt::Corners;
+  bool enabled() const { return !image.empty(); }
+};
+
+struct OcclusionOptions {
+  bool enabled = false;
+  int rays = 32;        // per corner
+  double radius = 0.0;  // world units a ray looks for the surface; 0: a tenth of the frame's size
+};
+
+struct BuildOptions {
+  int neighbors = 10;      // k of the k-NN radius r_i (and of PCA normals)
+  double smoothing = 1.0;  // σ_i = smoothing · r_i
+  FitMode fit = FitMode::Sphere;
+  OrientMode orient = OrientMode::Auto;
+  uint32_t leafPoints = 8;      // a node with more points may be subdivided
+  // A node with more points is subdivided without a patch test. Not a command-line option: tests
+  // lower it so that small scans have chunks many tested nodes wide, as large scans do.
+  uint32_t maxTestedPoints = 4096;
+  // A node wider than this many mean spacings is subdivided without a patch test, so that no test
+  // reads points much farther than that from its node (out-of-core chunks need reads of bounded
+  // reach). Not a command-line option.
+  double maxTestedEdge = 128.0;
+  int maxDepth = 20;            // deepest octree level (at most 20)
+  double tolerance = 0.1;       // allowed patch error, in mean point spacings
+  int normalBits = 8;           // octahedral normal bits per component: 8 or 12
+  uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
+  int zstdLevel = 3;
+  bool removeOutliers = true;
+  // Points per orientation block (orientNormals); part of the result, so a parameter.
+  uint32_t orientBlockPoints = 1u << 20;
+  TextureOptions texture;      // a triplanar texture baked into the colors (output/texture.h)
+  OcclusionOptions occlusion;  // ambient occlusion baked into the corners (output/occlusion.h)
+  // The input points kept in points chunks (output/keep_points.h), positions to 2^-pointBits of the
+  // frame.
+  bool keepPoints = false;
+  int pointBits = 24;
+  // Points per points chunk, about (kPointsPerChunk). Not a command-line option: tests lower it
+  // so that small scans have many chunks.
+  uint32_t keptPointsPerChunk = 1u << 16;
+};
+
+}  // namespace iso

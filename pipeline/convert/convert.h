@@ -1,0 +1,76 @@
+// Points to an .iso file: the conversion driver over the stages of points/, octree/ and output/,
+// in core or out of core, with its report (per-stage time, points/s, memory, octree shape, sizes,
+// accuracy, visibility).
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+
+#include "iso/error.h"
+#include "pipeline/base/options.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/io/point_cloud.h"
+
+namespace iso {
+
+// Input that does not define a surface (no points, fewer than 3 distinct ones, all on a line).
+class ConvertError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Where the points came from, for the report and the file's metadata.
+struct ConvertSource {
+  nlohmann::json inputs =
+      nlohmann::json::array();    // e.g. [{"file": ..., "format": ..., "points": ...}]
+  double readSeconds = 0.0;       // reported as the "read" stage
+  uint64_t nonFiniteDropped = 0;  // points the readers dropped
+  // Called when a stage ends, with its name and duration.
+  std::function<void(const std::string& stage, double seconds)> onStage;
+  ProgressReporter* progress = nullptr;  // shows each stage's progress when set
+};
+
+// Convert the points into the .iso file at output (written atomically). Returns the report. The
+// file's metadata holds it under "report" (with "inputs", "parameters" and "generator") without
+// the parts that vary from run to run (stage times, points/s, peak memory): the output bytes
+// depend only on the input and the options.
+nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path& output,
+                            const BuildOptions& options, const ConvertSource& source = {});
+
+class RawSpill;
+class SpillDirectory;
+// How an out-of-core conversion uses memory (specs/pipeline.md §15).
+struct OutOfCoreBudget {
+  uint64_t maxChunkPoints = 1u << 20;  // points per chunk of the point stages (with halos)
+  // Resident bytes the process is kept near by dropping spilled arrays' pages (SpillArea); 0:
+  // no array is spilled.
+  uint64_t memory = 0;
+  uint64_t minSpilledBytes = uint64_t{2} << 20;  // smaller arrays stay in memory
+  // The budget for `--memory`: chunks of memory / 600 points (the point stages hold about 600
+  // bytes per loaded point: positions, attributes, neighbours, their graph, chunk and halo
+  // together), and every per-point array of memory / 32 or more spilled.
+  static OutOfCoreBudget forMemory(uint64_t memory);
+};
+// The same for points streamed to disk (pipeline/outofcore/spill.h): the point stages run chunk by
+// chunk, chunks of at most budget.maxChunkPoints points with their halos, and the prepared points
+// (and their index) live in spilled arrays that the octree stages read in Morton order (the output
+// is the same as convertToIso's for the same points); the report adds "out_of_core" (chunks, halos,
+// temporary and spilled bytes). With budget.memory set, one such conversion runs at a time in a
+// process (the spill area and its pager are the process's).
+nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
+                              const OutOfCoreBudget& budget, const std::filesystem::path& output,
+                              const BuildOptions& options, const ConvertSource& source = {});
+
+// Throws UsageError naming the option (as on the command line) that is out of range.
+void validateOptions(const BuildOptions& options);
+
+// The options as JSON (the file's "parameters").
+nlohmann::json optionsJson(const BuildOptions& options);
+
+// Peak resident memory of this process so far, in bytes (VmHWM).
+uint64_t peakRssBytes();
+
+}  // namespace iso

@@ -1,0 +1,108 @@
+// The signed distance sampled at the corners of the octree's filled leaves and of its internal
+// nodes (levels of detail), one file each:
+//
+//   corners.cpp   leaf corner sampling: each distinct corner evaluated once
+//   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
+//   close.cpp     closure: empty cells the surface runs into are filled, until none is left
+//   lod.cpp       level of detail: corners of internal nodes from point proxies, node errors
+//
+// The octree and the field depend on each other (the octree's patch tests fill the field; the
+// field follows the tree's leaves), hence one folder. The math is in specs/pipeline.md.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <utility>
+
+#include "iso/flat_map.h"
+#include "iso/format.h"
+#include "iso/surface.h"
+#include "pipeline/base/buffers.h"
+#include "pipeline/base/options.h"
+#include "pipeline/octree/octree.h"
+#include "pipeline/points/points.h"
+
+static_assert(iso::KeyIndex<iso::Key128>::kNone == iso::kNoNode);
+
+namespace iso {
+
+// ---- pipeline/octree/corners.cpp
+// Values at grid points, each evaluated once: the corners of the nodes the octree tested, then of
+// every filled leaf.
+inline constexpr uint8_t kUnusedCorner = 0xff;  // coarsestLevel of a corner no filled leaf uses
+Key128 gridKey(const GridPoint& p);
+struct CornerField {
+  CornerField() = default;
+  // A table for about `expected` corners, and arrays reserved for `reserved` (address space:
+  // pages count once written; below that the arrays never grow by copying).
+  CornerField(size_t expected, size_t reserved);
+  // Spillable (pipeline/base/buffers.h): the entries are made in the key order of the leaves using
+  // them, which the stages that read them follow; the hash table stays in memory.
+  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // gridKey → entry
+  SpillVector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
+  SpillVector<CornerSample> value;
+  uint32_t find(const GridPoint& p) const;
+  uint32_t find(const Key128& key) const { return index.find(key); }
+  GridPoint point(uint32_t entry) const;
+  size_t size() const { return index.size(); }
+  // The entry of key, added when new (value to be set, no leaf using it); second: whether added.
+  std::pair<uint32_t, bool> insert(const Key128& key);
+};
+// Set the coarsest levels of a field's corners from the tree's filled leaves now (kUnusedCorner
+// for corners no filled leaf uses, such as those of leaves split since); returns the number of
+// corners in use.
+size_t refreshCornerLevels(CornerField& field, const Octree& tree);
+// Evaluate the signed distance at the field's entries (in parallel).
+void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
+                     const SdfEvaluator& sdf);
+// Add the corners of filled leaves to a field (their coarsest levels updated), evaluating those it
+// does not hold yet.
+void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
+                    const SdfEvaluator& sdf);
+
+// ---- pipeline/octree/snap.cpp
+struct HangingCorner {
+  uint32_t corner;                    // entry in the CornerField
+  std::array<uint32_t, 4> sources{};  // the coarser leaf's corners it interpolates
+  uint8_t sourceCount = 0;            // 2 (edge) or 4 (face)
+};
+using HangingCorners = SpillVector<HangingCorner>;  // in the field's entry order, then by level
+HangingCorners findHangingCorners(const Octree& tree, const CornerField& field);
+// Set each hanging corner to the mean of its sources, coarse levels first.
+void snapHangingCorners(CornerField& field, const HangingCorners& hanging);
+
+// ---- pipeline/octree/close.cpp
+struct Closure {
+  CornerField corners;
+  HangingCorners hanging;
+  size_t cornersInUse = 0;  // corners of the final filled leaves
+  size_t filled = 0;        // empty cells filled because the surface ran into them
+  size_t passes = 0;
+};
+// Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
+// which the zero set of a filled leaf runs (sharp edges, repaired normals), until none is left:
+// near the points the surface never leaves the filled leaves, so rays cannot slip out of it.
+// `corners` holds the values evaluated while building; it becomes the closure's field.
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                            CornerField&& corners);
+
+// ---- pipeline/octree/lod.cpp
+// Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
+struct LodField {
+  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // lodKey → entry
+  SpillVector<CornerSample> value;
+  uint32_t find(uint8_t level, const GridPoint& p) const;
+  GridPoint point(uint32_t entry) const;
+};
+Key128 lodKey(uint8_t level, const GridPoint& p);
+// pointsSdfDone, when set, is called once pointsSdf is no longer needed (before any proxies are
+// made), so that it and its index can be freed.
+LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
+                          const BuildOptions& options,
+                          const std::function<void()>& pointsSdfDone = {});
+// The largest distance of the points below an internal node to the node's own patch.
+float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
+                     uint32_t node);
+}  // namespace iso

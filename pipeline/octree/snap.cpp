@@ -1,0 +1,97 @@
+// Hanging corners (specs/pipeline.md, "Crack-free by construction"): a corner of a leaf that lies
+// inside a face or an edge of a filled leaf one level coarser takes the bilinear (face) or linear
+// (edge) interpolation of that leaf's corners there. Both trilinear patches then agree exactly on
+// the shared face, so the zero set has no cracks. After 2:1 balance only a leaf exactly one level
+// coarser can own such a face or edge.
+#include <algorithm>
+#include <glm/geometric.hpp>
+#include <numeric>
+#include <optional>
+
+#include "pipeline/base/collect.h"
+#include "pipeline/octree/field.h"
+#include "pipeline/octree/octree.h"
+
+namespace iso {
+namespace {
+
+// The hanging relation of one corner, if it has one.
+std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerField& field,
+                                             uint32_t corner) {
+  const uint8_t level = field.coarsestLevel[corner];
+  if (level == 0 || level == kUnusedCorner) return std::nullopt;
+  const GridPoint p = field.point(corner);
+  const uint32_t coarse = 1u << (kMaxLevel - level + 1);  // coarser cell size in grid units
+  const std::array<uint32_t, 3> c = {p.x, p.y, p.z};
+  std::array<bool, 3> onPlane{};
+  int inside = 0;  // axes along which p is strictly inside a coarser cell
+  for (int a = 0; a < 3; ++a) {
+    onPlane[size_t(a)] = c[size_t(a)] % coarse == 0;
+    inside += onPlane[size_t(a)] ? 0 : 1;
+  }
+  if (inside == 0 || inside == 3) return std::nullopt;  // a coarser grid point, or a cell centre
+  // The coarser cells that have p on their boundary: on-plane axes give two choices each.
+  for (int choice = 0; choice < 4; ++choice) {
+    std::array<int64_t, 3> cell{};
+    int bit = 0;
+    for (int a = 0; a < 3; ++a) {
+      cell[size_t(a)] = int64_t(c[size_t(a)] / coarse);
+      if (onPlane[size_t(a)]) cell[size_t(a)] -= (choice >> bit++) & 1;
+    }
+    if (choice >> bit) break;  // all combinations tried
+    const int64_t limit = int64_t{1} << (level - 1);
+    if (std::any_of(cell.begin(), cell.end(), [&](int64_t v) { return v < 0 || v >= limit; }))
+      continue;
+    const uint64_t key = mortonEncode(uint32_t(cell[0]), uint32_t(cell[1]), uint32_t(cell[2]));
+    const OctreeNode& node = tree.nodes[tree.find(uint8_t(level - 1), key)];
+    if (!node.isFilled() || node.level != level - 1) continue;
+    HangingCorner h{corner, {}, 0};
+    for (int k = 0; k < kCorners; ++k) {  // the coarse leaf's corners on the same face or edge
+      const GridPoint q = cornerPoint(node.level, node.key, k);
+      const std::array<uint32_t, 3> qc = {q.x, q.y, q.z};
+      bool same = true;
+      for (int a = 0; a < 3; ++a)
+        same = same && (!onPlane[size_t(a)] || qc[size_t(a)] == c[size_t(a)]);
+      if (same) h.sources[h.sourceCount++] = field.find(q);
+    }
+    return h;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+HangingCorners findHangingCorners(const Octree& tree, const CornerField& field) {
+  HangingCorners hanging = collectInParallel<HangingCorner, HangingCorners>(
+      field.size(), 1 << 14, [&](size_t i, std::vector<HangingCorner>& out) {
+        if (auto h = hangingRelation(tree, field, uint32_t(i))) out.push_back(*h);
+      });
+  // Coarse first: a source may itself hang from a leaf another level up.
+  std::stable_sort(hanging.begin(), hanging.end(),
+                   [&](const HangingCorner& a, const HangingCorner& b) {
+                     return field.coarsestLevel[a.corner] < field.coarsestLevel[b.corner];
+                   });
+  return hanging;
+}
+
+void snapHangingCorners(CornerField& field, const HangingCorners& hanging) {
+  for (const HangingCorner& h : hanging) {
+    CornerSample sum;
+    sum.distance = 0.0f;
+    sum.normal = glm::vec3(0.0f);
+    for (int s = 0; s < h.sourceCount; ++s) {
+      const CornerSample& v = field.value[h.sources[size_t(s)]];
+      sum.distance += v.distance;
+      sum.normal += v.normal;
+      sum.color += v.color;
+    }
+    const float inv = 1.0f / float(h.sourceCount);
+    CornerSample& out = field.value[h.corner];
+    out.distance = sum.distance * inv;
+    const float length = glm::length(sum.normal);
+    out.normal = length > 0.0f ? sum.normal / length : out.normal;
+    out.color = sum.color * inv;
+  }
+}
+
+}  // namespace iso

@@ -1,0 +1,551 @@
+// The point stages chunk by chunk (specs/pipeline.md, "Out of core"). Each chunk is loaded with
+// the points of a box around it. A point's k nearest neighbours are exact when its k-NN ball
+// lies inside the box; a chunk's results are exact when that holds for every point within a few
+// k-NN hops of its own points (radii and outliers look at neighbours' k-NN distances, the repair
+// of flipped input normals votes over four rounds). Otherwise the box widens and the chunk runs
+// again. Orientation blocks nest in chunks, so each block propagates exactly as in core; the
+// components are aligned across blocks once all chunks are done.
+#include "pipeline/outofcore/outofcore.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/common.hpp>
+#include <limits>
+
+#include "iso/check.h"
+#include "pipeline/base/options.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/points/points.h"
+
+namespace iso {
+namespace {
+
+// Whether point i's k-NN ball lies inside the box [lo, hi] (frame units); faces of the box on
+// the frame cube's faces bound nothing.
+bool ballInside(const glm::vec3& p, float radius, const glm::dvec3& lo, const glm::dvec3& hi) {
+  const double r = double(radius) * (1.0 + 1e-5) + 1e-9;  // float rounding of the distance
+  for (int a = 0; a < 3; ++a) {
+    if (lo[a] > 0.0 && double(p[a]) - r <= lo[a]) return false;
+    if (hi[a] < 1.0 && double(p[a]) + r >= hi[a]) return false;
+  }
+  return true;
+}
+
+// What one chunk added to the accumulated results, so that it can be reused.
+struct ChunkRecord {
+  size_t pointBegin = 0, pointEnd = 0;  // in Accumulated::points
+  uint32_t componentBegin = 0, componentEnd = 0;
+  size_t boundaryBegin = 0, boundaryEnd = 0;  // in Accumulated::boundarySource
+  size_t duplicates = 0, blocks = 0;
+  NormalStats normals;
+  glm::dvec3 lo{0.0}, hi{0.0};  // the box it was loaded with
+};
+
+struct Accumulated {
+  PointSet points;
+  SpillVector<float> firstDistance;  // per point: distance to its nearest neighbour
+  // Points with a neighbour in another orientation component (or loaded in a halo): their
+  // roughness is computed again, and their edges align the components, once all chunks are done.
+  SpillVector<uint32_t> boundarySource;                 // input index of each
+  UninitializedSpillVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
+  size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
+  OrientationComponents components;                // `of` per point in `points`
+  std::vector<ChunkRecord> chunks;
+  std::vector<uint32_t> outlierSources;
+  uint64_t haloPoints = 0, widenings = 0, maxLoaded = 0;
+};
+
+void appendRange(PointSet& to, const PointSet& from, uint32_t begin, uint32_t end) {
+  const auto add = [&](auto& dst, const auto& src) {
+    if (!src.empty()) dst.insert(dst.end(), src.begin() + begin, src.begin() + end);
+  };
+  add(to.position, from.position);
+  add(to.normal, from.normal);
+  add(to.color, from.color);
+  add(to.weight, from.weight);
+  add(to.radius, from.radius);
+  add(to.roughness, from.roughness);
+  add(to.key, from.key);
+  add(to.source, from.source);
+}
+
+// Room for n points (an upper bound: duplicates merge), so that appending never doubles.
+void reserveFor(Accumulated& a, size_t n, const PointLayout& layout) {
+  PointSet& p = a.points;
+  p.position.reserve(n);
+  p.normal.reserve(n);  // estimated where the input has none
+  if (layout.colors) p.color.reserve(n);
+  p.weight.reserve(n);
+  p.radius.reserve(n);
+  p.key.reserve(n);
+  p.source.reserve(n);
+  a.components.of.reserve(n);
+  p.roughness.reserve(n);
+  a.firstDistance.reserve(n);
+}
+
+// Rebuilds accumulated results chunk by chunk in place: each chunk's results are written at a
+// cursor that never passes the chunk's old position (a chunk prepared again has its old points
+// less the outliers), so the old results and the new ones are never held twice.
+class InPlaceResults {
+ public:
+  explicit InPlaceResults(Accumulated& target) : to_(target) {}
+
+  // Write the results of `record` in `from` (the target itself, or a chunk prepared again).
+  void place(const Accumulated& from, ChunkRecord record) {
+    const size_t begin = record.pointBegin, end = record.pointEnd, n = end - begin;
+    const auto put = [&](auto& dst, const auto& src, size_t stride) {
+      if (src.empty()) return;
+      ISO_CHECK(cursor_ * stride + n * stride <= dst.size());
+      std::copy(src.begin() + ptrdiff_t(begin * stride), src.begin() + ptrdiff_t(end * stride),
+                dst.begin() + ptrdiff_t(cursor_ * stride));  // forward: safe moving down
+    };
+    PointSet& to = to_.points;
+    const PointSet& p = from.points;
+    put(to.position, p.position, 1);
+    put(to.normal, p.normal, 1);
+    put(to.color, p.color, 1);
+    put(to.weight, p.weight, 1);
+    put(to.radius, p.radius, 1);
+    put(to.roughness, p.roughness, 1);
+    put(to.key, p.key, 1);
+    put(to.source, p.source, 1);
+    put(to_.firstDistance, from.firstDistance, 1);
+    const size_t firstBoundary = boundarySource_.size();
+    boundarySource_.insert(boundarySource_.end(),
+                           from.boundarySource.begin() + ptrdiff_t(record.boundaryBegin),
+                           from.boundarySource.begin() + ptrdiff_t(record.boundaryEnd));
+    boundaryNeighbor_.insert(
+        boundaryNeighbor_.end(),
+        from.boundaryNeighbor.begin() + ptrdiff_t(record.boundaryBegin * from.k),
+        from.boundaryNeighbor.begin() + ptrdiff_t(record.boundaryEnd * from.k));
+    record.boundaryBegin = firstBoundary;
+    record.boundaryEnd = boundarySource_.size();
+    const auto firstComponent = uint32_t(anchored_.size());
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t of = from.components.of[begin + i];
+      to_.components.of[cursor_ + i] =
+          of == kNoNode ? kNoNode : of - record.componentBegin + firstComponent;
+    }
+    anchored_.insert(anchored_.end(), from.components.anchored.begin() + record.componentBegin,
+                     from.components.anchored.begin() + record.componentEnd);
+    seedVote_.insert(seedVote_.end(), from.components.seedVote.begin() + record.componentBegin,
+                     from.components.seedVote.begin() + record.componentEnd);
+    record.pointBegin = cursor_;
+    record.pointEnd = cursor_ + n;
+    record.componentBegin = firstComponent;
+    record.componentEnd = uint32_t(anchored_.size());
+    records_.push_back(record);
+    cursor_ += n;
+  }
+
+  // Cut the target to the results placed.
+  void finish() {
+    const auto cut = [&](auto& v, size_t stride) {
+      if (!v.empty()) v.resize(cursor_ * stride);
+    };
+    PointSet& to = to_.points;
+    cut(to.position, 1);
+    cut(to.normal, 1);
+    cut(to.color, 1);
+    cut(to.weight, 1);
+    cut(to.radius, 1);
+    cut(to.roughness, 1);
+    cut(to.key, 1);
+    cut(to.source, 1);
+    cut(to_.firstDistance, 1);
+    to_.boundarySource = std::move(boundarySource_);
+    to_.boundaryNeighbor = std::move(boundaryNeighbor_);
+    cut(to_.components.of, 1);
+    to_.components.anchored = std::move(anchored_);
+    to_.components.seedVote = std::move(seedVote_);
+    to_.chunks = std::move(records_);
+  }
+
+ private:
+  Accumulated& to_;
+  size_t cursor_ = 0;
+  std::vector<uint8_t> anchored_;
+  std::vector<float> seedVote_;
+  std::vector<ChunkRecord> records_;
+  SpillVector<uint32_t> boundarySource_;
+  UninitializedSpillVector<uint32_t> boundaryNeighbor_;
+};
+
+// Drop the points that `keep` leaves out (far outliers found earlier).
+void dropExcluded(LoadedPoints& loaded, const std::vector<uint8_t>* keep) {
+  if (keep == nullptr) return;
+  size_t out = 0;
+  for (size_t i = 0; i < loaded.source.size(); ++i) {
+    if (!(*keep)[loaded.source[i]]) continue;
+    loaded.source[out] = loaded.source[i];
+    loaded.cloud.positions[out] = loaded.cloud.positions[i];
+    if (loaded.cloud.hasNormals()) loaded.cloud.normals[out] = loaded.cloud.normals[i];
+    if (loaded.cloud.hasColors()) loaded.cloud.colors[out] = loaded.cloud.colors[i];
+    ++out;
+  }
+  loaded.source.resize(out);
+  loaded.cloud.positions.resize(out);
+  if (loaded.cloud.hasNormals()) loaded.cloud.normals.resize(out);
+  if (loaded.cloud.hasColors()) loaded.cloud.colors.resize(out);
+}
+
+class ChunkRunner {
+ public:
+  ChunkRunner(const Distribution& distribution, const Frame& frame, const BuildOptions& options,
+              bool findingOutliers, bool inputNormals, const std::vector<uint8_t>* keep = nullptr)
+      : distribution_(distribution),
+        frame_(frame),
+        options_(options),
+        findingOutliers_(findingOutliers),
+        hops_(inputNormals ? 4 : 1),
+        keep_(keep) {}
+
+  void run(const SpillChunk& chunk, Accumulated& out) {
+    LoadedPoints own = distribution_.load(chunk);
+    dropExcluded(own, keep_);
+    const double cell = std::ldexp(1.0, -chunk.level);
+    const std::array<uint32_t, 3> c = mortonDecode(chunk.key);
+    const glm::dvec3 cellLo(c[0] * cell, c[1] * cell, c[2] * cell);
+    // A first guess of the halo: the k-NN radius of points spread over twice the cell's face
+    // area, times the hops needed, with room to spare; widened when it is not enough.
+    const double radius = std::sqrt(double(options_.neighbors) * 2.0 * cell * cell /
+                                    (3.14159 * double(std::max<size_t>(own.source.size(), 1))));
+    double width = std::min(cell / 8.0, 2.0 * (hops_ + 1) * radius);
+    for (;;) {
+      const glm::dvec3 lo = glm::max(cellLo - width, glm::dvec3(0.0));
+      const glm::dvec3 hi = glm::min(cellLo + cell + width, glm::dvec3(1.0));
+      const bool everything = lo == glm::dvec3(0.0) && hi == glm::dvec3(1.0);
+      LoadedPoints halo = distribution_.loadBox(lo, hi, chunk);
+      dropExcluded(halo, keep_);
+      bool done = false;
+      {
+        const ProgressMute mute;  // the stage counts whole chunks, not its inner steps
+        done = tryChunk(chunk, own, halo, lo, hi, everything, out);
+      }
+      if (done) {
+        progressAdvance(own.source.size());
+        return;
+      }
+      ++out.widenings;
+      width *= 2.0;
+    }
+  }
+
+ private:
+  bool tryChunk(const SpillChunk& chunk, const LoadedPoints& own, const LoadedPoints& halo,
+                const glm::dvec3& lo, const glm::dvec3& hi, bool everything, Accumulated& out) {
+    PointCloud cloud = own.cloud;
+    const auto append = [](auto& dst, const auto& src) {
+      dst.insert(dst.end(), src.begin(), src.end());
+    };
+    append(cloud.positions, halo.cloud.positions);
+    append(cloud.normals, halo.cloud.normals);
+    append(cloud.colors, halo.cloud.colors);
+    PointSet points = makePointSet(cloud, frame_);
+    points.source.assign(own.source.begin(), own.source.end());
+    append(points.source, halo.source);
+    sortByKey(points);
+    mergeDuplicates(points);
+    // The chunk's own points: its Morton key range.
+    const int shift = 3 * (kMaxLevel - chunk.level);
+    const auto ownBegin =
+        uint32_t(std::lower_bound(points.key.begin(), points.key.end(), chunk.key << shift) -
+                 points.key.begin());
+    const auto ownEnd =
+        uint32_t(std::lower_bound(points.key.begin(), points.key.end(), (chunk.key + 1) << shift) -
+                 points.key.begin());
+    const PointIndex index(points.position);
+    Neighbors neighbors = findNeighbors(points, index, options_.neighbors);
+    if (!everything && !isExact(points, neighbors, ownBegin, ownEnd, lo, hi)) return false;
+    ChunkRecord record;
+    record.pointBegin = out.points.size();
+    record.componentBegin = record.componentEnd = uint32_t(out.components.anchored.size());
+    record.lo = lo;
+    record.hi = hi;
+    record.boundaryBegin = record.boundaryEnd = out.boundarySource.size();
+    if (neighbors.k == 0) {  // one distinct point in the whole input: no surface (said later)
+      points.roughness.assign(points.size(), 0.0f);  // as in core: no neighbours, no roughness
+      appendRange(out.points, points, ownBegin, ownEnd);
+      out.firstDistance.insert(out.firstDistance.end(), ownEnd - ownBegin, 0.0f);
+      out.components.of.insert(out.components.of.end(), ownEnd - ownBegin, kNoNode);
+      record.pointEnd = out.points.size();
+      out.chunks.push_back(record);
+      return true;
+    }
+
+    out.maxLoaded = std::max<uint64_t>(out.maxLoaded, points.size());
+    out.haloPoints += points.size() - (ownEnd - ownBegin);
+    record.duplicates = own.source.size() - (ownEnd - ownBegin);
+    const size_t k = size_t(neighbors.k);
+    out.k = k;
+    if (findingOutliers_) {
+      const std::vector<uint8_t> flagged = findOutliers(points, neighbors);
+      for (uint32_t i = ownBegin; i < ownEnd; ++i)
+        if (flagged[i]) out.outlierSources.push_back(points.source[i]);
+    }
+    estimateRadii(points, neighbors);
+    for (uint32_t i = ownBegin; i < ownEnd; ++i)
+      out.firstDistance.push_back(neighbors.distance[i * k]);
+    std::vector<uint8_t> wasEstimated(points.size(), 0);
+    for (size_t i = 0; i < points.size(); ++i)
+      wasEstimated[i] = points.normal.empty() || points.normal[i] == glm::vec3(0.0f);
+    record.normals.estimated = size_t(
+        std::count(wasEstimated.begin() + ownBegin, wasEstimated.begin() + ownEnd, uint8_t{1}));
+    estimateNormals(points, neighbors);
+    record.normals.flipped =
+        repairFlippedNormals(points, neighbors, wasEstimated, ownBegin, ownEnd);
+    OrientationComponents local;
+    local.of.assign(points.size(), kNoNode);
+    if (options_.orient == OrientMode::Up) {
+      orientUp(points, wasEstimated, ownBegin, ownEnd);
+    } else {
+      const OrientationBlocks blocks =
+          orientationBlocks(points, options_.orientBlockPoints, ownBegin, ownEnd, chunk.level);
+      local.anchored.swap(out.components.anchored);
+      local.seedVote.swap(out.components.seedVote);
+      propagateInBlocks(points, neighbors, wasEstimated, blocks, local);
+      local.anchored.swap(out.components.anchored);
+      local.seedVote.swap(out.components.seedVote);
+      record.blocks = blocks.size();
+    }
+
+    // Roughness compares normals: final here for neighbours in the point's own component (whole
+    // components flip together later); points with others keep their edges for later.
+    points.roughness.assign(points.size(), 0.0f);
+    std::vector<uint8_t> boundary(points.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(ownBegin, ownEnd, 4096),
+                      [&](const tbb::blocked_range<uint32_t>& r) {
+                        for (uint32_t i = r.begin(); i < r.end(); ++i) {
+                          const uint32_t* near = neighbors.index.data() + size_t(i) * k;
+                          for (size_t e = 0; e < k && !boundary[i]; ++e)
+                            boundary[i] = near[e] < ownBegin || near[e] >= ownEnd ||
+                                          local.of[near[e]] != local.of[i];
+                          if (!boundary[i]) points.roughness[i] = roughnessOf(points, i, near, k);
+                        }
+                      });
+    for (uint32_t i = ownBegin; i < ownEnd; ++i) {
+      if (!boundary[i]) continue;
+      out.boundarySource.push_back(points.source[i]);
+      for (size_t e = 0; e < k; ++e)
+        out.boundaryNeighbor.push_back(points.source[neighbors.index[i * k + e]]);
+    }
+    record.boundaryEnd = out.boundarySource.size();
+    appendRange(out.points, points, ownBegin, ownEnd);
+    out.components.of.insert(out.components.of.end(), local.of.begin() + ownBegin,
+                             local.of.begin() + ownEnd);
+    record.pointEnd = out.points.size();
+    record.componentEnd = uint32_t(out.components.anchored.size());
+    out.chunks.push_back(record);
+    return true;
+  }
+
+  // Whether every point within hops_ k-NN hops of the own points has its k-NN ball in the box.
+  bool isExact(const PointSet& points, const Neighbors& neighbors, uint32_t ownBegin,
+               uint32_t ownEnd, const glm::dvec3& lo, const glm::dvec3& hi) const {
+    const size_t k = size_t(neighbors.k);
+    if (k < size_t(options_.neighbors)) return false;  // too few points loaded
+    std::vector<uint8_t> reached(points.size(), 0);
+    std::vector<uint32_t> frontier;
+    for (uint32_t i = ownBegin; i < ownEnd; ++i) {
+      reached[i] = 1;
+      frontier.push_back(i);
+    }
+    for (int hop = 0; hop <= hops_; ++hop) {
+      std::vector<uint32_t> next;
+      for (uint32_t i : frontier) {
+        if (!ballInside(points.position[i], neighbors.distance[i * k + k - 1], lo, hi))
+          return false;
+        if (hop == hops_) continue;
+        for (size_t e = 0; e < k; ++e) {
+          const uint32_t j = neighbors.index[i * k + e];
+          if (!reached[j]) {
+            reached[j] = 1;
+            next.push_back(j);
+          }
+        }
+      }
+      frontier.swap(next);
+    }
+    return true;
+  }
+
+  const Distribution& distribution_;
+  const Frame& frame_;
+  const BuildOptions& options_;
+  bool findingOutliers_;
+  int hops_;
+  const std::vector<uint8_t>* keep_;
+};
+
+// After outliers were removed: the chunks whose boxes held one run again (the others would load
+// the same points and give the same results) into a small set of results, then every chunk's
+// results are placed in order over the old ones. Returns how many ran again.
+size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
+                           const BuildOptions& options, bool inputNormals,
+                           const std::vector<uint8_t>& keep,
+                           const std::vector<glm::vec3>& outliers, Accumulated& done) {
+  Accumulated again;
+  ChunkRunner rerun(distribution, frame, options, false, inputNormals, &keep);
+  std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
+  size_t preparedAgain = 0;
+  for (size_t c = 0; c < distribution.chunks().size(); ++c) {
+    const ChunkRecord& record = done.chunks[c];
+    const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
+      return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
+             u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
+    });
+    if (touched) {
+      againOf[c] = again.chunks.size();
+      rerun.run(distribution.chunks()[c], again);
+      ++preparedAgain;
+    } else {
+      progressAdvance(distribution.chunks()[c].size());
+    }
+  }
+  const std::vector<ChunkRecord> old = done.chunks;
+  InPlaceResults results(done);
+  for (size_t c = 0; c < old.size(); ++c)
+    if (againOf[c] == kNoNode)
+      results.place(done, old[c]);
+    else
+      results.place(again, again.chunks[againOf[c]]);
+  results.finish();
+  done.haloPoints += again.haloPoints;
+  done.widenings += again.widenings;
+  done.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
+  return preparedAgain;
+}
+
+// The chunks' points as one set: the boundary points and their neighbours become indices into
+// it, the orientation components are aligned across chunks (when `align`), and the boundary
+// points' roughness, which compares normals across components, is computed after that.
+void joinChunks(Accumulated& done, uint64_t rawSize, bool align) {
+  PointSet& points = done.points;
+  SpillVector<uint32_t> ordinal(rawSize, kNoNode);
+  for (size_t i = 0; i < points.size(); ++i) ordinal[points.source[i]] = uint32_t(i);
+  SpillVector<uint32_t>& from = done.boundarySource;
+  UninitializedSpillVector<uint32_t>& near = done.boundaryNeighbor;
+  for (uint32_t& s : from) s = ordinal[s];
+  for (uint32_t& s : near) s = ordinal[s];
+  ordinal = {};
+  if (align) alignComponents(points.normal, done.components, from, near, done.k);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, from.size(), 1024),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t b = r.begin(); b < r.end(); ++b)
+                        points.roughness[from[b]] =
+                            roughnessOf(points, from[b], near.data() + b * done.k, done.k);
+                    });
+}
+
+// Every k-th kept input point (world units), for the accuracy measure, as in core.
+std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<uint8_t>& keep) {
+  size_t kept = 0;
+  for (uint64_t i = 0; i < raw.size(); ++i) kept += keep.empty() || keep[i] ? 1 : 0;
+  const size_t step = sampleStep(kept, kAccuracySamples);
+  std::vector<glm::dvec3> sample;
+  size_t ordinalKept = 0;
+  raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
+    for (size_t i = 0; i < batch.size(); ++i) {
+      if (!keep.empty() && !keep[first + i]) continue;
+      if (ordinalKept++ % step == 0) sample.push_back(batch.positions[i]);
+    }
+  });
+  return sample;
+}
+
+}  // namespace
+
+ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
+                             const BuildOptions& options, uint64_t maxChunkPoints,
+                             const std::function<void(const std::string&, uint64_t)>& stage) {
+  if (raw.size() >= uint64_t(std::numeric_limits<uint32_t>::max()))
+    throw std::length_error("more than 4,294,967,294 input points in one conversion");
+  // Orientation blocks must nest in chunks: a chunk holds at least a block's points.
+  maxChunkPoints = std::max<uint64_t>(maxChunkPoints, options.orientBlockPoints);
+  ReadyPoints ready;
+  ready.frame = chooseFrame(raw.lo(), raw.hi());
+  std::vector<uint8_t> keep;
+  bool findingOutliers = options.removeOutliers;
+  uint64_t peakTemporary = 0;
+  Accumulated done;
+  size_t chunks = 0, preparedAgain = 0;
+  for (;;) {
+    stage("distribute", 2 * raw.size());
+    const Distribution distribution(directory, raw, ready.frame, maxChunkPoints,
+                                    keep.empty() ? nullptr : &keep);
+    peakTemporary = std::max(peakTemporary, directory.bytes());
+    chunks = distribution.chunks().size();
+    stage("points", distribution.size());
+    done = Accumulated{};
+    reserveFor(done, distribution.size(), raw.layout());
+    ChunkRunner runner(distribution, ready.frame, options, findingOutliers, raw.layout().normals);
+    for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
+    if (done.outlierSources.empty()) break;
+    // Without the outliers the points are prepared again, as in core: with a new frame when they
+    // held the bounds (far outliers waste its precision), else only the chunks whose boxes held
+    // one (the others would load the same points and give the same results).
+    ready.outliers = done.outlierSources.size();
+    keep.assign(raw.size(), 1);
+    for (uint32_t s : done.outlierSources) keep[s] = 0;
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    std::vector<glm::vec3> outliers;
+    raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
+      for (size_t i = 0; i < batch.size(); ++i) {
+        if (!keep[first + i]) {
+          outliers.push_back(glm::vec3(toFrame(batch.positions[i], ready.frame)));
+          continue;
+        }
+        lo = glm::min(lo, batch.positions[i]);
+        hi = glm::max(hi, batch.positions[i]);
+      }
+    });
+    findingOutliers = false;
+    const Frame frame = chooseFrame(lo, hi);
+    if (frame.origin != ready.frame.origin || frame.size != ready.frame.size) {
+      ready.frame = frame;
+      continue;
+    }
+    stage("points", distribution.size());
+    preparedAgain = prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals,
+                                        keep, outliers, done);
+    break;
+  }
+  size_t blocks = 0;
+  for (const ChunkRecord& record : done.chunks) {
+    blocks += record.blocks;
+    ready.duplicates += record.duplicates;
+    ready.normals.estimated += record.normals.estimated;
+    ready.normals.flipped += record.normals.flipped;
+  }
+
+  stage("orient", done.points.size());
+  PointSet& points = done.points;
+  const size_t n = points.size();
+  joinChunks(done, raw.size(),
+             options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0);
+  progressAdvance(n);
+
+  double spacingSum = 0.0;  // in key order, the additions of the in-core sum
+  for (const float d : done.firstDistance) spacingSum += d;
+  ready.radii.meanSpacing = n > 0 ? spacingSum / double(n) : 0.0;
+  SpillVector<float> radii = points.radius;
+  ready.radii.medianRadius = medianOf(radii);
+  ready.points = std::move(points);
+  ready.index = std::make_unique<PointIndex>(ready.points.position);
+
+  ready.sample = accuracySample(raw, keep);
+  ready.outOfCore = {{"chunks", chunks},
+                     {"max_chunk_points", maxChunkPoints},
+                     {"largest_loaded_points", done.maxLoaded},
+                     {"halo_points", done.haloPoints},
+                     {"halo_widenings", done.widenings},
+                     {"boundary_points", done.boundarySource.size()},
+                     {"chunks_prepared_again", preparedAgain},
+                     {"temporary_bytes_peak", peakTemporary}};
+  return ready;
+}
+
+}  // namespace iso

@@ -1,0 +1,276 @@
+// Points chunks from the input points, and back (specs/pipeline.md §17, "Keeping the points").
+#include "pipeline/output/keep_points.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
+#include <limits>
+#include <stdexcept>
+
+#include "iso/reader.h"
+#include "iso/surface.h"
+#include "iso/writer.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/io/color.h"
+#include "pipeline/outofcore/spill.h"
+#include "pipeline/points/points.h"
+
+namespace iso {
+namespace {
+
+constexpr size_t kBatchChunks = 16;  // chunks encoded in parallel at a time
+
+struct EncodedChunk {
+  ChunkDesc desc;
+  std::vector<std::byte> data;
+  bool coarser = false;
+  double maxError = 0.0;
+};
+
+}  // namespace
+
+nlohmann::json KeptPointsStats::json() const {
+  return {{"chunks", chunks},
+          {"points", points},
+          {"bytes", bytes},
+          {"bytes_per_point", points > 0 ? double(bytes) / double(points) : 0.0},
+          {"step_bits", stepBits},
+          {"coarser_chunks", coarserChunks},
+          {"max_error", maxError}};
+}
+
+PointsChunkWriter::PointsChunkWriter(Writer& writer, const FileHeader& header, int stepBits,
+                                     bool colors, bool normals, uint32_t perChunk)
+    : writer_(writer),
+      frame_(header.frame),
+      finest_(header.maxLevel),
+      stepBits_(stepBits),
+      colors_(colors),
+      normals_(normals),
+      perChunk_(std::clamp<uint32_t>(perChunk, 1, kMaxPointsPerChunk)) {
+  stats_.stepBits = stepBits;
+}
+
+PointsChunkWriter::~PointsChunkWriter() = default;
+
+void PointsChunkWriter::push(const glm::dvec3& world, uint64_t key, const glm::vec3& normal,
+                             const glm::vec3& color) {
+  const glm::dvec3 u = toFrame(world, frame_);
+  if (!(u.x >= 0.0 && u.y >= 0.0 && u.z >= 0.0 && u.x < 1.0 && u.y < 1.0 && u.z < 1.0)) {
+    outside_.push_back({key, world, normal, color});  // written last, in chunks of their own
+    return;
+  }
+  buffer_.push_back({key, world, normal, color});
+  while (buffer_.size() - head_ > perChunk_) cutOne();
+}
+
+void PointsChunkWriter::finish() {
+  while (head_ < buffer_.size()) cutOne();
+  // Points outside the frame (removed outliers): root cell chunks after all others, so that no
+  // chunk of points inside needs a coarser step for them.
+  for (size_t first = 0; first < outside_.size(); first += perChunk_) {
+    const auto begin = outside_.begin() + ptrdiff_t(first);
+    pending_.push_back(
+        {0, 0,
+         std::vector<Point>(
+             begin, begin + ptrdiff_t(std::min<size_t>(perChunk_, outside_.size() - first)))});
+    if (pending_.size() >= kBatchChunks) flush();
+  }
+  outside_.clear();
+  flush();
+}
+
+// Cut the next chunk from the buffer, which holds more than perChunk_ points (or all that are
+// left): enough to know whether a cell holds at most perChunk_.
+void PointsChunkWriter::cutOne() {
+  const uint64_t first = buffer_[head_].key;
+  const int finestShift = 3 * (kMaxLevel - finest_);
+  const auto begin = buffer_.begin() + ptrdiff_t(head_);
+  const auto limit = buffer_.begin() + ptrdiff_t(std::min(buffer_.size(), head_ + perChunk_ + 1));
+  const auto endOf = [&](uint64_t bound) {
+    return std::partition_point(begin, limit, [&](const Point& p) { return p.key < bound; });
+  };
+  uint8_t level = finest_;
+  uint64_t cell = first >> finestShift;
+  auto end = begin;
+  if (continues_) {  // the rest of a finest cell split over several chunks
+    end = endOf((cell + 1) << finestShift);
+  } else {
+    for (int l = 0; l <= finest_; ++l) {
+      const int shift = 3 * (kMaxLevel - l);
+      const uint64_t c = first >> shift;
+      if ((c << shift) < floor_) continue;  // would overlap chunks already cut
+      end = endOf((c + 1) << shift);
+      if (size_t(end - begin) <= perChunk_ || l == finest_) {
+        level = uint8_t(l);
+        cell = c;
+        break;
+      }
+    }
+  }
+  if (size_t(end - begin) > perChunk_) end = begin + perChunk_;  // a finest cell, split
+  continues_ = level == finest_ && end != buffer_.end() && (end->key >> finestShift) == cell;
+  floor_ = (cell + 1) << (3 * (kMaxLevel - level));
+  pending_.push_back({level, cell, std::vector<Point>(begin, end)});
+  head_ += size_t(end - begin);
+  if (head_ > perChunk_) {  // drop what was cut, now and then
+    buffer_.erase(buffer_.begin(), buffer_.begin() + ptrdiff_t(head_));
+    head_ = 0;
+  }
+  if (pending_.size() >= kBatchChunks) flush();
+}
+
+void PointsChunkWriter::flush() {
+  std::vector<EncodedChunk> encoded(pending_.size());
+  tbb::parallel_for(size_t{0}, pending_.size(), [&](size_t c) {
+    const Pending& p = pending_[c];
+    EncodedChunk& out = encoded[c];
+    const std::array<uint32_t, 3> xyz = mortonDecode(p.key);
+    const double cellSize = std::ldexp(1.0, -int(p.level));
+    const glm::dvec3 cellMin = glm::dvec3(xyz[0], xyz[1], xyz[2]) * cellSize;
+    // The finest step (at most the one asked for) at which every offset fits in an int32 and
+    // their span along each axis in kMaxPointOffsetSpan (with a step to spare for rounding).
+    glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
+    for (const Point& point : p.points) {
+      const glm::dvec3 d = toFrame(point.world, frame_) - cellMin;
+      lo = glm::min(lo, d);
+      hi = glm::max(hi, d);
+    }
+    const double reach = std::max({-lo.x, -lo.y, -lo.z, hi.x, hi.y, hi.z, 0.0});
+    const double span = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    const double limit = double(kMaxPointOffsetSpan) - 2.0;
+    int bits = stepBits_;
+    while (bits > 0 && (std::ldexp(reach, bits) > limit || std::ldexp(span, bits) > limit)) --bits;
+    if (std::ldexp(reach, bits) > limit || std::ldexp(span, bits) > limit)
+      throw std::runtime_error(
+          "a point lies more than 2^30 frame sizes from the frame: it cannot "
+          "be kept");
+    out.coarser = bits < stepBits_;
+    PointsChunk chunk;
+    chunk.stepBits = uint8_t(bits);
+    chunk.offsets.resize(p.points.size());
+    if (colors_) chunk.colors.resize(p.points.size());
+    if (normals_) chunk.normals.resize(p.points.size());
+    for (size_t i = 0; i < p.points.size(); ++i) {
+      const Point& point = p.points[i];
+      const glm::dvec3 d = toFrame(point.world, frame_) - cellMin;
+      for (int a = 0; a < 3; ++a)
+        chunk.offsets[i][a] = int32_t(std::llround(std::ldexp(d[a], bits)));
+      const std::array<double, 3> stored =
+          pointFramePosition(p.level, p.key, chunk.stepBits, chunk.offsets[i]);
+      const glm::dvec3 back = toWorld(glm::dvec3(stored[0], stored[1], stored[2]), frame_);
+      out.maxError = std::max(out.maxError, glm::length(back - point.world));
+      if (colors_)
+        for (int a = 0; a < 3; ++a)
+          chunk.colors[i][a] = uint16_t(
+              std::lround(std::clamp(linearToSrgb(point.color[a]), 0.0f, 1.0f) * 65535.0f));
+      if (normals_) {
+        const glm::vec3 n = unitOrZero(point.normal);
+        for (int a = 0; a < 3; ++a) chunk.normals[i][a] = encodeSnorm16(n[a]);
+      }
+    }
+    out.data = encodePointsChunk(chunk);
+    out.desc.kind = kPointsKind;
+    out.desc.level = p.level;
+    out.desc.key = p.key;
+    out.desc.pointCount = p.points.size();
+    out.desc.codec = Codec::Raw;  // Draco's bytes do not compress further
+  });
+  for (const EncodedChunk& e : encoded) {
+    writer_.addChunk(e.desc, e.data);
+    ++stats_.chunks;
+    stats_.points += e.desc.pointCount;
+    stats_.bytes += e.data.size();
+    stats_.coarserChunks += e.coarser ? 1 : 0;
+    stats_.maxError = std::max(stats_.maxError, e.maxError);
+  }
+  pending_.clear();
+}
+
+KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHeader& header,
+                           int stepBits, uint32_t perChunk) {
+  const Frame& frame = header.frame;
+  const size_t n = cloud.size();
+  std::vector<uint64_t> keys(n);
+  tbb::parallel_for(size_t{0}, n,
+                    [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
+  const std::vector<uint32_t> order = sortedOrder(keys);  // stable: input order within a key
+  PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk);
+  const glm::vec3 none(0.0f);
+  for (size_t j = 0; j < n; ++j) {
+    const uint32_t i = order[j];
+    out.push(cloud.positions[i], keys[i], cloud.hasNormals() ? cloud.normals[i] : none,
+             cloud.hasColors() ? cloud.colors[i] : none);
+    if ((j + 1) % 65536 == 0) progressAdvance(65536);
+  }
+  progressAdvance(n % 65536);
+  out.finish();
+  return out.stats();
+}
+
+KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& directory,
+                           const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
+                           uint32_t perChunk) {
+  const Frame& frame = header.frame;
+  const Distribution distribution(directory, raw, frame, maxLoadedPoints);
+  PointsChunkWriter out(writer, header, stepBits, raw.layout().colors, raw.layout().normals,
+                        perChunk);
+  const glm::vec3 none(0.0f);
+  for (const SpillChunk& chunk : distribution.chunks()) {
+    const LoadedPoints loaded = distribution.load(chunk);
+    const PointCloud& cloud = loaded.cloud;
+    std::vector<uint64_t> keys(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) keys[i] = keyOfWorld(cloud.positions[i], frame);
+    // A load holds the points of each fine cell in input order, and one key lies in one fine
+    // cell: the stable sort by key gives (key, input index) order, as in core.
+    const std::vector<uint32_t> order = sortedOrder(keys);
+    for (const uint32_t i : order)
+      out.push(cloud.positions[i], keys[i], cloud.hasNormals() ? cloud.normals[i] : none,
+               cloud.hasColors() ? cloud.colors[i] : none);
+    progressAdvance(cloud.size());
+  }
+  out.finish();
+  return out.stats();
+}
+
+void forEachKeptPoints(const Reader& reader,
+                       const std::function<void(const PointCloud& points)>& f) {
+  const Frame& frame = reader.header().frame;
+  for (const ChunkInfo& info : reader.chunks()) {
+    if (info.kind != kPointsKind) continue;
+    const PointsChunk chunk = decodePointsChunk(reader, info.id);
+    PointCloud points;
+    points.positions.resize(chunk.size());
+    for (size_t i = 0; i < chunk.size(); ++i) {
+      const std::array<double, 3> u =
+          pointFramePosition(info.level, info.key, chunk.stepBits, chunk.offsets[i]);
+      points.positions[i] = toWorld(glm::dvec3(u[0], u[1], u[2]), frame);
+    }
+    for (const std::array<uint16_t, 3>& c : chunk.colors)
+      points.colors.emplace_back(srgbToLinear(float(c[0]) / 65535.0f),
+                                 srgbToLinear(float(c[1]) / 65535.0f),
+                                 srgbToLinear(float(c[2]) / 65535.0f));
+    for (const std::array<int16_t, 3>& n : chunk.normals)
+      points.normals.emplace_back(decodeSnorm16(n[0]), decodeSnorm16(n[1]), decodeSnorm16(n[2]));
+    f(points);
+  }
+}
+
+KeptPointsInfo keptPointsInfo(const Reader& reader) {
+  KeptPointsInfo info;
+  for (const ChunkInfo& c : reader.chunks()) {
+    if (c.kind != kPointsKind) continue;
+    if (info.chunks++ == 0) {
+      const PointsChunk first = decodePointsChunk(reader, c.id);
+      info.colors = !first.colors.empty();
+      info.normals = !first.normals.empty();
+    }
+    info.points += c.pointCount;
+  }
+  return info;
+}
+
+}  // namespace iso

@@ -1,0 +1,106 @@
+// The original points kept in the .iso file (`iso convert --keep-points`): Draco-compressed points
+// chunks, one octree cell each (specs/iso-format.md, "Points chunks"; specs/pipeline.md §17).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <glm/vec3.hpp>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "iso/format.h"
+#include "iso/points.h"
+#include "pipeline/io/point_cloud.h"
+
+namespace iso {
+
+class Writer;
+class Reader;
+class RawSpill;
+class SpillDirectory;
+
+// Points per chunk the writer aims at (fewer where a cell holds fewer; a cell of the finest grid
+// holding more is split into several chunks of that cell).
+inline constexpr uint32_t kPointsPerChunk = uint32_t{1} << 16;
+
+struct KeptPointsStats {
+  uint64_t chunks = 0, points = 0, bytes = 0;  // bytes: the chunks' data
+  int stepBits = 0;                            // asked for
+  uint64_t coarserChunks =
+      0;                  // chunks whose offsets needed a coarser step (points outside the frame)
+  double maxError = 0.0;  // largest distance of a stored point from its input, world units
+  nlohmann::json json() const;
+};
+
+// Cuts points, given in Morton order (key at kMaxLevel, then input index), into cells and writes
+// each as a points chunk. Every decision depends only on the points, so any way of producing the
+// same sequence (in core, or out of core chunk by chunk) writes the same bytes. A cell becomes a
+// chunk when it is the coarsest one that holds the next point, starts after the previous chunk and
+// holds at most `perChunk` points; a cell of the header's maxLevel holding more is split into
+// chunks of `perChunk` points in order. Points outside the frame's cube (far outliers the
+// conversion removed) come last, in chunks of the root cell of their own. Chunks are encoded in
+// parallel, a batch at a time.
+class PointsChunkWriter {
+ public:
+  PointsChunkWriter(Writer& writer, const FileHeader& header, int stepBits, bool colors,
+                    bool normals, uint32_t perChunk = kPointsPerChunk);
+  ~PointsChunkWriter();
+  // One point: world position, its key (keyOf of its frame position), normal and linear color
+  // (ignored unless the writer keeps them).
+  void push(const glm::dvec3& world, uint64_t key, const glm::vec3& normal, const glm::vec3& color);
+  // Write what is left.
+  void finish();
+  const KeptPointsStats& stats() const { return stats_; }
+
+ private:
+  struct Point {
+    uint64_t key;
+    glm::dvec3 world;
+    glm::vec3 normal, color;
+  };
+  struct Pending {
+    uint8_t level;
+    uint64_t key;
+    std::vector<Point> points;
+  };
+  void cutOne();
+  void flush();
+
+  Writer& writer_;
+  Frame frame_;
+  uint8_t finest_;  // the deepest level a chunk may have
+  int stepBits_;
+  bool colors_, normals_;
+  uint32_t perChunk_;
+  std::vector<Point> buffer_;
+  size_t head_ = 0;
+  std::vector<Point> outside_;  // points outside the frame's cube
+  uint64_t floor_ = 0;          // keys below belong to chunks already cut
+  bool continues_ = false;      // the last chunk cut a finest cell that goes on
+  std::vector<Pending> pending_;
+  KeptPointsStats stats_;
+};
+
+// The points of a cloud (in core), in Morton order, in the header's frame and levels.
+KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHeader& header,
+                           int stepBits, uint32_t perChunk = kPointsPerChunk);
+// The points of a raw spill (out of core), counting-sorted by cell through a Distribution of at
+// most maxLoadedPoints points at a time; the same bytes as keepPoints on the same points.
+KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& directory,
+                           const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
+                           uint32_t perChunk = kPointsPerChunk);
+
+// Every points chunk of a file, decoded, in file order: world positions, unit normals and linear
+// colors (when kept). Calls f once per chunk.
+void forEachKeptPoints(const Reader& reader,
+                       const std::function<void(const PointCloud& points)>& f);
+// Points the file keeps (the sum of its points chunks' counts) and whether they have colors and
+// normals.
+struct KeptPointsInfo {
+  uint64_t points = 0, chunks = 0;
+  bool colors = false, normals = false;
+};
+KeptPointsInfo keptPointsInfo(const Reader& reader);
+
+}  // namespace iso

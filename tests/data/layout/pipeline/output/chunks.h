@@ -1,0 +1,2 @@
+#include "pipeline/points/points.h"
+#include "iso/format.h"

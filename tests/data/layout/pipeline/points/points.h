@@ -1,0 +1,2 @@
+#include "pipeline/output/chunks.h"
+#include "tools/iso/text.h"
