@@ -30,25 +30,9 @@ Vec3d rotated(const Vec3d& v, const Vec3d& axis, double angle) {
 }
 
 std::vector<double> parseNumbers(const std::string& text, size_t count, const std::string& what) {
-  std::vector<double> out;
-  std::stringstream in(text);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(item, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != item.size() || !std::isfinite(v))
-      throw UsageError(what + ": '" + item + "' is not a finite number");
-    out.push_back(v);
-  }
-  if (out.size() != count)
-    throw UsageError(what + ": expected " + std::to_string(count) + " numbers, got '" +
-                                text + "'");
-  return out;
+  if (std::optional<std::vector<double>> values = parseNumberList(text, count)) return *values;
+  throw UsageError(what + ": expected " + std::to_string(count) + " finite number" +
+                   (count == 1 ? "" : "s separated by commas") + ", not '" + text + "'");
 }
 
 namespace {
@@ -98,10 +82,8 @@ struct Fields {
 }  // namespace
 
 BackFaces parseBackFaces(const std::string& text) {
-  if (text == "show") return BackFaces::Show;
-  if (text == "tint") return BackFaces::Tint;
-  if (text == "hide") return BackFaces::Hide;
-  throw UsageError("back faces: '" + text + "' is not show, tint or hide");
+  if (const std::optional<BackFaces> value = valueNamed(kBackFaceNames, text)) return *value;
+  throw UsageError("back faces: '" + text + "' is not " + namesOf(kBackFaceNames));
 }
 
 Vec3d parseVec3(const std::string& text) {
@@ -248,12 +230,11 @@ void readRendering(const Fields& f, const json& j, const std::filesystem::path& 
     if (!(scene.lodPixels >= 0)) f.fail("lod_pixels", "not negative");
   }
   if (j.contains("backfaces")) {
-    if (!j["backfaces"].is_string()) f.fail("backfaces", "show, tint or hide");
-    try {
-      scene.backFaces = parseBackFaces(j["backfaces"].get<std::string>());
-    } catch (const UsageError&) {
-      f.fail("backfaces", "show, tint or hide");
-    }
+    const std::optional<BackFaces> value =
+        j["backfaces"].is_string() ? valueNamed(kBackFaceNames, j["backfaces"].get<std::string>())
+                                   : std::nullopt;
+    if (!value) f.fail("backfaces", namesOf(kBackFaceNames));
+    scene.backFaces = *value;
   }
   if (j.contains("backface_tint")) scene.backTint = f.color(j["backface_tint"], "backface_tint");
 }

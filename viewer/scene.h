@@ -14,6 +14,7 @@
 
 #include "iso/error.h"
 #include "iso/format.h"
+#include "pipeline/base/text.h"
 #include "shaders/shared.h"
 #include "viewer/blob.h"
 
@@ -45,7 +46,9 @@ struct Material {
 // What camera rays do at a back face (reached from the inside, f < 0, as an open scan seen from
 // behind): shade it with the flipped normal, also tint it, or pass through it.
 enum class BackFaces { Show, Tint, Hide };
-// "show", "tint", "hide"; UsageError naming the accepted words otherwise.
+inline constexpr NameTable<BackFaces, 3> kBackFaceNames{
+    {{"show", BackFaces::Show}, {"tint", BackFaces::Tint}, {"hide", BackFaces::Hide}}};
+// A name of kBackFaceNames; UsageError naming the accepted words otherwise.
 BackFaces parseBackFaces(const std::string& text);
 
 struct Scene {

@@ -9,6 +9,7 @@
 #include <numeric>
 #include <optional>
 
+#include "pipeline/base/text.h"
 #include "viewer/asset.h"
 #include "viewer/cpu_tracer.h"
 #include "viewer/image.h"
@@ -20,8 +21,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
-
-std::string mib(uint64_t bytes) { return fmt::format("{:.1f} MiB", bytes / 1048576.0); }
 
 std::optional<Environment> environmentOf(const Scene& scene) {
   if (scene.environment.empty()) return std::nullopt;
@@ -108,13 +107,13 @@ int viewHeadless(const ViewOptions& options) {
   fmt::print(
       "  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
       "(--vram {})\n",
-      s.resident, asset->reader.chunks().size(), mib(s.poolBytesInUse), mib(s.poolBytes),
-      mib(s.streamedBytes), mib(s.vramPeak), mib(options.vram));
+      s.resident, asset->reader.chunks().size(), byteSize(s.poolBytesInUse), byteSize(s.poolBytes),
+      byteSize(s.streamedBytes), byteSize(s.vramPeak), byteSize(options.vram));
   if (renderer.stalled())
     fmt::print(stderr,
                "iso view: the view needs more chunks than --vram {} holds; coarser levels are "
                "shown where they are missing\n",
-               mib(options.vram));
+               byteSize(options.vram));
   if (*gpu.validationErrors > 0) {
     fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
     return 1;
@@ -182,14 +181,14 @@ int viewBench(const ViewOptions& options) {
       "--vram {}\n",
       options.file.filename().string(), options.width, options.height, gpu.properties.deviceName,
       options.benchFrames, base.samples, base.shadows ? "on" : "off",
-      base.reflections && base.material.reflectivity > 0 ? "on" : "off", mib(options.vram));
+      base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(options.vram));
   fmt::print("  ms/frame    mean {:.2f}, median {:.2f}, max {:.2f}\n", mean,
              sorted.empty() ? 0 : sorted[sorted.size() / 2], sorted.empty() ? 0 : sorted.back());
   fmt::print(
       "  rays/s      {:.2f} M ({:.2f} rays a pixel)\n", total > 0 ? rays / total / 1e6 : 0,
       double(rays) / std::max<size_t>(ms.size(), 1) / (double(options.width) * options.height));
-  fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", mib(s.vramInUse),
-             mib(s.vramPeak), mib(s.poolBytesInUse), mib(s.poolBytes));
+  fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", byteSize(s.vramInUse),
+             byteSize(s.vramPeak), byteSize(s.poolBytesInUse), byteSize(s.poolBytes));
   fmt::print("  chunks      {} resident at the end, {} at most, of {}\n", s.resident, maxResident,
              asset->reader.chunks().size());
   const size_t half = uploaded.size() / 2;
@@ -197,8 +196,8 @@ int viewBench(const ViewOptions& options) {
   fmt::print(
       "  streamed    {} in all, {:.1f} KiB a frame on average ({:.1f} KiB in the second "
       "half of the path), {} at most in a frame\n",
-      mib(upTotal), upTotal / 1024.0 / uploaded.size(),
-      upLater / 1024.0 / std::max<size_t>(uploaded.size() - half, 1), mib(upMax));
+      byteSize(upTotal), upTotal / 1024.0 / uploaded.size(),
+      upLater / 1024.0 / std::max<size_t>(uploaded.size() - half, 1), byteSize(upMax));
   return *gpu.validationErrors > 0 ? 1 : 0;
 }
 

@@ -306,6 +306,38 @@ std::string titleText(const std::string& title, const TitleStats& t, double seco
       t.rays / std::max(t.gpuSeconds, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident, s.pending);
 }
 
+// GLFW, initialized, and one window without a graphics API (Vulkan draws into it), for as long
+// as this lives.
+class GlfwWindow {
+ public:
+  GlfwWindow(uint32_t width, uint32_t height, const std::string& title) {
+    if (!glfwInit())
+      throw std::runtime_error("cannot open a window (no display?); use --headless --out F.png");
+    const char* problem = nullptr;
+    if (!glfwVulkanSupported()) {
+      problem = "GLFW finds no Vulkan loader";
+    } else {
+      glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
+      window_ = glfwCreateWindow(int(width), int(height), title.c_str(), nullptr, nullptr);
+      if (!window_) problem = "cannot open a window (no display?); use --headless";
+    }
+    if (problem) {
+      glfwTerminate();
+      throw std::runtime_error(problem);
+    }
+  }
+  ~GlfwWindow() {
+    glfwDestroyWindow(window_);
+    glfwTerminate();
+  }
+  GlfwWindow(const GlfwWindow&) = delete;
+  GlfwWindow& operator=(const GlfwWindow&) = delete;
+  GLFWwindow* window() const { return window_; }
+
+ private:
+  GLFWwindow* window_ = nullptr;
+};
+
 }  // namespace
 
 int viewWindow(const ViewOptions& options) {
@@ -314,21 +346,9 @@ int viewWindow(const ViewOptions& options) {
   std::optional<Environment> env;
   if (!scene.environment.empty()) env = loadEnvironment(scene.environment);
 
-  if (!glfwInit())
-    throw std::runtime_error("cannot open a window (no display?); use --headless --out F.png");
-  struct GlfwGuard {
-    ~GlfwGuard() { glfwTerminate(); }
-  } glfwGuard;
-  if (!glfwVulkanSupported()) throw std::runtime_error("GLFW finds no Vulkan loader");
-  glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
   const std::string title = "iso view " + options.file.filename().string();
-  GLFWwindow* window =
-      glfwCreateWindow(int(options.width), int(options.height), title.c_str(), nullptr, nullptr);
-  if (!window) throw std::runtime_error("cannot open a window (no display?); use --headless");
-  struct WindowGuard {
-    GLFWwindow* w;
-    ~WindowGuard() { glfwDestroyWindow(w); }
-  } windowGuard{window};
+  const GlfwWindow glfw(options.width, options.height, title);
+  GLFWwindow* window = glfw.window();
 
   uint32_t extensionCount = 0;
   const char** extensions = glfwGetRequiredInstanceExtensions(&extensionCount);

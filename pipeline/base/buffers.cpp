@@ -19,7 +19,9 @@
 #include <thread>
 
 #include "iso/check.h"
+#include "pipeline/base/process.h"
 #include "pipeline/base/progress.h"
+#include "pipeline/base/text.h"
 
 namespace iso {
 namespace {
@@ -50,17 +52,6 @@ void deallocateLarge(void* p, size_t bytes) noexcept {
 
 namespace {
 std::atomic<uint64_t> temporaryBytes{0}, temporaryPeak{0}, temporaryLimit{0};
-
-std::string sizeText(uint64_t bytes) {
-  char text[32];
-  if (bytes >= uint64_t{1} << 30)
-    std::snprintf(text, sizeof text, "%.2f GiB", double(bytes) / double(uint64_t{1} << 30));
-  else if (bytes >= uint64_t{1} << 20)
-    std::snprintf(text, sizeof text, "%.1f MiB", double(bytes) / double(uint64_t{1} << 20));
-  else
-    std::snprintf(text, sizeof text, "%llu bytes", static_cast<unsigned long long>(bytes));
-  return text;
-}
 }  // namespace
 
 void chargeTemporaryDisk(uint64_t bytes, const std::filesystem::path& where) {
@@ -69,8 +60,8 @@ void chargeTemporaryDisk(uint64_t bytes, const std::filesystem::path& where) {
   do {
     if (limit > 0 && now + bytes > limit)
       throw std::runtime_error(where.string() + ": the temporary files would exceed --max-temp " +
-                               sizeText(limit) + " (" + sizeText(now) + " in use, " +
-                               sizeText(bytes) + " more needed)");
+                               byteSize(limit) + " (" + byteSize(now) + " in use, " +
+                               byteSize(bytes) + " more needed)");
   } while (!temporaryBytes.compare_exchange_weak(now, now + bytes));
   uint64_t peak = temporaryPeak.load();
   while (now + bytes > peak && !temporaryPeak.compare_exchange_weak(peak, now + bytes)) {

@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <filesystem>
 
+#include "pipeline/base/text.h"
+
 namespace iso {
 
 enum class OrientMode { Auto, Up, Propagate };
@@ -13,10 +15,17 @@ enum class OrientMode { Auto, Up, Propagate };
 // Guennebaud & Gross 2007), which has no curvature bias (specs/pipeline.md measures both).
 enum class FitMode { Plane, Sphere };
 
+inline constexpr NameTable<OrientMode, 3> kOrientNames{
+    {{"auto", OrientMode::Auto}, {"up", OrientMode::Up}, {"propagate", OrientMode::Propagate}}};
+inline constexpr NameTable<FitMode, 2> kFitNames{
+    {{"sphere", FitMode::Sphere}, {"plane", FitMode::Plane}}};
+
 // Where a texture is sampled: at every point (its colors then reach the corners as point colors
 // do, averaged by the signed distance's weights), or at every corner's projection onto the zero
 // set (the image's detail down to the leaf size, without the points' averaging).
 enum class TextureAt { Points, Corners };
+inline constexpr NameTable<TextureAt, 2> kTextureAtNames{
+    {{"points", TextureAt::Points}, {"corners", TextureAt::Corners}}};
 
 struct TextureOptions {
   std::filesystem::path image;  // empty: no texture

@@ -6,6 +6,9 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "pipeline/base/process.h"
+#include "pipeline/base/text.h"
+
 namespace iso {
 namespace {
 
@@ -33,16 +36,6 @@ void progressAdvance(uint64_t amount) {
 
 ProgressMute::ProgressMute() { gMuted.fetch_add(1, std::memory_order_relaxed); }
 ProgressMute::~ProgressMute() { gMuted.fetch_sub(1, std::memory_order_relaxed); }
-
-uint64_t currentRssBytes(uint64_t* fromFiles) {
-  std::FILE* f = std::fopen("/proc/self/statm", "r");
-  if (f == nullptr) return 0;
-  unsigned long long pages = 0, resident = 0, shared = 0;
-  const int read = std::fscanf(f, "%llu %llu %llu", &pages, &resident, &shared);
-  std::fclose(f);
-  if (fromFiles) *fromFiles = read == 3 ? shared * 4096ull : 0;
-  return read >= 2 ? resident * 4096ull : 0;
-}
 
 ProgressReporter::ProgressReporter(ProgressMode mode, std::FILE* out,
                                    std::chrono::milliseconds interval)
@@ -117,7 +110,7 @@ void ProgressReporter::print(bool final) {
     if (done > 0) line += " " + rate(perSecond);
     line += final ? fmt::format(" in {}", clock(elapsed))
                   : (eta >= 0.0 ? fmt::format(" ETA {}", clock(eta)) : "");
-    line += fmt::format(" RSS {:.2f} GiB", double(rss) / double(1ull << 30));
+    line += " RSS " + byteSize(rss);
     fmt::print(out_, "\r\033[K{}{}", line, final ? "\n" : "");
   }
   std::fflush(out_);

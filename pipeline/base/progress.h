@@ -15,6 +15,8 @@
 #include <string>
 #include <thread>
 
+#include "pipeline/base/text.h"
+
 namespace iso {
 
 // Count `amount` units of work (usually points) done in the current stage. Thread-safe.
@@ -30,15 +32,13 @@ class ProgressMute {
   ProgressMute& operator=(const ProgressMute&) = delete;
 };
 
-// Resident memory of this process now, in bytes (VmRSS); fromFiles, when given, gets the part
-// mapped from files (spilled arrays among them; the rest is anonymous memory).
-uint64_t currentRssBytes(uint64_t* fromFiles = nullptr);
-
 enum class ProgressMode {
   None,  // report nothing
   Line,  // a live line on a terminal
   Json,  // one JSON object per line
 };
+inline constexpr NameTable<ProgressMode, 3> kProgressNames{
+    {{"line", ProgressMode::Line}, {"json", ProgressMode::Json}, {"none", ProgressMode::None}}};
 
 class ProgressReporter {
  public:

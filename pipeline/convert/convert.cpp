@@ -16,6 +16,7 @@
 #include "pipeline/analysis/measure.h"
 #include "pipeline/analysis/visibility.h"
 #include "pipeline/base/options.h"
+#include "pipeline/base/process.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/io/image.h"
 #include "pipeline/octree/field.h"
@@ -209,25 +210,11 @@ nlohmann::json octreeJson(const Octree& tree, const OctreeStats& stats, size_t p
 
 }  // namespace
 
-uint64_t peakRssBytes() {
-  FILE* f = std::fopen("/proc/self/status", "r");
-  if (!f) return 0;
-  char line[256];
-  unsigned long long kib = 0;
-  while (std::fgets(line, sizeof line, f))
-    if (std::sscanf(line, "VmHWM: %llu kB", &kib) == 1) break;
-  std::fclose(f);
-  return kib * 1024;
-}
-
 nlohmann::json optionsJson(const BuildOptions& o) {
-  const char* orient = o.orient == OrientMode::Up
-                           ? "up"
-                           : (o.orient == OrientMode::Propagate ? "propagate" : "auto");
   nlohmann::json out = {{"neighbors", o.neighbors},
                         {"smoothing", o.smoothing},
-                        {"fit", o.fit == FitMode::Plane ? "plane" : "sphere"},
-                        {"orient", orient},
+                        {"fit", nameOf(kFitNames, o.fit)},
+                        {"orient", nameOf(kOrientNames, o.orient)},
                         {"leaf_points", o.leafPoints},
                         {"max_depth", o.maxDepth},
                         {"tolerance", o.tolerance},
@@ -241,7 +228,7 @@ nlohmann::json optionsJson(const BuildOptions& o) {
     out["texture"] = {{"image", o.texture.image.filename().string()},
                       {"scale", o.texture.scale},
                       {"sharpness", o.texture.sharpness},
-                      {"at", o.texture.at == TextureAt::Points ? "points" : "corners"}};
+                      {"at", nameOf(kTextureAtNames, o.texture.at)}};
   if (o.occlusion.enabled)
     out["occlusion"] = {{"rays", o.occlusion.rays}, {"radius", o.occlusion.radius}};
   if (o.keepPoints) out["keep_points"] = {{"point_bits", o.pointBits}};
@@ -376,7 +363,7 @@ std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image,
                        {"height", image->height},
                        {"scale", scale},
                        {"sharpness", t.sharpness},
-                       {"at", t.at == TextureAt::Points ? "points" : "corners"},
+                       {"at", nameOf(kTextureAtNames, t.at)},
                        {"modulates_point_colors", points.hasColors()}};
   std::optional<TriplanarTexture> texture(std::in_place, std::move(*image), scale, t.sharpness);
   if (t.at == TextureAt::Points) {

@@ -70,7 +70,4 @@ void validateOptions(const BuildOptions& options);
 // The options as JSON (the file's "parameters").
 nlohmann::json optionsJson(const BuildOptions& options);
 
-// Peak resident memory of this process so far, in bytes (VmHWM).
-uint64_t peakRssBytes();
-
 }  // namespace iso

@@ -92,6 +92,28 @@ struct StackEntry {
 
 using Stack = std::array<StackEntry, Bvh::kMaxDepth>;
 
+// Depth first over the hierarchy from the root: leaf(n) visits a leaf; next(n, stack, top) returns
+// the child of an internal node to visit next, if any, having pushed the other one when it is
+// worth a visit too; pruned(bound) tells when a pushed node is no longer worth one.
+template <typename Leaf, typename Next, typename Pruned>
+void depthFirst(const Bvh& bvh, const Leaf& leaf, const Next& next, const Pruned& pruned) {
+  Stack stack;
+  int top = 0;
+  uint32_t node = 0;
+  for (;;) {
+    const BvhNode& n = bvh.node(node);
+    if (n.isLeaf()) {
+      leaf(n);
+    } else if (const std::optional<uint32_t> child = next(n, stack, top)) {
+      node = *child;
+      continue;
+    }
+    while (top > 0 && pruned(stack[top - 1].bound)) --top;
+    if (top == 0) break;
+    node = stack[--top].node;
+  }
+}
+
 // Start loading what visiting a node will read: its children's pair, or its leaf's triangles.
 void prefetchVisit(const Bvh& bvh, const std::vector<Triangle>& triangles, const BvhNode& n) {
   if (n.isLeaf()) {
@@ -250,22 +272,12 @@ ClosestPoint MeshShape::closest(const glm::dvec3& query) const {
   }
   const glm::dvec3 local = query - bvh_.origin;
   Nearest best;
-  Stack stack;
-  int top = 0;
-  uint32_t node = 0;
-  for (;;) {
-    const BvhNode& n = bvh_.node(node);
-    if (n.isLeaf()) {
-      closestInLeaf(query, n.first, n.count, best);
-    } else if (const std::optional<uint32_t> next =
-                   nearerChild(local, n, best.distance2, stack, top)) {
-      node = *next;
-      continue;
-    }
-    while (top > 0 && stack[top - 1].bound >= best.distance2) --top;
-    if (top == 0) break;
-    node = stack[--top].node;
-  }
+  depthFirst(
+      bvh_, [&](const BvhNode& n) { closestInLeaf(query, n.first, n.count, best); },
+      [&](const BvhNode& n, Stack& stack, int& top) {
+        return nearerChild(local, n, best.distance2, stack, top);
+      },
+      [&](double bound) { return bound >= best.distance2; });
   return {best.point, unitNormal(triangles_[best.triangle]), std::sqrt(best.distance2)};
 }
 
@@ -311,26 +323,19 @@ std::optional<double> MeshShape::intersect(const glm::dvec3& origin, const glm::
   std::optional<double> nearest;
   double limit = tMax, enter = 0.0;
   if (!boxRay.enters(bvh_.node(0), tMin, limit, enter)) return std::nullopt;
-  Stack stack;
-  int top = 0;
-  uint32_t node = 0;
-  for (;;) {
-    const BvhNode& n = bvh_.node(node);
-    if (n.isLeaf()) {
-      for (uint32_t i = n.first; i < n.first + n.count; ++i) {
-        const Triangle& t = triangles_[i];
-        if (const std::optional<double> hit = intersectTriangle(ray, t.a, t.b, t.c, tMin, limit))
-          nearest = limit = *hit;
-      }
-    } else if (const std::optional<uint32_t> next =
-                   enterChildren(boxRay, n, tMin, limit, stack, top)) {
-      node = *next;
-      continue;
-    }
-    while (top > 0 && stack[top - 1].bound > limit) --top;
-    if (top == 0) break;
-    node = stack[--top].node;
-  }
+  depthFirst(
+      bvh_,
+      [&](const BvhNode& n) {
+        for (uint32_t i = n.first; i < n.first + n.count; ++i) {
+          const Triangle& t = triangles_[i];
+          if (const std::optional<double> hit = intersectTriangle(ray, t.a, t.b, t.c, tMin, limit))
+            nearest = limit = *hit;
+        }
+      },
+      [&](const BvhNode& n, Stack& stack, int& top) {
+        return enterChildren(boxRay, n, tMin, limit, stack, top);
+      },
+      [&](double bound) { return bound > limit; });
   return nearest;
 }
 

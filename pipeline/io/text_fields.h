@@ -1,5 +1,5 @@
-// Field splitting and number parsing for text formats (PLY ASCII, XYZ-like files), without
-// iostreams or locales: std::from_chars.
+// Field splitting for text formats (PLY ASCII, XYZ-like files), without iostreams or locales;
+// numbers parsed by pipeline/base/text.h (std::from_chars).
 #pragma once
 
 #include <charconv>
@@ -8,6 +8,8 @@
 #include <string>
 #include <string_view>
 #include <system_error>
+
+#include "pipeline/base/text.h"
 
 namespace iso::io {
 
@@ -31,32 +33,8 @@ bool nextField(std::string_view& rest, std::string_view& field) {
   return true;
 }
 
-// Parse all of `text` as a decimal or scientific number ("inf" and "nan" included) of type T
-// (float or double), rounded once to the nearest value. Values beyond the range become infinities
-// (and tiny ones zero or subnormals), as strtod makes them.
-template <typename T = double>
-bool parseNumber(std::string_view text, T& value) {
-  if (text.starts_with('+') && !text.starts_with("+-")) text.remove_prefix(1);
-  const char* last = text.data() + text.size();
-  const auto [end, error] = std::from_chars(text.data(), last, value);
-  if (end != last || text.empty()) return false;
-  if (error == std::errc::result_out_of_range) {
-    const std::string copy(text);
-    if constexpr (sizeof(T) == sizeof(float)) {
-      value = std::strtof(copy.c_str(), nullptr);
-    } else {
-      value = std::strtod(copy.c_str(), nullptr);
-    }
-  }
-  return error == std::errc() || error == std::errc::result_out_of_range;
-}
-
-// Parse all of `text` as a decimal integer.
-inline bool parseInteger(std::string_view text, int64_t& value) {
-  if (text.starts_with('+') && !text.starts_with("+-")) text.remove_prefix(1);
-  const char* last = text.data() + text.size();
-  const auto [end, error] = std::from_chars(text.data(), last, value);
-  return error == std::errc() && end == last && !text.empty();
-}
+// Numbers are parsed by pipeline/base/text.h, for every part of the project.
+using iso::parseInteger;
+using iso::parseNumber;
 
 }  // namespace iso::io

@@ -28,7 +28,7 @@ static_assert(iso::KeyIndex<iso::Key128>::kNone == iso::kNoNode);
 
 namespace iso {
 
-// ---- pipeline/octree/corners.cpp
+// ---- corners.cpp
 // Values at grid points, each evaluated once: the corners of the nodes the octree tested, then of
 // every filled leaf.
 inline constexpr uint8_t kUnusedCorner = 0xff;  // coarsestLevel of a corner no filled leaf uses
@@ -62,7 +62,7 @@ void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
 void addLeafCorners(CornerField& field, const Octree& tree, std::span<const uint32_t> leaves,
                     const SdfEvaluator& sdf);
 
-// ---- pipeline/octree/snap.cpp
+// ---- snap.cpp
 struct HangingCorner {
   uint32_t corner;                    // entry in the CornerField
   std::array<uint32_t, 4> sources{};  // the coarser leaf's corners it interpolates
@@ -73,7 +73,7 @@ HangingCorners findHangingCorners(const Octree& tree, const CornerField& field);
 // Set each hanging corner to the mean of its sources, coarse levels first.
 void snapHangingCorners(CornerField& field, const HangingCorners& hanging);
 
-// ---- pipeline/octree/close.cpp
+// ---- close.cpp
 struct Closure {
   CornerField corners;
   HangingCorners hanging;
@@ -88,7 +88,7 @@ struct Closure {
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerField&& corners);
 
-// ---- pipeline/octree/lod.cpp
+// ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
 struct LodField {
   KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // lodKey → entry

@@ -27,7 +27,7 @@ namespace iso {
 inline constexpr AttributeDesc kDistanceEncoding{Semantic::SignedDistance, Encoding::Snorm8, 1,
                                                  1.0f};
 
-// ---- pipeline/octree/sdf.cpp
+// ---- sdf.cpp
 struct CornerSample {
   float distance = 0.0f;
   glm::vec3 normal{0.0f, 0.0f, 1.0f};
@@ -55,7 +55,7 @@ class SdfEvaluator {
   }
 };
 
-// ---- pipeline/octree/octree.cpp
+// ---- octree.cpp
 // The trilinear patch of one node: its 8 corner distances over its cell.
 struct Patch {
   std::array<double, 8> distance{};
@@ -113,14 +113,14 @@ struct CornerField;
 Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildOptions& options,
                    const RadiusStats& radii, CornerField& corners, OctreeStats* stats = nullptr);
 
-// ---- pipeline/octree/passive.cpp
+// ---- passive.cpp
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
 bool diskTouchesBox(const PointSet& points, uint32_t i, const glm::dvec3& lo, const glm::dvec3& hi);
 bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node);
 // Mark Empty children of Internal nodes Passive when a disk touches them; returns how many.
 size_t markPassiveLeaves(Octree& tree, const PointSet& points);
 
-// ---- pipeline/octree/balance.cpp
+// ---- balance.cpp
 // Split filled leaves until face-, edge- and corner-adjacent filled leaves differ by at most one
 // level; returns the number of splits.
 size_t balanceOctree(Octree& tree, const PointSet& points);

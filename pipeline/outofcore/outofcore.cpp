@@ -58,31 +58,23 @@ struct Accumulated {
 };
 
 void appendRange(PointSet& to, const PointSet& from, uint32_t begin, uint32_t end) {
-  const auto add = [&](auto& dst, const auto& src) {
-    if (!src.empty()) dst.insert(dst.end(), src.begin() + begin, src.begin() + end);
-  };
-  add(to.position, from.position);
-  add(to.normal, from.normal);
-  add(to.color, from.color);
-  add(to.weight, from.weight);
-  add(to.radius, from.radius);
-  add(to.roughness, from.roughness);
-  add(to.key, from.key);
-  add(to.source, from.source);
+  PointSet::forEachColumn(
+      [&](auto& dst, const auto& src) {
+        if (!src.empty()) dst.insert(dst.end(), src.begin() + begin, src.begin() + end);
+      },
+      to, from);
 }
 
 // Room for n points (an upper bound: duplicates merge), so that appending never doubles.
 void reserveFor(Accumulated& a, size_t n, const PointLayout& layout) {
   PointSet& p = a.points;
-  p.position.reserve(n);
-  p.normal.reserve(n);  // estimated where the input has none
-  if (layout.colors) p.color.reserve(n);
-  p.weight.reserve(n);
-  p.radius.reserve(n);
-  p.key.reserve(n);
-  p.source.reserve(n);
+  // Every column (normals are estimated where the input has none) but colors the input lacks.
+  PointSet::forEachColumn(
+      [&](auto& column) {
+        if (static_cast<const void*>(&column) != &p.color || layout.colors) column.reserve(n);
+      },
+      p);
   a.components.of.reserve(n);
-  p.roughness.reserve(n);
   a.firstDistance.reserve(n);
 }
 
@@ -96,23 +88,14 @@ class InPlaceResults {
   // Write the results of `record` in `from` (the target itself, or a chunk prepared again).
   void place(const Accumulated& from, ChunkRecord record) {
     const size_t begin = record.pointBegin, end = record.pointEnd, n = end - begin;
-    const auto put = [&](auto& dst, const auto& src, size_t stride) {
+    const auto put = [&](auto& dst, const auto& src) {
       if (src.empty()) return;
-      ISO_CHECK(cursor_ * stride + n * stride <= dst.size());
-      std::copy(src.begin() + ptrdiff_t(begin * stride), src.begin() + ptrdiff_t(end * stride),
-                dst.begin() + ptrdiff_t(cursor_ * stride));  // forward: safe moving down
+      ISO_CHECK(cursor_ + n <= dst.size());
+      std::copy(src.begin() + ptrdiff_t(begin), src.begin() + ptrdiff_t(end),
+                dst.begin() + ptrdiff_t(cursor_));  // forward: safe moving down
     };
-    PointSet& to = to_.points;
-    const PointSet& p = from.points;
-    put(to.position, p.position, 1);
-    put(to.normal, p.normal, 1);
-    put(to.color, p.color, 1);
-    put(to.weight, p.weight, 1);
-    put(to.radius, p.radius, 1);
-    put(to.roughness, p.roughness, 1);
-    put(to.key, p.key, 1);
-    put(to.source, p.source, 1);
-    put(to_.firstDistance, from.firstDistance, 1);
+    PointSet::forEachColumn(put, to_.points, from.points);
+    put(to_.firstDistance, from.firstDistance);
     const size_t firstBoundary = boundarySource_.size();
     boundarySource_.insert(boundarySource_.end(),
                            from.boundarySource.begin() + ptrdiff_t(record.boundaryBegin),
@@ -143,22 +126,14 @@ class InPlaceResults {
 
   // Cut the target to the results placed.
   void finish() {
-    const auto cut = [&](auto& v, size_t stride) {
-      if (!v.empty()) v.resize(cursor_ * stride);
+    const auto cut = [&](auto& v) {
+      if (!v.empty()) v.resize(cursor_);
     };
-    PointSet& to = to_.points;
-    cut(to.position, 1);
-    cut(to.normal, 1);
-    cut(to.color, 1);
-    cut(to.weight, 1);
-    cut(to.radius, 1);
-    cut(to.roughness, 1);
-    cut(to.key, 1);
-    cut(to.source, 1);
-    cut(to_.firstDistance, 1);
+    PointSet::forEachColumn(cut, to_.points);
+    cut(to_.firstDistance);
     to_.boundarySource = std::move(boundarySource_);
     to_.boundaryNeighbor = std::move(boundaryNeighbor_);
-    cut(to_.components.of, 1);
+    cut(to_.components.of);
     to_.components.anchored = std::move(anchored_);
     to_.components.seedVote = std::move(seedVote_);
     to_.chunks = std::move(records_);

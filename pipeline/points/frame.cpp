@@ -191,13 +191,7 @@ PointSet makePointSet(const PointCloud& cloud, const Frame& frame) {
 
 void sortByKey(PointSet& points) {
   const std::vector<uint32_t> order = sortedOrder(points.key);
-  permute(points.position, order);
-  permute(points.normal, order);
-  permute(points.color, order);
-  permute(points.weight, order);
-  permute(points.radius, order);
-  permute(points.key, order);
-  permute(points.source, order);
+  PointSet::forEachColumn([&](auto& column) { permute(column, order); }, points);
 }
 
 size_t mergeDuplicates(PointSet& points) {

@@ -41,9 +41,24 @@ struct PointSet {
   SpillVector<uint32_t> source;   // index of the (first) input point
   size_t size() const { return position.size(); }
   bool hasColors() const { return !color.empty(); }
+
+  // f(sets.column...) for every column above, in that order: the one list of the columns, which
+  // the code that sorts, appends, reserves, moves or cuts whole points visits. With two sets,
+  // f(a.position, b.position), then the normals, and so on.
+  template <typename F, typename... Sets>
+  static void forEachColumn(F&& f, Sets&... sets) {
+    f(sets.position...);
+    f(sets.normal...);
+    f(sets.color...);
+    f(sets.weight...);
+    f(sets.radius...);
+    f(sets.roughness...);
+    f(sets.key...);
+    f(sets.source...);
+  }
 };
 
-// ---- pipeline/points/frame.cpp
+// ---- frame.cpp
 // The cube around the points, grown so that surfaces reaching past the outermost points stay
 // inside; a degenerate extent (one point, a plane) still gives a positive size.
 Frame chooseFrame(const PointCloud& cloud);
@@ -71,7 +86,7 @@ std::vector<uint32_t> sortedOrder(std::span<const uint64_t> keys);
 // returns how many were merged away. Requires sorted points.
 size_t mergeDuplicates(PointSet& points);
 
-// ---- pipeline/points/radii.cpp
+// ---- radii.cpp
 struct Neighbors {  // the k nearest other points of every point
   int k = 0;
   UninitializedVector<uint32_t> index;  // k per point
@@ -90,7 +105,7 @@ std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neigh
 // The median of values (reordered); 0 for none.
 float medianOf(std::span<float> values);
 
-// ---- pipeline/points/normals.cpp / pipeline/points/orient.cpp
+// ---- normals.cpp / orient.cpp
 struct NormalStats {
   size_t estimated = 0;  // normals computed by PCA
   size_t flipped = 0;    // input normals flipped to agree with their neighbourhood

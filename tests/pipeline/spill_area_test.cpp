@@ -10,19 +10,18 @@
 #include <numeric>
 
 #include "pipeline/base/buffers.h"
+#include "pipeline/base/process.h"
 #include "pipeline/outofcore/spill.h"
 #include "tests/support/support.h"
 
 namespace iso {
 namespace {
 
-// Resident pages mapped from files, in bytes (/proc/self/statm, third field).
+// Resident pages mapped from files, in bytes.
 uint64_t residentFileBytes() {
-  FILE* f = std::fopen("/proc/self/statm", "r");
-  unsigned long long size = 0, resident = 0, shared = 0;
-  EXPECT_EQ(std::fscanf(f, "%llu %llu %llu", &size, &resident, &shared), 3);
-  std::fclose(f);
-  return shared * uint64_t(sysconf(_SC_PAGESIZE));
+  uint64_t files = 0;
+  currentRssBytes(&files);
+  return files;
 }
 
 bool directoryIsEmpty(const std::filesystem::path& dir) {

@@ -15,6 +15,7 @@
 #include "iso/reader.h"
 #include "iso/verify.h"
 #include "iso/writer.h"
+#include "pipeline/base/process.h"
 
 namespace {
 
@@ -24,25 +25,7 @@ double secondsSince(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// Reset the kernel's peak-RSS mark (Linux: "5" to /proc/self/clear_refs), so that a phase's peak
-// can be read alone; the mapped file of a read phase would otherwise dominate it.
-void resetPeakRss() {
-  if (FILE* f = std::fopen("/proc/self/clear_refs", "w")) {
-    std::fputs("5", f);
-    std::fclose(f);
-  }
-}
-
-double peakRssMiB() {
-  FILE* f = std::fopen("/proc/self/status", "r");
-  if (!f) return 0.0;
-  char line[256];
-  double kib = 0.0;
-  while (std::fgets(line, sizeof line, f))
-    if (std::sscanf(line, "VmHWM: %lf kB", &kib) == 1) break;
-  std::fclose(f);
-  return kib / 1024.0;
-}
+double peakRssMiB() { return double(iso::peakRssBytes()) / 1048576.0; }
 
 // Bytes that resemble quantized corner data: a smooth signal plus a little noise.
 std::vector<std::byte> makeChunk(uint32_t seed, size_t size) {
@@ -68,7 +51,7 @@ void benchCodec(const Config& config, const char* label, iso::Codec codec, int l
   const double raw = double(config.chunks) * double(config.chunkBytes);
   iso::FileHeader header;
   header.maxLevel = 3;
-  resetPeakRss();
+  iso::resetPeakRss();
   auto start = Clock::now();
   {
     iso::Writer writer(path, header, {.zstdLevel = level});

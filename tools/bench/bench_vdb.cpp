@@ -24,6 +24,7 @@
 #include "iso/surface_model.h"
 #include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/export.h"
+#include "pipeline/base/process.h"
 #include "pipeline/convert/convert.h"
 #include "pipeline/geom/shape.h"
 #include "pipeline/io/ply.h"

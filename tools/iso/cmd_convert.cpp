@@ -44,7 +44,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
              withSeparators(input), withSeparators(r["octree"]["leaves"].get<uint64_t>()),
              r["seconds"].get<double>(),
              withSeparators(uint64_t(r["points_per_second"].get<double>())),
-             humanBytes(r["peak_rss_bytes"].get<uint64_t>()));
+             byteSize(r["peak_rss_bytes"].get<uint64_t>()));
   fmt::print("  {:<16} {:>8} {:>14}\n", "stage", "seconds", "points/s");
   for (const auto& s : r["stages"]) {
     const double seconds = s["seconds"].get<double>();
@@ -71,7 +71,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const auto& f = r["file"];
   const uint64_t fileChunks = f["chunks"].get<uint64_t>();
   fmt::print("  size: {} in {} chunk{}: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
-             humanBytes(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
+             byteSize(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
              fileChunks == 1 ? "" : "s",
              f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
   if (r.contains("out_of_core")) {
@@ -82,14 +82,14 @@ void printReport(const nlohmann::json& r, const Options& o) {
                withSeparators(c["max_chunk_points"].get<uint64_t>()),
                withSeparators(c["halo_points"].get<uint64_t>()));
     std::string disk =
-        "  temporary disk: " + humanBytes(c.value("temporary_disk_peak", uint64_t{0})) + " at most";
+        "  temporary disk: " + byteSize(c.value("temporary_disk_peak", uint64_t{0})) + " at most";
     if (c.contains("temporary_disk_limit"))
-      disk += " (--max-temp " + humanBytes(c["temporary_disk_limit"].get<uint64_t>()) + ")";
-    disk += ": the points' files " + humanBytes(c["temporary_bytes_peak"].get<uint64_t>());
+      disk += " (--max-temp " + byteSize(c["temporary_disk_limit"].get<uint64_t>()) + ")";
+    disk += ": the points' files " + byteSize(c["temporary_bytes_peak"].get<uint64_t>());
     if (c.value("spilled_arrays", uint64_t{0}) > 0)
       disk += fmt::format(", {} spilled arrays {} (pages dropped {} times)",
                           withSeparators(c["spilled_arrays"].get<uint64_t>()),
-                          humanBytes(c["spilled_bytes_peak"].get<uint64_t>()),
+                          byteSize(c["spilled_bytes_peak"].get<uint64_t>()),
                           withSeparators(c["page_releases"].get<uint64_t>()));
     fmt::print("{}\n", disk);
   }
@@ -117,7 +117,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
         "  kept points: {} in {} chunk{}, {} ({:.2f} bytes/point), positions within {:.3g} "
         "({:.3g} mean spacings){}\n",
         withSeparators(k["points"].get<uint64_t>()), withSeparators(k["chunks"].get<uint64_t>()),
-        k["chunks"].get<uint64_t>() == 1 ? "" : "s", humanBytes(k["bytes"].get<uint64_t>()),
+        k["chunks"].get<uint64_t>() == 1 ? "" : "s", byteSize(k["bytes"].get<uint64_t>()),
         k["bytes_per_point"].get<double>(), k["max_error"].get<double>(),
         k["max_error_over_spacing"].get<double>(),
         k["coarser_chunks"].get<uint64_t>() > 0
@@ -160,21 +160,13 @@ uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path
 }
 
 int run(Options& o) {
-  if (o.fit != "sphere" && o.fit != "plane")
-    throw UsageError("--fit must be sphere or plane");
-  o.build.fit = o.fit == "plane" ? FitMode::Plane : FitMode::Sphere;
-  const std::map<std::string, OrientMode> orients = {
-      {"auto", OrientMode::Auto}, {"up", OrientMode::Up}, {"propagate", OrientMode::Propagate}};
-  if (!orients.contains(o.orient))
-    throw UsageError("--orient must be auto, up or propagate");
-  o.build.orient = orients.at(o.orient);
+  o.build.fit = named(kFitNames, o.fit, "--fit");
+  o.build.orient = named(kOrientNames, o.orient, "--orient");
   o.build.removeOutliers = !o.keepOutliers;
   validateOptions(o.build);  // before any file is read
   if (!o.texture.empty()) {
-    if (o.textureAt != "points" && o.textureAt != "corners")
-      throw UsageError("--texture-at must be points or corners");
     o.build.texture.image = o.texture;
-    o.build.texture.at = o.textureAt == "points" ? TextureAt::Points : TextureAt::Corners;
+    o.build.texture.at = named(kTextureAtNames, o.textureAt, "--texture-at");
     checkImageReadable(o.build.texture.image);  // before the points are read
   }
   const std::filesystem::path output(o.output);
@@ -191,20 +183,16 @@ int run(Options& o) {
     if (std::filesystem::equivalent(file, output, error))
       throw FileError(o.output, std::nullopt, "is also an input");
   }
-  const std::map<std::string, ProgressMode> progressModes = {
-      {"auto", isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None},
-      {"line", ProgressMode::Line},
-      {"json", ProgressMode::Json},
-      {"none", ProgressMode::None}};
-  if (!progressModes.contains(o.progress))
-    throw UsageError("--progress must be auto, line, json or none");
+  const ProgressMode mode =
+      o.progress == "auto" ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line
+                                                                  : ProgressMode::None)
+                           : named(kProgressNames, o.progress, "--progress", "auto, ");
   if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.report.empty() && std::filesystem::is_directory(o.report))
     throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
   std::optional<tbb::global_control> threads;
   if (o.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
-  const ProgressMode mode = progressModes.at(o.progress);
   ProgressReporter progress(mode);
   const uint64_t memory = parseBytes(o.memory, "--memory");
   const std::filesystem::path tmp =
@@ -241,7 +229,7 @@ int run(Options& o) {
     fmt::print(stderr,
                "note: the octree stages' work lists stay in memory: about {} for {} points, "
                "more than --memory {}\n",
-               humanBytes(listBytes), withSeparators(raw->size()), humanBytes(memory));
+               byteSize(listBytes), withSeparators(raw->size()), byteSize(memory));
   ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
   if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {

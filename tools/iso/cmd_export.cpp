@@ -123,7 +123,7 @@ int print(const nlohmann::json& summary, const Options& o) {
     const auto& v = summary["vdb"];
     fmt::print("{}: level set of {} active voxels of {:.6g} (band {} voxels), {} in {:.2f} s\n",
                o.vdb, withSeparators(v["active_voxels"].get<uint64_t>()),
-               v["voxel_size"].get<double>(), o.band, humanBytes(v["bytes"].get<uint64_t>()),
+               v["voxel_size"].get<double>(), o.band, byteSize(v["bytes"].get<uint64_t>()),
                v["seconds"].get<double>());
   }
   return kExitOk;

@@ -123,7 +123,7 @@ void printInfo(const Reader& reader, bool withChunks) {
   const Summary s = summarize(reader);
   fmt::print("{:<12}{}\n", "file", reader.name());
   fmt::print("{:<12}{} bytes ({})\n", "size", withSeparators(reader.fileSize()),
-             humanBytes(reader.fileSize()));
+             byteSize(reader.fileSize()));
   fmt::print("{:<12}{}.{}\n", "format", h.versionMajor, h.versionMinor);
   fmt::print("{:<12}origin ({}, {}, {}), size {}\n", "frame", h.frame.origin[0], h.frame.origin[1],
              h.frame.origin[2], h.frame.size);
@@ -140,18 +140,18 @@ void printInfo(const Reader& reader, bool withChunks) {
   std::string codecs;
   for (const auto& [codec, count] : s.codecs) codecs += fmt::format(", {} {}", count, codec);
   fmt::print("{:<12}{}{}; {} stored for {} of data", "chunks",
-             withSeparators(reader.chunks().size()), codecs, humanBytes(s.storedBytes),
-             humanBytes(s.rawBytes));
+             withSeparators(reader.chunks().size()), codecs, byteSize(s.storedBytes),
+             byteSize(s.rawBytes));
   if (s.rawBytes > 0) fmt::print(" ({:.1f}%)", 100.0 * double(s.storedBytes) / double(s.rawBytes));
   fmt::print("\n");
   for (const auto& [level, l] : s.levels)
     fmt::print("  level {:<4}{} chunk{}, {} stored, {} points\n", level, withSeparators(l.chunks),
-               l.chunks == 1 ? "" : "s", humanBytes(l.storedBytes), withSeparators(l.points));
+               l.chunks == 1 ? "" : "s", byteSize(l.storedBytes), withSeparators(l.points));
   fmt::print("{:<12}{}\n", "points", withSeparators(s.points));
   if (s.kept.chunks > 0)
     fmt::print("{:<12}{} original points in {} chunk{}, {} stored\n", "kept",
                withSeparators(s.kept.points), withSeparators(s.kept.chunks),
-               s.kept.chunks == 1 ? "" : "s", humanBytes(s.kept.storedBytes));
+               s.kept.chunks == 1 ? "" : "s", byteSize(s.kept.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (metadata.is_discarded())
     fmt::print("{:<12}(not valid JSON, {} bytes)\n", "metadata", reader.metadata().size());

@@ -145,7 +145,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_option("--backfaces", a->backFaces,
                 "Back faces (the inside of the surface, e.g. an open scan seen from behind): "
                 "show (shaded, the default), tint, or hide (see through them)")
-      ->check(CLI::IsMember({"show", "tint", "hide"}));
+      ->check(CLI::IsMember(namesList(viewer::kBackFaceNames)));
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");

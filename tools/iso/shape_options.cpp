@@ -1,9 +1,11 @@
 #include "tools/iso/shape_options.h"
 
-#include <charconv>
+#include <optional>
 #include <stdexcept>
+#include <vector>
 
 #include "iso/error.h"
+#include "pipeline/base/text.h"
 #include "pipeline/io/ply.h"
 
 namespace iso::cli {
@@ -25,18 +27,9 @@ void addShapeOptions(CLI::App& c, ShapeOptions& o) {
 }
 
 glm::dvec3 parseVector(const std::string& text, const char* option) {
-  glm::dvec3 v(0.0);
-  const char* p = text.data();
-  const char* end = text.data() + text.size();
-  for (int i = 0; i < 3; ++i) {
-    const auto [next, error] = std::from_chars(p, end, v[i]);
-    if (error != std::errc() || (i < 2 && (next == end || *next != ',')) ||
-        (i == 2 && next != end) || !std::isfinite(v[i]))
-      throw UsageError(std::string(option) + " must be three numbers x,y,z, not '" +
-                                  text + "'");
-    p = next + 1;
-  }
-  return v;
+  const std::optional<std::vector<double>> v = parseNumberList(text, 3);
+  if (!v) throw UsageError(std::string(option) + " must be three numbers x,y,z, not '" + text + "'");
+  return {(*v)[0], (*v)[1], (*v)[2]};
 }
 
 std::unique_ptr<Shape> makeTruth(const ShapeOptions& o) {

@@ -1,18 +1,28 @@
-// Number and text formatting for people.
+// Text for the command line: sizes and names of options checked, text files written (numbers
+// and names themselves: pipeline/base/text.h).
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include "iso/error.h"
+#include "pipeline/base/text.h"
 
 namespace iso::cli {
 
-std::string withSeparators(uint64_t value);                     // 1234567 -> "1,234,567"
-std::string humanBytes(uint64_t bytes);                         // 1536 -> "1.5 KiB"
-// Bytes from "2G", "512M", "1.5G", "100000" (binary units); UsageError naming the
+// Bytes from "2G", "512M", "1.5G", "100000" (binary units; parseByteSize); UsageError naming the
 // option otherwise.
 uint64_t parseSize(const std::string& text, const char* option);
+// The value named `text` in `table`; UsageError naming the option and the accepted names (after
+// `others`, names the caller accepts itself) otherwise.
+template <typename E, size_t N>
+E named(const NameTable<E, N>& table, const std::string& text, const char* option,
+        const std::string& others = "") {
+  if (const std::optional<E> value = valueNamed(table, text)) return *value;
+  throw UsageError(std::string(option) + " must be " + others + namesOf(table) + ", not '" + text +
+                   "'");
+}
 std::string indentLines(const std::string& text, int columns);  // indent every line but the first
 
 // Write text to a file atomically (a temporary file renamed into place); throws iso::FileError.

@@ -1,0 +1,218 @@
+// Shading: background and environment, lights and shadows, reflections and refractions, and
+// one pixel's color. Part of the tracer (trace.h).
+
+uint hashUint(uint x) {
+  x ^= x >> 16u;
+  x *= 0x7feb352du;
+  x ^= x >> 15u;
+  x *= 0x846ca68bu;
+  x ^= x >> 16u;
+  return x;
+}
+
+float randomUnit(ISO_INOUT(uint) state) {
+  state = hashUint(state + 0x9e3779b9u);
+  return float(state >> 8u) * (1.0f / 16777216.0f);
+}
+
+vec3 background(vec3 d) {
+  vec3 up = vec3(P.worldUp.x, P.worldUp.y, P.worldUp.z);
+  float h = dot(d, up);
+  if ((P.options.x & kOptionEnvironment) != 0u) {
+    // Equirectangular: longitude around `up`, latitude from it; bilinear filtering.
+    vec3 a = abs(up.x) < 0.9f ? vec3(1.0f, 0.0f, 0.0f) : vec3(0.0f, 1.0f, 0.0f);
+    vec3 e1 = normalize(cross(up, a));
+    vec3 e2 = cross(up, e1);
+    float phi = atan(dot(d, e2), dot(d, e1));
+    float theta = acos(clamp(h, -1.0f, 1.0f));
+    float w = float(P.pool.z), hgt = float(P.pool.w);
+    float x = (phi * 0.15915494f + 0.5f) * w - 0.5f;
+    float y = theta * 0.31830989f * hgt - 0.5f;
+    float fx = floor(x), fy = floor(y);
+    float ax = x - fx, ay = y - fy;
+    uint x0 = uint(int(fx) < 0 ? int(fx) + int(P.pool.z) : int(fx)) % P.pool.z;
+    uint x1 = (x0 + 1u) % P.pool.z;
+    uint y0 = uint(clamp(int(fy), 0, int(P.pool.w) - 1));
+    uint y1 = uint(clamp(int(fy) + 1, 0, int(P.pool.w) - 1));
+    vec3 top = mix(environmentTexel(x0, y0), environmentTexel(x1, y0), ax);
+    vec3 bottom = mix(environmentTexel(x0, y1), environmentTexel(x1, y1), ax);
+    return P.lod.z * mix(top, bottom, ay);
+  }
+  vec3 top = vec3(P.skyTop.x, P.skyTop.y, P.skyTop.z);
+  vec3 bottom = vec3(P.skyBottom.x, P.skyBottom.y, P.skyBottom.z);
+  return mix(bottom, top, clamp(0.5f + 0.5f * h, 0.0f, 1.0f));
+}
+
+// Phong lighting at p with the shading normal hit.normal (facing the ray) seen from direction
+// -d, with shadow rays that leave the surface on the side `from` of the hit.
+vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+  vec3 n = hit.normal;
+  vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
+  vec3 color = ambient * hit.occlusion * hit.color;
+  vec3 origin = p + n * P.lod.y;
+  for (uint i = 0u; i < kMaxLights; ++i) {
+    Light light = P.lights[i];
+    uint kind = uint(light.position.w);
+    uint samples = kind == kLightArea ? max(uint(light.color.w), 1u) : 1u;
+    if (kind == kLightNone) samples = 0u;
+    vec3 sum = vec3(0.0f);
+    for (uint s = 0u; s < samples; ++s) {
+      vec3 at = vec3(light.position.x, light.position.y, light.position.z);
+      if (kind == kLightArea) {
+        // Stratified over a near-square grid of cells, jittered per pixel.
+        uint columns = uint(ceil(sqrt(float(samples))));
+        uint rows = (samples + columns - 1u) / columns;
+        float a = (float(s % columns) + randomUnit(rng)) / float(columns) - 0.5f;
+        float b = (float(s / columns) + randomUnit(rng)) / float(rows) - 0.5f;
+        at += a * vec3(light.u.x, light.u.y, light.u.z) + b * vec3(light.v.x, light.v.y, light.v.z);
+      }
+      vec3 l = at - p;
+      float lengthL = length(l);
+      l = l / lengthL;
+      float lambert = dot(n, l);
+      bool lit = lambert > 0.0f;
+      if (lit && (P.options.x & kOptionShadows) != 0u) {
+        Hit blocker;
+        lit = !intersect(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker, rays);
+      }
+      if (lit) {
+        vec3 r = reflect(-l, n);
+        float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
+        sum += P.material.x * lambert * hit.color + vec3(P.material.y * specular);
+      }
+    }
+    if (samples > 0u)
+      color += vec3(light.color.x, light.color.y, light.color.z) * sum / float(samples);
+  }
+  return color;
+}
+
+// A pending ray's side of the surface (-1, 0, +1) and whether it travels inside a transparent
+// object, packed into one float of the ray stack.
+float packRayState(float side, bool inMedium) { return side + 1.0f + (inMedium ? 4.0f : 0.0f); }
+
+// The color seen along a camera ray, with reflection and refraction rays up to the bounce limit.
+// Camera rays see both sides of the surface: a back face (crossed from f < 0) is shaded with the
+// flipped normal, tinted (kOptionBackTint) or passed through (kOptionBackHide). Every hit is shaded
+// with the normal facing the ray; the rays that leave it keep the side they leave on.
+// Pending rays wait on a small stack of vec4s: origin and path length before it, direction and
+// bounce count, weight and the ray's state (packRayState).
+vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+  vec4 stackOrigin[kRayStack];
+  vec4 stackDirection[kRayStack];
+  vec4 stackWeight[kRayStack];
+  bool hideBack = (P.options.x & kOptionBackHide) != 0u;
+  // The camera ray first.
+  vec3 origin = o;
+  vec3 direction = d;
+  vec3 weight = vec3(1.0f);
+  float before = 0.0f;  // path length before origin
+  uint depth = 0u;
+  float side = hideBack ? 1.0f : 0.0f;
+  bool inMedium = false;
+  uint count = 0u;
+  vec3 color = vec3(0.0f);
+  float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
+  float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
+  float eta = P.medium.x;
+  float offset = P.lod.y;
+  bool more = true;  // a ray to trace
+  while (more) {
+    Hit hit;
+    bool primary = depth == 0u;
+    if (!intersect(origin, direction, 0.0f, 1e30f, side, primary && hideBack, before,
+                   primary && (P.options.x & kOptionRequests) != 0u, hit, rays)) {
+      color += weight * background(direction);
+    } else {
+      vec3 p = origin + direction * hit.t;
+      vec3 n = hit.from * hit.normal;  // facing the ray
+      hit.normal = n;
+      float distance = before + hit.t;
+      bool bounce = depth < P.options.y;
+      if (!inMedium) {
+        // Local shading, then the transmitted and the mirror rays.
+        if (hit.from < 0.0f && (P.options.x & kOptionBackTint) != 0u)
+          hit.color *= vec3(P.backface.x, P.backface.y, P.backface.z);
+        color += weight * (1.0f - reflectivity - transparency) *
+                 shade(p, direction, hit, distance, rng, rays);
+        float mirror = reflectivity;
+        if (bounce && transparency > 0.0f) {
+          vec3 r = refract(direction, n, 1.0f / eta);
+          if (dot(r, r) > 0.0f && count < kRayStack) {
+            stackOrigin[count] = vec4(p - n * offset, distance);
+            stackDirection[count] = vec4(normalize(r), float(depth + 1u));
+            stackWeight[count] = vec4(weight * transparency, packRayState(-hit.from, true));
+            count += 1u;
+          } else {
+            mirror += transparency;
+          }
+        }
+        if (bounce && mirror > 0.0f && count < kRayStack) {
+          stackOrigin[count] = vec4(p + n * offset, distance);
+          stackDirection[count] = vec4(reflect(direction, n), float(depth + 1u));
+          stackWeight[count] = vec4(weight * mirror, packRayState(hit.from, false));
+          count += 1u;
+        }
+      } else if (bounce && count < kRayStack) {
+        // Leaving a transparent object: absorption along the way, then out or totally reflected.
+        vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
+        vec3 r = refract(direction, n, eta);
+        bool leaves = dot(r, r) > 0.0f;
+        stackOrigin[count] = vec4(leaves ? p - n * offset : p + n * offset, distance);
+        stackDirection[count] =
+            vec4(leaves ? normalize(r) : reflect(direction, n), float(depth + 1u));
+        stackWeight[count] = vec4(weight * exp(-absorption * hit.t),
+                                  leaves ? packRayState(-hit.from, false)
+                                         : packRayState(hit.from, true));
+        count += 1u;
+      }
+    }
+    more = count > 0u;
+    if (more) {
+      count -= 1u;
+      origin = vec3(stackOrigin[count].x, stackOrigin[count].y, stackOrigin[count].z);
+      before = stackOrigin[count].w;
+      direction = vec3(stackDirection[count].x, stackDirection[count].y, stackDirection[count].z);
+      depth = uint(stackDirection[count].w);
+      weight = vec3(stackWeight[count].x, stackWeight[count].y, stackWeight[count].z);
+      uint state = uint(stackWeight[count].w + 0.5f);
+      side = float(state & 3u) - 1.0f;
+      inMedium = state >= 4u;
+    }
+  }
+  return color;
+}
+
+float linearToSrgb(float c) {
+  c = clamp(c, 0.0f, 1.0f);
+  return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
+uint renderPixel(uint x, uint y, ISO_INOUT(uint) rays) {
+  uint samples = max(P.image.z, 1u);
+  uint rng = hashUint(x * 1973u + y * 9277u + P.image.w * 26699u);
+  vec3 sum = vec3(0.0f);
+  vec3 right = vec3(P.right.x, P.right.y, P.right.z);
+  vec3 up = vec3(P.up.x, P.up.y, P.up.z);
+  vec3 forward = vec3(P.forward.x, P.forward.y, P.forward.z);
+  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
+  for (uint s = 0u; s < samples; ++s) {
+    float jx = samples > 1u ? randomUnit(rng) : 0.5f;
+    float jy = samples > 1u ? randomUnit(rng) : 0.5f;
+    float sx = 2.0f * (float(x) + jx) / float(P.image.x) - 1.0f;
+    float sy = 1.0f - 2.0f * (float(y) + jy) / float(P.image.y);
+    vec3 d = normalize(forward + sx * right + sy * up);
+    sum += radiance(eye, d, rng, rays);
+  }
+  vec3 c = sum / float(samples);
+  uint r = uint(linearToSrgb(c.x) * 255.0f + 0.5f);
+  uint gc = uint(linearToSrgb(c.y) * 255.0f + 0.5f);
+  uint b = uint(linearToSrgb(c.z) * 255.0f + 0.5f);
+  if ((P.options.x & kOptionSwapRB) != 0u) {
+    uint swap = r;
+    r = b;
+    b = swap;
+  }
+  return r | (gc << 8u) | (b << 16u) | (255u << 24u);
+}
