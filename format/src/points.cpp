@@ -15,6 +15,7 @@
 #include <string>
 
 #include "bytes.h"
+#include "iso/check.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
@@ -71,17 +72,17 @@ bool withinSpan(const std::vector<std::array<int32_t, 3>>& offsets) {
 std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
   const size_t n = points.size();
   if (n == 0 || n > kMaxPointsPerChunk)
-    throw std::invalid_argument("a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
+    throw InternalError("a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
                                 " points, not " + std::to_string(n));
   if ((!points.colors.empty() && points.colors.size() != n) ||
       (!points.normals.empty() && points.normals.size() != n))
-    throw std::invalid_argument("points chunk attributes are not one per point");
+    throw InternalError("points chunk attributes are not one per point");
   if (points.stepBits > kMaxPointStepBits)
-    throw std::invalid_argument("points chunk step bits above " +
+    throw InternalError("points chunk step bits above " +
                                 std::to_string(kMaxPointStepBits));
-  if (speed < 0 || speed > 10) throw std::invalid_argument("Draco speed must be 0 to 10");
+  if (speed < 0 || speed > 10) throw InternalError("Draco speed must be 0 to 10");
   if (!withinSpan(points.offsets))
-    throw std::invalid_argument("points chunk offsets span 2^31 or more along an axis");
+    throw InternalError("points chunk offsets span 2^31 or more along an axis");
   draco::PointCloudBuilder builder;
   builder.Start(uint32_t(n));
   addAttribute(builder, kPosition, points.offsets);

@@ -12,6 +12,7 @@
 
 #include "bytes.h"
 #include "file_io.h"
+#include "iso/check.h"
 #include "iso/error.h"
 #include "layout.h"
 
@@ -246,7 +247,7 @@ std::span<const std::byte> Reader::storedPayload(uint32_t id) const {
 void Reader::decodePayload(uint32_t id, std::span<std::byte> out) const {
   const ChunkInfo& c = chunk(id);
   if (out.size() < c.rawSize)
-    throw std::invalid_argument("decodePayload: output buffer smaller than the chunk's raw size");
+    throw InternalError("decodePayload: output buffer smaller than the chunk's raw size");
   const std::span<const std::byte> stored = storedPayload(id);
   if (c.codec == Codec::Raw) {
     if (!stored.empty()) std::memcpy(out.data(), stored.data(), stored.size());

@@ -4,11 +4,13 @@
 
 #include <algorithm>
 #include <bit>
+#include <optional>
 #include <cstring>
 #include <stdexcept>
 #include <string>
 
 #include "bytes.h"
+#include "iso/check.h"
 #include "iso/error.h"
 #include "iso/flat_map.h"
 #include "iso/quantize.h"
@@ -26,9 +28,12 @@ Key128 lodCornerKey(const GridPoint& p, uint8_t level) {
   return {p.x | uint64_t(p.y) << 32, p.z | uint64_t(level) << 32};
 }
 
-[[noreturn]] void invalid(const std::string& reason) {
-  throw std::invalid_argument("surface chunk: " + reason);
-}
+// A rule of the format a topology breaks (layoutSurface's checks, caught by its two entries).
+struct BrokenRule {
+  std::string reason;
+};
+
+[[noreturn]] void invalid(const std::string& reason) { throw BrokenRule{"surface chunk: " + reason}; }
 
 void checkRoots(const SurfaceTopology& t, uint8_t chunkLevel, uint64_t chunkKey, uint8_t maxLevel) {
   if (t.depth < 1) invalid("depth is 0");
@@ -199,6 +204,9 @@ void resizeValues(CornerValues& v, const std::vector<AttributeDesc>& schema, siz
 }
 
 void checkValueCounts(const CornerValues& v, const std::vector<AttributeDesc>& schema, size_t n) {
+  const auto invalid = [](const std::string& reason) {
+    throw InternalError("surface chunk: " + reason);
+  };
   if (v.distance.size() != n) invalid("distance count differs from the corner count");
   for (const AttributeDesc& a : schema) {
     if (a.semantic == Semantic::Normal && v.normal.size() != n) invalid("normal count differs");
@@ -240,8 +248,10 @@ GridPoint cornerPoint(uint8_t level, uint64_t key, int corner) {
           (cell[2] + uint32_t((corner >> 2) & 1)) << shift};
 }
 
-CornerLayout layoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel, uint64_t chunkKey,
-                           uint8_t maxLevel) {
+namespace {
+
+CornerLayout layoutOf(const SurfaceTopology& topology, uint8_t chunkLevel, uint64_t chunkKey,
+                      uint8_t maxLevel) {
   checkRoots(topology, chunkLevel, chunkKey, maxLevel);
   CornerLayout layout;
   layout.nodes = expandNodes(topology);
@@ -255,6 +265,28 @@ CornerLayout layoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel, 
               : numberCorner(lodMap, layout.lodCorners, lodCornerKey(p, node.level), p, node.level);
     }
   return layout;
+}
+
+}  // namespace
+
+std::optional<CornerLayout> tryLayoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel,
+                                             uint64_t chunkKey, uint8_t maxLevel,
+                                             std::string& problem) {
+  try {
+    return layoutOf(topology, chunkLevel, chunkKey, maxLevel);
+  } catch (const BrokenRule& broken) {
+    problem = broken.reason;
+    return std::nullopt;
+  }
+}
+
+CornerLayout layoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel, uint64_t chunkKey,
+                           uint8_t maxLevel) {
+  try {
+    return layoutOf(topology, chunkLevel, chunkKey, maxLevel);
+  } catch (const BrokenRule& broken) {
+    throw InternalError(broken.reason);
+  }
 }
 
 std::vector<std::byte> encodeSurfaceChunk(const SurfaceTopology& topology,
@@ -350,11 +382,11 @@ SurfaceChunk decodeSurfaceChunk(const Reader& reader, uint32_t id) {
     out.topology.rootKeys[i] = loadLE<uint64_t>(b + p.rootsOffset + 8ull * i);
   out.topology.childMasks.resize(nodeCount);
   std::memcpy(out.topology.childMasks.data(), b + p.masksOffset, nodeCount);
-  try {
-    out.layout = layoutSurface(out.topology, chunk.level, chunk.key, reader.header().maxLevel);
-  } catch (const std::invalid_argument& error) {
-    fail(error.what());
-  }
+  std::string problem;
+  std::optional<CornerLayout> layout =
+      tryLayoutSurface(out.topology, chunk.level, chunk.key, reader.header().maxLevel, problem);
+  if (!layout) fail(problem);
+  out.layout = std::move(*layout);
   if (out.layout.leafCorners.size() != leafCount || out.layout.lodCorners.size() != lodCount)
     fail("corner counts differ from those the nodes use");
   const size_t leaves = size_t(std::count_if(out.layout.nodes.begin(), out.layout.nodes.end(),

@@ -36,7 +36,7 @@ struct Writer::Impl {
   ~Impl() { ZSTD_freeCCtx(zstd); }
 
   void requireOpen() const {
-    if (!isOpen) throw std::logic_error("iso::Writer used after finish() or abandon()");
+    if (!isOpen) throw InternalError("iso::Writer used after finish() or abandon()");
   }
 
   // Compress data into `compressed`; returns false when that would not make it smaller.
@@ -70,11 +70,11 @@ struct Writer::Impl {
       if (c.parent == kNoParent) continue;
       const std::string who = "chunk " + std::to_string(c.id);
       if (c.parent >= chunks.size())
-        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) +
+        throw InternalError(who + ": parent " + std::to_string(c.parent) +
                                     " does not exist");
       const ChunkInfo& p = chunks[c.parent];
       if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
-        throw std::invalid_argument(who + ": parent " + std::to_string(c.parent) +
+        throw InternalError(who + ": parent " + std::to_string(c.parent) +
                                     " is not a coarser cell containing it");
     }
   }
@@ -82,13 +82,13 @@ struct Writer::Impl {
 
 Writer::Writer(std::filesystem::path output, const FileHeader& header, WriterOptions options) {
   if (header.versionMajor != kFormatMajor || header.versionMinor != kFormatMinor)
-    throw std::invalid_argument("iso::Writer writes format version " +
+    throw InternalError("iso::Writer writes format version " +
                                 std::to_string(kFormatMajor) + "." + std::to_string(kFormatMinor) +
                                 " only");
   if (std::optional<detail::FieldProblem> problem = detail::headerProblem(header))
-    throw std::invalid_argument("invalid .iso header: " + problem->reason);
+    throw InternalError("invalid .iso header: " + problem->reason);
   if (options.zstdLevel < ZSTD_minCLevel() || options.zstdLevel > ZSTD_maxCLevel())
-    throw std::invalid_argument("zstd level out of range");
+    throw InternalError("zstd level out of range");
   impl_ = std::make_unique<Impl>(std::move(output), header, options);
   const auto encoded = detail::encodeHeader(header);
   impl_->file.write(encoded);
@@ -103,16 +103,16 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
   Impl& w = *impl_;
   w.requireOpen();
   if (desc.level > w.header.maxLevel)
-    throw std::invalid_argument("chunk level is above the header's maxLevel");
+    throw InternalError("chunk level is above the header's maxLevel");
   if (!isValidKey(desc.level, desc.key))
-    throw std::invalid_argument("chunk key does not fit its level");
+    throw InternalError("chunk key does not fit its level");
   if (data.size() > kMaxChunkRawSize)
-    throw std::invalid_argument("chunk data is over the format's limit of 2^30 bytes");
+    throw InternalError("chunk data is over the format's limit of 2^30 bytes");
   if (!std::isfinite(desc.geometricError) || desc.geometricError < 0.0f)
-    throw std::invalid_argument("chunk geometric error must be finite and non-negative");
+    throw InternalError("chunk geometric error must be finite and non-negative");
   if (desc.codec != Codec::Raw && desc.codec != Codec::Zstd)
-    throw std::invalid_argument("unknown chunk codec");
-  if (w.chunks.size() >= kNoParent) throw std::invalid_argument("too many chunks");
+    throw InternalError("unknown chunk codec");
+  if (w.chunks.size() >= kNoParent) throw InternalError("too many chunks");
 
   ChunkInfo c;
   c.id = static_cast<uint32_t>(w.chunks.size());
@@ -144,7 +144,7 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
 
 void Writer::setParent(uint32_t chunk, uint32_t parent) {
   impl_->requireOpen();
-  if (chunk >= impl_->chunks.size()) throw std::invalid_argument("setParent: no such chunk");
+  if (chunk >= impl_->chunks.size()) throw InternalError("setParent: no such chunk");
   impl_->chunks[chunk].parent = parent;
 }
 
@@ -154,7 +154,7 @@ void requireJsonObject(const std::string& json) {
   const size_t first = json.find_first_not_of(" \t\r\n");
   const size_t last = json.find_last_not_of(" \t\r\n");
   if (first == std::string::npos || json[first] != '{' || json[last] != '}')
-    throw std::invalid_argument("metadata must be a JSON object");
+    throw InternalError("metadata must be a JSON object");
 }
 
 }  // namespace
@@ -197,7 +197,7 @@ void Writer::close() {
 
 void Writer::replaceMetadata(std::string json) {
   Impl& w = *impl_;
-  if (!w.isClosed) throw std::logic_error("iso::Writer::replaceMetadata before close()");
+  if (!w.isClosed) throw InternalError("iso::Writer::replaceMetadata before close()");
   requireJsonObject(json);
   w.metadata = std::move(json);
   w.file.truncate(w.trailer.metadataOffset);
@@ -206,7 +206,7 @@ void Writer::replaceMetadata(std::string json) {
 
 void Writer::commit() {
   Impl& w = *impl_;
-  if (!w.isClosed) throw std::logic_error("iso::Writer::commit before close()");
+  if (!w.isClosed) throw InternalError("iso::Writer::commit before close()");
   w.file.commit();
   w.isClosed = false;
 }

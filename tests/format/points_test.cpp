@@ -9,6 +9,7 @@
 #include <random>
 #include <tuple>
 
+#include "iso/check.h"
 #include "iso/error.h"
 #include "iso/points.h"
 #include "iso/reader.h"
@@ -136,17 +137,17 @@ TEST(PointsChunk, positionsAreTheCellCornerPlusStepsExactly) {
 
 TEST(PointsChunk, theEncoderRefusesWhatTheFormatDoesNotAllow) {
   PointsChunk empty;
-  EXPECT_THROW(encodePointsChunk(empty), std::invalid_argument);
+  EXPECT_THROW(encodePointsChunk(empty), InternalError);
   PointsChunk c = randomPoints(10, true, false, 1);
   c.colors.pop_back();
-  EXPECT_THROW(encodePointsChunk(c), std::invalid_argument);
+  EXPECT_THROW(encodePointsChunk(c), InternalError);
   c = randomPoints(10, false, false, 1);
   c.stepBits = 53;
-  EXPECT_THROW(encodePointsChunk(c), std::invalid_argument);
+  EXPECT_THROW(encodePointsChunk(c), InternalError);
   c = randomPoints(10, false, false, 1);
   c.offsets[1][2] = std::numeric_limits<int32_t>::max();
   c.offsets[2][2] = -1;  // a span of 2^31
-  EXPECT_THROW(encodePointsChunk(c), std::invalid_argument);
+  EXPECT_THROW(encodePointsChunk(c), InternalError);
 }
 
 // Decoding throws a FileError naming the file, chunk 0 and `reason`; verification reports it.

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <random>
 
+#include "iso/check.h"
 #include "iso/reader.h"
 #include "iso/verify.h"
 #include "iso/writer.h"
@@ -182,7 +183,7 @@ TEST(FormatRoundTrip, decodeRejectsSmallBuffersAndBadIds) {
   }
   const Reader reader = Reader::open(dir / "f.iso");
   std::vector<std::byte> small(999);
-  EXPECT_THROW(reader.decodePayload(0, small), std::invalid_argument);
+  EXPECT_THROW(reader.decodePayload(0, small), InternalError);
   EXPECT_THROW(reader.chunk(1), std::out_of_range);
   EXPECT_THROW(reader.storedPayload(1), std::out_of_range);
 }

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <thread>
 
+#include "iso/check.h"
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/verify.h"
@@ -123,33 +124,33 @@ TEST(Writer, rejectsInvalidHeadersAndChunks) {
   test::TempDir dir;
   FileHeader bad;
   bad.frame.size = 0;
-  EXPECT_THROW(Writer(dir / "a.iso", bad), std::invalid_argument);
+  EXPECT_THROW(Writer(dir / "a.iso", bad), InternalError);
   bad = FileHeader{};
   bad.attributes.push_back({Semantic::Normal, Encoding::Srgb8, 3, 0});
-  EXPECT_THROW(Writer(dir / "a.iso", bad), std::invalid_argument);
+  EXPECT_THROW(Writer(dir / "a.iso", bad), InternalError);
   bad = FileHeader{};
   bad.payloadAlignmentLog2 = 2;
-  EXPECT_THROW(Writer(dir / "a.iso", bad), std::invalid_argument);
+  EXPECT_THROW(Writer(dir / "a.iso", bad), InternalError);
   EXPECT_TRUE(listDirectory(dir.path()).empty());
 
   FileHeader header;
   header.maxLevel = 2;
   Writer writer(dir / "a.iso", header);
   const std::vector<std::byte> data(10);
-  EXPECT_THROW(writer.addChunk({.level = 3}, data), std::invalid_argument);
-  EXPECT_THROW(writer.addChunk({.level = 1, .key = 8}, data), std::invalid_argument);
-  EXPECT_THROW(writer.addChunk({.geometricError = -1.0f}, data), std::invalid_argument);
-  EXPECT_THROW(writer.setMetadata("[1, 2]"), std::invalid_argument);
+  EXPECT_THROW(writer.addChunk({.level = 3}, data), InternalError);
+  EXPECT_THROW(writer.addChunk({.level = 1, .key = 8}, data), InternalError);
+  EXPECT_THROW(writer.addChunk({.geometricError = -1.0f}, data), InternalError);
+  EXPECT_THROW(writer.setMetadata("[1, 2]"), InternalError);
   const uint32_t root = writer.addChunk({}, data);
   const uint32_t child = writer.addChunk({.level = 1, .key = 3}, data);
   writer.setParent(root, child);  // a finer parent breaks the rules
-  EXPECT_THROW(writer.finish(), std::invalid_argument);
+  EXPECT_THROW(writer.finish(), InternalError);
   EXPECT_FALSE(std::filesystem::exists(dir / "a.iso"));
   writer.setParent(root, kNoParent);
   writer.setParent(child, root);
   writer.finish();
   EXPECT_EQ(Reader::open(dir / "a.iso").chunk(child).parent, root);
-  EXPECT_THROW(writer.addChunk({}, data), std::logic_error);
+  EXPECT_THROW(writer.addChunk({}, data), InternalError);
 }
 
 TEST(Writer, outputInMissingDirectoryIsAClearError) {

@@ -11,9 +11,11 @@
 //                  OpenVDB) and of a stage (ConvertError: the points define no surface): exit 1.
 //
 // Nothing the user had is replaced or left half written in any of these cases (iso/writer.h,
-// iso/atomic_file.h). The format library's own API checks of what its callers pass (a header that
-// breaks the format's rules, a chunk out of range) throw std::invalid_argument: a bug of the
-// caller, exit 1 at the command line.
+// iso/atomic_file.h). The format library's checks of what its callers pass (a header or a chunk
+// that breaks the format's rules, a buffer too small, a writer used after it finished) throw
+// InternalError too: a bug of the caller. What comes from a file is checked by the readers, and
+// what breaks a rule there is a FileError (tryLayoutSurface reports a topology's problem without
+// throwing for that reason).
 #pragma once
 
 #include <cstdint>

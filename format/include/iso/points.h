@@ -36,7 +36,7 @@ struct PointsChunk {
 };
 
 // The chunk's data: its header and one Draco point cloud (kd-tree encoding at Draco's encoder
-// `speed`, 0 to 10). Throws std::invalid_argument for a chunk the format does not allow (no
+// `speed`, 0 to 10). Throws iso::InternalError for a chunk the format does not allow (no
 // points, more than kMaxPointsPerChunk, attributes not one per point, stepBits too large, offsets
 // spanning more than kMaxPointOffsetSpan).
 std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed = 0);

@@ -38,7 +38,7 @@ class Reader {
   // The stored bytes of a chunk: its data itself when the codec is raw (zero copy).
   std::span<const std::byte> storedPayload(uint32_t id) const;
 
-  // Decode a chunk's data into out, which must hold at least rawSize bytes (std::invalid_argument
+  // Decode a chunk's data into out, which must hold at least rawSize bytes (iso::InternalError
   // otherwise). Throws iso::FileError when a zstd payload is corrupt. Does not check the checksum.
   void decodePayload(uint32_t id, std::span<std::byte> out) const;
 

@@ -11,7 +11,9 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "iso/format.h"
@@ -72,13 +74,19 @@ struct CornerValues {
   size_t size() const { return distance.size(); }
 };
 
-// Nodes and corner numbering of a topology inside the chunk cell (chunkLevel, chunkKey). Throws
-// std::invalid_argument naming the rule a topology breaks.
+// Nodes and corner numbering of a topology inside the chunk cell (chunkLevel, chunkKey), for a
+// topology its caller made: one that breaks the format's rules is a bug (iso::InternalError
+// naming the rule).
 CornerLayout layoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel, uint64_t chunkKey,
                            uint8_t maxLevel);
+// The same for a topology read from a file: one that breaks the rules gives no layout, and
+// `problem` names the rule.
+std::optional<CornerLayout> tryLayoutSurface(const SurfaceTopology& topology, uint8_t chunkLevel,
+                                             uint64_t chunkKey, uint8_t maxLevel,
+                                             std::string& problem);
 
 // The payload of a surface chunk. Values are quantized per the schema; their counts must match
-// the layout's (std::invalid_argument otherwise).
+// the layout's (iso::InternalError otherwise).
 std::vector<std::byte> encodeSurfaceChunk(const SurfaceTopology& topology,
                                           const CornerLayout& layout,
                                           const std::vector<AttributeDesc>& schema,

@@ -38,7 +38,7 @@ struct ChunkDesc {
 
 class Writer {
  public:
-  // Create the temporary file and write the header. Throws std::invalid_argument for an invalid
+  // Create the temporary file and write the header. Throws iso::InternalError for an invalid
   // header and iso::FileError when the file cannot be created.
   Writer(std::filesystem::path output, const FileHeader& header, WriterOptions options = {});
   ~Writer();  // removes the temporary file unless finish() succeeded
@@ -46,7 +46,7 @@ class Writer {
   Writer& operator=(Writer&&) noexcept;
 
   // Compress (when asked and worthwhile), checksum and write one chunk; returns its id (the index
-  // in the chunk table, in the order of the calls). Throws std::invalid_argument for an invalid
+  // in the chunk table, in the order of the calls). Throws iso::InternalError for an invalid
   // description (level above the header's maxLevel, key out of range, data over kMaxChunkRawSize)
   // and iso::FileError when writing fails.
   uint32_t addChunk(const ChunkDesc& desc, std::span<const std::byte> data);
@@ -58,7 +58,7 @@ class Writer {
   void setMetadata(std::string json);
 
   // Write the chunk table, metadata and trailer, flush, and rename to the output path. Throws
-  // std::invalid_argument when a parent link breaks the format's rules, iso::FileError on I/O
+  // iso::InternalError when a parent link breaks the format's rules, iso::FileError on I/O
   // failure; either way nothing appears at the output path. Same as close() then commit().
   void finish();
 
