@@ -58,7 +58,7 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
       runIso("eval " + quoted(dir_ / "sphere.iso") + " --shape sphere --rays 2000 --samples 5000");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json e = nlohmann::json::parse(run.out);
-  for (const char* key : {"rms", "max", "mean_spacing", "rms_over_spacing", "max_over_spacing",
+  for (const char* key : {"rms", "max", "spacing", "rms_over_spacing", "max_over_spacing",
                           "normal_median_deg", "normal_p99_deg", "hole_rate"})
     EXPECT_TRUE(e.contains(key)) << key;
   EXPECT_LT(e["rms_over_spacing"].get<double>(), 0.2);

@@ -222,7 +222,7 @@ nlohmann::json weightedJson(const Weighted& w, double spacing) {
 }  // namespace
 
 nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
-                                    double meanSpacing, const EvalOptions& options) {
+                                    double pointSpacing, const EvalOptions& options) {
   const IsoToTruth a = isoToTruth(surface, truth, options);
   const TruthToIso b = truthToIso(surface, truth, a.samples, options);
   const Rays rays = castRays(surface, truth, options);
@@ -230,18 +230,18 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
       std::sqrt(0.5 * (a.distance.rms() * a.distance.rms() + b.distance.rms() * b.distance.rms()));
   const double max = std::max(a.distance.max, b.distance.max);
   const double diagonal = glm::length(truth.boundsMax() - truth.boundsMin());
-  nlohmann::json iso = weightedJson(a.distance, meanSpacing);
+  nlohmann::json iso = weightedJson(a.distance, pointSpacing);
   iso["samples"] = a.normalAngles.size();
-  nlohmann::json back = weightedJson(b.distance, meanSpacing);
+  nlohmann::json back = weightedJson(b.distance, pointSpacing);
   back["samples"] = options.truthSamples;
   back["unprojected"] = b.unprojected;
   return {{"truth", truth.name()},
           {"rms", rms},
           {"max", max},
           {"mean", 0.5 * (a.distance.mean() + b.distance.mean())},
-          {"mean_spacing", meanSpacing},
-          {"rms_over_spacing", rms / meanSpacing},
-          {"max_over_spacing", max / meanSpacing},
+          {"spacing", pointSpacing},
+          {"rms_over_spacing", rms / pointSpacing},
+          {"max_over_spacing", max / pointSpacing},
           {"rms_over_diagonal", rms / diagonal},
           {"normal_median_deg", percentile(a.normalAngles, 0.5)},
           {"normal_p99_deg", percentile(a.normalAngles, 0.99)},
@@ -320,7 +320,7 @@ nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointClo
           {"rms", d.rms},
           {"max", d.max},
           {"mean", d.mean},
-          {"mean_spacing", spacing},
+          {"spacing", spacing},
           {"rms_over_spacing", spacing > 0 ? d.rms / spacing : 0.0},
           {"max_over_spacing", spacing > 0 ? d.max / spacing : 0.0}};
 }
@@ -417,7 +417,7 @@ nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
 }
 
 nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
-                                        double meanSpacing, uint64_t samples, uint64_t seed) {
+                                        double pointSpacing, uint64_t samples, uint64_t seed) {
   const std::unique_ptr<Shape> surface = makeMeshShape(mesh);
   // Distances from `count` samples of one to the other, in parallel with one stream per block.
   const auto oneWay = [&](const Shape& from, const Shape& to, uint64_t salt) {
@@ -440,9 +440,9 @@ nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& t
   const double rms = std::sqrt(0.5 * (rmsMT * rmsMT + rmsTM * rmsTM)), max = std::max(maxMT, maxTM);
   return {{"rms", rms},
           {"max", max},
-          {"mean_spacing", meanSpacing},
-          {"rms_over_spacing", rms / meanSpacing},
-          {"max_over_spacing", max / meanSpacing},
+          {"spacing", pointSpacing},
+          {"rms_over_spacing", rms / pointSpacing},
+          {"max_over_spacing", max / pointSpacing},
           {"mesh_to_truth", {{"rms", rmsMT}, {"max", maxMT}}},
           {"truth_to_mesh", {{"rms", rmsTM}, {"max", maxTM}}},
           {"triangles", mesh.triangles.size()},

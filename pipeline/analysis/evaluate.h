@@ -28,9 +28,9 @@ struct EvalOptions {
   uint64_t seed = 1;
 };
 
-// meanSpacing: the input's mean point spacing (world units), the unit of the *_over_spacing values.
+// pointSpacing: the input's mean point spacing (world units), the unit of the *_over_spacing values.
 nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
-                                    double meanSpacing, const EvalOptions& options = {});
+                                    double pointSpacing, const EvalOptions& options = {});
 
 // Distances of the points to the zero set (the conversion report's measure) with their spacing,
 // and, when both the points and the file have colors, the color error: the file's color where
@@ -39,7 +39,7 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);
 // The same with the points' mean spacing given (computed once for many surfaces).
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points,
-                                     double meanSpacing);
+                                     double pointSpacing);
 
 // evaluateAgainstPoints for each level-of-detail cut of the file (SurfaceModel::load's cutLevel),
 // from the coarsest level with nodes to the deepest leaves: what the viewer draws at that level.
@@ -56,9 +56,9 @@ nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
 // A triangle mesh against a truth, both ways by closest points: the one metric for surfaces that
 // other tools make (an OpenVDB level set's mesh) and for an .iso file's exported mesh beside them.
 // "mesh_to_truth": area-uniform samples of the mesh; "truth_to_mesh": samples of the truth; "rms"
-// and "max" combined as evaluateAgainstShape does; *_over_spacing in meanSpacing.
+// and "max" combined as evaluateAgainstShape does; *_over_spacing in pointSpacing.
 nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
-                                        double meanSpacing, uint64_t samples = 100000,
+                                        double pointSpacing, uint64_t samples = 100000,
                                         uint64_t seed = 1);
 
 }  // namespace iso

@@ -281,8 +281,8 @@ std::vector<glm::dvec3> visibilityViews(int random, uint64_t seed) {
 }
 
 Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> points,
-                             double meanSpacing, const VisibilityOptions& options) {
-  ISO_CHECK(meanSpacing > 0.0 && options.pixelSpacings > 0.0);
+                             double pointSpacing, const VisibilityOptions& options) {
+  ISO_CHECK(pointSpacing > 0.0 && options.pixelSpacings > 0.0);
   const Frame& frame = reader.header().frame;
   Visibility out;
   out.pixelSpacings = options.pixelSpacings;
@@ -299,7 +299,7 @@ Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> p
     out.measured.push_back(i);
     inFrame.push_back(q);
   }
-  const double spacing = meanSpacing / frame.size, pixel = options.pixelSpacings * spacing;
+  const double spacing = pointSpacing / frame.size, pixel = options.pixelSpacings * spacing;
   const std::vector<glm::dvec3> directions = visibilityViews(options.randomViews, options.seed);
   std::vector<Tally> tallies(directions.size());
   std::vector<std::vector<uint8_t>> inside;

@@ -73,10 +73,10 @@ struct Visibility {
   nlohmann::json json() const;
 };
 
-// The points are in world units, `meanSpacing` too; points outside the frame's cube are left out.
+// The points are in world units, `pointSpacing` too; points outside the frame's cube are left out.
 // Throws iso::FileError for a damaged file.
 Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> points,
-                             double meanSpacing, const VisibilityOptions& options = {});
+                             double pointSpacing, const VisibilityOptions& options = {});
 
 // The view directions: the 6 axis directions (+x, −x, +y, −y, +z, −z), then `random` uniform ones.
 std::vector<glm::dvec3> visibilityViews(int random, uint64_t seed);

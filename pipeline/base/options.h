@@ -60,6 +60,8 @@ struct BuildOptions {
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;
   bool removeOutliers = true;
+  // Separate groups of fewer points (and less than half the points) are strays (points/points.h).
+  uint32_t strayGroupPoints = 64;
   // Points per orientation block (orientNormals); part of the result, so a parameter.
   uint32_t orientBlockPoints = 1u << 20;
   TextureOptions texture;      // a triplanar texture baked into the colors (output/texture.h)

@@ -146,14 +146,16 @@ Prepared prepare(const PointCloud& cloud) {
   return p;
 }
 
-PointCloud withoutSources(const PointCloud& cloud, const PointSet& points,
-                          const std::vector<uint8_t>& flagged) {
-  std::vector<uint8_t> drop(cloud.size(), 0);
-  for (size_t i = 0; i < points.size(); ++i)
-    if (flagged[i]) drop[points.source[i]] = 1;
+// The cloud without the stray points (and the duplicates merged into them, at their positions).
+PointCloud withoutStrays(const PointCloud& cloud, const Prepared& prepared,
+                         const std::vector<uint8_t>& flagged) {
+  StrayPositions strays;
+  for (size_t i = 0; i < prepared.points.size(); ++i)
+    if (flagged[i]) strays.add(prepared.points.position[i]);
+  strays.seal();
   PointCloud out;
   for (size_t i = 0; i < cloud.size(); ++i) {
-    if (drop[i]) continue;
+    if (strays.contains(glm::vec3(toFrame(cloud.positions[i], prepared.frame)))) continue;
     out.positions.push_back(cloud.positions[i]);
     if (cloud.hasNormals()) out.normals.push_back(cloud.normals[i]);
     if (cloud.hasColors()) out.colors.push_back(cloud.colors[i]);
@@ -222,6 +224,7 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                         {"chunk_nodes", o.chunkNodes},
                         {"zstd_level", o.zstdLevel},
                         {"remove_outliers", o.removeOutliers},
+                        {"stray_group_points", o.strayGroupPoints},
                         {"orient_block_points", o.orientBlockPoints}};
   // Bakes are listed only when asked for, so files without them keep their bytes.
   if (o.texture.enabled())
@@ -257,10 +260,11 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   if (options.removeOutliers) {
-    const std::vector<uint8_t> flagged = findOutliers(prepared.points, neighbors);
-    ready.outliers = size_t(std::count(flagged.begin(), flagged.end(), uint8_t{1}));
-    if (ready.outliers > 0) {  // choose the frame again without them: far outliers waste precision
-      filtered = withoutSources(*cloud, prepared.points, flagged);
+    const Strays strays =
+        findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
+    if (strays.sparse + strays.grouped > 0) {  // choose the frame again without them
+      filtered = withoutStrays(*cloud, prepared, strays.flagged);
+      ready.outliers = {cloud->size() - filtered.size(), strays.sparse, strays.grouped};
       cloud = &filtered;
       timer.next("prepare", cloud->size());  // both stages again, as their own entries
       prepared = prepare(*cloud);
@@ -380,13 +384,15 @@ void reportPoints(const ReadyPoints& ready, uint64_t input, uint64_t nonFinite,
   report["points"] = {{"input", input},
                       {"non_finite_dropped", nonFinite},
                       {"duplicates_merged", ready.duplicates},
-                      {"outliers_removed", ready.outliers},
+                      {"outliers_removed", ready.outliers.removed},
                       {"used", points.size()}};
   report["normals"] = {{"estimated", ready.normals.estimated},
                        {"from_input", points.size() - ready.normals.estimated},
                        {"flipped_to_agree", ready.normals.flipped}};
   if (!ready.outOfCore.is_null()) report["out_of_core"] = ready.outOfCore;
-  report["mean_spacing"] = ready.radii.meanSpacing * ready.frame.size;
+  report["points"]["outliers"] = {{"sparse", ready.outliers.sparse},
+                                  {"in_small_groups", ready.outliers.grouped}};
+  report["spacing"] = ready.radii.spacing * ready.frame.size;
   report["median_radius"] = ready.radii.medianRadius * ready.frame.size;
 }
 
@@ -479,7 +485,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   }
   timer.next("write");
 
-  const double spacing = radii.meanSpacing * frame.size;
+  const double spacing = radii.spacing * frame.size;
   reportPoints(ready, inputPoints + source.nonFiniteDropped, source.nonFiniteDropped, report);
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
   report["octree"]["closure_filled"] = closure.filled;

@@ -60,7 +60,7 @@ Patch leafPatch(const OctreeNode& node, const CornerField& corners) {
 enum class Verdict : uint8_t { Leaf, Subdivide, Test, TooFar, Uncovered };
 
 struct ToleranceScale {
-  double tolerance, meanSpacing, medianRadius;
+  double tolerance, pointSpacing, medianRadius;
 };
 
 // maxEdge: the edge (frame units) above which nodes are subdivided without a test.
@@ -127,7 +127,7 @@ double nodeTolerance(const OctreeNode& node, const PointSet& points, const Toler
     radii += points.radius[i];
   }
   const double n = std::max<uint32_t>(node.pointCount(), 1);
-  const double localSpacing = scale.meanSpacing * (radii / n) / scale.medianRadius;
+  const double localSpacing = scale.pointSpacing * (radii / n) / scale.medianRadius;
   return std::max(scale.tolerance * localSpacing, kNoiseFactor * std::sqrt(squares / n));
 }
 
@@ -259,10 +259,10 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
   root.pointEnd = uint32_t(points.size());
   root.kind = root.pointCount() > 0 ? NodeKind::Leaf : NodeKind::Empty;
   tree.nodes.push_back(root);
-  const ToleranceScale tolerance{options.tolerance, radii.meanSpacing,
+  const ToleranceScale tolerance{options.tolerance, radii.spacing,
                                  std::max(radii.medianRadius, 1e-12)};
   // Tested nodes are at most this wide, so that no test reads points much farther away.
-  const double maxEdge = options.maxTestedEdge * radii.meanSpacing;
+  const double maxEdge = options.maxTestedEdge * radii.spacing;
   std::vector<uint32_t> frontier = {0};
   OctreeStats stats;
   while (!frontier.empty()) {  // one level at a time

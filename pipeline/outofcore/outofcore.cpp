@@ -53,7 +53,9 @@ struct Accumulated {
   size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
   OrientationComponents components;                // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
-  std::vector<uint32_t> outlierSources;
+  // While finding strays: the groups of the input points and each point's k-th distance.
+  std::unique_ptr<PointGroups> groups;
+  SpillVector<float> kth;
   uint64_t haloPoints = 0, widenings = 0, maxLoaded = 0;
 };
 
@@ -170,11 +172,10 @@ void dropExcluded(LoadedPoints& loaded, const std::vector<uint8_t>* keep) {
 class ChunkRunner {
  public:
   ChunkRunner(const Distribution& distribution, const Frame& frame, const BuildOptions& options,
-              bool findingOutliers, bool inputNormals, const std::vector<uint8_t>* keep = nullptr)
+              bool inputNormals, const std::vector<uint8_t>* keep = nullptr)
       : distribution_(distribution),
         frame_(frame),
         options_(options),
-        findingOutliers_(findingOutliers),
         hops_(inputNormals ? 4 : 1),
         keep_(keep) {}
 
@@ -246,6 +247,7 @@ class ChunkRunner {
       appendRange(out.points, points, ownBegin, ownEnd);
       out.firstDistance.insert(out.firstDistance.end(), ownEnd - ownBegin, 0.0f);
       out.components.of.insert(out.components.of.end(), ownEnd - ownBegin, kNoNode);
+      if (out.groups) out.kth.insert(out.kth.end(), ownEnd - ownBegin, 0.0f);
       record.pointEnd = out.points.size();
       out.chunks.push_back(record);
       return true;
@@ -256,10 +258,10 @@ class ChunkRunner {
     record.duplicates = own.source.size() - (ownEnd - ownBegin);
     const size_t k = size_t(neighbors.k);
     out.k = k;
-    if (findingOutliers_) {
-      const std::vector<uint8_t> flagged = findOutliers(points, neighbors);
+    if (out.groups) {  // each own point's edges, from its exact k-NN list (specs: strays)
+      out.groups->joinNeighbors(neighbors, ownBegin, ownEnd, points.source);
       for (uint32_t i = ownBegin; i < ownEnd; ++i)
-        if (flagged[i]) out.outlierSources.push_back(points.source[i]);
+        out.kth.push_back(neighbors.distance[size_t(i) * k + k - 1]);
     }
     estimateRadii(points, neighbors);
     for (uint32_t i = ownBegin; i < ownEnd; ++i)
@@ -350,7 +352,6 @@ class ChunkRunner {
   const Distribution& distribution_;
   const Frame& frame_;
   const BuildOptions& options_;
-  bool findingOutliers_;
   int hops_;
   const std::vector<uint8_t>* keep_;
 };
@@ -361,14 +362,14 @@ class ChunkRunner {
 size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
                            const BuildOptions& options, bool inputNormals,
                            const std::vector<uint8_t>& keep,
-                           const std::vector<glm::vec3>& outliers, Accumulated& done) {
+                           const std::vector<glm::vec3>& strays, Accumulated& done) {
   Accumulated again;
-  ChunkRunner rerun(distribution, frame, options, false, inputNormals, &keep);
+  ChunkRunner rerun(distribution, frame, options, inputNormals, &keep);
   std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
   size_t preparedAgain = 0;
   for (size_t c = 0; c < distribution.chunks().size(); ++c) {
     const ChunkRecord& record = done.chunks[c];
-    const bool touched = std::any_of(outliers.begin(), outliers.end(), [&](const glm::vec3& u) {
+    const bool touched = std::any_of(strays.begin(), strays.end(), [&](const glm::vec3& u) {
       return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
              u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
     });
@@ -456,27 +457,38 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     stage("points", distribution.size());
     done = Accumulated{};
     reserveFor(done, distribution.size(), raw.layout());
-    ChunkRunner runner(distribution, ready.frame, options, findingOutliers, raw.layout().normals);
+    if (findingOutliers) done.groups = std::make_unique<PointGroups>(raw.size());
+    ChunkRunner runner(distribution, ready.frame, options, raw.layout().normals);
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
-    if (done.outlierSources.empty()) break;
-    // Without the outliers the points are prepared again, as in core: with a new frame when they
-    // held the bounds (far outliers waste its precision), else only the chunks whose boxes held
+    if (!findingOutliers) break;
+    const Strays found =
+        flagStrays(done.kth, done.points.source, *done.groups, options.strayGroupPoints);
+    done.groups.reset();
+    done.kth = {};
+    if (found.sparse + found.grouped == 0) break;
+    // Without the strays the points are prepared again, as in core: with a new frame when they
+    // held the bounds (far strays waste its precision), else only the chunks whose boxes held
     // one (the others would load the same points and give the same results).
-    ready.outliers = done.outlierSources.size();
+    StrayPositions positions;
+    for (size_t i = 0; i < found.flagged.size(); ++i)
+      if (found.flagged[i]) positions.add(done.points.position[i]);
+    positions.seal();
     keep.assign(raw.size(), 1);
-    for (uint32_t s : done.outlierSources) keep[s] = 0;
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-    std::vector<glm::vec3> outliers;
+    std::vector<glm::vec3> strays;
     raw.forEachBatch([&](const PointCloud& batch, uint64_t first) {
       for (size_t i = 0; i < batch.size(); ++i) {
-        if (!keep[first + i]) {
-          outliers.push_back(glm::vec3(toFrame(batch.positions[i], ready.frame)));
+        const glm::vec3 p(toFrame(batch.positions[i], ready.frame));
+        if (positions.contains(p)) {
+          keep[first + i] = 0;
+          strays.push_back(p);
           continue;
         }
         lo = glm::min(lo, batch.positions[i]);
         hi = glm::max(hi, batch.positions[i]);
       }
     });
+    ready.outliers = {strays.size(), found.sparse, found.grouped};
     findingOutliers = false;
     const Frame frame = chooseFrame(lo, hi);
     if (frame.origin != ready.frame.origin || frame.size != ready.frame.size) {
@@ -485,7 +497,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     }
     stage("points", distribution.size());
     preparedAgain = prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals,
-                                        keep, outliers, done);
+                                        keep, strays, done);
     break;
   }
   size_t blocks = 0;
@@ -503,9 +515,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
              options.orient != OrientMode::Up && blocks > 1 && ready.normals.estimated > 0);
   progressAdvance(n);
 
-  double spacingSum = 0.0;  // in key order, the additions of the in-core sum
-  for (const float d : done.firstDistance) spacingSum += d;
-  ready.radii.meanSpacing = n > 0 ? spacingSum / double(n) : 0.0;
+  ready.radii.spacing = medianOf(done.firstDistance);  // reorders: not needed after this
   SpillVector<float> radii = points.radius;
   ready.radii.medianRadius = medianOf(radii);
   ready.points = std::move(points);

@@ -25,7 +25,11 @@ struct ReadyPoints {
   RadiusStats radii;
   NormalStats normals;
   size_t duplicates = 0;               // input points merged into others
-  size_t outliers = 0;                 // far outliers removed
+  struct {
+    size_t removed = 0;  // input points removed as strays (duplicates included)
+    size_t sparse = 0;   // strays too far from their k-th neighbour, and in small groups
+    size_t grouped = 0;
+  } outliers;
   std::vector<glm::dvec3> sample;      // input points for the accuracy measure (world units)
   nlohmann::json outOfCore = nullptr;  // chunks, halos, temporary bytes (streamed only)
 };

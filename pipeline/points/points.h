@@ -3,7 +3,8 @@
 //
 //   frame.cpp     world → frame units, Morton keys, sort, merge exact duplicates
 //   knn.cpp       the neighbour index (knn.h): k nearest neighbours, radius and box queries
-//   radii.cpp     radius of influence r_i from k nearest neighbours, outliers, mean spacing
+//   radii.cpp     radius of influence r_i from k nearest neighbours, spacing
+//   strays.cpp    stray points: too sparse, or in groups too small to make a surface
 //   normals.cpp   PCA normals where the input has none (or invalid ones)
 //   orient.cpp    consistent orientation of normals, repair of flipped input normals, roughness
 //
@@ -94,14 +95,58 @@ struct Neighbors {  // the k nearest other points of every point
 };
 Neighbors findNeighbors(const PointSet& points, const PointIndex& index, int k);
 struct RadiusStats {
-  double meanSpacing = 0.0;  // mean distance to the nearest other point
+  double spacing = 0.0;  // the median distance to the nearest other point
   double medianRadius = 0.0;
-  size_t outliers = 0;  // removed by removeOutliers
 };
-// r_i = distance to the k-th nearest neighbour; mean spacing from the nearest.
+// r_i = distance to the k-th nearest neighbour; the spacing from the nearest.
 RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
-// Points whose radius exceeds 10 times the median radius of their neighbours (far outliers).
-std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors);
+
+// ---- strays.cpp
+// The rule that finds stray points (specs/pipeline.md, "Stray points").
+struct StrayRule {
+  // A point whose k-th neighbour is farther than the median k-th distance times
+  // max(kSparseFactor, e^(kSparseSigmas·σ)), σ the MAD of the log distances as a normal's σ.
+  static constexpr double kSparseFactor = 32.0, kSparseSigmas = 8.0;
+};
+// The groups of points that near k-NN edges join (union-find over point ids): an edge i→j, j
+// among i's k nearest, joins when no longer than 3 times the smaller of their k-th distances.
+class PointGroups {
+ public:
+  explicit PointGroups(size_t ids);
+  // Join points [begin, end) to their near neighbours; ids[i] names point i (empty: i itself).
+  void joinNeighbors(const Neighbors& neighbors, uint32_t begin, uint32_t end,
+                     std::span<const uint32_t> ids);
+  void join(uint32_t a, uint32_t b);
+  uint32_t root(uint32_t id);
+
+ private:
+  SpillVector<uint32_t> parent_;
+};
+struct Strays {
+  std::vector<uint8_t> flagged;  // per point
+  size_t sparse = 0;             // too far from their k-th neighbour
+  size_t grouped = 0;            // in groups of fewer than groupPoints (and half the points)
+};
+// The k-th distance beyond which a point is a stray (StrayRule).
+float sparseThreshold(std::span<const float> kth);
+// Strays among points with these k-th distances and ids in `groups`.
+Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, PointGroups& groups,
+                  uint32_t groupPoints);
+// Strays among n points with these neighbours, in core.
+Strays findStrays(size_t n, const Neighbors& neighbors, uint32_t groupPoints);
+// The positions (frame units) of stray points: an input point at one of them (a duplicate merged
+// into a stray) is a stray too.
+class StrayPositions {
+ public:
+  void add(const glm::vec3& p) { bits_.push_back(bitsOf(p)); }
+  void seal();  // after the last add
+  bool contains(const glm::vec3& p) const;
+
+ private:
+  using Bits = std::array<uint32_t, 3>;
+  static Bits bitsOf(const glm::vec3& p);
+  std::vector<Bits> bits_;
+};
 // The median of values (reordered); 0 for none.
 float medianOf(std::span<float> values);
 

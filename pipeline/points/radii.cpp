@@ -1,6 +1,5 @@
 // Radius of influence r_i = distance to the k-th nearest neighbour (specs/pipeline.md, "Radius of
-// influence"). Exact duplicates were merged before, so no distance is zero; far outliers are
-// found by comparing a point's radius with its neighbours'.
+// influence"). Exact duplicates were merged before, so no distance is zero.
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -48,12 +47,12 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors) {
   const size_t n = points.size(), k = size_t(neighbors.k);
   points.radius.assign(n, 0.0f);
   if (k == 0) return stats;
-  double spacingSum = 0.0;
+  std::vector<float> nearest(n);
   for (size_t i = 0; i < n; ++i) {
     points.radius[i] = neighbors.distance[i * k + k - 1];
-    spacingSum += neighbors.distance[i * k];
+    nearest[i] = neighbors.distance[i * k];
   }
-  stats.meanSpacing = spacingSum / double(n);
+  stats.spacing = medianOf(nearest);  // a median: a few sparse points do not move it
   // Clamp each radius to 4 times the median of its neighbours' so that one sparse point does not
   // spread a huge disk; keep it above a floor far below any cell.
   SpillVector<float> clamped(n);
@@ -75,29 +74,6 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors) {
   SpillVector<float> all = points.radius;
   stats.medianRadius = medianOf(all);
   return stats;
-}
-
-std::vector<uint8_t> findOutliers(const PointSet& points, const Neighbors& neighbors) {
-  const size_t n = points.size(), k = size_t(neighbors.k);
-  std::vector<uint8_t> flagged(n, 0);
-  if (k == 0) return flagged;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
-                    [&](const tbb::blocked_range<size_t>& range) {
-                      std::vector<float> local(k);
-                      for (size_t i = range.begin(); i < range.end(); ++i) {
-                        const float own = neighbors.distance[i * k + k - 1];
-                        float smallest = std::numeric_limits<float>::max();
-                        for (size_t j = 0; j < k; ++j) {
-                          const size_t other = neighbors.index[i * k + j];
-                          local[j] = neighbors.distance[other * k + k - 1];
-                          smallest = std::min(smallest, local[j]);
-                        }
-                        // The median is at least the smallest: most points need no median.
-                        flagged[i] =
-                            own > 10.0f * smallest && own > 10.0f * smallMedian(local.data(), k);
-                      }
-                    });
-  return flagged;
 }
 
 }  // namespace iso

@@ -58,7 +58,7 @@ TEST(EvalAgainstFile, concentricSpheresAreTheirGapApartAndColorsTheirDifference)
   std::printf("spheres 1 and 1.05: RMS %.5f (a→b %.5f, b→a %.5f), color %.3f dB\n",
               e["rms"].get<double>(), e["a_to_b"]["rms"].get<double>(),
               e["b_to_a"]["rms"].get<double>(), e["color_psnr_db"].get<double>());
-  const double spacing = a.report["mean_spacing"].get<double>();
+  const double spacing = a.report["spacing"].get<double>();
   EXPECT_NEAR(e["a_to_b"]["rms"].get<double>(), 0.05, 0.1 * spacing);
   EXPECT_NEAR(e["b_to_a"]["rms"].get<double>(), 0.05, 0.1 * spacing);
   // Red 10 levels apart in every sample: MSE = 10² / 3 over the channels.

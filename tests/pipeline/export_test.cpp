@@ -99,7 +99,7 @@ TEST(MeshExport, theSphereIsCrackFreeAcrossLevelsOrientedAndRound) {
   // The unit sphere: area 4π, volume 4π/3 (positive: facing outwards).
   EXPECT_NEAR(m.area / (4 * std::numbers::pi), 1.0, 0.005);
   EXPECT_NEAR(m.volume / (4 * std::numbers::pi / 3), 1.0, 0.005);
-  const double spacing = c.report["mean_spacing"].get<double>();
+  const double spacing = c.report["spacing"].get<double>();
   double worst = 0.0;
   for (const glm::dvec3& v : mesh.vertices) worst = std::max(worst, std::abs(glm::length(v) - 1));
   EXPECT_LT(worst, 0.5 * spacing);
@@ -164,7 +164,7 @@ TEST(VdbExport, theLevelSetHoldsTheFilesDistancesAndItsZeroSetIsTheSphere) {
       static_cast<unsigned long long>(stats.activeVoxels), voxel, worst, worst / voxel);
   EXPECT_LT(worst, 0.05 * voxel);
   // Its zero crossing along rays from the centre is the unit sphere; inside is negative.
-  const double spacing = c.report["mean_spacing"].get<double>();
+  const double spacing = c.report["spacing"].get<double>();
   std::vector<glm::dvec3> rays(200);
   for (glm::dvec3& d : rays)
     d = glm::normalize(glm::dvec3(normal(random), normal(random), normal(random)));

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <glm/geometric.hpp>
 #include <map>
 #include <random>
 #include <set>
@@ -172,6 +173,37 @@ TEST(OutOfCore, outliersInsideTheBoundsPrepareOnlyTheChunksAroundThemAgain) {
   const size_t again = streamed["out_of_core"]["chunks_prepared_again"].get<size_t>();
   EXPECT_GE(again, 1u);
   EXPECT_LT(again, streamed["out_of_core"]["chunks"].get<size_t>() / 2);
+}
+
+// Groups of strays across chunk borders (the groups are joined over all chunks), sparse dust
+// inside the bounds and a far group that moves the frame: the same strays, the same file.
+TEST(OutOfCore, straysInGroupsAndDustAreFoundAcrossChunksAsInCore) {
+  const PointCloud sphere = test::scanOf("sphere", 40000, false, 0.0, 13);
+  std::mt19937 random(21);
+  std::normal_distribution<double> spread(0.0, 0.01);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto group = [&](PointCloud& cloud, const glm::dvec3& centre, int count) {
+    for (int i = 0; i < count; ++i)
+      cloud.positions.push_back(centre + glm::dvec3(spread(random), spread(random), spread(random)));
+  };
+  PointCloud inside = sphere;
+  group(inside, glm::dvec3(0.0), 30);               // at the centre: on the borders of 8 chunks
+  group(inside, glm::dvec3(0.85, 0.85, 0.85), 12);  // in a corner of the bounds
+  for (int i = 0; i < 40; ++i) {                    // dust at least 0.4 inside the sphere
+    const glm::dvec3 p(u(random), u(random), u(random));
+    if (glm::length(p) < 0.6) inside.positions.push_back(p);
+  }
+  const size_t insideStrays = inside.size() - sphere.size();
+  BuildOptions options;
+  options.orientBlockPoints = 128;
+  nlohmann::json streamed = expectSameFiles(inside, options, 200, 100);
+  EXPECT_EQ(streamed["points"]["outliers_removed"].get<size_t>(), insideStrays);
+  EXPECT_GE(streamed["out_of_core"]["chunks_prepared_again"].get<size_t>(), 1u);
+
+  PointCloud far = inside;
+  group(far, glm::dvec3(4.0, -3.0, 2.0), 25);
+  streamed = expectSameFiles(far, options, 200, 100);
+  EXPECT_EQ(streamed["points"]["outliers_removed"].get<size_t>(), insideStrays + 25);
 }
 
 TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {

@@ -42,7 +42,7 @@ nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t
   options.rays = rays;
   options.truthSamples = 50000;
   return evaluateAgainstShape(converted.surface, truth,
-                              converted.report["mean_spacing"].get<double>(), options);
+                              converted.report["spacing"].get<double>(), options);
 }
 
 void writePpm(const std::filesystem::path& path, uint32_t width, uint32_t height,

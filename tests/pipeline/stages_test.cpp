@@ -325,7 +325,7 @@ BuiltOctree buildTestOctree(const std::string& shape, size_t n) {
   const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
   CornerField corners;
   RadiusStats radii;
-  radii.meanSpacing = 1e-3;
+  radii.spacing = 1e-3;
   radii.medianRadius = 3e-3;
   b.octree = buildOctree(b.points, sdf, BuildOptions{}, radii, corners);
   return b;

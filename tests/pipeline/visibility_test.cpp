@@ -21,7 +21,7 @@ Measured measure(const std::filesystem::path& file, const PointCloud& points,
                  const VisibilityOptions& options = {}) {
   const Reader reader = Reader::open(file);
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata());
-  const double spacing = metadata["report"]["mean_spacing"].get<double>();
+  const double spacing = metadata["report"]["spacing"].get<double>();
   return {measureVisibility(reader, points.positions, spacing, options), spacing};
 }
 

@@ -32,7 +32,7 @@ struct Files {
   double sphereSpacing = 0;
   Files() {
     BuildOptions quiet;
-    sphereSpacing = convertToIso(scanOf("sphere", 30000), sphere, quiet)["mean_spacing"];
+    sphereSpacing = convertToIso(scanOf("sphere", 30000), sphere, quiet)["spacing"];
     convertToIso(scanOf("torus", 30000), torus, quiet);
     const PointCloud kittenPoints =
         readPointFile(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz");

@@ -118,7 +118,7 @@ int main(int argc, char** argv) {
     for (const auto& leaf : surface.leaves()) level = std::max(level, int(leaf.level));
     const Frame& frame = reader.header().frame;
     const double voxel = voxelScale * std::ldexp(frame.size, -level);
-    const double spacing = nlohmann::json::parse(reader.metadata())["report"]["mean_spacing"];
+    const double spacing = nlohmann::json::parse(reader.metadata())["report"]["spacing"];
     const double radius = std::max(radiusSpacings * spacing, 2.0 * voxel);
     // The baseline, timed: rasterize, erode by the radius, smooth.
     const auto started = std::chrono::steady_clock::now();

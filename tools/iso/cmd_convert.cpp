@@ -53,7 +53,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
   }
   const auto& p = r["points"];
   fmt::print(
-      "  points: {} used ({} duplicates merged, {} outliers removed, {} non-finite dropped)\n",
+      "  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
       withSeparators(p["used"].get<uint64_t>()),
       withSeparators(p["duplicates_merged"].get<uint64_t>()),
       withSeparators(p["outliers_removed"].get<uint64_t>()),
@@ -130,7 +130,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
       "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
       "(spacing {:.6g}; {} not projected)\n",
       withSeparators(a["samples"].get<uint64_t>()), a["rms_over_spacing"].get<double>(),
-      a["max_over_spacing"].get<double>(), r["mean_spacing"].get<double>(),
+      a["max_over_spacing"].get<double>(), r["spacing"].get<double>(),
       withSeparators(a["unprojected"].get<uint64_t>()));
   const auto& v = r["visibility"];
   fmt::print(
@@ -286,7 +286,13 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
-  c->add_flag("--keep-outliers", o->keepOutliers, "Keep far outliers instead of removing them");
+  c->add_flag("--keep-outliers", o->keepOutliers,
+              "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
+              "instead of removing them");
+  c->add_option("--stray-group", o->build.strayGroupPoints,
+                "Separate groups of fewer points are strays (birds, multipath, dust)")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 1000000000u));
   CLI::Option* texture = c->add_option(
       "--texture", o->texture,
       "An image (any OpenImageIO reads) projected along the three axes and blended by the "

@@ -34,12 +34,14 @@ struct Options {
   double spacing = 0.0;
 };
 
-// The mean point spacing of the file's input, from its conversion report.
+// The point spacing of the file's input, from its conversion report (files written before the
+// spacing became a median name the mean).
 double reportedSpacing(const Reader& reader) {
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
-  if (metadata.is_object() && metadata.contains("report") &&
-      metadata["report"].contains("mean_spacing"))
-    return metadata["report"]["mean_spacing"].get<double>();
+  if (!metadata.is_object() || !metadata.contains("report")) return 0.0;
+  for (const char* key : {"spacing", "mean_spacing"})
+    if (metadata["report"].contains(key) && metadata["report"][key].is_number())
+      return metadata["report"][key].get<double>();
   return 0.0;
 }
 
@@ -98,7 +100,7 @@ int run(Options& o) {
     if (!(spacing > 0.0))
       throw FileError(o.file, std::nullopt, "has no reported mean spacing; give --spacing");
     result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
-    result["mean_spacing"] = spacing;
+    result["spacing"] = spacing;
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
     return kExitOk;
@@ -114,14 +116,14 @@ int run(Options& o) {
       result["visibility"] =
           visibilityOf(reader, samplePoints(cloud, o.visibilityPoints == 0 ? cloud.size()
                                                                            : o.visibilityPoints),
-                       o.spacing > 0.0 ? o.spacing : result["mean_spacing"].get<double>(), o);
+                       o.spacing > 0.0 ? o.spacing : result["spacing"].get<double>(), o);
   } else if (!o.against.empty()) {
     const Reader other = Reader::open(o.against);
     result = evaluateAgainstFile(surface, SurfaceModel::load(other));
     result["against"] = o.against;
     const double spacing = reportedSpacing(reader);
     if (spacing > 0.0) {
-      result["mean_spacing"] = spacing;
+      result["spacing"] = spacing;
       result["rms_over_spacing"] = result["rms"].get<double>() / spacing;
       result["max_over_spacing"] = result["max"].get<double>() / spacing;
     }

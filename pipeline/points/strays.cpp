@@ -1,0 +1,124 @@
+// Stray points (specs/pipeline.md, "Stray points"): isolated returns, small groups far from
+// everything (birds, multipath) and sparse dust. A point is a stray when its k-th neighbour is
+// far beyond what the scan's robust spacing allows, or when its group (the points it joins
+// through near k-NN edges) is too small to make a surface. Both are decided the same way in core
+// and chunk by chunk: the groups are a union-find over the edges each point adds from its own
+// exact k-NN list, the threshold a median and MAD over all points.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <utility>
+
+#include "pipeline/points/points.h"
+
+namespace iso {
+namespace {
+
+// An edge i→j joins a surface when no longer than this many times the smaller of the two
+// points' k-th neighbour distances: within a sampled surface every k-NN edge is shorter than
+// both, while the edges from a stray group to the surface below it are many times the surface's.
+constexpr float kEdgeReach = 3.0f;
+
+}  // namespace
+
+PointGroups::PointGroups(size_t ids) : parent_(ids) {
+  std::iota(parent_.begin(), parent_.end(), 0u);
+}
+
+uint32_t PointGroups::root(uint32_t id) {
+  uint32_t r = id;
+  while (parent_[r] != r) r = parent_[r];
+  while (parent_[id] != r) id = std::exchange(parent_[id], r);  // path compression
+  return r;
+}
+
+void PointGroups::join(uint32_t a, uint32_t b) {
+  a = root(a);
+  b = root(b);
+  if (a == b) return;
+  if (a > b) std::swap(a, b);  // the smaller id is the root: the partition decides, not the order
+  parent_[b] = a;
+}
+
+void PointGroups::joinNeighbors(const Neighbors& neighbors, uint32_t begin, uint32_t end,
+                                std::span<const uint32_t> ids) {
+  const size_t k = size_t(neighbors.k);
+  if (k == 0) return;
+  const auto id = [&](uint32_t i) { return ids.empty() ? i : ids[i]; };
+  for (uint32_t i = begin; i < end; ++i) {
+    const float own = neighbors.distance[size_t(i) * k + k - 1];
+    for (size_t e = 0; e < k; ++e) {
+      const uint32_t j = neighbors.index[size_t(i) * k + e];
+      const float reach = kEdgeReach * std::min(own, neighbors.distance[size_t(j) * k + k - 1]);
+      if (neighbors.distance[size_t(i) * k + e] <= reach) join(id(i), id(j));
+    }
+  }
+}
+
+float sparseThreshold(std::span<const float> kth) {
+  if (kth.empty()) return std::numeric_limits<float>::max();
+  std::vector<float> logs(kth.size());
+  for (size_t i = 0; i < kth.size(); ++i) logs[i] = std::log(std::max(kth[i], 1e-30f));
+  const float median = medianOf(logs);
+  for (float& v : logs) v = std::abs(v - median);
+  const double sigma = 1.4826 * double(medianOf(logs));  // the MAD as a normal's σ
+  const double factor =
+      std::max(double(StrayRule::kSparseFactor), std::exp(StrayRule::kSparseSigmas * sigma));
+  return float(std::exp(double(median)) * factor);
+}
+
+Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, PointGroups& groups,
+                  uint32_t groupPoints) {
+  const size_t n = kth.size();
+  Strays out;
+  out.flagged.assign(n, 0);
+  const float threshold = sparseThreshold(kth);
+  std::vector<uint32_t> roots(n), dense;  // group sizes count the dense points present only
+  for (size_t i = 0; i < n; ++i) {
+    roots[i] = groups.root(ids.empty() ? uint32_t(i) : ids[i]);
+    if (kth[i] > threshold) {
+      out.flagged[i] = 1;
+      ++out.sparse;
+    } else {
+      dense.push_back(roots[i]);
+    }
+  }
+  std::sort(dense.begin(), dense.end());
+  for (size_t i = 0; i < n; ++i) {
+    if (out.flagged[i]) continue;
+    const auto [lo, hi] = std::equal_range(dense.begin(), dense.end(), roots[i]);
+    const auto size = size_t(hi - lo);
+    if (size < groupPoints && 2 * size < dense.size()) {  // never the half of the scan
+      out.flagged[i] = 1;
+      ++out.grouped;
+    }
+  }
+  return out;
+}
+
+Strays findStrays(size_t n, const Neighbors& neighbors, uint32_t groupPoints) {
+  const size_t k = size_t(neighbors.k);
+  if (k == 0) return {std::vector<uint8_t>(n, 0)};
+  std::vector<float> kth(n);
+  for (size_t i = 0; i < n; ++i) kth[i] = neighbors.distance[i * k + k - 1];
+  PointGroups groups(n);
+  groups.joinNeighbors(neighbors, 0, uint32_t(n), {});
+  return flagStrays(kth, {}, groups, groupPoints);
+}
+
+StrayPositions::Bits StrayPositions::bitsOf(const glm::vec3& p) {
+  return {std::bit_cast<uint32_t>(p.x), std::bit_cast<uint32_t>(p.y), std::bit_cast<uint32_t>(p.z)};
+}
+
+void StrayPositions::seal() {
+  std::sort(bits_.begin(), bits_.end());
+  bits_.erase(std::unique(bits_.begin(), bits_.end()), bits_.end());
+}
+
+bool StrayPositions::contains(const glm::vec3& p) const {
+  return !bits_.empty() && std::binary_search(bits_.begin(), bits_.end(), bitsOf(p));
+}
+
+}  // namespace iso
