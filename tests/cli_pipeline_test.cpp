@@ -7,9 +7,10 @@
 #include <unistd.h>
 
 #include <fstream>
-#include <sstream>
-#include <vector>
 #include <nlohmann/json.hpp>
+#include <sstream>
+#include <tuple>
+#include <vector>
 
 #include <cstring>
 
@@ -77,9 +78,9 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   for (int threads : {1, 2, 0}) {
     const auto out = dir_ / ("t" + std::to_string(threads) + ".iso");
     // Small orientation blocks, so that components are aligned across blocks too.
-    const auto run = runIso("convert -q --orient-block-points 512 --memory 4M --threads " +
-                            std::to_string(threads) + " " + quoted(dir_ / "t.ply") + " -o " +
-                            quoted(out));
+    const auto run =
+        runIso("convert -q --orient-block-points 512 --memory 4M --threads " +
+               std::to_string(threads) + " " + quoted(dir_ / "t.ply") + " -o " + quoted(out));
     ASSERT_EQ(run.exitCode, 0) << run.err;
     bytes[threads] = test::slurp(out);
   }
@@ -173,8 +174,8 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
       EXPECT_LE(j["done"].get<uint64_t>(), j["total"].get<uint64_t>()) << line;
     }
   }
-  const std::vector<std::string> stages = {"read",   "distribute",      "points",  "orient",
-                                           "octree", "passive+balance", "corners", "lod",
+  const std::vector<std::string> stages = {"read",   "distribute",      "points",    "orient",
+                                           "octree", "passive+balance", "corners",   "lod",
                                            "write",  "accuracy",        "visibility"};
   EXPECT_EQ(ended, stages);
   const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
@@ -407,9 +408,9 @@ TEST_F(CliPipeline, evalMeasuresWhatTheViewerShowsAndWritesThePointsSeenThrough)
   // Points of a cube around the sphere, inside the frame: those outside the sphere's outline in a
   // view are seen through (a line through a point inside the sphere always meets it), and
   // written out.
-  ASSERT_EQ(runIso("gen cube -n 4000 --half-size 0.99 --seed 5 -o " + quoted(dir_ / "cube.ply"))
-                .exitCode,
-            0);
+  ASSERT_EQ(
+      runIso("gen cube -n 4000 --half-size 0.99 --seed 5 -o " + quoted(dir_ / "cube.ply")).exitCode,
+      0);
   run = runIso("eval " + iso + " --visibility --points " + quoted(dir_ / "cube.ply") +
                " --seen-through " + quoted(dir_ / "seen.ply"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
@@ -424,10 +425,10 @@ TEST_F(CliPipeline, evalMeasuresWhatTheViewerShowsAndWritesThePointsSeenThrough)
                " --seen-through " + quoted(dir_ / "seen.ply"));
   EXPECT_EQ(run.exitCode, 1);
   EXPECT_NE(run.err.find("seen.ply"), std::string::npos) << run.err;
-  EXPECT_EQ(runIso("eval " + iso + " --points " + ply + " --seen-through " +
-                   quoted(dir_ / "other.ply"))
-                .exitCode,
-            2);
+  EXPECT_EQ(
+      runIso("eval " + iso + " --points " + ply + " --seen-through " + quoted(dir_ / "other.ply"))
+          .exitCode,
+      2);
   ASSERT_EQ(runIso("convert -q " + ply + " -o " + quoted(dir_ / "plain.iso")).exitCode, 0);
   run = runIso("eval " + quoted(dir_ / "plain.iso") + " --visibility");
   EXPECT_EQ(run.exitCode, 1);
@@ -449,8 +450,8 @@ TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
 std::string interruptWhileWriting(const std::filesystem::path& input,
                                   const std::filesystem::path& output, int signal) {
   const std::string binary = ISO_BINARY;
-  std::vector<std::string> args = {binary, "convert", "-q", "-f", input.string(), "-o",
-                                   output.string()};
+  std::vector<std::string> args = {binary,         "convert", "-q",           "-f",
+                                   input.string(), "-o",      output.string()};
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -458,8 +459,7 @@ std::string interruptWhileWriting(const std::filesystem::path& input,
   if (posix_spawn(&child, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return "";
   std::string temporary;
   for (int status = 0; temporary.empty();) {
-    const std::string prefix =
-        "." + output.filename().string() + "." + std::to_string(child) + "-";
+    const std::string prefix = "." + output.filename().string() + "." + std::to_string(child) + "-";
     for (const auto& entry : std::filesystem::directory_iterator(output.parent_path()))
       if (entry.path().filename().string().starts_with(prefix))
         temporary = entry.path().filename().string();
@@ -499,8 +499,8 @@ TEST_F(CliPipeline, anInterruptedConversionLeavesTheOldFileAndNoTemporaryFiles) 
   EXPECT_EQ(temporaries(), 2u);  // the output's and the directory of spilled points
   EXPECT_TRUE(test::slurp(dir_ / "out.iso") == old);
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
-  const auto run = runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " +
-                          quoted(dir_ / "again.iso"));
+  const auto run =
+      runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "again.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.err.find("removed 2 temporary files"), std::string::npos) << run.err;
   EXPECT_EQ(temporaries(), 0u);
@@ -533,10 +533,14 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
   std::ofstream(dir_ / "two.xyz") << "1 2 3\n4 5 6\n";
   std::ofstream(dir_ / "line.xyz") << "0 0 0\n1 1 1\n2 2 2\n3 3 3\n";
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {"missing.ply", "missing.ply"}, {"cut.ply", "file ends after"},
-      {"empty.ply", "no points"},     {"scan.laz", "LAZ"},
-      {"one.xyz", "at least 3 distinct points"}, {"same.xyz", "the input has 1"},
-      {"two.xyz", "the input has 2"}, {"line.xyz", "one line"}};
+      {"missing.ply", "missing.ply"},
+      {"cut.ply", "file ends after"},
+      {"empty.ply", "no points"},
+      {"scan.laz", "LAZ"},
+      {"one.xyz", "at least 3 distinct points"},
+      {"same.xyz", "the input has 1"},
+      {"two.xyz", "the input has 2"},
+      {"line.xyz", "one line"}};
   for (const auto& [input, expected] : cases) {
     const auto run =
         runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));
@@ -598,6 +602,48 @@ TEST_F(CliPipeline, nonFinitePointsAreDroppedAndCounted) {
   const nlohmann::json report = nlohmann::json::parse(run.out);
   EXPECT_EQ(report["points"]["non_finite_dropped"], 2);
   EXPECT_EQ(report["points"]["input"], 8);
+}
+
+TEST_F(CliPipeline, convertReportsTheStraysItRemovesAndWritesThemOnRequest) {
+  // The sphere with a bird of 12 points and two single returns: the report and the printed lines
+  // count them, --write-strays writes exactly them, and --keep-outliers keeps them.
+  PointCloud cloud = readPointFile(dir_ / "sphere.ply");
+  const size_t sphere = cloud.size();
+  std::vector<glm::dvec3> strays = {{3.0, 0.0, 0.0}, {0.0, -40.0, 2.0}};
+  for (int i = 0; i < 12; ++i) strays.push_back({0.1 * (i % 3), 2.5 + 0.01 * i, 0.05 * (i % 4)});
+  for (const glm::dvec3& p : strays) {
+    cloud.positions.push_back(p);
+    cloud.normals.push_back(glm::vec3(0.0f, 0.0f, 1.0f));
+  }
+  writePly(dir_ / "with.ply", cloud);
+  const auto run = runIso("convert --progress none " + quoted(dir_ / "with.ply") + " -o " +
+                          quoted(dir_ / "with.iso") + " --report " + quoted(dir_ / "r.json") +
+                          " --write-strays " + quoted(dir_ / "strays.ply"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("14 strays removed"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("strays: 14 in groups of fewer than 64 points"), std::string::npos);
+  const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
+  EXPECT_EQ(report["points"]["outliers_removed"], strays.size());
+  EXPECT_EQ(report["points"]["used"], sphere);
+  const PointCloud written = readPointFile(dir_ / "strays.ply");
+  ASSERT_EQ(written.size(), strays.size());
+  std::vector<glm::dvec3> got = written.positions;
+  const auto less = [](const glm::dvec3& a, const glm::dvec3& b) {
+    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
+  };
+  std::sort(got.begin(), got.end(), less);
+  std::sort(strays.begin(), strays.end(), less);
+  EXPECT_EQ(got, strays);  // positions are written as doubles: exactly the input's
+  EXPECT_EQ(written.normals.size(), strays.size());
+
+  const auto kept = runIso("convert -q --json --keep-outliers " + quoted(dir_ / "with.ply") +
+                           " -o " + quoted(dir_ / "kept.iso"));
+  ASSERT_EQ(kept.exitCode, 0) << kept.err;
+  EXPECT_EQ(nlohmann::json::parse(kept.out)["points"]["used"], cloud.size());
+  const auto both = runIso("convert -q --keep-outliers " + quoted(dir_ / "with.ply") + " -o " +
+                           quoted(dir_ / "k2.iso") + " --write-strays " + quoted(dir_ / "s2.ply"));
+  EXPECT_EQ(both.exitCode, 2) << both.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "k2.iso"));
 }
 
 TEST_F(CliPipeline, impossibleOptionsAreUsageErrors) {

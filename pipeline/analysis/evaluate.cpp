@@ -145,7 +145,8 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
   return out;
 }
 
-constexpr double kGrazing = 0.3;  // cos 73°: rays this close to an open truth's tangent are not counted
+constexpr double kGrazing =
+    0.3;  // cos 73°: rays this close to an open truth's tangent are not counted
 
 struct Rays {
   uint64_t truthHits = 0, holes = 0, spurious = 0;
@@ -188,7 +189,8 @@ Rays castRays(const SurfaceModel& surface, const Shape& truth, const EvalOptions
           const double cosine = std::abs(glm::dot(direction, aim.normal));
           const double tMax = truth.isClosed() ? length : length + depth / std::max(cosine, 0.05);
           const bool grazing = !truth.isClosed() && cosine < kGrazing;
-          const bool truthHit = !grazing && truth.intersect(origin, direction, 0.0, tMax).has_value();
+          const bool truthHit =
+              !grazing && truth.intersect(origin, direction, 0.0, tMax).has_value();
           const glm::dvec3 o = toFrame(origin, frame), dir = direction / frame.size;
           const bool isoHit =
               surface.intersect({o.x, o.y, o.z}, {dir.x, dir.y, dir.z}, 0.0, tMax).has_value();
@@ -293,7 +295,7 @@ ColorError colorError(const SurfaceModel& surface, const PointCloud& points,
 }  // namespace
 
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points) {
-  return evaluateAgainstPoints(surface, points, meanNearestSpacing(points));
+  return evaluateAgainstPoints(surface, points, pointSpacing(points));
 }
 
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points,
@@ -326,7 +328,7 @@ nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointClo
 }
 
 nlohmann::json evaluateLevels(const Reader& reader, const PointCloud& points) {
-  const double spacing = meanNearestSpacing(points);
+  const double spacing = pointSpacing(points);
   // Chunks decoded once for all the cuts.
   std::map<uint32_t, std::shared_ptr<const SurfaceChunk>> decoded;
   const SurfaceModel::ChunkSource source = [&](uint32_t id) {

@@ -28,7 +28,7 @@ struct EvalOptions {
   uint64_t seed = 1;
 };
 
-// pointSpacing: the input's mean point spacing (world units), the unit of the *_over_spacing values.
+// pointSpacing: the input's point spacing (world units), the unit of the *_over_spacing values.
 nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
                                     double pointSpacing, const EvalOptions& options = {});
 
@@ -37,7 +37,7 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
 // each point projects onto the zero set against the point's, as the PSNR of 8-bit sRGB values
 // ("color_psnr_db"; null when there is nothing to compare).
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points);
-// The same with the points' mean spacing given (computed once for many surfaces).
+// The same with the points' spacing given (computed once for many surfaces).
 nlohmann::json evaluateAgainstPoints(const SurfaceModel& surface, const PointCloud& points,
                                      double pointSpacing);
 

@@ -267,8 +267,8 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
   // Leaf centres are points of the finest grid: leaves of level kMaxLevel have none.
   if (!order.empty() && surface.leaves()[order.back()].level >= kMaxLevel)
     throw std::runtime_error("leaves of level " + std::to_string(kMaxLevel) +
-                                " are too fine for the mesh export (at most " +
-                                std::to_string(kMaxLevel - 1) + ")");
+                             " are too fine for the mesh export (at most " +
+                             std::to_string(kMaxLevel - 1) + ")");
   Extractor extractor(surface);
   for (uint32_t id : order) extractor.leaf(id);
   if (stats) *stats = extractor.stats;

@@ -4,9 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
-#include <glm/geometric.hpp>
 
 #include "iso/reader.h"
 #include "pipeline/points/knn.h"
@@ -127,7 +127,7 @@ std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit) {
   return out;
 }
 
-double meanNearestSpacing(const PointCloud& cloud) {
+double pointSpacing(const PointCloud& cloud) {
   if (cloud.size() < 2) return 0.0;
   const Frame frame = chooseFrame(cloud);
   PointSet points = makePointSet(cloud, frame);
@@ -135,10 +135,9 @@ double meanNearestSpacing(const PointCloud& cloud) {
   mergeDuplicates(points);
   if (points.size() < 2) return 0.0;
   const PointIndex tree(points.position);
-  const Neighbors neighbors = findNeighbors(points, tree, 1);
-  double sum = 0.0;
-  for (float d : neighbors.distance) sum += d;
-  return sum / double(points.size()) * frame.size;
+  Neighbors neighbors = findNeighbors(points, tree, 1);
+  return double(medianOf(std::span<float>(neighbors.distance.data(), neighbors.distance.size()))) *
+         frame.size;
 }
 
 }  // namespace iso

@@ -39,7 +39,8 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
 // Every step-th point, at most `limit` of them, spread over the whole cloud.
 std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit);
 
-// The mean distance from each point to its nearest other point (exact duplicates skipped).
-double meanNearestSpacing(const PointCloud& cloud);
+// The point spacing: the median distance from each point to its nearest other point (exact
+// duplicates skipped), as the conversion reports it.
+double pointSpacing(const PointCloud& cloud);
 
 }  // namespace iso

@@ -148,8 +148,7 @@ struct Projected {
 };
 
 // The points' pixels and depths, sorted by pixel, then depth.
-std::vector<Projected> project(std::span<const glm::dvec3> points, const View& view,
-                               double pixel) {
+std::vector<Projected> project(std::span<const glm::dvec3> points, const View& view, double pixel) {
   std::vector<Projected> out(points.size());
   tbb::parallel_for(size_t(0), points.size(), [&](size_t i) {
     const glm::dvec3& p = points[i];
@@ -158,8 +157,9 @@ std::vector<Projected> project(std::span<const glm::dvec3> points, const View& v
               glm::dot(p, view.d), uint32_t(i)};
   });
   tbb::parallel_sort(out.begin(), out.end(), [](const Projected& a, const Projected& b) {
-    return a.key != b.key ? a.key < b.key : a.depth != b.depth ? a.depth < b.depth
-                                                                 : a.index < b.index;
+    return a.key != b.key       ? a.key < b.key
+           : a.depth != b.depth ? a.depth < b.depth
+                                : a.index < b.index;
   });
   return out;
 }
@@ -204,9 +204,8 @@ std::vector<uint8_t> insideOutline(std::span<const glm::dvec3> points, const Vie
 // depth errors added to the tally.
 void measureView(const viewer::CpuPool& pool, const gpu::FrameParams& params,
                  std::span<const glm::dvec3> points, std::span<const uint32_t> index,
-                 const std::vector<uint8_t>& inside, const Box& box, double spacing,
-                 double pixel, const View& view, Tally& tally, std::vector<uint32_t>& seen,
-                 uint64_t& rays) {
+                 const std::vector<uint8_t>& inside, const Box& box, double spacing, double pixel,
+                 const View& view, Tally& tally, std::vector<uint32_t>& seen, uint64_t& rays) {
   ViewVisibility& out = tally.view;
   out.points += points.size();
   const std::vector<Projected> projected = project(points, view, pixel);
@@ -247,8 +246,8 @@ void measureView(const viewer::CpuPool& pool, const gpu::FrameParams& params,
       continue;
     }
     ++out.depthMeasured;
-    tally.errors.push_back(
-        std::abs(view.start + double(exactHits[i]->t) - projected[i].depth) / spacing);
+    tally.errors.push_back(std::abs(view.start + double(exactHits[i]->t) - projected[i].depth) /
+                           spacing);
   }
 }
 
@@ -266,8 +265,8 @@ uint8_t regionLevel(const Reader& reader, uint64_t regionLeaves) {
 }  // namespace
 
 std::vector<glm::dvec3> visibilityViews(int random, uint64_t seed) {
-  std::vector<glm::dvec3> views = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0},
-                                   {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  std::vector<glm::dvec3> views = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                   {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal;
   for (int i = 0; i < random; ++i) {
@@ -293,8 +292,7 @@ Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> p
   const glm::dvec3 origin(frame.origin[0], frame.origin[1], frame.origin[2]);
   for (uint32_t i = 0; i < points.size(); ++i) {
     const glm::dvec3 q = (points[i] - origin) / frame.size;
-    if (!(q.x >= 0.0 && q.x < 1.0 && q.y >= 0.0 && q.y < 1.0 && q.z >= 0.0 && q.z < 1.0))
-      continue;
+    if (!(q.x >= 0.0 && q.x < 1.0 && q.y >= 0.0 && q.y < 1.0 && q.z >= 0.0 && q.z < 1.0)) continue;
     regions[keyOf(glm::vec3(q)) >> (3 * (kMaxLevel - level))].push_back(uint32_t(inFrame.size()));
     out.measured.push_back(i);
     inFrame.push_back(q);
@@ -318,7 +316,8 @@ Visibility measureVisibility(const Reader& reader, std::span<const glm::dvec3> p
       const auto at = mortonDecode(c.key);
       const double size = std::ldexp(1.0, -int(c.level));
       for (int a = 0; a < 3; ++a)
-        if (double(at[size_t(a)]) * size > box.hi[a] || double(at[size_t(a)] + 1) * size < box.lo[a])
+        if (double(at[size_t(a)]) * size > box.hi[a] ||
+            double(at[size_t(a)] + 1) * size < box.lo[a])
           return false;
       return true;
     });

@@ -4,7 +4,7 @@
 // how far along the view the surface is from the points nearest the viewer.
 //
 // A view is an orthographic projection along a direction (a camera far away): 6 along the axes,
-// then random ones. Pixels are square, `pixelSpacings` mean point spacings wide, on a grid
+// then random ones. Pixels are square, `pixelSpacings` point spacings wide, on a grid
 // anchored at the frame's origin. Each pixel's ray passes through its centre. A point is seen
 // through when the rays of its pixel and of the 8 around it all miss the surface; it is seen
 // through *inside the outline* when the points' own image has no gap around it (the 3×3 blocks
@@ -34,9 +34,9 @@ namespace iso {
 class Reader;
 
 struct VisibilityOptions {
-  int randomViews = 4;          // views in random directions besides the 6 along the axes
-  double pixelSpacings = 1.0;   // the width of a pixel, in mean point spacings
-  uint64_t seed = 1;            // of the random views
+  int randomViews = 4;         // views in random directions besides the 6 along the axes
+  double pixelSpacings = 1.0;  // the width of a pixel, in point spacings
+  uint64_t seed = 1;           // of the random views
   // The points are measured region by region, each region a cell of the coarsest level whose
   // cells hold about this many leaves, traced in the chunks that meet it (rays clipped to it,
   // widened by 1/16 of its edge): so about that many leaves are decoded at once. A file of fewer
@@ -54,7 +54,7 @@ struct ViewVisibility {
   uint64_t seenThroughInside = 0;
   uint64_t depthMeasured = 0;  // points with surface within 3 spacings along the view
   uint64_t depthMissed = 0;    // points without
-  // |hit − point| along the view for the measured points, in mean spacings.
+  // |hit − point| along the view for the measured points, in spacings.
   double depthMedian = 0.0, depthP90 = 0.0, depthMax = 0.0;
   double seenThroughFraction() const { return points ? double(seenThrough) / double(points) : 0.0; }
 };

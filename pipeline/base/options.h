@@ -50,12 +50,12 @@ struct BuildOptions {
   // A node with more points is subdivided without a patch test. Not a command-line option: tests
   // lower it so that small scans have chunks many tested nodes wide, as large scans do.
   uint32_t maxTestedPoints = 4096;
-  // A node wider than this many mean spacings is subdivided without a patch test, so that no test
+  // A node wider than this many spacings is subdivided without a patch test, so that no test
   // reads points much farther than that from its node (out-of-core chunks need reads of bounded
   // reach). Not a command-line option.
   double maxTestedEdge = 128.0;
   int maxDepth = 20;            // deepest octree level (at most 20)
-  double tolerance = 0.1;       // allowed patch error, in mean point spacings
+  double tolerance = 0.1;       // allowed patch error, in point spacings
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;

@@ -132,8 +132,7 @@ void requireSurface(const PointSet& points) {
   if (points.size() < 3)
     throw ConvertError("a surface needs at least 3 distinct points; the input has " +
                        std::to_string(points.size()));
-  if (isCollinear(points))
-    throw ConvertError("all points lie on one line: they define no surface");
+  if (isCollinear(points)) throw ConvertError("all points lie on one line: they define no surface");
 }
 
 Prepared prepare(const PointCloud& cloud) {
@@ -146,30 +145,30 @@ Prepared prepare(const PointCloud& cloud) {
   return p;
 }
 
-// The cloud without the stray points (and the duplicates merged into them, at their positions).
+// The cloud without the stray points (and the duplicates merged into them, at their positions);
+// those go to `removed` when given.
 PointCloud withoutStrays(const PointCloud& cloud, const Prepared& prepared,
-                         const std::vector<uint8_t>& flagged) {
+                         const std::vector<uint8_t>& flagged, PointCloud* removed) {
   StrayPositions strays;
   for (size_t i = 0; i < prepared.points.size(); ++i)
     if (flagged[i]) strays.add(prepared.points.position[i]);
   strays.seal();
   PointCloud out;
   for (size_t i = 0; i < cloud.size(); ++i) {
-    if (strays.contains(glm::vec3(toFrame(cloud.positions[i], prepared.frame)))) continue;
-    out.positions.push_back(cloud.positions[i]);
-    if (cloud.hasNormals()) out.normals.push_back(cloud.normals[i]);
-    if (cloud.hasColors()) out.colors.push_back(cloud.colors[i]);
+    const bool isStray = strays.contains(glm::vec3(toFrame(cloud.positions[i], prepared.frame)));
+    if (!isStray || removed) appendPoint(isStray ? *removed : out, cloud, i);
   }
   return out;
 }
 
 // The conversion report's visibility (pipeline/analysis/visibility.h): up to kVisibilityPoints of
-// the accuracy sample, the 6 axis views and 2 random ones, pixels one mean spacing wide.
+// the accuracy sample, the 6 axis views and 2 random ones, pixels one spacing wide.
 constexpr size_t kVisibilityPoints = 20000;
 
 nlohmann::json visibilityReport(const Reader& written, std::span<const glm::dvec3> sample,
                                 double spacing) {
-  const size_t step = std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
+  const size_t step =
+      std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
   std::vector<glm::dvec3> points;
   for (size_t i = 0; i < sample.size(); i += step) points.push_back(sample[i]);
   VisibilityOptions options;
@@ -250,7 +249,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              Clock::time_point started);
 
 // The point stages in core, timed.
-ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer) {
+ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, StageTimer& timer,
+                          bool collectStrays) {
   ReadyPoints ready;
   const PointCloud* cloud = &input;
   PointCloud filtered;
@@ -260,10 +260,10 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   if (options.removeOutliers) {
-    const Strays strays =
-        findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
+    const Strays strays = findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
     if (strays.sparse + strays.grouped > 0) {  // choose the frame again without them
-      filtered = withoutStrays(*cloud, prepared, strays.flagged);
+      filtered =
+          withoutStrays(*cloud, prepared, strays.flagged, collectStrays ? &ready.strays : nullptr);
       ready.outliers = {cloud->size() - filtered.size(), strays.sparse, strays.grouped};
       cloud = &filtered;
       timer.next("prepare", cloud->size());  // both stages again, as their own entries
@@ -311,6 +311,7 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
   ReadyPoints ready = prepare(timer);
+  if (source.onStrays) source.onStrays(std::move(ready.strays));
   return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), keep, source,
                        timer, report, started);
 }
@@ -321,7 +322,9 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
                             const BuildOptions& options, const ConvertSource& source) {
   return convertWith(
       input.size(), output, options, source,
-      [&](StageTimer& timer) { return prepareInCore(input, options, timer); },
+      [&](StageTimer& timer) {
+        return prepareInCore(input, options, timer, bool(source.onStrays));
+      },
       [&](Writer& writer, const FileHeader& header) {
         return keepPoints(writer, input, header, options.pointBits, options.keptPointsPerChunk);
       });
@@ -342,7 +345,8 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
         const auto stage = [&](const std::string& name, uint64_t total) {
           timer.next(name, total);
         };
-        ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage);
+        ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage,
+                                             bool(source.onStrays));
         requireSurface(ready.points);  // known once every chunk's duplicates are merged
         return ready;
       },
@@ -356,9 +360,8 @@ namespace {
 
 // The texture (`--texture`), read before any work. Sampled at the points, it becomes their
 // colors here, in or out of core alike.
-std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image,
-                                          const TextureOptions& t, PointSet& points,
-                                          const Frame& frame, StageTimer& timer,
+std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image, const TextureOptions& t,
+                                          PointSet& points, const Frame& frame, StageTimer& timer,
                                           nlohmann::json& report) {
   if (!image) return std::nullopt;
   const double scale = t.scale > 0.0 ? t.scale : frame.size;

@@ -31,6 +31,9 @@ struct ConvertSource {
   // Called when a stage ends, with its name and duration.
   std::function<void(const std::string& stage, double seconds)> onStage;
   ProgressReporter* progress = nullptr;  // shows each stage's progress when set
+  // When set, called once with the input points removed as strays (world units, their normals
+  // and colors), before the octree stages.
+  std::function<void(PointCloud strays)> onStrays;
 };
 
 // Convert the points into the .iso file at output (written atomically). Returns the report. The

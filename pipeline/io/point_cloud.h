@@ -34,6 +34,13 @@ struct PointCloud {
   }
 };
 
+// Append point i of `from` with its normal and color (extras are left out).
+inline void appendPoint(PointCloud& to, const PointCloud& from, size_t i) {
+  to.positions.push_back(from.positions[i]);
+  if (from.hasNormals()) to.normals.push_back(from.normals[i]);
+  if (from.hasColors()) to.colors.push_back(from.colors[i]);
+}
+
 // A triangle mesh in world coordinates (e.g. the ground truth of a scan).
 struct TriangleMesh {
   std::vector<glm::dvec3> vertices;

@@ -117,7 +117,7 @@ bool isCovered(const Patch& patch, const SdfEvaluator& sdf, const PointSet& poin
 }
 
 // The tolerance of a node in frame units: the option's, in units of the local point spacing (the
-// mean spacing scaled by the points' radii against the median radius: sparse parts cannot hold
+// spacing scaled by the points' radii against the median radius: sparse parts cannot hold
 // detail finer than their sampling), but never below 3 times the points' roughness (RMS), so
 // that noise is not mistaken for shape that needs smaller leaves.
 double nodeTolerance(const OctreeNode& node, const PointSet& points, const ToleranceScale& scale) {

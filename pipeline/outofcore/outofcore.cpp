@@ -51,7 +51,7 @@ struct Accumulated {
   SpillVector<uint32_t> boundarySource;                 // input index of each
   UninitializedSpillVector<uint32_t> boundaryNeighbor;  // k per boundary point: input indices
   size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
-  OrientationComponents components;                // `of` per point in `points`
+  OrientationComponents components;  // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
   // While finding strays: the groups of the input points and each point's k-th distance.
   std::unique_ptr<PointGroups> groups;
@@ -361,8 +361,8 @@ class ChunkRunner {
 // results are placed in order over the old ones. Returns how many ran again.
 size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
                            const BuildOptions& options, bool inputNormals,
-                           const std::vector<uint8_t>& keep,
-                           const std::vector<glm::vec3>& strays, Accumulated& done) {
+                           const std::vector<uint8_t>& keep, const std::vector<glm::vec3>& strays,
+                           Accumulated& done) {
   Accumulated again;
   ChunkRunner rerun(distribution, frame, options, inputNormals, &keep);
   std::vector<size_t> againOf(distribution.chunks().size(), kNoNode);
@@ -370,8 +370,8 @@ size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
   for (size_t c = 0; c < distribution.chunks().size(); ++c) {
     const ChunkRecord& record = done.chunks[c];
     const bool touched = std::any_of(strays.begin(), strays.end(), [&](const glm::vec3& u) {
-      return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z &&
-             u.x <= record.hi.x && u.y <= record.hi.y && u.z <= record.hi.z;
+      return u.x >= record.lo.x && u.y >= record.lo.y && u.z >= record.lo.z && u.x <= record.hi.x &&
+             u.y <= record.hi.y && u.z <= record.hi.z;
     });
     if (touched) {
       againOf[c] = again.chunks.size();
@@ -436,7 +436,8 @@ std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<ui
 
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                              const BuildOptions& options, uint64_t maxChunkPoints,
-                             const std::function<void(const std::string&, uint64_t)>& stage) {
+                             const std::function<void(const std::string&, uint64_t)>& stage,
+                             bool collectStrays) {
   if (raw.size() >= uint64_t(std::numeric_limits<uint32_t>::max()))
     throw std::length_error("more than 4,294,967,294 input points in one conversion");
   // Orientation blocks must nest in chunks: a chunk holds at least a block's points.
@@ -482,6 +483,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
         if (positions.contains(p)) {
           keep[first + i] = 0;
           strays.push_back(p);
+          if (collectStrays) appendPoint(ready.strays, batch, i);
           continue;
         }
         lo = glm::min(lo, batch.positions[i]);

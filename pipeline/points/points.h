@@ -103,9 +103,12 @@ RadiusStats estimateRadii(PointSet& points, const Neighbors& neighbors);
 
 // ---- strays.cpp
 // The rule that finds stray points (specs/pipeline.md, "Stray points").
+// A group (below) of fewer than --stray-group points is a stray, and so is a group whose median
+// k-th neighbour distance exceeds the median over all points times max(kSparseFactor,
+// e^(kSparseSigmas·σ)), σ the MAD of the log distances as a normal's σ; never a group of half the
+// points. Groups, not points, are judged: the sparse end of a scan whose density varies smoothly
+// is joined to its dense part and stays.
 struct StrayRule {
-  // A point whose k-th neighbour is farther than the median k-th distance times
-  // max(kSparseFactor, e^(kSparseSigmas·σ)), σ the MAD of the log distances as a normal's σ.
   static constexpr double kSparseFactor = 32.0, kSparseSigmas = 8.0;
 };
 // The groups of points that near k-NN edges join (union-find over point ids): an edge i→j, j
@@ -124,10 +127,10 @@ class PointGroups {
 };
 struct Strays {
   std::vector<uint8_t> flagged;  // per point
-  size_t sparse = 0;             // too far from their k-th neighbour
-  size_t grouped = 0;            // in groups of fewer than groupPoints (and half the points)
+  size_t sparse = 0;             // in groups far sparser than the scan
+  size_t grouped = 0;            // in groups of fewer than groupPoints
 };
-// The k-th distance beyond which a point is a stray (StrayRule).
+// The median k-th distance beyond which a group is sparse (StrayRule).
 float sparseThreshold(std::span<const float> kth);
 // Strays among points with these k-th distances and ids in `groups`.
 Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, PointGroups& groups,

@@ -21,6 +21,8 @@ namespace {
 // both, while the edges from a stray group to the surface below it are many times the surface's.
 constexpr float kEdgeReach = 3.0f;
 
+enum class StrayKind : uint8_t { SmallGroup, Sparse };
+
 }  // namespace
 
 PointGroups::PointGroups(size_t ids) : parent_(ids) {
@@ -75,25 +77,29 @@ Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, Poi
   Strays out;
   out.flagged.assign(n, 0);
   const float threshold = sparseThreshold(kth);
-  std::vector<uint32_t> roots(n), dense;  // group sizes count the dense points present only
-  for (size_t i = 0; i < n; ++i) {
-    roots[i] = groups.root(ids.empty() ? uint32_t(i) : ids[i]);
-    if (kth[i] > threshold) {
-      out.flagged[i] = 1;
-      ++out.sparse;
-    } else {
-      dense.push_back(roots[i]);
-    }
+  // Each point's group and k-th distance, sorted: a group is a run, its size the run's length and
+  // its median k-th distance the run's middle.
+  std::vector<std::pair<uint32_t, float>> members(n);
+  for (size_t i = 0; i < n; ++i)
+    members[i] = {groups.root(ids.empty() ? uint32_t(i) : ids[i]), kth[i]};
+  std::sort(members.begin(), members.end());
+  std::vector<std::pair<uint32_t, StrayKind>> verdicts;  // by root, for the groups that are strays
+  for (size_t a = 0, b = 0; a < n; a = b) {
+    while (b < n && members[b].first == members[a].first) ++b;
+    const size_t size = b - a;
+    if (2 * size >= n) continue;  // never the half of the scan
+    if (size < groupPoints)
+      verdicts.emplace_back(members[a].first, StrayKind::SmallGroup);
+    else if (members[a + size / 2].second > threshold)
+      verdicts.emplace_back(members[a].first, StrayKind::Sparse);
   }
-  std::sort(dense.begin(), dense.end());
   for (size_t i = 0; i < n; ++i) {
-    if (out.flagged[i]) continue;
-    const auto [lo, hi] = std::equal_range(dense.begin(), dense.end(), roots[i]);
-    const auto size = size_t(hi - lo);
-    if (size < groupPoints && 2 * size < dense.size()) {  // never the half of the scan
-      out.flagged[i] = 1;
-      ++out.grouped;
-    }
+    const uint32_t root = groups.root(ids.empty() ? uint32_t(i) : ids[i]);
+    const auto it = std::lower_bound(verdicts.begin(), verdicts.end(),
+                                     std::pair<uint32_t, StrayKind>{root, StrayKind{}});
+    if (it == verdicts.end() || it->first != root) continue;
+    out.flagged[i] = 1;
+    ++(it->second == StrayKind::Sparse ? out.sparse : out.grouped);
   }
   return out;
 }

@@ -103,7 +103,7 @@ PointCloud texturedTruth(const TriplanarTexture& texture, uint64_t count) {
 
 TEST(Texture, bakedAtPointsOrCornersTheSphereShowsTheTexture) {
   test::TempDir dir;
-  // 16 × 16 random texels over a repeat of 2: a texel is 0.125 wide, about 7 mean spacings of
+  // 16 × 16 random texels over a repeat of 2: a texel is 0.125 wide, about 7 spacings of
   // 100k points on the unit sphere (0.011).
   test::writePpm(dir / "tex.ppm", 16, 16, test::randomImage(16, 16, 5));
   const TriplanarTexture texture(readLinearImage(dir / "tex.ppm"), 2.0, 4.0);

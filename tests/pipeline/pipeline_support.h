@@ -35,7 +35,7 @@ struct Converted {
 Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& path,
                          const BuildOptions& options = {});
 
-// evaluateAgainstShape with the report's mean spacing.
+// evaluateAgainstShape with the report's spacing.
 nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t rays = 20000);
 
 // Write an 8-bit binary PPM (rows from the top, RGB bytes), an image any OpenImageIO reads.

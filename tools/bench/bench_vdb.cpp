@@ -2,7 +2,7 @@
 //     [--radius-spacings R] [--voxel-scale F]
 // The OpenVDB baseline of `tools/run bench accuracy`, on the points an .iso file was converted
 // from, at its resolution (voxels the size of its finest leaves, times F: default 1). OpenVDB's
-// ParticlesToLevelSet rasterizes a sphere around every point, of R mean spacings (default 2) but at
+// ParticlesToLevelSet rasterizes a sphere around every point, of R spacings (default 2) but at
 // least 2 voxels so that neighbours overlap; the union of spheres around surface points is a shell
 // about the surface, 2 radii thick, so it is eroded (LevelSetFilter::offset) by the radius less one
 // voxel, which leaves a shell a couple of voxels thick whose two sheets lie about a voxel from the

@@ -12,6 +12,7 @@
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
 #include "pipeline/io/image.h"
+#include "pipeline/io/ply.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/outofcore/spill.h"
 #include "tools/iso/commands.h"
@@ -27,13 +28,14 @@ struct Options {
   std::string columns;
   std::string fit = "sphere";
   std::string orient = "auto";
-  std::string memory = "auto";  // --memory
-  std::string tmp;              // --tmp; default: the output's directory
-  std::string maxTemp = "auto";    // --max-temp
-  std::string report;              // --report FILE
-  std::string progress = "auto";   // auto, line, json, none
+  std::string memory = "auto";                 // --memory
+  std::string tmp;                             // --tmp; default: the output's directory
+  std::string maxTemp = "auto";                // --max-temp
+  std::string report;                          // --report FILE
+  std::string writeStrays;                     // --write-strays FILE.ply
+  std::string progress = "auto";               // auto, line, json, none
   std::string texture, textureAt = "corners";  // --texture, --texture-at
-  int threads = 0;                 // 0: all cores
+  int threads = 0;                             // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
 };
@@ -52,12 +54,16 @@ void printReport(const nlohmann::json& r, const Options& o) {
                seconds > 0 ? withSeparators(uint64_t(double(input) / seconds)) : "-");
   }
   const auto& p = r["points"];
-  fmt::print(
-      "  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
-      withSeparators(p["used"].get<uint64_t>()),
-      withSeparators(p["duplicates_merged"].get<uint64_t>()),
-      withSeparators(p["outliers_removed"].get<uint64_t>()),
-      withSeparators(p["non_finite_dropped"].get<uint64_t>()));
+  fmt::print("  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
+             withSeparators(p["used"].get<uint64_t>()),
+             withSeparators(p["duplicates_merged"].get<uint64_t>()),
+             withSeparators(p["outliers_removed"].get<uint64_t>()),
+             withSeparators(p["non_finite_dropped"].get<uint64_t>()));
+  if (p["outliers_removed"].get<uint64_t>() > 0)
+    fmt::print(
+        "  strays: {} in groups of fewer than {} points, {} in groups far sparser than the scan\n",
+        withSeparators(p["outliers"]["in_small_groups"].get<uint64_t>()), o.build.strayGroupPoints,
+        withSeparators(p["outliers"]["sparse"].get<uint64_t>()));
   fmt::print(
       "  normals: {} from the input, {} estimated, {} flipped to agree with their neighbours\n",
       withSeparators(r["normals"]["from_input"].get<uint64_t>()),
@@ -72,8 +78,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const uint64_t fileChunks = f["chunks"].get<uint64_t>();
   fmt::print("  size: {} in {} chunk{}: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
              byteSize(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
-             fileChunks == 1 ? "" : "s",
-             f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
+             fileChunks == 1 ? "" : "s", f["bytes_per_leaf"].get<double>(),
+             f["bytes_per_point"].get<double>());
   if (r.contains("out_of_core")) {
     const auto& c = r["out_of_core"];
     const uint64_t chunks = c["chunks"].get<uint64_t>();
@@ -115,7 +121,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
     const auto& k = r["kept_points"];
     fmt::print(
         "  kept points: {} in {} chunk{}, {} ({:.2f} bytes/point), positions within {:.3g} "
-        "({:.3g} mean spacings){}\n",
+        "({:.3g} spacings){}\n",
         withSeparators(k["points"].get<uint64_t>()), withSeparators(k["chunks"].get<uint64_t>()),
         k["chunks"].get<uint64_t>() == 1 ? "" : "s", byteSize(k["bytes"].get<uint64_t>()),
         k["bytes_per_point"].get<double>(), k["max_error"].get<double>(),
@@ -127,7 +133,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
   }
   const auto& a = r["accuracy"];
   fmt::print(
-      "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} mean spacings "
+      "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} spacings "
       "(spacing {:.6g}; {} not projected)\n",
       withSeparators(a["samples"].get<uint64_t>()), a["rms_over_spacing"].get<double>(),
       a["max_over_spacing"].get<double>(), r["spacing"].get<double>(),
@@ -135,7 +141,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const auto& v = r["visibility"];
   fmt::print(
       "  visibility: {:.3f} % of {} points seen through in {} views (worst view {:.3f} %, {} "
-      "inside the points' outline), depth error median {:.3f} mean spacings\n",
+      "inside the points' outline), depth error median {:.3f} spacings\n",
       100.0 * v["seen_through_fraction"].get<double>(), withSeparators(v["points"].get<uint64_t>()),
       v["views"].get<uint64_t>(), 100.0 * v["worst_view_fraction"].get<double>(),
       withSeparators(v["seen_through_inside"].get<uint64_t>()),
@@ -184,12 +190,17 @@ int run(Options& o) {
       throw FileError(o.output, std::nullopt, "is also an input");
   }
   const ProgressMode mode =
-      o.progress == "auto" ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line
-                                                                  : ProgressMode::None)
-                           : named(kProgressNames, o.progress, "--progress", "auto, ");
+      o.progress == "auto"
+          ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None)
+          : named(kProgressNames, o.progress, "--progress", "auto, ");
   if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.report.empty() && std::filesystem::is_directory(o.report))
     throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
+  if (!o.writeStrays.empty() && std::filesystem::is_directory(o.writeStrays))
+    throw FileError(o.writeStrays, std::nullopt,
+                    "is a directory (--write-strays wants a file name)");
+  if (!o.writeStrays.empty() && o.keepOutliers)
+    throw UsageError("--write-strays has nothing to write with --keep-outliers");
   std::optional<tbb::global_control> threads;
   if (o.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
@@ -230,20 +241,25 @@ int run(Options& o) {
                "note: the octree stages' work lists stay in memory: about {} for {} points, "
                "more than --memory {}\n",
                byteSize(listBytes), withSeparators(raw->size()), byteSize(memory));
-  ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress};
+  ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress, {}};
   if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {
       if (stage != "read") fmt::print(stderr, "  {:<16} {:.3f} s\n", stage, seconds);
     };
+  PointCloud strays;
+  if (!o.writeStrays.empty())
+    source.onStrays = [&](PointCloud removed) { strays = std::move(removed); };
   nlohmann::json report;
   try {
-    report = convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
+    report =
+        convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
     throw FileError(names, std::nullopt, error.what());
   }
   if (!o.report.empty()) writeTextFile(o.report, report.dump(2) + "\n");
+  if (!o.writeStrays.empty()) writePly(o.writeStrays, strays);
   if (o.json)
     fmt::print("{}\n", report.dump(2));
   else
@@ -277,7 +293,7 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--max-depth", o->build.maxDepth, "Deepest octree level (1 to 20)")
       ->capture_default_str();
-  c->add_option("--tolerance", o->build.tolerance, "Allowed patch error, in mean point spacings")
+  c->add_option("--tolerance", o->build.tolerance, "Allowed patch error, in point spacings")
       ->capture_default_str();
   c->add_option("--normal-bits", o->build.normalBits,
                 "Octahedral normal bits per component: 8 or 12")
@@ -286,9 +302,13 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
-  c->add_flag("--keep-outliers", o->keepOutliers,
-              "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
-              "instead of removing them");
+  c->add_flag(
+      "--keep-outliers", o->keepOutliers,
+      "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
+      "instead of removing them");
+  c->add_option("--write-strays", o->writeStrays,
+                "Write the points removed as strays to this PLY file (world coordinates, with "
+                "their normals and colors), to look at what was left out");
   c->add_option("--stray-group", o->build.strayGroupPoints,
                 "Separate groups of fewer points are strays (birds, multipath, dust)")
       ->capture_default_str()
@@ -350,8 +370,7 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
-  c->callback(
-      [o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
+  c->callback([o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

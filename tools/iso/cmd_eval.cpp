@@ -98,7 +98,7 @@ int run(Options& o) {
   if (o.visibility && truths == 0) {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
-      throw FileError(o.file, std::nullopt, "has no reported mean spacing; give --spacing");
+      throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
     result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
     result["spacing"] = spacing;
     result["file"] = o.file;
@@ -130,7 +130,7 @@ int run(Options& o) {
   } else {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
-      throw FileError(o.file, std::nullopt, "has no reported mean spacing; give --spacing");
+      throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
     if (!o.shape.empty()) o.truth.params.name = o.shape;
     o.eval.orientedNormals = o.truth.mesh.empty();
     result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
@@ -171,7 +171,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--views", o->view.randomViews, "Random views besides the 6 along the axes")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000));
-  c->add_option("--pixel", o->view.pixelSpacings, "Pixel width in mean point spacings")
+  c->add_option("--pixel", o->view.pixelSpacings, "Pixel width in point spacings")
       ->capture_default_str()
       ->check(CLI::Range(0.01, 1000.0));
   c->add_option("--visibility-points", o->visibilityPoints,
@@ -179,7 +179,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--columns", o->columns, "Column spec of text point files");
   c->add_option("--spacing", o->spacing,
-                "Mean point spacing (default: the file's conversion report)");
+                "Point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
   c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")->capture_default_str();
