@@ -4,11 +4,14 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <map>
 #include <optional>
 
 #include "iso/error.h"
 #include "iso/temporary_files.h"
+#include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
 #include "pipeline/io/image.h"
@@ -16,6 +19,7 @@
 #include "pipeline/outofcore/spill.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/inputs.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
 
 namespace iso::cli {
@@ -27,13 +31,13 @@ struct Options {
   std::string columns;
   std::string fit = "sphere";
   std::string orient = "auto";
-  std::string memory = "auto";  // --memory
-  std::string tmp;              // --tmp; default: the output's directory
-  std::string maxTemp = "auto";    // --max-temp
-  std::string report;              // --report FILE
-  std::string progress = "auto";   // auto, line, json, none
+  std::string memory = "auto";                 // --memory
+  std::string tmp;                             // --tmp; default: the output's directory
+  std::string maxTemp = "auto";                // --max-temp
+  std::string report;                          // --report FILE
+  std::string progress = "auto";               // auto, line, json, none
   std::string texture, textureAt = "corners";  // --texture, --texture-at
-  int threads = 0;                 // 0: all cores
+  int threads = 0;                             // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
 };
@@ -52,12 +56,11 @@ void printReport(const nlohmann::json& r, const Options& o) {
                seconds > 0 ? withSeparators(uint64_t(double(input) / seconds)) : "-");
   }
   const auto& p = r["points"];
-  fmt::print(
-      "  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
-      withSeparators(p["used"].get<uint64_t>()),
-      withSeparators(p["duplicates_merged"].get<uint64_t>()),
-      withSeparators(p["outliers_removed"].get<uint64_t>()),
-      withSeparators(p["non_finite_dropped"].get<uint64_t>()));
+  fmt::print("  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
+             withSeparators(p["used"].get<uint64_t>()),
+             withSeparators(p["duplicates_merged"].get<uint64_t>()),
+             withSeparators(p["outliers_removed"].get<uint64_t>()),
+             withSeparators(p["non_finite_dropped"].get<uint64_t>()));
   fmt::print(
       "  normals: {} from the input, {} estimated, {} flipped to agree with their neighbours\n",
       withSeparators(r["normals"]["from_input"].get<uint64_t>()),
@@ -72,8 +75,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const uint64_t fileChunks = f["chunks"].get<uint64_t>();
   fmt::print("  size: {} in {} chunk{}: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
              byteSize(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
-             fileChunks == 1 ? "" : "s",
-             f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
+             fileChunks == 1 ? "" : "s", f["bytes_per_leaf"].get<double>(),
+             f["bytes_per_point"].get<double>());
   if (r.contains("out_of_core")) {
     const auto& c = r["out_of_core"];
     const uint64_t chunks = c["chunks"].get<uint64_t>();
@@ -159,50 +162,99 @@ uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path
   return std::max<uint64_t>(space.available / 10 * 9, 1);
 }
 
-int run(Options& o) {
+// The options that need no file: a usage error before anything is read.
+void checkOptions(Options& o) {
   o.build.fit = named(kFitNames, o.fit, "--fit");
   o.build.orient = named(kOrientNames, o.orient, "--orient");
   o.build.removeOutliers = !o.keepOutliers;
   validateOptions(o.build);  // before any file is read
+  if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.texture.empty()) {
-    o.build.texture.image = o.texture;
     o.build.texture.at = named(kTextureAtNames, o.textureAt, "--texture-at");
-    checkImageReadable(o.build.texture.image);  // before the points are read
+    o.build.texture.image = o.texture;
   }
+  if (o.memory != "auto") parseSize(o.memory, "--memory");
+  if (o.maxTemp != "auto") parseSize(o.maxTemp, "--max-temp");
+}
+
+// The outputs (-o, --report), checked against the inputs before any work; the input files.
+std::vector<std::filesystem::path> checkPaths(const Options& o) {
   const std::filesystem::path output(o.output);
-  // Temporary files of runs that were killed (kill -9, power loss) next to the output.
-  const size_t stale = removeStaleTemporaries(output.parent_path());
+  checkOutputPath(output, "-o", o.force);
+  if (!o.report.empty()) {
+    checkOutputPath(o.report, "--report", true);  // a report is replaced, as a log is
+    refuseOutputOverInput(o.report, output, "--report");
+  }
+  const std::vector<std::filesystem::path> files = expandInputs(o.inputs);
+  for (const auto& file : files) {
+    refuseOutputOverInput(output, file, "-o");
+    if (!o.report.empty()) refuseOutputOverInput(o.report, file, "--report");
+  }
+  if (!o.texture.empty()) checkImageReadable(o.build.texture.image);  // before the points
+  return files;
+}
+
+// Where the temporary files go: --tmp (made when missing, with its parents) or the output's
+// directory. Files left there by runs that were killed (kill -9, power loss) are removed.
+std::filesystem::path temporaryDirectory(const Options& o, std::optional<MadeDirectories>& made) {
+  const std::filesystem::path output(o.output);
+  const std::filesystem::path outputDirectory =
+      output.has_parent_path() ? output.parent_path() : std::filesystem::path(".");
+  size_t stale = removeStaleTemporaries(outputDirectory);
+  std::filesystem::path tmp = outputDirectory;
+  if (!o.tmp.empty()) {
+    made.emplace(o.tmp, "--tmp");
+    if (::access(o.tmp.c_str(), W_OK | X_OK) != 0)
+      throw FileError(
+          o.tmp, std::nullopt,
+          std::string("cannot write temporary files there (--tmp): ") + std::strerror(errno));
+    tmp = o.tmp;
+    std::error_code error;
+    if (!std::filesystem::equivalent(tmp, outputDirectory, error))
+      stale += removeStaleTemporaries(tmp);
+  }
   if (stale > 0 && !o.quiet)
     fmt::print(stderr, "note: removed {} temporary file{} of an interrupted earlier run\n", stale,
                stale == 1 ? "" : "s");
-  if (std::filesystem::exists(output) && !o.force)
-    throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
-  const std::vector<std::filesystem::path> files = expandInputs(o.inputs);
-  for (const auto& file : files) {
-    std::error_code error;
-    if (std::filesystem::equivalent(file, output, error))
-      throw FileError(o.output, std::nullopt, "is also an input");
-  }
+  return tmp;
+}
+
+// What Ctrl-C leaves at each stage, said when it comes (tools/iso/interrupt.h).
+std::function<void(const std::string&)> interruptMessages(const Options& o, ProgressMode mode,
+                                                          const MadeDirectories* made) {
+  const std::string left = std::filesystem::exists(o.output) ? o.output + " keeps what it held"
+                                                             : std::string("nothing was written");
+  std::string removed = "temporary files removed";
+  if (made != nullptr && !made->made().empty())
+    removed += ", with the directory " + made->made().front().string() + " made for them";
+  const bool live = mode == ProgressMode::Line;
+  return [=](const std::string& stage) {
+    const std::string when = stage.empty()     ? "before reading the points"
+                             : stage == "read" ? "while reading the points"
+                                               : "in the " + stage + " stage";
+    setInterruptMessage("iso convert: interrupted " + when + "; " + left + ", " + removed, live);
+  };
+}
+
+int run(Options& o) {
+  checkOptions(o);
+  const std::vector<std::filesystem::path> files = checkPaths(o);
+  const std::filesystem::path output(o.output);
   const ProgressMode mode =
-      o.progress == "auto" ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line
-                                                                  : ProgressMode::None)
-                           : named(kProgressNames, o.progress, "--progress", "auto, ");
-  if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
-  if (!o.report.empty() && std::filesystem::is_directory(o.report))
-    throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
+      o.progress == "auto"
+          ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None)
+          : named(kProgressNames, o.progress, "--progress", "auto, ");
+  std::optional<MadeDirectories> made;
+  const std::filesystem::path tmp = temporaryDirectory(o, made);
+  const auto interrupted = interruptMessages(o, mode, made ? &*made : nullptr);
+  interrupted("");
   std::optional<tbb::global_control> threads;
   if (o.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
   ProgressReporter progress(mode);
+  progress.observeStages(interrupted);
   const uint64_t memory = parseBytes(o.memory, "--memory");
-  const std::filesystem::path tmp =
-      o.tmp.empty() ? (output.has_parent_path() ? output.parent_path() : std::filesystem::path("."))
-                    : std::filesystem::path(o.tmp);
-  if (!std::filesystem::is_directory(tmp))
-    throw FileError(tmp.string(), std::nullopt, "is not a directory (--tmp)");
-  if (tmp != output.parent_path()) removeStaleTemporaries(tmp);
-  const uint64_t maxTemp = temporaryDiskLimit(o.maxTemp, tmp);
-  TemporaryDiskLimit temporaryLimit(maxTemp);
+  TemporaryDiskLimit temporaryLimit(temporaryDiskLimit(o.maxTemp, tmp));
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
   SpillDirectory spill(tmp);
@@ -237,12 +289,14 @@ int run(Options& o) {
     };
   nlohmann::json report;
   try {
-    report = convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
+    report =
+        convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
     throw FileError(names, std::nullopt, error.what());
   }
+  setInterruptMessage("iso convert: interrupted after writing " + o.output);
   if (!o.report.empty()) writeTextFile(o.report, report.dump(2) + "\n");
   if (o.json)
     fmt::print("{}\n", report.dump(2));
@@ -286,9 +340,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
-  c->add_flag("--keep-outliers", o->keepOutliers,
-              "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
-              "instead of removing them");
+  c->add_flag(
+      "--keep-outliers", o->keepOutliers,
+      "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
+      "instead of removing them");
   c->add_option("--stray-group", o->build.strayGroupPoints,
                 "Separate groups of fewer points are strays (birds, multipath, dust)")
       ->capture_default_str()
@@ -350,8 +405,7 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
-  c->callback(
-      [o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
+  c->callback([o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli

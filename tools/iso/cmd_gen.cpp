@@ -2,9 +2,11 @@
 #include <fmt/core.h>
 
 #include "iso/error.h"
+#include "pipeline/base/files.h"
 #include "pipeline/geom/generate.h"
 #include "pipeline/io/ply.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/shape_options.h"
 #include "tools/iso/text.h"
 
@@ -21,10 +23,10 @@ struct Options {
 
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
-    throw UsageError(
-        "name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
-  if (std::filesystem::exists(o.output) && !o.force)
-    throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
+    throw UsageError("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+  checkOutputPath(o.output, "-o", o.force);
+  if (!o.truth.mesh.empty()) refuseOutputOverInput(o.output, o.truth.mesh, "-o");
+  setInterruptMessage("iso gen: interrupted; nothing was written");
   if (o.truth.mesh.empty()) o.truth.params.name = o.shape;
   ShapeOptions placed = o.truth;
   placed.offset = "0,0,0";  // generateScan adds the offset itself
