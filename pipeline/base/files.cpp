@@ -55,7 +55,7 @@ void syncDirectory(const fs::path& directory) {
 }  // namespace
 
 void checkOutputPath(const fs::path& path, const std::string& role, bool replace) {
-  if (path.empty()) fail(path, "an empty name (" + role + ")");
+  if (path.empty()) throw UsageError(role + " names no file (an empty name)");
   const fs::path directory = directoryOf(path);
   std::error_code error;
   const fs::file_status where = fs::status(directory, error);

@@ -15,7 +15,7 @@ namespace iso {
 
 // Refuse a path that cannot become an output: its directory does not exist, is not a directory
 // or cannot be written in; the path is a directory; or it exists and `replace` is false. `role`
-// names where the path came from ("-o", "--mesh") in the message.
+// names where the path came from ("-o", "--mesh") in the message. An empty path is a UsageError.
 void checkOutputPath(const std::filesystem::path& path, const std::string& role, bool replace);
 
 // Refuse an output that is the same file as an input (through a link, too).

@@ -313,7 +313,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       "convert",
       "Convert point files (PLY, LAS, PCD, Draco, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
-  c->add_option("-o,--output", o->output, "The .iso file to write")->required();
+  c->add_option("-o,--output", o->output,
+                "The .iso file to write (its directory must exist); Ctrl-C stops the conversion "
+                "with a line saying what it left, removing its temporary files")
+      ->required();
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   c->add_option("--columns", o->columns,
                 "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips)");
@@ -387,13 +390,15 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "update) or none")
       ->capture_default_str();
   c->add_option("--memory", o->memory,
-                "Memory budget (e.g. 2G; auto: half the RAM): the point stages run in chunks "
+                "Memory budget (e.g. 2G, 512M; units K, M, G, T are powers of 1024; auto: half "
+                "the RAM): the point stages run in chunks "
                 "that fit it, and the large arrays live in temporary files whose pages are "
                 "dropped when the process nears it; the output does not depend on it")
       ->capture_default_str();
   c->add_option("--tmp", o->tmp,
-                "Directory for temporary files (default: the output's): the points as read, "
-                "sorted, and their arrays; removed afterwards");
+                "Directory for temporary files (default: the output's; made with its parents "
+                "when missing): the points as read, sorted, and their arrays; all removed "
+                "afterwards, with the directories made for them");
   c->add_option("--max-temp", o->maxTemp,
                 "Most temporary disk the conversion may use (e.g. 20G; auto: 90 % of the free "
                 "space in --tmp); it stops with an error, removing its files, before going past")

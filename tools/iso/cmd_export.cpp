@@ -3,6 +3,7 @@
 #include <fmt/core.h>
 
 #include <chrono>
+#include <functional>
 #include <nlohmann/json.hpp>
 
 #include "iso/error.h"
@@ -49,6 +50,18 @@ void checkOutputs(const Options& o) {
   }
 }
 
+// Stage `final` in `outputs` and write it with `write`; errors name `final`, not the staged name.
+void writeAs(OutputGroup& outputs, const std::string& final,
+             const std::function<void(const std::filesystem::path& staged)>& write) {
+  const std::filesystem::path staged = outputs.stage(final);
+  try {
+    write(staged);
+  } catch (const FileError& error) {
+    if (error.file() != staged.string()) throw;
+    throw FileError(final, error.offset(), error.reason());
+  }
+}
+
 void say(const std::string& doing) {
   setInterruptMessage("iso export: interrupted while " + doing +
                       "; nothing was written, temporary files removed");
@@ -63,10 +76,11 @@ void writePoints(const Reader& reader, const Options& o, OutputGroup& outputs,
   say("writing the points");
   const auto started = std::chrono::steady_clock::now();
   // Double positions: float would round them more coarsely than the file keeps them.
-  PlyPointWriter ply(outputs.stage(o.points), kept.points, kept.normals, kept.colors,
-                     {.doublePositions = true});
-  forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
-  ply.commit();
+  writeAs(outputs, o.points, [&](const std::filesystem::path& staged) {
+    PlyPointWriter ply(staged, kept.points, kept.normals, kept.colors, {.doublePositions = true});
+    forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
+    ply.commit();
+  });
   summary["points"] = {{"path", o.points},      {"points", kept.points},
                        {"chunks", kept.chunks}, {"normals", kept.normals},
                        {"colors", kept.colors}, {"seconds", secondsSince(started)}};
@@ -78,7 +92,8 @@ void writeMesh(const SurfaceModel& surface, bool doubles, const Options& o, Outp
   const auto started = std::chrono::steady_clock::now();
   MeshStats stats;
   const TriangleMesh mesh = extractMesh(surface, &stats);
-  writePlyMesh(outputs.stage(o.mesh), mesh, doubles);
+  writeAs(outputs, o.mesh,
+          [&](const std::filesystem::path& staged) { writePlyMesh(staged, mesh, doubles); });
   summary["mesh"] = {{"path", o.mesh},
                      {"vertices", mesh.vertices.size()},
                      {"triangles", mesh.triangles.size()},
@@ -94,13 +109,17 @@ void writeLevelSet(const SurfaceModel& surface, const Options& o, OutputGroup& o
                    nlohmann::json& summary) {
   say("writing the level set");
   const auto started = std::chrono::steady_clock::now();
-  const std::filesystem::path staged = outputs.stage(o.vdb);
-  const VdbStats stats = writeVdb(surface, staged, o.band);
+  VdbStats stats;
+  uint64_t bytes = 0;
+  writeAs(outputs, o.vdb, [&](const std::filesystem::path& staged) {
+    stats = writeVdb(surface, staged, o.band);
+    bytes = std::filesystem::file_size(staged);
+  });
   summary["vdb"] = {{"path", o.vdb},
                     {"active_voxels", stats.activeVoxels},
                     {"voxel_size", stats.voxelSize},
                     {"band_voxels", o.band},
-                    {"bytes", std::filesystem::file_size(staged)},
+                    {"bytes", bytes},
                     {"seconds", secondsSince(started)}};
 }
 
@@ -174,7 +193,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   CLI::App* c = app.add_subcommand(
       "export",
       "Write the surface of an .iso file for other tools: a triangle mesh (PLY), an OpenVDB "
-      "level set, or the original points it keeps");
+      "level set, or the original points it keeps; all the files asked for, or none");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
                 "Triangle mesh of the zero set (binary PLY), crack-free across levels: each leaf "

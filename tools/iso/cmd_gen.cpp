@@ -53,7 +53,9 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   CLI::App* c = app.add_subcommand("gen", "Write a synthetic scan with a known answer (PLY)");
   c->add_option("shape", o->shape, "sphere, torus, cube, plane or sheets (or --mesh)");
   c->add_option("-o,--output", o->output, "The PLY file to write")->required();
-  c->add_option("-n,--count", o->generate.count, "Number of points")->capture_default_str();
+  c->add_option("-n,--count", o->generate.count, "Number of points (1 to 2^32)")
+      ->capture_default_str()
+      ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 32));
   c->add_option("--noise", o->generate.noise, "Noise along the normal, in point spacings (σ)")
       ->capture_default_str();
   c->add_option("--density-ratio", o->generate.densityRatio, "Densest to sparsest sampling along x")
