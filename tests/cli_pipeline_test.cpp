@@ -855,7 +855,6 @@ TEST_F(CliPipeline, outputsThatCannotBeWrittenAreRefusedBeforeAnyWork) {
       {"convert -f " + ply + " -o " + ply, "is also an input (-o would replace"},
       {"convert -f " + ply + " -o " + quoted(dir_ / "t.iso") + " --report " + ply,
        "is also an input (--report would replace"},
-      {"convert -f " + ply + " -o " + file + " --report " + file, "is also an input (--report"},
       {"export -f " + file + " --mesh " + file, "is also an input (--mesh would replace"},
       {"export " + file + " --vdb " + quoted(dir_ / "folder"), "is a directory (--vdb wants"},
       {"gen sphere -f -n 1000 -o " + quoted(dir_ / "folder"), "is a directory (-o wants"},
@@ -872,6 +871,10 @@ TEST_F(CliPipeline, outputsThatCannotBeWrittenAreRefusedBeforeAnyWork) {
   const auto empty = runIso("convert " + ply + " -o ''");
   EXPECT_EQ(empty.exitCode, 2);
   EXPECT_NE(empty.err.find("-o names no file"), std::string::npos) << empty.err;
+  const auto report = runIso("convert " + ply + " -o " + quoted(dir_ / "t.iso") + " --report " +
+                             quoted(dir_ / "folder" / ".." / "t.iso"));
+  EXPECT_EQ(report.exitCode, 2);
+  EXPECT_NE(report.err.find("-o and --report name the same file"), std::string::npos) << report.err;
   const auto twice = runIso("export " + file + " --mesh " + quoted(dir_ / "m.ply") + " --points " +
                             quoted(dir_ / "." / "m.ply"));
   EXPECT_EQ(twice.exitCode, 2);

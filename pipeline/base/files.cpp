@@ -75,6 +75,14 @@ void refuseOutputOverInput(const fs::path& output, const fs::path& input, const 
     fail(output, "is also an input (" + role + " would replace " + input.string() + ")");
 }
 
+bool namesSameFile(const fs::path& a, const fs::path& b) {
+  std::error_code error;
+  if (fs::exists(a, error) && fs::exists(b, error)) return fs::equivalent(a, b, error);
+  const fs::path canonicalA = fs::weakly_canonical(a, error);
+  if (error) return false;
+  return canonicalA == fs::weakly_canonical(b, error) && !error;
+}
+
 // ---- OutputGroup
 
 OutputGroup::~OutputGroup() {

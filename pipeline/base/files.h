@@ -22,6 +22,10 @@ void checkOutputPath(const std::filesystem::path& path, const std::string& role,
 void refuseOutputOverInput(const std::filesystem::path& output, const std::filesystem::path& input,
                            const std::string& role);
 
+// Whether two paths name one file: the same file when both exist (through links too), else the
+// same absolute path once "." and ".." and the links of the existing part are resolved.
+bool namesSameFile(const std::filesystem::path& a, const std::filesystem::path& b);
+
 // Outputs written together, all or none. Each is written under a temporary name beside its final
 // path (stage()); commit() renames them all into place once every one is complete. If a rename
 // fails, the renames done are undone, so that every final path holds what it held before, and

@@ -132,6 +132,20 @@ TEST(OutputPath, directoriesExistingFilesAndInputsAreRefused) {
   EXPECT_NO_THROW(refuseOutputOverInput(dir / "new.ply", dir / "in.ply", "-o"));
 }
 
+TEST(OutputPath, twoNamesOfOneFileAreTheSameFileWhetherItExistsOrNot) {
+  test::TempDir dir;
+  fs::create_directory(dir / "sub");
+  EXPECT_TRUE(namesSameFile(dir / "new.ply", dir / "sub" / ".." / "new.ply"));
+  EXPECT_TRUE(namesSameFile(dir / "new.ply", dir / "." / "new.ply"));
+  EXPECT_FALSE(namesSameFile(dir / "new.ply", dir / "sub" / "new.ply"));
+  put(dir / "old.ply", "x");
+  fs::create_symlink(dir / "old.ply", dir / "sub" / "link.ply");
+  EXPECT_TRUE(namesSameFile(dir / "old.ply", dir / "sub" / "link.ply"));
+  fs::create_directory_symlink(dir / "sub", dir / "alias");
+  EXPECT_TRUE(namesSameFile(dir / "sub" / "new.ply", dir / "alias" / "new.ply"));
+  EXPECT_FALSE(namesSameFile(dir / "old.ply", dir / "new.ply"));
+}
+
 TEST(OutputPath, aDirectoryThatCannotBeWrittenInIsRefused) {
   test::TempDir dir;
   test::ReadOnlyDirectory locked(dir / "locked");

@@ -183,7 +183,8 @@ std::vector<std::filesystem::path> checkPaths(const Options& o) {
   checkOutputPath(output, "-o", o.force);
   if (!o.report.empty()) {
     checkOutputPath(o.report, "--report", true);  // a report is replaced, as a log is
-    refuseOutputOverInput(o.report, output, "--report");
+    if (namesSameFile(o.report, output))
+      throw UsageError("-o and --report name the same file: " + o.report);
   }
   const std::vector<std::filesystem::path> files = expandInputs(o.inputs);
   for (const auto& file : files) {
@@ -238,12 +239,12 @@ std::function<void(const std::string&)> interruptMessages(const Options& o, Prog
 
 int run(Options& o) {
   checkOptions(o);
-  const std::vector<std::filesystem::path> files = checkPaths(o);
-  const std::filesystem::path output(o.output);
   const ProgressMode mode =
       o.progress == "auto"
           ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None)
           : named(kProgressNames, o.progress, "--progress", "auto, ");
+  const std::vector<std::filesystem::path> files = checkPaths(o);
+  const std::filesystem::path output(o.output);
   std::optional<MadeDirectories> made;
   const std::filesystem::path tmp = temporaryDirectory(o, made);
   const auto interrupted = interruptMessages(o, mode, made ? &*made : nullptr);

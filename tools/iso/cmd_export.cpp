@@ -43,8 +43,7 @@ void checkOutputs(const Options& o) {
     checkOutputPath(path, option, o.force);
     refuseOutputOverInput(path, o.file, option);
     for (size_t j = 0; j < i; ++j)
-      if (!outputs[j].first.empty() && std::filesystem::weakly_canonical(outputs[j].first) ==
-                                           std::filesystem::weakly_canonical(path))
+      if (!outputs[j].first.empty() && namesSameFile(outputs[j].first, path))
         throw UsageError(std::string(outputs[j].second) + " and " + option +
                          " name the same file: " + path);
   }
