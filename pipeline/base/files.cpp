@@ -60,6 +60,8 @@ void checkOutputPath(const fs::path& path, const std::string& role, bool replace
   std::error_code error;
   const fs::file_status where = fs::status(directory, error);
   if (where.type() == fs::file_type::not_found) fail(path, missingDirectory(directory));
+  if (error)
+    fail(path, "cannot reach the directory " + directory.string() + ": " + error.message());
   if (!fs::is_directory(where)) fail(path, directory.string() + " is not a directory");
   if (::access(directory.c_str(), W_OK | X_OK) != 0)
     fail(path, "cannot write in the directory " + directory.string() + ": " + std::strerror(errno));
