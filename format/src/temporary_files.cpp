@@ -24,10 +24,7 @@ struct Slot {
 std::array<Slot, kSlots> gSlots;
 
 extern "C" void removeAndReraise(int signal) {
-  for (Slot& slot : gSlots)
-    if (slot.state.load(std::memory_order_acquire) == 2) ::unlink(slot.path);
-  for (Slot& slot : gSlots)  // directories, once the files in them are gone
-    if (slot.state.load(std::memory_order_acquire) == 2) ::rmdir(slot.path);
+  removeRegisteredTemporaries();
   ::signal(signal, SIG_DFL);
   ::raise(signal);
 }
@@ -67,13 +64,31 @@ TemporaryRegistration& TemporaryRegistration::operator=(TemporaryRegistration&& 
   return *this;
 }
 
+void removeRegisteredTemporaries() noexcept {
+  for (Slot& slot : gSlots)
+    if (slot.state.load(std::memory_order_acquire) == 2) ::unlink(slot.path);
+  // Directories once the files in them are gone, deepest first: a pass removes those that are
+  // empty by then, until a pass removes none.
+  for (bool removed = true; removed;) {
+    removed = false;
+    for (Slot& slot : gSlots)
+      if (slot.state.load(std::memory_order_acquire) == 2 && ::rmdir(slot.path) == 0)
+        removed = true;
+  }
+}
+
 void installInterruptCleanup() {
   static std::atomic<bool> installed{false};
   if (installed.exchange(true)) return;
   struct sigaction action {};
   action.sa_handler = removeAndReraise;
   sigemptyset(&action.sa_mask);
-  for (int signal : {SIGINT, SIGTERM, SIGHUP}) ::sigaction(signal, &action, nullptr);
+  for (int signal : {SIGINT, SIGTERM, SIGHUP}) {
+    struct sigaction previous {};
+    // A signal the process was started ignoring (nohup, a background job) stays ignored.
+    if (::sigaction(signal, nullptr, &previous) == 0 && previous.sa_handler == SIG_IGN) continue;
+    ::sigaction(signal, &action, nullptr);
+  }
 }
 
 bool parseTemporaryName(const std::string& name, long& pid) {

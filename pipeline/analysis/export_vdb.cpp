@@ -6,7 +6,10 @@
 
 #include <algorithm>
 #include <array>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <mutex>
 #include <vector>
 
@@ -17,6 +20,16 @@
 namespace iso {
 
 namespace {
+
+// What openvdb::io::File::write writes (a seekable archive), to a stream whose errors are
+// checked: File's own std::ofstream is never checked, and a full disk gave a cut file and success.
+class CheckedArchive : public openvdb::io::Archive {
+ public:
+  void writeTo(std::ostream& out, const openvdb::GridCPtrVec& grids) const {
+    Archive::write(out, grids, /*seekable=*/true);
+  }
+};
+
 void initialize() {
   static std::once_flag initialized;
   std::call_once(initialized, [] { openvdb::initialize(); });
@@ -111,13 +124,18 @@ VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path
   openvdb::tools::signedFloodFill(grid->tree());
   stats.activeVoxels = grid->activeVoxelCount();
   AtomicFile file(path);
+  std::ofstream out(file.temporaryPath(), std::ios::binary | std::ios::trunc);
+  errno = 0;
   try {
-    openvdb::io::File out(file.temporaryPath().string());
-    out.write({grid});
+    CheckedArchive().writeTo(out, {grid});
     out.close();
   } catch (const openvdb::Exception& error) {
     throw FileError(path.string(), std::nullopt, std::string("cannot write: ") + error.what());
   }
+  if (out.fail())
+    throw FileError(
+        path.string(), std::nullopt,
+        std::string("cannot write: ") + (errno != 0 ? std::strerror(errno) : "the stream failed"));
   file.commit();
   return stats;
 }

@@ -53,8 +53,13 @@ ProgressReporter::~ProgressReporter() {
   if (thread_.joinable()) thread_.join();
 }
 
+void ProgressReporter::observeStages(std::function<void(const std::string& stage)> observer) {
+  observer_ = std::move(observer);
+}
+
 void ProgressReporter::begin(const std::string& stage, uint64_t total) {
   end();
+  if (observer_) observer_(stage);
   std::lock_guard lock(mutex_);
   stage_ = stage;
   total_ = total;
@@ -93,13 +98,10 @@ void ProgressReporter::print(bool final) {
   uint64_t rssFiles = 0;
   const uint64_t rss = currentRssBytes(&rssFiles);
   if (mode_ == ProgressMode::Json) {
-    nlohmann::json j = {{"event", final ? "end" : "progress"},
-                        {"stage", stage_},
-                        {"done", done},
-                        {"elapsed_seconds", elapsed},
-                        {"per_second", perSecond},
-                        {"rss_bytes", rss},
-                        {"rss_file_bytes", rssFiles}};
+    nlohmann::json j = {
+        {"event", final ? "end" : "progress"}, {"stage", stage_},         {"done", done},
+        {"elapsed_seconds", elapsed},          {"per_second", perSecond}, {"rss_bytes", rss},
+        {"rss_file_bytes", rssFiles}};
     if (total_ > 0) j["total"] = total_;
     if (bounded) j["percent"] = 100.0 * fraction;
     if (eta >= 0.0 && !final) j["eta_seconds"] = eta;

@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -53,6 +54,9 @@ class ProgressReporter {
   void begin(const std::string& stage, uint64_t total);
   // End the current stage: the final line (Line) or an "end" object (Json).
   void end();
+  // Call `observer` with the name of each stage begun from now on, as it begins (in the thread
+  // that calls begin()); whatever the mode, None included.
+  void observeStages(std::function<void(const std::string& stage)> observer);
 
  private:
   void run();
@@ -66,6 +70,7 @@ class ProgressReporter {
   bool stopping_ = false;
   bool active_ = false;
   std::string stage_;
+  std::function<void(const std::string&)> observer_;
   uint64_t total_ = 0;
   std::chrono::steady_clock::time_point started_;
   std::thread thread_;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -84,22 +85,59 @@ inline std::optional<std::vector<double>> parseNumberList(std::string_view text,
   return values;
 }
 
-// A byte size such as "2G", "512M", "1.5G" or "100000" (binary units K, M, G, T); nullopt when it
-// is not one, not positive, or more than 2^64 − 1 bytes.
-inline std::optional<uint64_t> parseByteSize(std::string_view text) {
+namespace detail {
+// The power of 1024 of a byte size's unit ("2G", "2g", "2GB", "2GiB": 3), removed from `text`;
+// 0 when there is none.
+inline int takeByteUnit(std::string_view& text) {
   static constexpr std::string_view kUnits = "KMGT";
-  double scale = 1.0;
-  if (!text.empty()) {
-    const size_t unit = kUnits.find(text.back());
-    if (unit != std::string_view::npos) {
-      scale = std::ldexp(1.0, 10 * int(unit + 1));
-      text.remove_suffix(1);
+  const auto unitAt = [&](size_t fromEnd) {
+    if (text.size() <= fromEnd) return std::string_view::npos;
+    return kUnits.find(
+        char(std::toupper(static_cast<unsigned char>(text[text.size() - 1 - fromEnd]))));
+  };
+  for (std::string_view suffix : {"iB", "B", "ib", "b"})
+    if (text.ends_with(suffix) && unitAt(suffix.size()) != std::string_view::npos) {
+      text.remove_suffix(suffix.size());
+      break;
     }
+  const size_t unit = unitAt(0);
+  if (unit == std::string_view::npos) return 0;
+  text.remove_suffix(1);
+  return int(unit) + 1;
+}
+}  // namespace detail
+
+// A byte size such as "2G", "512M", "1.5G" or "100000": a decimal number and an optional binary
+// unit K, M, G or T (either case, also written KB or KiB; all are powers of 1024). Whole numbers
+// of bytes are exact up to 2^64 − 1; a fraction is rounded down to whole bytes. nullopt when the
+// text is not one, is below one byte (zero, negative) or is more than 2^64 − 1 bytes once the unit
+// is applied; the reason is then in *why, when given.
+inline std::optional<uint64_t> parseByteSize(std::string_view text, std::string* why = nullptr) {
+  const auto refuse = [&](const char* reason) -> std::optional<uint64_t> {
+    if (why != nullptr) *why = reason;
+    return std::nullopt;
+  };
+  constexpr const char* kTooLarge = "more than 2^64 − 1 bytes (16 EiB)";
+  const int shift = 10 * detail::takeByteUnit(text);
+  if (text.size() > 1 && text[0] == '+' &&
+      (std::isdigit(static_cast<unsigned char>(text[1])) || text[1] == '.'))
+    text.remove_prefix(1);
+  uint64_t whole = 0;  // whole numbers are read exactly
+  const char* last = text.data() + text.size();
+  const auto [end, error] = std::from_chars(text.data(), last, whole);
+  if (end == last && !text.empty()) {
+    if (error == std::errc::result_out_of_range || (shift > 0 && whole > (~uint64_t{0} >> shift)))
+      return refuse(kTooLarge);
+    if (whole == 0) return refuse("not positive");
+    return whole << shift;
   }
   double value = 0.0;
-  if (!parseNumber(text, value) || !(value > 0.0)) return std::nullopt;
-  const double bytes = value * scale;
-  if (!(bytes < 18446744073709551616.0)) return std::nullopt;  // 2^64
+  if (text.starts_with('+') || !parseNumber(text, value) || std::isnan(value))
+    return refuse("not a number with an optional unit K, M, G or T");
+  if (!(value > 0.0)) return refuse("not positive");
+  const double bytes = std::ldexp(value, shift);
+  if (!(bytes < 18446744073709551616.0)) return refuse(kTooLarge);  // 2^64
+  if (bytes < 1.0) return refuse("less than one byte");
   return uint64_t(bytes);
 }
 

@@ -72,7 +72,7 @@ SpillDirectory::SpillDirectory(const std::filesystem::path& parent) {
   std::error_code error;
   if (!std::filesystem::create_directory(path_, error) || error)
     throw FileError(base.string(), std::nullopt,
-                    "cannot create a temporary directory there (--tmp): " +
+                    "cannot make a directory for temporary files there: " +
                         (error ? error.message() : std::string("it exists")));
 }
 

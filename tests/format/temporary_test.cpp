@@ -4,7 +4,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <fstream>
+#include <vector>
 
 #include "iso/atomic_file.h"
 #include "iso/temporary_files.h"
@@ -70,6 +72,47 @@ TEST(TemporaryFiles, anInterruptRemovesTheFilesBeingWritten) {
   ASSERT_TRUE(WIFSIGNALED(status));
   EXPECT_EQ(WTERMSIG(status), SIGINT);
   EXPECT_TRUE(std::filesystem::is_empty(dir.path())) << "a temporary file was left behind";
+}
+
+TEST(TemporaryFiles, anInterruptRemovesNestedDirectoriesDeepestFirst) {
+  test::TempDir dir;
+  const pid_t child = ::fork();
+  if (child == 0) {  // directories registered outermost first, as they are made, and a file
+    installInterruptCleanup();
+    std::vector<TemporaryRegistration> registrations;
+    for (const char* name : {"a", "a/b", "a/b/c"}) {
+      registrations.emplace_back(dir / name);
+      std::filesystem::create_directory(dir / name);
+    }
+    registrations.emplace_back(dir / "a/b/c/points");
+    touch(dir / "a/b/c/points");
+    ::raise(SIGTERM);
+    ::_exit(3);
+  }
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  EXPECT_EQ(WTERMSIG(status), SIGTERM);
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path())) << "a directory was left behind";
+}
+
+TEST(TemporaryFiles, aSignalIgnoredAtStartStaysIgnored) {
+  test::TempDir dir;
+  const pid_t child = ::fork();
+  if (child == 0) {  // as under nohup: the terminal closing must not end the process
+    ::signal(SIGHUP, SIG_IGN);
+    installInterruptCleanup();
+    AtomicFile file(dir / "out.iso");
+    file.write(std::string_view("complete"));
+    ::raise(SIGHUP);
+    file.commit();
+    ::_exit(7);
+  }
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 7);
+  EXPECT_TRUE(std::filesystem::exists(dir / "out.iso"));
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <stdexcept>
@@ -42,6 +43,35 @@ TempDir::TempDir() {
 TempDir::~TempDir() {
   std::error_code ignored;
   std::filesystem::remove_all(path_, ignored);
+}
+
+ReadOnlyDirectory::ReadOnlyDirectory(const std::filesystem::path& path) : path_(path) {
+  std::filesystem::create_directories(path_);
+  if (::geteuid() != 0) {
+    ok_ = true;  // permissions hold for other users
+    return;
+  }
+  const std::string mount = "mount -t tmpfs -o size=4m tmpfs '" + path_.string() + "' 2>/dev/null";
+  mounted_ = ok_ = std::system(mount.c_str()) == 0;
+}
+
+void ReadOnlyDirectory::lock() {
+  if (mounted_) {
+    const std::string remount = "mount -o remount,ro '" + path_.string() + "' 2>/dev/null";
+    ok_ = std::system(remount.c_str()) == 0;
+  } else {
+    std::filesystem::permissions(path_, std::filesystem::perms(0555));
+  }
+}
+
+ReadOnlyDirectory::~ReadOnlyDirectory() {
+  if (mounted_) {
+    const std::string unmount = "umount '" + path_.string() + "' 2>/dev/null";
+    (void)std::system(unmount.c_str());
+  } else {
+    std::error_code ignored;
+    std::filesystem::permissions(path_, std::filesystem::perms(0755), ignored);
+  }
 }
 
 std::vector<std::byte> readFile(const std::filesystem::path& path) {

@@ -25,6 +25,23 @@ class TempDir {
   std::filesystem::path path_;
 };
 
+// A directory that no file can be made in, not even by root: a tmpfs mounted on it and made
+// read-only by lock() (as root), or mode 0555 (other users). What is written there before lock()
+// stays readable. ok() is false where neither works (a test then skips).
+class ReadOnlyDirectory {
+ public:
+  explicit ReadOnlyDirectory(const std::filesystem::path& path);
+  ~ReadOnlyDirectory();
+  ReadOnlyDirectory(const ReadOnlyDirectory&) = delete;
+  ReadOnlyDirectory& operator=(const ReadOnlyDirectory&) = delete;
+  bool ok() const { return ok_; }
+  void lock();
+
+ private:
+  std::filesystem::path path_;
+  bool mounted_ = false, ok_ = false;
+};
+
 std::vector<std::byte> readFile(const std::filesystem::path& path);
 void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& bytes);
 

@@ -4,11 +4,14 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstring>
 #include <map>
 #include <optional>
 
 #include "iso/error.h"
 #include "iso/temporary_files.h"
+#include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
 #include "pipeline/io/image.h"
@@ -17,6 +20,7 @@
 #include "pipeline/outofcore/spill.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/inputs.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
 
 namespace iso::cli {
@@ -165,55 +169,109 @@ uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path
   return std::max<uint64_t>(space.available / 10 * 9, 1);
 }
 
-int run(Options& o) {
+// The options that need no file: a usage error before anything is read.
+void checkOptions(Options& o) {
   o.build.fit = named(kFitNames, o.fit, "--fit");
   o.build.orient = named(kOrientNames, o.orient, "--orient");
   o.build.removeOutliers = !o.keepOutliers;
   validateOptions(o.build);  // before any file is read
+  if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.texture.empty()) {
-    o.build.texture.image = o.texture;
     o.build.texture.at = named(kTextureAtNames, o.textureAt, "--texture-at");
-    checkImageReadable(o.build.texture.image);  // before the points are read
+    o.build.texture.image = o.texture;
   }
+  if (o.memory != "auto") parseSize(o.memory, "--memory");
+  if (o.maxTemp != "auto") parseSize(o.maxTemp, "--max-temp");
+}
+
+// The outputs (-o, --report), checked against the inputs before any work; the input files.
+std::vector<std::filesystem::path> checkPaths(const Options& o) {
   const std::filesystem::path output(o.output);
-  // Temporary files of runs that were killed (kill -9, power loss) next to the output.
-  const size_t stale = removeStaleTemporaries(output.parent_path());
+  checkOutputPath(output, "-o", o.force);
+  if (!o.report.empty()) {
+    checkOutputPath(o.report, "--report", true);  // a report is replaced, as a log is
+    if (namesSameFile(o.report, output))
+      throw UsageError("-o and --report name the same file: " + o.report);
+  }
+  const std::vector<std::filesystem::path> files = expandInputs(o.inputs);
+  for (const auto& file : files) {
+    refuseOutputOverInput(output, file, "-o");
+    if (!o.report.empty()) refuseOutputOverInput(o.report, file, "--report");
+  }
+  if (!o.writeStrays.empty()) {
+    if (o.keepOutliers)
+      throw UsageError("--write-strays has nothing to write with --keep-outliers");
+    checkOutputPath(o.writeStrays, "--write-strays", true);
+    if (namesSameFile(o.writeStrays, output) ||
+        (!o.report.empty() && namesSameFile(o.writeStrays, o.report)))
+      throw UsageError("--write-strays names the same file as -o or --report: " + o.writeStrays);
+    for (const auto& file : files) refuseOutputOverInput(o.writeStrays, file, "--write-strays");
+  }
+  if (!o.texture.empty()) checkImageReadable(o.build.texture.image);  // before the points
+  return files;
+}
+
+// Where the temporary files go: --tmp (made when missing, with its parents) or the output's
+// directory. Files left there by runs that were killed (kill -9, power loss) are removed.
+std::filesystem::path temporaryDirectory(const Options& o, std::optional<MadeDirectories>& made) {
+  const std::filesystem::path output(o.output);
+  const std::filesystem::path outputDirectory =
+      output.has_parent_path() ? output.parent_path() : std::filesystem::path(".");
+  size_t stale = removeStaleTemporaries(outputDirectory);
+  std::filesystem::path tmp = outputDirectory;
+  if (!o.tmp.empty()) {
+    made.emplace(o.tmp, "--tmp");
+    if (::access(o.tmp.c_str(), W_OK | X_OK) != 0)
+      throw FileError(
+          o.tmp, std::nullopt,
+          std::string("cannot write temporary files there (--tmp): ") + std::strerror(errno));
+    tmp = o.tmp;
+    std::error_code error;
+    if (!std::filesystem::equivalent(tmp, outputDirectory, error))
+      stale += removeStaleTemporaries(tmp);
+  }
   if (stale > 0 && !o.quiet)
     fmt::print(stderr, "note: removed {} temporary file{} of an interrupted earlier run\n", stale,
                stale == 1 ? "" : "s");
-  if (std::filesystem::exists(output) && !o.force)
-    throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
-  const std::vector<std::filesystem::path> files = expandInputs(o.inputs);
-  for (const auto& file : files) {
-    std::error_code error;
-    if (std::filesystem::equivalent(file, output, error))
-      throw FileError(o.output, std::nullopt, "is also an input");
-  }
+  return tmp;
+}
+
+// What Ctrl-C leaves at each stage, said when it comes (tools/iso/interrupt.h).
+std::function<void(const std::string&)> interruptMessages(const Options& o, ProgressMode mode,
+                                                          const MadeDirectories* made) {
+  const std::string left = std::filesystem::exists(o.output) ? o.output + " keeps what it held"
+                                                             : std::string("nothing was written");
+  std::string removed = "temporary files removed";
+  if (made != nullptr && !made->made().empty())
+    removed += ", with the directory " + made->made().front().string() + " made for them";
+  const bool live = mode == ProgressMode::Line;
+  return [=](const std::string& stage) {
+    const std::string when = stage.empty()     ? "before reading the points"
+                             : stage == "read" ? "while reading the points"
+                                               : "in the " + stage + " stage";
+    setInterruptMessage("iso convert: interrupted " + when + "; " + left + ", " + removed, live);
+  };
+}
+
+int run(Options& o) {
+  checkOptions(o);
   const ProgressMode mode =
       o.progress == "auto"
           ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None)
           : named(kProgressNames, o.progress, "--progress", "auto, ");
-  if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
-  if (!o.report.empty() && std::filesystem::is_directory(o.report))
-    throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
-  if (!o.writeStrays.empty() && std::filesystem::is_directory(o.writeStrays))
-    throw FileError(o.writeStrays, std::nullopt,
-                    "is a directory (--write-strays wants a file name)");
-  if (!o.writeStrays.empty() && o.keepOutliers)
-    throw UsageError("--write-strays has nothing to write with --keep-outliers");
+  const std::vector<std::filesystem::path> files = checkPaths(o);
+  const std::filesystem::path output(o.output);
+  std::optional<MadeDirectories> made;
+  const std::filesystem::path tmp = temporaryDirectory(o, made);
+  const auto interrupted = interruptMessages(o, mode, made ? &*made : nullptr);
+  interrupted("");
   std::optional<tbb::global_control> threads;
   if (o.threads > 0)
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
   ProgressReporter progress(mode);
+  progress.observeStages(interrupted);
   const uint64_t memory = parseBytes(o.memory, "--memory");
-  const std::filesystem::path tmp =
-      o.tmp.empty() ? (output.has_parent_path() ? output.parent_path() : std::filesystem::path("."))
-                    : std::filesystem::path(o.tmp);
-  if (!std::filesystem::is_directory(tmp))
-    throw FileError(tmp.string(), std::nullopt, "is not a directory (--tmp)");
-  if (tmp != output.parent_path()) removeStaleTemporaries(tmp);
-  const uint64_t maxTemp = temporaryDiskLimit(o.maxTemp, tmp);
-  TemporaryDiskLimit temporaryLimit(maxTemp);
+  TemporaryDiskLimit temporaryLimit(temporaryDiskLimit(o.maxTemp, tmp));
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
   SpillDirectory spill(tmp);
@@ -258,6 +316,7 @@ int run(Options& o) {
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
     throw FileError(names, std::nullopt, error.what());
   }
+  setInterruptMessage("iso convert: interrupted after writing " + o.output);
   if (!o.report.empty()) writeTextFile(o.report, report.dump(2) + "\n");
   if (!o.writeStrays.empty()) writePly(o.writeStrays, strays);
   if (o.json)
@@ -275,7 +334,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       "convert",
       "Convert point files (PLY, LAS, PCD, Draco, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
-  c->add_option("-o,--output", o->output, "The .iso file to write")->required();
+  c->add_option("-o,--output", o->output,
+                "The .iso file to write (its directory must exist); Ctrl-C stops the conversion "
+                "with a line saying what it left, removing its temporary files")
+      ->required();
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   c->add_option("--columns", o->columns,
                 "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips)");
@@ -352,13 +414,15 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "update) or none")
       ->capture_default_str();
   c->add_option("--memory", o->memory,
-                "Memory budget (e.g. 2G; auto: half the RAM): the point stages run in chunks "
+                "Memory budget (e.g. 2G, 512M; units K, M, G, T are powers of 1024; auto: half "
+                "the RAM): the point stages run in chunks "
                 "that fit it, and the large arrays live in temporary files whose pages are "
                 "dropped when the process nears it; the output does not depend on it")
       ->capture_default_str();
   c->add_option("--tmp", o->tmp,
-                "Directory for temporary files (default: the output's): the points as read, "
-                "sorted, and their arrays; removed afterwards");
+                "Directory for temporary files (default: the output's; made with its parents "
+                "when missing): the points as read, sorted, and their arrays; all removed "
+                "afterwards, with the directories made for them");
   c->add_option("--max-temp", o->maxTemp,
                 "Most temporary disk the conversion may use (e.g. 20G; auto: 90 % of the free "
                 "space in --tmp); it stops with an error, removing its files, before going past")

@@ -8,10 +8,12 @@
 #include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/measure.h"
 #include "pipeline/analysis/visibility.h"
+#include "pipeline/base/files.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/inputs.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/shape_options.h"
 
 namespace iso::cli {
@@ -83,15 +85,17 @@ int run(Options& o) {
     throw UsageError(
         "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso "
         "(or --visibility alone, on the file's kept points)");
-  if (o.perLevel && o.points.empty())
-    throw UsageError("--per-level measures against --points");
+  if (o.perLevel && o.points.empty()) throw UsageError("--per-level measures against --points");
   if (o.visibility && !o.against.empty())
     throw UsageError("--visibility measures --points or the file's kept points");
   o.view.seed = o.eval.seed;
   if (!o.seenThrough.empty()) {
     if (!o.visibility) throw UsageError("--seen-through needs --visibility");
-    if (std::filesystem::exists(o.seenThrough) && !o.force)
-      throw FileError(o.seenThrough, std::nullopt, "exists already (use --force to replace it)");
+    checkOutputPath(o.seenThrough, "--seen-through", o.force);
+    for (const std::string& input : o.points)
+      refuseOutputOverInput(o.seenThrough, input, "--seen-through");
+    refuseOutputOverInput(o.seenThrough, o.file, "--seen-through");
+    setInterruptMessage("iso eval: interrupted; nothing was written");
   }
   const Reader reader = Reader::open(o.file);
   nlohmann::json result;
@@ -113,10 +117,9 @@ int run(Options& o) {
     result = evaluateAgainstPoints(surface, cloud);
     if (o.perLevel) result["levels"] = evaluateLevels(reader, cloud);
     if (o.visibility)
-      result["visibility"] =
-          visibilityOf(reader, samplePoints(cloud, o.visibilityPoints == 0 ? cloud.size()
-                                                                           : o.visibilityPoints),
-                       o.spacing > 0.0 ? o.spacing : result["spacing"].get<double>(), o);
+      result["visibility"] = visibilityOf(
+          reader, samplePoints(cloud, o.visibilityPoints == 0 ? cloud.size() : o.visibilityPoints),
+          o.spacing > 0.0 ? o.spacing : result["spacing"].get<double>(), o);
   } else if (!o.against.empty()) {
     const Reader other = Reader::open(o.against);
     result = evaluateAgainstFile(surface, SurfaceModel::load(other));
@@ -182,7 +185,8 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
                 "Point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
-  c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")->capture_default_str();
+  c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")
+      ->capture_default_str();
   addShapeOptions(*c, o->truth);
   c->callback([o, &exitCode] { exitCode = runGuarded("eval", [&] { return run(*o); }); });
 }

@@ -3,15 +3,18 @@
 #include <fmt/core.h>
 
 #include <chrono>
+#include <functional>
 #include <nlohmann/json.hpp>
 
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
 #include "pipeline/analysis/export.h"
+#include "pipeline/base/files.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
 
 namespace iso::cli {
@@ -25,73 +28,126 @@ struct Options {
 
 int print(const nlohmann::json& summary, const Options& o);
 
-void refuseToReplace(const std::string& path, bool force) {
-  if (std::filesystem::exists(path) && !force)
-    throw FileError(path, std::nullopt, "exists already (use --force to replace it)");
+double secondsSince(std::chrono::steady_clock::time_point started) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+}
+
+// Every output, before the file is read: a directory that can take it, --force over an existing
+// file, not the .iso file itself, and no file named by two options.
+void checkOutputs(const Options& o) {
+  const std::pair<std::string, const char*> outputs[] = {
+      {o.mesh, "--mesh"}, {o.vdb, "--vdb"}, {o.points, "--points"}};
+  for (size_t i = 0; i < std::size(outputs); ++i) {
+    const auto& [path, option] = outputs[i];
+    if (path.empty()) continue;
+    checkOutputPath(path, option, o.force);
+    refuseOutputOverInput(path, o.file, option);
+    for (size_t j = 0; j < i; ++j)
+      if (!outputs[j].first.empty() && namesSameFile(outputs[j].first, path))
+        throw UsageError(std::string(outputs[j].second) + " and " + option +
+                         " name the same file: " + path);
+  }
+}
+
+// Stage `final` in `outputs` and write it with `write`; errors name `final`, not the staged name.
+void writeAs(OutputGroup& outputs, const std::string& final,
+             const std::function<void(const std::filesystem::path& staged)>& write) {
+  const std::filesystem::path staged = outputs.stage(final);
+  try {
+    write(staged);
+  } catch (const FileError& error) {
+    if (error.file() != staged.string()) throw;
+    throw FileError(final, error.offset(), error.reason());
+  }
+}
+
+void say(const std::string& doing) {
+  setInterruptMessage("iso export: interrupted while " + doing +
+                      "; nothing was written, temporary files removed");
+}
+
+void writePoints(const Reader& reader, const Options& o, OutputGroup& outputs,
+                 nlohmann::json& summary) {
+  const KeptPointsInfo kept = keptPointsInfo(reader);
+  if (kept.chunks == 0)
+    throw FileError(o.file, std::nullopt,
+                    "keeps no points (convert with --keep-points to keep them)");
+  say("writing the points");
+  const auto started = std::chrono::steady_clock::now();
+  // Double positions: float would round them more coarsely than the file keeps them.
+  writeAs(outputs, o.points, [&](const std::filesystem::path& staged) {
+    PlyPointWriter ply(staged, kept.points, kept.normals, kept.colors, {.doublePositions = true});
+    forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
+    ply.commit();
+  });
+  summary["points"] = {{"path", o.points},      {"points", kept.points},
+                       {"chunks", kept.chunks}, {"normals", kept.normals},
+                       {"colors", kept.colors}, {"seconds", secondsSince(started)}};
+}
+
+void writeMesh(const SurfaceModel& surface, bool doubles, const Options& o, OutputGroup& outputs,
+               nlohmann::json& summary) {
+  say("writing the mesh");
+  const auto started = std::chrono::steady_clock::now();
+  MeshStats stats;
+  const TriangleMesh mesh = extractMesh(surface, &stats);
+  writeAs(outputs, o.mesh,
+          [&](const std::filesystem::path& staged) { writePlyMesh(staged, mesh, doubles); });
+  summary["mesh"] = {{"path", o.mesh},
+                     {"vertices", mesh.vertices.size()},
+                     {"triangles", mesh.triangles.size()},
+                     {"leaves", stats.leaves},
+                     {"tetrahedra", stats.tetrahedra},
+                     {"split_faces", stats.splitFaces},
+                     {"open_edges", openEdges(mesh)},
+                     {"double_positions", doubles},
+                     {"seconds", secondsSince(started)}};
+}
+
+void writeLevelSet(const SurfaceModel& surface, const Options& o, OutputGroup& outputs,
+                   nlohmann::json& summary) {
+  say("writing the level set");
+  const auto started = std::chrono::steady_clock::now();
+  VdbStats stats;
+  uint64_t bytes = 0;
+  writeAs(outputs, o.vdb, [&](const std::filesystem::path& staged) {
+    stats = writeVdb(surface, staged, o.band);
+    bytes = std::filesystem::file_size(staged);
+  });
+  summary["vdb"] = {{"path", o.vdb},
+                    {"active_voxels", stats.activeVoxels},
+                    {"voxel_size", stats.voxelSize},
+                    {"band_voxels", o.band},
+                    {"bytes", bytes},
+                    {"seconds", secondsSince(started)}};
 }
 
 int run(const Options& o) {
   if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
     throw UsageError("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
-  for (const std::string& out : {o.mesh, o.vdb, o.points})
-    if (!out.empty()) refuseToReplace(out, o.force);
+  checkOutputs(o);
+  say("reading " + o.file);
   const Reader reader = Reader::open(o.file);
   nlohmann::json summary = {{"file", o.file}};
-  // Far from the origin (UTM coordinates) float positions lose the surface's detail.
-  const Frame& frame = reader.header().frame;
-  double reach = frame.size;
-  for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
-  const bool doubles = reach > 65536.0;
-  if (!o.points.empty()) {
-    const KeptPointsInfo kept = keptPointsInfo(reader);
-    if (kept.chunks == 0)
-      throw FileError(o.file, std::nullopt,
-                      "keeps no points (convert with --keep-points to keep them)");
-    const auto started = std::chrono::steady_clock::now();
-    // Double positions: float would round them more coarsely than the file keeps them.
-    PlyPointWriter ply(o.points, kept.points, kept.normals, kept.colors, {.doublePositions = true});
-    forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
-    ply.commit();
-    summary["points"] = {
-        {"path", o.points},
-        {"points", kept.points},
-        {"chunks", kept.chunks},
-        {"normals", kept.normals},
-        {"colors", kept.colors},
-        {"seconds",
-         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
+  // Each output is written under a temporary name, and all are renamed into place once all are
+  // complete: a failure (or Ctrl-C) leaves none of them, and every old file as it was.
+  OutputGroup outputs;
+  if (!o.points.empty()) writePoints(reader, o, outputs, summary);
+  if (!o.mesh.empty() || !o.vdb.empty()) {
+    say("reading the surface of " + o.file);
+    const SurfaceModel surface = SurfaceModel::load(reader);
+    // Far from the origin (UTM coordinates) float positions lose the surface's detail.
+    const Frame& frame = reader.header().frame;
+    double reach = frame.size;
+    for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
+    if (!o.mesh.empty()) writeMesh(surface, reach > 65536.0, o, outputs, summary);
+    if (!o.vdb.empty()) writeLevelSet(surface, o, outputs, summary);
   }
-  if (o.mesh.empty() && o.vdb.empty()) return print(summary, o);
-  const SurfaceModel surface = SurfaceModel::load(reader);
-  if (!o.mesh.empty()) {
-    const auto started = std::chrono::steady_clock::now();
-    MeshStats stats;
-    const TriangleMesh mesh = extractMesh(surface, &stats);
-    writePlyMesh(o.mesh, mesh, doubles);
-    summary["mesh"] = {
-        {"path", o.mesh},
-        {"vertices", mesh.vertices.size()},
-        {"triangles", mesh.triangles.size()},
-        {"leaves", stats.leaves},
-        {"tetrahedra", stats.tetrahedra},
-        {"split_faces", stats.splitFaces},
-        {"open_edges", openEdges(mesh)},
-        {"double_positions", doubles},
-        {"seconds",
-         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
-  }
-  if (!o.vdb.empty()) {
-    const auto started = std::chrono::steady_clock::now();
-    const VdbStats stats = writeVdb(surface, o.vdb, o.band);
-    summary["vdb"] = {
-        {"path", o.vdb},
-        {"active_voxels", stats.activeVoxels},
-        {"voxel_size", stats.voxelSize},
-        {"band_voxels", o.band},
-        {"bytes", std::filesystem::file_size(o.vdb)},
-        {"seconds",
-         std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()}};
+  {
+    const InterruptsDeferred deferred;  // all renamed into place, or none
+    outputs.commit();
+    setInterruptMessage("iso export: interrupted after writing its files");
   }
   return print(summary, o);
 }
@@ -136,7 +192,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   CLI::App* c = app.add_subcommand(
       "export",
       "Write the surface of an .iso file for other tools: a triangle mesh (PLY), an OpenVDB "
-      "level set, or the original points it keeps");
+      "level set, or the original points it keeps; all the files asked for, or none");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
                 "Triangle mesh of the zero set (binary PLY), crack-free across levels: each leaf "

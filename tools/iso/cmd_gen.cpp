@@ -2,9 +2,11 @@
 #include <fmt/core.h>
 
 #include "iso/error.h"
+#include "pipeline/base/files.h"
 #include "pipeline/geom/generate.h"
 #include "pipeline/io/ply.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/shape_options.h"
 #include "tools/iso/text.h"
 
@@ -21,10 +23,10 @@ struct Options {
 
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
-    throw UsageError(
-        "name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
-  if (std::filesystem::exists(o.output) && !o.force)
-    throw FileError(o.output, std::nullopt, "exists already (use --force to replace it)");
+    throw UsageError("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+  checkOutputPath(o.output, "-o", o.force);
+  if (!o.truth.mesh.empty()) refuseOutputOverInput(o.output, o.truth.mesh, "-o");
+  setInterruptMessage("iso gen: interrupted; nothing was written");
   if (o.truth.mesh.empty()) o.truth.params.name = o.shape;
   ShapeOptions placed = o.truth;
   placed.offset = "0,0,0";  // generateScan adds the offset itself
@@ -51,7 +53,9 @@ void addGenCommand(CLI::App& app, int& exitCode) {
   CLI::App* c = app.add_subcommand("gen", "Write a synthetic scan with a known answer (PLY)");
   c->add_option("shape", o->shape, "sphere, torus, cube, plane or sheets (or --mesh)");
   c->add_option("-o,--output", o->output, "The PLY file to write")->required();
-  c->add_option("-n,--count", o->generate.count, "Number of points")->capture_default_str();
+  c->add_option("-n,--count", o->generate.count, "Number of points (1 to 2^32)")
+      ->capture_default_str()
+      ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 32));
   c->add_option("--noise", o->generate.noise, "Noise along the normal, in point spacings (σ)")
       ->capture_default_str();
   c->add_option("--density-ratio", o->generate.densityRatio, "Densest to sparsest sampling along x")

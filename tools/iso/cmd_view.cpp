@@ -3,7 +3,9 @@
 #include <fmt/core.h>
 
 #include "iso/error.h"
+#include "pipeline/base/files.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
 #include "viewer/view.h"
 
@@ -79,6 +81,19 @@ void buildScene(ViewArgs& a) {
   if (a.noReflections) s.reflections = false;
   if (a.noRefractions) s.refractions = false;
   if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
+}
+
+// The pictures to write (--out, --screenshot), checked before the file is opened; they replace
+// what is there.
+void checkPictures(const ViewArgs& a) {
+  const std::pair<std::filesystem::path, const char*> pictures[] = {
+      {a.view.out, "--out"}, {a.view.screenshot, "--screenshot"}};
+  for (const auto& [path, option] : pictures) {
+    if (path.empty()) continue;
+    checkOutputPath(path, option, true);
+    refuseOutputOverInput(path, a.view.file, option);
+    setInterruptMessage("iso view: interrupted; nothing was written");
+  }
 }
 
 }  // namespace
@@ -174,6 +189,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       }
       a->view.vram = parseSize(a->vram, "--vram");
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
+      checkPictures(*a);
       buildScene(*a);
       if (a->cpu) return viewer::viewCpu(a->view);
       if (a->headless) return viewer::viewHeadless(a->view);

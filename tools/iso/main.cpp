@@ -7,13 +7,14 @@
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/format.h"
-#include "iso/temporary_files.h"
 #include "iso/version.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/interrupt.h"
 
 namespace iso::cli {
 
 int runGuarded(const char* command, const std::function<int()>& body) {
+  setInterruptMessage(std::string("iso ") + command + ": interrupted");
   try {
     return body();
   } catch (const std::exception& error) {  // the taxonomy: iso/error.h
@@ -41,7 +42,7 @@ int main(int argc, char** argv) {
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);
   iso::cli::addViewCommand(app, exitCode);
-  iso::installInterruptCleanup();  // Ctrl-C leaves no temporary file behind
+  iso::cli::installInterruptHandlers();  // Ctrl-C: no temporary file left, a line saying so
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& error) {

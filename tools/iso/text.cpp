@@ -23,9 +23,10 @@ void writeTextFile(const std::filesystem::path& path, const std::string& text) {
 }
 
 uint64_t parseSize(const std::string& text, const char* option) {
-  if (const std::optional<uint64_t> bytes = parseByteSize(text)) return *bytes;
-  throw UsageError(std::string(option) + " must be a size like 2G, 512M or 100000, not '" + text +
-                   "'");
+  std::string why;
+  if (const std::optional<uint64_t> bytes = parseByteSize(text, &why)) return *bytes;
+  throw UsageError(std::string(option) + " '" + text + "': " + why +
+                   "; give a size like 2G, 512M or 100000 (units K, M, G, T: powers of 1024)");
 }
 
 }  // namespace iso::cli

@@ -11,8 +11,8 @@
 
 namespace iso::cli {
 
-// Bytes from "2G", "512M", "1.5G", "100000" (binary units; parseByteSize); UsageError naming the
-// option otherwise.
+// Bytes from "2G", "512M", "1.5G", "100000" (binary units; parseByteSize); otherwise a UsageError
+// naming the option, the value and what is wrong with it.
 uint64_t parseSize(const std::string& text, const char* option);
 // The value named `text` in `table`; UsageError naming the option and the accepted names (after
 // `others`, names the caller accepts itself) otherwise.
