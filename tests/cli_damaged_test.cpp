@@ -127,17 +127,19 @@ const Outcome& intactOutcome(const Command& c) {
   return found->second;
 }
 
-// Whether `iso view --headless` has a Vulkan device (lavapipe, without a GPU): when it has none,
-// the damaged files are not shown to it. Any other failure on the intact file fails the test.
-bool canViewHeadless() {
-  static const bool can = [] {
-    const CommandResult& run = intactOutcome(commands()[2]).run;
-    const bool noVulkan = run.exitCode != 0 && (run.err.find("Vulkan") != std::string::npos ||
-                                                run.err.find("vulkan") != std::string::npos);
-    if (noVulkan) std::fprintf(stderr, "no Vulkan device: view --headless not run\n");
-    return !noVulkan;
+// Whether a failed run is `iso view --headless` without a Vulkan device (no lavapipe, no GPU):
+// it fails on the intact file too, and the damaged files cannot be shown to it.
+bool isHeadlessWithoutDevice(const Command& c, const Outcome& o,
+                             const std::filesystem::path& file) {
+  if (c.arguments.find("--headless") == std::string::npos || o.run.exitCode == 0 ||
+      o.run.err.find(file.string()) != std::string::npos)
+    return false;
+  static const bool noDevice = [&] {
+    const bool fails = intactOutcome(c).run.exitCode != 0;
+    if (fails) std::fprintf(stderr, "view --headless fails on the intact file: not checked\n");
+    return fails;
   }();
-  return can;
+  return noDevice;
 }
 
 // What a mutant is checked for besides its answers.
@@ -163,8 +165,8 @@ long expectRefusedOrUnchanged(const std::string& name, const std::vector<std::by
   long growth = 0;
   for (const Command& c : commands()) {
     SCOPED_TRACE(c.name);
-    if (c.arguments.find("--headless") != std::string::npos && !canViewHeadless()) continue;
     const Outcome o = runOn(c, file);
+    if (isHeadlessWithoutDevice(c, o, file)) continue;
     if (o.run.exitCode != 0) {
       EXPECT_EQ(o.run.exitCode, 1) << o.run.err;
       EXPECT_NE(o.run.err.find(file.string()), std::string::npos) << o.run.err;
@@ -259,24 +261,18 @@ TEST_F(CliDamaged, metadataWithAByteOrderMarkIsRejectedByVerifyAndReadAlikeByThe
   expectRefusedOrUnchanged("bom", b);
 }
 
-TEST_F(CliDamaged, impossiblePointCountsAreRefusedByEveryCommand) {
+// (tests/format/ tries every rule of counts and frames; here one of each class meets every
+// command.)
+TEST_F(CliDamaged, anImpossiblePointCountIsRefusedByEveryCommand) {
   const ChunkInfo& child = chunk([](const ChunkInfo& c) { return c.kind == 1 && c.parent == 0; });
-  const ChunkInfo& points = chunk([](const ChunkInfo& c) { return c.kind == 2; });
-  const uint64_t most = std::numeric_limits<uint64_t>::max();
-  expectRefusedOrUnchanged("surface-count",
-                           resealed([&](auto& b) { put<uint64_t>(b, entry(child) + 40, most); }));
-  expectRefusedOrUnchanged("points-count",
-                           resealed([&](auto& b) { put<uint64_t>(b, entry(points) + 40, most); }));
+  expectRefusedOrUnchanged("surface-count", resealed([&](auto& b) {
+                             put<uint64_t>(b, entry(child) + 40, ~uint64_t{0});
+                           }));
 }
 
-TEST_F(CliDamaged, impossibleFrameSizesAreRefusedByEveryCommand) {
+TEST_F(CliDamaged, impossibleFramesAreRefusedByEveryCommand) {
   expectRefusedOrUnchanged("subnormal-size", frame(0.0, std::numeric_limits<double>::denorm_min()));
-  expectRefusedOrUnchanged("huge-size", frame(0.0, 1e300));
-}
-
-TEST_F(CliDamaged, impossibleFrameOriginsAreRefusedByEveryCommand) {
   expectRefusedOrUnchanged("far-origin", frame(1e300, 2.0));
-  expectRefusedOrUnchanged("nan-origin", frame(std::nan(""), 2.0));
 }
 
 TEST_F(CliDamaged, hugeRawSizesAreRefusedBeforeTheMemoryIsTaken) {

@@ -140,8 +140,9 @@ class Parser {
     if (c.codec == Codec::Zstd && c.storedSize == 0)
       return detail::FieldProblem{e::kStoredSize, "zstd chunk with no stored bytes"};
     if (c.codec == Codec::Zstd && (c.rawSize + kMaxZstdRatio - 1) / kMaxZstdRatio > c.storedSize)
-      return detail::FieldProblem{e::kRawSize, "raw size is more than 32768 times the stored " +
-                                                   std::string("size, more than zstd decodes to")};
+      return detail::FieldProblem{e::kRawSize,
+                                  "raw size is more than 32768 times the stored size (more than "
+                                  "a zstd frame of that size decodes to)"};
     if (c.offset != expectedOffset)
       return detail::FieldProblem{e::kOffset, "payload offset " + std::to_string(c.offset) +
                                                   " is not where the layout puts it (" +
