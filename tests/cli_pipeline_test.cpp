@@ -532,6 +532,8 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
   std::ofstream(dir_ / "same.xyz") << "1 2 3\n1 2 3\n1 2 3\n1 2 3\n";
   std::ofstream(dir_ / "two.xyz") << "1 2 3\n4 5 6\n";
   std::ofstream(dir_ / "line.xyz") << "0 0 0\n1 1 1\n2 2 2\n3 3 3\n";
+  // Points 10^20 apart: their cube is larger than an .iso frame holds (2^64).
+  std::ofstream(dir_ / "huge.xyz") << "0 0 0\n1e20 0 0\n0 1e20 0\n1e20 1e20 0\n5e19 3e19 0\n";
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"missing.ply", "missing.ply"},
       {"cut.ply", "file ends after"},
@@ -540,7 +542,8 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
       {"one.xyz", "at least 3 distinct points"},
       {"same.xyz", "the input has 1"},
       {"two.xyz", "the input has 2"},
-      {"line.xyz", "one line"}};
+      {"line.xyz", "one line"},
+      {"huge.xyz", "beyond what an .iso file holds: frame size is not within 2^-64 to 2^64"}};
   for (const auto& [input, expected] : cases) {
     const auto run =
         runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));

@@ -98,6 +98,24 @@ TEST(Cli, infoJsonIsValidAndComplete) {
   EXPECT_EQ(j["levels"].size(), 4u);
 }
 
+TEST(Cli, infoDoesNotWrapThePointCountsOfChunksItDoesNotKnow) {
+  // Chunk 1 of the golden file is a blob (no rule on its point count) at level 1, beside chunk 5's
+  // 40 points: the sum stops at 2^64 - 1 instead of wrapping to 39.
+  test::TempDir dir;
+  std::vector<std::byte> bytes = test::readFile(kGolden);
+  uint64_t table = 0;
+  std::memcpy(&table, bytes.data() + bytes.size() - 64, 8);
+  const uint64_t most = ~uint64_t{0};
+  std::memcpy(bytes.data() + table + 80 * 1 + 40, &most, 8);
+  test::resealChecksums(bytes);
+  test::writeFile(dir / "blob.iso", bytes);
+  const CommandResult run = iso("info --json " + quoted(dir / "blob.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j["levels"][1]["points"].get<uint64_t>(), most);
+  EXPECT_EQ(j["point_count"], 1000);
+}
+
 TEST(Cli, infoForPeopleShowsTheEssentials) {
   const CommandResult run = iso("info " + quoted(kGolden));
   ASSERT_EQ(run.exitCode, 0) << run.err;

@@ -19,7 +19,6 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
     throw FileError(a->reader.name(), std::nullopt, "the file holds no surface to view");
   a->blob = blobOptionsOf(header);
   // Bounds from the coarsest chunk's deepest level.
-  a->reader.checkPayload(a->tree.topChunk());
   const SurfaceChunk top = decodeSurfaceChunk(a->reader, a->tree.topChunk());
   const uint8_t last = uint8_t(top.topology.startLevel + top.topology.depth - 1);
   double lo[3] = {1, 1, 1}, hi[3] = {0, 0, 0};

@@ -67,7 +67,6 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
   std::vector<std::vector<uint32_t>> blobs(chunks.size());
   tbb::parallel_for(size_t(0), chunks.size(), [&](size_t i) {
     if (chunks[i].kind != kSurfaceKind || (holds && !holds(chunks[i]))) return;
-    reader.checkPayload(uint32_t(i));
     blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
   });
   size_t pages = 0;

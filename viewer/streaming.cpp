@@ -41,9 +41,9 @@ ChunkCache::~ChunkCache() {
 }
 
 std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
-  reader_.checkPayload(chunk);
+  // Decoding checks the payload's checksum (once per load) and the table's node and leaf counts,
+  // from which the renderer sizes buffers.
   const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
-  // (Decoding checks the table's node and leaf counts, from which the renderer sizes buffers.)
   return buildBlob(decoded, chunk, tree_, options_);
 }
 

@@ -1,4 +1,4 @@
-// Attribute schema rules and names (specs/iso-format.md, "AttributeDesc").
+// Attribute schema and frame rules, and names (specs/iso-format.md, "Header", "AttributeDesc").
 #include "iso/format.h"
 
 #include <cmath>
@@ -53,6 +53,17 @@ std::string_view attributeSchemaProblem(const std::vector<AttributeDesc>& attrib
     }
   }
   return {};
+}
+
+std::optional<FrameProblem> frameProblem(const Frame& frame) {
+  for (int axis = 0; axis < 3; ++axis)
+    if (!std::isfinite(frame.origin[axis])) return FrameProblem{axis, "frame origin is not finite"};
+  if (!(frame.size >= kMinFrameSize && frame.size <= kMaxFrameSize))
+    return FrameProblem{3, "frame size is not within 2^-64 to 2^64"};
+  for (int axis = 0; axis < 3; ++axis)
+    if (!(std::abs(frame.origin[axis]) <= kMaxFrameOriginInSizes * frame.size))
+      return FrameProblem{axis, "frame origin is more than 2^31 frame sizes from 0"};
+  return std::nullopt;
 }
 
 uint32_t encodedSize(const AttributeDesc& a) {

@@ -23,11 +23,10 @@ std::optional<FieldProblem> headerProblem(const FileHeader& h) {
       h.payloadAlignmentLog2 > kMaxPayloadAlignmentLog2)
     return FieldProblem{hdr::kAlignmentLog2, "payload alignment must be 2^3 to 2^16 bytes"};
   if (h.maxLevel > kMaxLevel) return FieldProblem{hdr::kMaxLevel, "maximum level is over 21"};
-  for (int axis = 0; axis < 3; ++axis)
-    if (!std::isfinite(h.frame.origin[axis]))
-      return FieldProblem{hdr::kFrameOrigin + 8u * axis, "frame origin is not finite"};
-  if (!std::isfinite(h.frame.size) || !(h.frame.size > 0.0))
-    return FieldProblem{hdr::kFrameSize, "frame size is not finite and positive"};
+  if (const std::optional<FrameProblem> problem = frameProblem(h.frame))
+    return FieldProblem{
+        problem->field < 3 ? hdr::kFrameOrigin + 8u * uint32_t(problem->field) : hdr::kFrameSize,
+        std::string(problem->reason)};
   if (std::string_view problem = attributeSchemaProblem(h.attributes); !problem.empty())
     return FieldProblem{hdr::kAttributes, std::string(problem)};
   return std::nullopt;

@@ -1,10 +1,10 @@
 // Reader: validation of everything but the payloads before use (specs/iso-format.md, "What readers
-// check"), zero-copy access to raw payloads and zstd decoding into caller buffers.
+// check"), and the one way to a chunk's data, which checks it first: zero copy for raw payloads,
+// zstd decoding once the frame is known to hold the data.
 #include "iso/reader.h"
 
-#include <zstd.h>
-
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <optional>
 #include <stdexcept>
@@ -14,7 +14,10 @@
 #include "file_io.h"
 #include "iso/check.h"
 #include "iso/error.h"
+#include "iso/points.h"
+#include "iso/surface.h"
 #include "layout.h"
+#include "zstd_payload.h"
 
 namespace iso {
 
@@ -136,6 +139,10 @@ class Parser {
       return detail::FieldProblem{e::kStoredSize, "raw chunk with stored size != raw size"};
     if (c.codec == Codec::Zstd && c.storedSize == 0)
       return detail::FieldProblem{e::kStoredSize, "zstd chunk with no stored bytes"};
+    if (c.codec == Codec::Zstd && (c.rawSize + kMaxZstdRatio - 1) / kMaxZstdRatio > c.storedSize)
+      return detail::FieldProblem{e::kRawSize,
+                                  "raw size is more than 32768 times the stored size (more than "
+                                  "a zstd frame of that size decodes to)"};
     if (c.offset != expectedOffset)
       return detail::FieldProblem{e::kOffset, "payload offset " + std::to_string(c.offset) +
                                                   " is not where the layout puts it (" +
@@ -144,6 +151,23 @@ class Parser {
       return detail::FieldProblem{e::kStoredSize, "payload runs into the chunk table"};
     if (!std::isfinite(c.geometricError) || c.geometricError < 0.0f)
       return detail::FieldProblem{e::kGeometricError, "geometric error is negative or not finite"};
+    if (c.kind == kPointsKind) return pointsEntryProblem(c);
+    return std::nullopt;
+  }
+
+  // The rule of "Points chunks" that the entry of a points chunk breaks.
+  static std::optional<detail::FieldProblem> pointsEntryProblem(const ChunkInfo& c) {
+    namespace e = detail::entry;
+    if (c.pointCount == 0 || c.pointCount > kMaxPointsPerChunk)
+      return detail::FieldProblem{
+          e::kPointCount, "a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
+                              " points, not " + std::to_string(c.pointCount)};
+    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, "a points chunk has nodes"};
+    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, "a points chunk has leaves"};
+    if (c.parent != kNoParent)
+      return detail::FieldProblem{e::kParent, "a points chunk has a parent"};
+    if (c.geometricError != 0.0f)
+      return detail::FieldProblem{e::kGeometricError, "a points chunk has a geometric error"};
     return std::nullopt;
   }
 
@@ -176,6 +200,33 @@ class Parser {
       if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
         fail(at, who + " is not a coarser cell containing it");
     }
+    checkSurfacePointCounts(t.chunkTableOffset);
+  }
+
+  // The input points of surface chunks: those whose parent is a surface chunk count together at
+  // most their parent's points (their cells are disjoint parts of its cells); the others count
+  // together at most kMaxPointCount. Every sum over surface chunks then stays below 2^58.
+  void checkSurfacePointCounts(uint64_t tableOffset) const {
+    std::vector<uint64_t> children(r_.chunks.size(), 0);
+    uint64_t tops = 0;
+    for (const ChunkInfo& c : r_.chunks) {
+      if (c.kind != kSurfaceKind) continue;
+      const uint64_t at =
+          tableOffset + uint64_t{c.id} * kChunkEntrySize + detail::entry::kPointCount;
+      const std::string who =
+          "chunk " + std::to_string(c.id) + ": point count " + std::to_string(c.pointCount);
+      if (c.parent != kNoParent && r_.chunks[c.parent].kind == kSurfaceKind) {
+        const ChunkInfo& p = r_.chunks[c.parent];
+        if (c.pointCount > p.pointCount - children[p.id])
+          fail(at, who + " and those of the other chunks of parent " + std::to_string(p.id) +
+                       " exceed its " + std::to_string(p.pointCount));
+        children[p.id] += c.pointCount;
+      } else {
+        if (c.pointCount > kMaxPointCount - tops)
+          fail(at, who + " brings the points of the top surface chunks over 2^53");
+        tops += c.pointCount;
+      }
+    }
   }
 
   const std::string& name_;
@@ -183,17 +234,6 @@ class Parser {
   std::span<const std::byte> bytes_;
   uint64_t size_;
 };
-
-// A zstd decompression context per thread, so that const Reader calls can run concurrently.
-ZSTD_DCtx* threadDecompressor() {
-  struct Holder {
-    ZSTD_DCtx* context = ZSTD_createDCtx();
-    ~Holder() { ZSTD_freeDCtx(context); }
-  };
-  thread_local Holder holder;
-  if (holder.context == nullptr) throw std::bad_alloc();
-  return holder.context;
-}
 
 }  // namespace
 
@@ -239,39 +279,62 @@ std::string_view Reader::metadata() const {
   return {reinterpret_cast<const char*>(m.data()), m.size()};
 }
 
-std::span<const std::byte> Reader::storedPayload(uint32_t id) const {
-  const ChunkInfo& c = chunk(id);
-  return impl_->bytes.subspan(c.offset, c.storedSize);
+namespace {
+
+[[noreturn]] void failChunk(const Reader& reader, uint32_t id, const std::string& reason) {
+  throw FileError(reader.name(), reader.chunk(id).offset,
+                  "chunk " + std::to_string(id) + ": " + reason);
+}
+
+// A chunk's stored bytes, checked against its checksum and, for zstd, against its raw size (the
+// frame's content size, its blocks' capacity): before anything is decoded or allocated.
+std::span<const std::byte> checkedStoredBytes(const Reader& reader, uint32_t id) {
+  const ChunkInfo& c = reader.chunk(id);
+  const std::span<const std::byte> stored = reader.bytes().subspan(c.offset, c.storedSize);
+  if (const uint64_t computed = detail::checksum(stored); computed != c.checksum) {
+    char values[64];
+    std::snprintf(values, sizeof values, " (table 0x%016llx, payload 0x%016llx)",
+                  static_cast<unsigned long long>(c.checksum),
+                  static_cast<unsigned long long>(computed));
+    failChunk(reader, id, std::string("checksum mismatch") + values);
+  }
+  if (c.codec == Codec::Zstd)
+    if (std::string problem = detail::zstdFrameProblem(stored, c.rawSize); !problem.empty())
+      failChunk(reader, id, problem);
+  return stored;
+}
+
+}  // namespace
+
+ChunkData Reader::payload(uint32_t id) const {
+  const std::span<const std::byte> stored = checkedStoredBytes(*this, id);
+  if (chunk(id).codec == Codec::Raw) return ChunkData(stored);
+  std::vector<std::byte> data(chunk(id).rawSize);
+  if (std::string problem = detail::zstdDecodeProblem(stored, data); !problem.empty())
+    failChunk(*this, id, problem);
+  return ChunkData(std::move(data));
 }
 
 void Reader::decodePayload(uint32_t id, std::span<std::byte> out) const {
   const ChunkInfo& c = chunk(id);
   if (out.size() < c.rawSize)
     throw InternalError("decodePayload: output buffer smaller than the chunk's raw size");
-  const std::span<const std::byte> stored = storedPayload(id);
+  const std::span<const std::byte> stored = checkedStoredBytes(*this, id);
   if (c.codec == Codec::Raw) {
     if (!stored.empty()) std::memcpy(out.data(), stored.data(), stored.size());
     return;
   }
-  const auto fail = [&](const std::string& reason) {
-    throw FileError(impl_->name, c.offset, "chunk " + std::to_string(id) + ": " + reason);
-  };
-  if (ZSTD_findFrameCompressedSize(stored.data(), stored.size()) != stored.size())
-    fail("zstd payload is not exactly one complete frame");
-  if (ZSTD_getFrameContentSize(stored.data(), stored.size()) != c.rawSize)
-    fail("zstd frame content size differs from the chunk's raw size");
-  const size_t decoded = ZSTD_decompressDCtx(threadDecompressor(), out.data(), c.rawSize,
-                                             stored.data(), stored.size());
-  if (ZSTD_isError(decoded)) fail(std::string("zstd: ") + ZSTD_getErrorName(decoded));
-  if (decoded != c.rawSize)
-    fail("zstd payload decodes to " + std::to_string(decoded) + " bytes, expected " +
-         std::to_string(c.rawSize));
+  if (std::string problem = detail::zstdDecodeProblem(stored, out.first(c.rawSize));
+      !problem.empty())
+    failChunk(*this, id, problem);
 }
 
 void Reader::checkPayload(uint32_t id) const {
-  const ChunkInfo& c = chunk(id);
-  if (detail::checksum(storedPayload(id)) != c.checksum)
-    throw FileError(impl_->name, c.offset, "chunk " + std::to_string(id) + ": checksum mismatch");
+  const std::span<const std::byte> stored = checkedStoredBytes(*this, id);
+  if (chunk(id).codec == Codec::Zstd)
+    if (std::string problem = detail::zstdStreamProblem(stored, chunk(id).rawSize);
+        !problem.empty())
+      failChunk(*this, id, problem);
 }
 
 }  // namespace iso

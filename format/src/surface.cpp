@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <bit>
-#include <optional>
 #include <cstring>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -33,7 +33,9 @@ struct BrokenRule {
   std::string reason;
 };
 
-[[noreturn]] void invalid(const std::string& reason) { throw BrokenRule{"surface chunk: " + reason}; }
+[[noreturn]] void invalid(const std::string& reason) {
+  throw BrokenRule{"surface chunk: " + reason};
+}
 
 void checkRoots(const SurfaceTopology& t, uint8_t chunkLevel, uint64_t chunkKey, uint8_t maxLevel) {
   if (t.depth < 1) invalid("depth is 0");
@@ -355,8 +357,8 @@ SurfaceChunk decodeSurfaceChunk(const Reader& reader, uint32_t id) {
   const ChunkInfo& chunk = reader.chunk(id);
   const auto fail = [&](const std::string& reason) { failChunk(reader, id, reason); };
   if (chunk.kind != kSurfaceKind) fail("not a surface chunk");
-  std::vector<std::byte> payload(chunk.rawSize);
-  reader.decodePayload(id, payload);
+  const ChunkData data = reader.payload(id);  // checked; the mapped bytes when stored raw
+  const std::span<const std::byte> payload = data.bytes();
   if (payload.size() < kSurfaceHeaderSize) fail("surface payload is shorter than its header");
   const std::byte* b = payload.data();
   const uint32_t rootCount = loadLE<uint32_t>(b), nodeCount = loadLE<uint32_t>(b + 4);

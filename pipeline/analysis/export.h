@@ -52,7 +52,8 @@ struct VdbStats {
 // frame's origin + (i, j, k)·size (the lattice points of the finest leaves). Every lattice point of
 // a filled leaf whose signed distance (world units; the coarsest leaf's value where leaves meet) is
 // within `bandVoxels` voxels of 0 is active; the rest of space takes ±bandVoxels·size by a signed
-// flood fill (negative inside). Written atomically. Throws iso::FileError when it cannot write.
+// flood fill (negative inside). Written atomically. Throws iso::FileError when it cannot write, or
+// when the voxels are smaller than OpenVDB's transforms allow (about 1.44e-5 units).
 VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path,
                   double bandVoxels = 3.0);
 

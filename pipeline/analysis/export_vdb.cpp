@@ -8,6 +8,7 @@
 #include <array>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <mutex>
@@ -34,6 +35,20 @@ void initialize() {
   static std::once_flag initialized;
   std::call_once(initialized, [] { openvdb::initialize(); });
 }
+
+// Throw a FileError naming path when OpenVDB's linear transforms cannot take voxels of this size:
+// they refuse a voxel volume below 3 times OpenVDB's tolerance (math::ScaleMap).
+void requireVdbVoxel(double voxelSize, const std::filesystem::path& path) {
+  const double smallestVolume = 3.0 * openvdb::math::Tolerance<double>::value();
+  if (voxelSize * voxelSize * voxelSize >= smallestVolume) return;
+  char reason[160];
+  std::snprintf(reason, sizeof reason,
+                "OpenVDB cannot hold the surface's finest voxels, %.3g units wide (its smallest "
+                "are %.3g units)",
+                voxelSize, std::cbrt(smallestVolume));
+  throw FileError(path.string(), std::nullopt, reason);
+}
+
 }  // namespace
 
 std::vector<double> sampleVdb(const std::filesystem::path& path,
@@ -69,6 +84,7 @@ VdbStats writeVdb(const SurfaceModel& surface, const std::filesystem::path& path
   const Frame& frame = surface.header().frame;
   const double h = std::ldexp(1.0, -stats.level);  // frame units
   stats.voxelSize = h * frame.size;
+  requireVdbVoxel(stats.voxelSize, path);
   const float band = float(bandVoxels * stats.voxelSize);
   openvdb::FloatGrid::Ptr grid = openvdb::FloatGrid::create(band);
   grid->setTransform(openvdb::math::Transform::createLinearTransform(stats.voxelSize));

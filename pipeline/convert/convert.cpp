@@ -442,11 +442,24 @@ void reportRun(double seconds, double pointsPerSecond, nlohmann::json& report) {
   if (disk.limit > 0) report["out_of_core"]["temporary_disk_limit"] = disk.limit;
 }
 
+// Throw ConvertError when the points' cube is one an .iso file cannot hold (FrameProblem: points
+// more than 2^64 units apart or from the origin).
+void requireFrame(const Frame& frame) {
+  const std::optional<FrameProblem> problem = frameProblem(frame);
+  if (!problem) return;
+  char cube[160];
+  std::snprintf(cube, sizeof cube, "origin (%.9g, %.9g, %.9g), size %.9g", frame.origin[0],
+                frame.origin[1], frame.origin[2], frame.size);
+  throw ConvertError("the points' cube (" + std::string(cube) +
+                     ") is beyond what an .iso file holds: " + std::string(problem->reason));
+}
+
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const KeepPoints& keep,
                              const ConvertSource& source, StageTimer& timer, nlohmann::json& report,
                              Clock::time_point started) {
+  requireFrame(ready.frame);
   PointSet& points = ready.points;
   const Frame& frame = ready.frame;
   const RadiusStats& radii = ready.radii;

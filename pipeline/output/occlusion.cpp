@@ -106,10 +106,8 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
                    info.parent,    info.pointCount,     info.nodeCount,
                    info.leafCount, info.geometricError, Codec::Zstd};
     if (info.kind != kSurfaceKind) {  // copied as they are
-      std::vector<std::byte> data(info.rawSize);
-      in.decodePayload(info.id, data);
       desc.codec = info.codec;
-      out.addChunk(desc, data);
+      out.addChunk(desc, in.payload(info.id).bytes());
       continue;
     }
     SurfaceChunk chunk = decodeSurfaceChunk(in, info.id);

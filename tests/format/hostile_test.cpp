@@ -1,18 +1,55 @@
 // Malformed, truncated and hostile files: every one is rejected with the file, the offset and the
-// reason, or caught by verification; none crashes (these tests also run under ASan and UBSan).
+// reason, or caught by verification; none crashes (these tests also run under ASan and UBSan). No
+// way to a chunk's data gives damaged data, and none allocates more than the payload can hold.
 #include <gtest/gtest.h>
 #define XXH_INLINE_ALL
 #include <xxhash.h>
 
+#include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <limits>
+#include <new>
 
+#include "iso/check.h"
 #include "iso/error.h"
+#include "iso/points.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
+#include "iso/surface_model.h"
 #include "iso/verify.h"
+#include "iso/writer.h"
 #include "tests/support/support.h"
+
+namespace iso::test {
+// The largest single request to operator new (below) since a test last set it to 0.
+std::atomic<size_t> largestAllocation{0};
+}  // namespace iso::test
+
+// The test program's operator new, which records the largest request: how a test sees that a
+// reader refused a hostile size before allocating it. (operator new[] and the nothrow forms call
+// this one.)
+void* operator new(std::size_t size) {
+  size_t seen = iso::test::largestAllocation.load(std::memory_order_relaxed);
+  while (size > seen && !iso::test::largestAllocation.compare_exchange_weak(
+                            seen, size, std::memory_order_relaxed)) {
+  }
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+// GCC warns that free() meets memory from operator new wherever it inlines these: here that is
+// the design.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 namespace iso {
 namespace {
@@ -303,6 +340,296 @@ TEST(HostileFiles, notAnIsoFileIsNamed) {
   EXPECT_THROW(Reader::open(dir.path()), FileError);  // a directory
   test::writeFile(dir / "empty.iso", {});
   EXPECT_THROW(Reader::open(dir / "empty.iso"), FileError);
+}
+
+// Calls body and expects the FileError of a checksum mismatch in chunk id, at its payload.
+void expectChecksumMismatch(const char* what, const std::function<void()>& body,
+                            const std::string& file, uint32_t id, uint64_t offset) {
+  SCOPED_TRACE(what);
+  try {
+    body();
+    ADD_FAILURE() << "accepted damaged data";
+  } catch (const FileError& error) {
+    EXPECT_EQ(error.file(), file);
+    EXPECT_EQ(error.offset(), offset);
+    EXPECT_NE(error.reason().find("chunk " + std::to_string(id) + ": checksum mismatch"),
+              std::string::npos)
+        << error.what();
+  }
+}
+
+TEST_F(Hostile, everyWayToAChunksDataRefusesAFlippedPayloadByte) {
+  for (uint32_t id : {0u, 1u, 2u, 4u, 5u}) {  // every chunk with stored bytes (3 is empty)
+    SCOPED_TRACE("chunk " + std::to_string(id));
+    std::vector<std::byte> b = golden_;
+    const uint64_t at = get<uint64_t>(b, entry(id)), stored = get<uint64_t>(b, entry(id) + 8);
+    b[at + stored / 2] ^= std::byte{0x10};
+    const Reader reader = Reader::fromMemory(b, "flip.iso");  // opening reads no payload
+    std::vector<std::byte> out(reader.chunk(id).rawSize);
+    expectChecksumMismatch(
+        "payload", [&] { reader.payload(id); }, "flip.iso", id, at);
+    expectChecksumMismatch(
+        "decodePayload", [&] { reader.decodePayload(id, out); }, "flip.iso", id, at);
+    expectChecksumMismatch(
+        "checkPayload", [&] { reader.checkPayload(id); }, "flip.iso", id, at);
+    if (id == 5) {
+      expectChecksumMismatch(
+          "decodeSurfaceChunk", [&] { decodeSurfaceChunk(reader, id); }, "flip.iso", id, at);
+      expectChecksumMismatch(
+          "SurfaceModel::load", [&] { SurfaceModel::load(reader); }, "flip.iso", id, at);
+    }
+    const VerifyResult result = verifyFile(reader);
+    ASSERT_EQ(result.problems.size(), 1u);
+    EXPECT_EQ(result.problems[0].chunk, id);
+    EXPECT_EQ(result.problems[0].offset, at);
+    EXPECT_EQ(result.problems[0].reason.rfind("checksum mismatch (table 0x", 0), 0u)
+        << result.problems[0].reason;
+  }
+  // The intact file's surface loads: the refusals above are the flipped byte's.
+  EXPECT_NO_THROW(SurfaceModel::load(Reader::fromMemory(golden_, "golden.iso")));
+}
+
+TEST(HostileFiles, aFlippedPointsPayloadByteIsRefusedByEveryWayToItsData) {
+  test::TempDir dir;
+  test::writePointsSeedFile(dir / "points.iso");
+  const std::vector<std::byte> good = test::readFile(dir / "points.iso");
+  const Reader intact = Reader::fromMemory(good, "points.iso");
+  for (const ChunkInfo& c : intact.chunks()) {  // one raw, one zstd
+    SCOPED_TRACE(std::string(codecName(c.codec)));
+    EXPECT_EQ(decodePointsChunk(intact, c.id).size(), 60u);
+    std::vector<std::byte> b = good;
+    b[c.offset + c.storedSize / 2] ^= std::byte{0x01};
+    const Reader reader = Reader::fromMemory(b, "flip.iso");
+    expectChecksumMismatch(
+        "decodePointsChunk", [&] { decodePointsChunk(reader, c.id); }, "flip.iso", c.id, c.offset);
+    expectChecksumMismatch(
+        "payload", [&] { reader.payload(c.id); }, "flip.iso", c.id, c.offset);
+    const VerifyResult result = verifyFile(reader);
+    ASSERT_EQ(result.problems.size(), 1u);
+    EXPECT_NE(result.problems[0].reason.find("checksum mismatch"), std::string::npos);
+  }
+}
+
+TEST_F(Hostile, metadataThatStartsWithAByteOrderMarkIsRejectedByVerify) {
+  std::vector<std::byte> b = golden_;
+  const uint64_t metadata = get<uint64_t>(b, trailer_ + 16);
+  const std::array<std::byte, 3> mark = {std::byte{0xEF}, std::byte{0xBB}, std::byte{0xBF}};
+  b.insert(b.begin() + ptrdiff_t(metadata), mark.begin(), mark.end());
+  const size_t trailer = b.size() - 64;
+  put<uint64_t>(b, trailer + 24, get<uint64_t>(b, trailer + 24) + 3);
+  test::resealChecksums(b);
+  const Reader reader = Reader::fromMemory(b, "bom.iso");  // every structure is sound
+  EXPECT_EQ(reader.metadata().substr(3), test::goldenMetadata());
+  const VerifyResult result = verifyFile(reader);
+  ASSERT_EQ(result.problems.size(), 1u);
+  EXPECT_FALSE(result.problems[0].chunk.has_value());
+  EXPECT_EQ(result.problems[0].offset, metadata);
+  EXPECT_NE(result.problems[0].reason.find("byte order mark"), std::string::npos);
+}
+
+// A file of surface chunks (level 0, then level-1 children of chunk 0, then more top chunks) with
+// these point counts, and a blob with every count; the payloads are not read when opening.
+std::vector<std::byte> surfaceCountsFile(const std::filesystem::path& path,
+                                         const std::vector<uint64_t>& children,
+                                         const std::vector<uint64_t>& tops) {
+  FileHeader header;
+  header.maxLevel = 1;
+  header.payloadAlignmentLog2 = 3;
+  Writer writer(path, header);
+  const std::vector<std::byte> data(8);
+  writer.addChunk({.kind = kSurfaceKind, .pointCount = tops.at(0), .codec = Codec::Raw}, data);
+  for (size_t i = 0; i < children.size(); ++i)
+    writer.addChunk({.kind = kSurfaceKind,
+                     .level = 1,
+                     .key = i,
+                     .parent = 0,
+                     .pointCount = children[i],
+                     .codec = Codec::Raw},
+                    data);
+  for (size_t i = 1; i < tops.size(); ++i)
+    writer.addChunk({.kind = kSurfaceKind, .pointCount = tops[i], .codec = Codec::Raw}, data);
+  writer.addChunk({.pointCount = ~uint64_t{0}, .codec = Codec::Raw}, data);  // a blob: no rule
+  writer.finish();
+  return test::readFile(path);
+}
+
+TEST(HostileFiles, surfacePointCountsAreBoundedByTheirParentsAndBy2To53) {
+  test::TempDir dir;
+  const uint64_t limit = kMaxPointCount;
+  EXPECT_EQ(limit, uint64_t{1} << 53);
+  struct Case {
+    std::vector<uint64_t> children, tops;
+    uint32_t refused;  // the chunk whose count is refused, or kNoParent
+  };
+  const std::vector<Case> cases = {
+      {{6, 4}, {10}, kNoParent},
+      {{6, 5}, {10}, 2},
+      {{11}, {10}, 1},
+      {{~uint64_t{0}}, {10}, 1},
+      {{limit, 0}, {limit}, kNoParent},
+      {{}, {limit + 1}, 0},
+      {{}, {~uint64_t{0}}, 0},
+      {{}, {limit - 1, 1}, kNoParent},
+      {{}, {limit - 1, 2}, 1},
+  };
+  for (const Case& c : cases) {
+    const std::vector<std::byte> b = surfaceCountsFile(dir / "counts.iso", c.children, c.tops);
+    const uint64_t table = get<uint64_t>(b, b.size() - 64);
+    // The refused chunk's index in the file: children follow chunk 0, other tops follow them.
+    const uint32_t index = c.refused == kNoParent || c.refused <= c.children.size()
+                               ? c.refused
+                               : uint32_t(c.children.size() + c.refused);
+    SCOPED_TRACE(testing::Message() << "tops " << c.tops.size() << ", refused " << index);
+    if (c.refused == kNoParent) {
+      EXPECT_NO_THROW(Reader::fromMemory(b, "counts.iso"));
+      continue;
+    }
+    try {
+      Reader::fromMemory(b, "counts.iso");
+      ADD_FAILURE() << "opened";
+    } catch (const FileError& error) {
+      EXPECT_EQ(error.offset(), table + 80 * index + 40) << error.what();
+      EXPECT_NE(error.reason().find("chunk " + std::to_string(index) + ": point count"),
+                std::string::npos)
+          << error.what();
+    }
+  }
+}
+
+TEST_F(Hostile, framesBeyondTheLimitsAreRejectedAndTheLimitsAccepted) {
+  const auto withFrame = [&](std::array<double, 3> origin, double size) {
+    return mutate([&](auto& b) {
+      for (int a = 0; a < 3; ++a) put<double>(b, 24 + 8 * size_t(a), origin[size_t(a)]);
+      put<double>(b, 48, size);
+    });
+  };
+  const double far = std::ldexp(1.0, 31) * 64.0;  // 2^31 golden frame sizes
+  const double inf = std::numeric_limits<double>::infinity();
+  struct Rejected {
+    std::array<double, 3> origin;
+    double size;
+    uint64_t offset;
+  };
+  for (const Rejected& r : std::vector<Rejected>{
+           {{0, 0, 0}, std::numeric_limits<double>::denorm_min(), 48},
+           {{0, 0, 0}, std::ldexp(1.0, -65), 48},
+           {{0, 0, 0}, std::ldexp(1.0, 65), 48},
+           {{0, 0, 0}, 1e300, 48},
+           {{0, 0, 0}, -64.0, 48},
+           {{0, 0, 0}, std::nan(""), 48},
+           {{0, 0, 0}, inf, 48},
+           {{std::nextafter(far, inf), 0, 0}, 64.0, 24},
+           {{0, -std::nextafter(far, inf), 0}, 64.0, 32},
+           {{0, 0, 1e300}, 64.0, 40},
+           {{0, 0, -inf}, 64.0, 40},
+           {{1.7e308, 0, 0}, 1e308, 48},
+       }) {
+    SCOPED_TRACE(testing::Message() << "origin " << r.origin[0] << " " << r.origin[1] << " "
+                                    << r.origin[2] << ", size " << r.size);
+    const FileError error = openError(withFrame(r.origin, r.size));
+    EXPECT_EQ(error.offset(), r.offset) << error.what();
+    EXPECT_NE(error.reason().find("header: frame"), std::string::npos) << error.what();
+    FileHeader header = test::goldenHeader();
+    header.frame = {r.origin, r.size};
+    EXPECT_THROW(Writer(test::TempDir() / "frame.iso", header), InternalError);
+  }
+  const double big = std::ldexp(1.0, 64), small = std::ldexp(1.0, -64);
+  for (const Frame& f : std::vector<Frame>{{{0, 0, 0}, small},
+                                           {{-small, small, 0}, small},
+                                           {{far, -far, far}, 64.0},
+                                           {{std::ldexp(big, 31), 0, -std::ldexp(big, 31)}, big}}) {
+    const std::vector<std::byte> b = withFrame(f.origin, f.size);
+    const Reader reader = Reader::fromMemory(b, "limit.iso");
+    EXPECT_EQ(reader.header().frame, f);
+  }
+}
+
+// One zstd frame (RFC 8878) declaring `declared` content bytes, holding one last Raw block of
+// `content` bytes (i % 251): its blocks hold exactly `content` bytes.
+std::vector<std::byte> rawBlockFrame(uint32_t content, uint32_t declared) {
+  std::vector<std::byte> frame = {std::byte{0x28}, std::byte{0xB5}, std::byte{0x2F},
+                                  std::byte{0xFD},
+                                  std::byte{0xA0}};  // 4-byte content size, single segment
+  for (int i = 0; i < 4; ++i) frame.push_back(std::byte(declared >> (8 * i)));
+  const uint32_t block = 1u | content << 3;  // Last_Block, Block_Type 0 (Raw), Block_Size
+  for (int i = 0; i < 3; ++i) frame.push_back(std::byte(block >> (8 * i)));
+  for (uint32_t i = 0; i < content; ++i) frame.push_back(std::byte(i % 251));
+  return frame;
+}
+
+// A file whose one chunk (of this kind) stores `frame` as zstd and declares rawSize: written raw,
+// then its entry's codec and raw size changed (the stored bytes, and so their checksum, stay).
+std::vector<std::byte> zstdChunkFile(const std::vector<std::byte>& frame, uint64_t rawSize,
+                                     uint8_t kind) {
+  test::TempDir dir;
+  {
+    Writer writer(dir / "zstd.iso", FileHeader{});
+    writer.addChunk(
+        {.kind = kind, .pointCount = kind == kPointsKind ? 1u : 0u, .codec = Codec::Raw}, frame);
+    writer.finish();
+  }
+  std::vector<std::byte> b = test::readFile(dir / "zstd.iso");
+  const size_t entry = size_t(get<uint64_t>(b, b.size() - 64));
+  put<uint64_t>(b, entry + 16, rawSize);
+  b[entry + 69] = std::byte{1};  // zstd
+  test::resealChecksums(b);
+  return b;
+}
+
+TEST(HostileFiles, aHugeDeclaredRawSizeIsRefusedBeforeAnythingIsAllocated) {
+  // A real frame: declared and held sizes agree, and it decodes.
+  const std::vector<std::byte> honest = rawBlockFrame(32768, 32768);
+  const std::vector<std::byte> honestFile = zstdChunkFile(honest, 32768, 0);
+  const Reader good = Reader::fromMemory(honestFile, "honest.iso");
+  const ChunkData data = good.payload(0);
+  ASSERT_EQ(data.bytes().size(), 32768u);
+  EXPECT_TRUE(std::equal(data.bytes().begin(), data.bytes().end(), honest.end() - 32768));
+
+  // The same blocks declaring 2^30 bytes, frame header and table alike, with a valid checksum:
+  // 32780 stored bytes could decode to 2^30 (32768 times as many), so opening accepts the entry.
+  const uint32_t huge = uint32_t{1} << 30;
+  for (uint8_t kind : {uint8_t{0}, kSurfaceKind, kPointsKind}) {
+    SCOPED_TRACE("kind " + std::to_string(kind));
+    const std::vector<std::byte> b = zstdChunkFile(rawBlockFrame(32768, huge), huge, kind);
+    const Reader reader = Reader::fromMemory(b, "huge.iso");
+    struct Read {
+      const char* what;
+      std::function<void()> read;
+      bool refuses;  // whether it reads this chunk's data (and so must refuse it)
+    };
+    const std::vector<Read> reads = {
+        {"payload", [&] { reader.payload(0); }, true},
+        {"checkPayload", [&] { reader.checkPayload(0); }, true},
+        {"verifyFile", [&] { verifyFile(reader); }, false},
+        {"decodeSurfaceChunk", [&] { decodeSurfaceChunk(reader, 0); }, kind == kSurfaceKind},
+        {"decodePointsChunk", [&] { decodePointsChunk(reader, 0); }, kind == kPointsKind},
+        {"SurfaceModel::load", [&] { SurfaceModel::load(reader); }, kind == kSurfaceKind}};
+    for (const Read& r : reads) {
+      SCOPED_TRACE(r.what);
+      test::largestAllocation = 0;
+      try {
+        r.read();
+        EXPECT_FALSE(r.refuses) << "accepted";
+      } catch (const FileError& error) {
+        EXPECT_EQ(error.file(), "huge.iso");
+        if (r.refuses) {
+          EXPECT_NE(error.reason().find("chunk 0: zstd frame's blocks hold at most 32768 bytes"),
+                    std::string::npos)
+              << error.what();
+        }
+      }
+      EXPECT_LT(test::largestAllocation.load(), size_t{1} << 20);  // not 2^30
+    }
+    const VerifyResult result = verifyFile(reader);
+    ASSERT_EQ(result.problems.size(), 1u);
+    EXPECT_NE(result.problems[0].reason.find("blocks hold at most"), std::string::npos);
+  }
+
+  // Fewer stored bytes than 2^30 / 32768: the table alone shows it, and opening refuses it.
+  const FileError error = openError(zstdChunkFile(rawBlockFrame(1000, huge), huge, kSurfaceKind));
+  EXPECT_NE(error.reason().find("chunk 0: raw size is more than 32768 times the stored size"),
+            std::string::npos)
+      << error.what();
 }
 
 }  // namespace

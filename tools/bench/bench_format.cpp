@@ -81,8 +81,8 @@ void benchCodec(const Config& config, const char* label, iso::Codec codec, int l
   std::vector<std::byte> buffer(config.chunkBytes);
   uint64_t sum = 0;
   for (const iso::ChunkInfo& c : reader.chunks()) {
-    if (c.codec == iso::Codec::Raw) {  // zero copy: touch the mapped bytes
-      for (std::byte b : reader.storedPayload(c.id)) sum += uint64_t(b);
+    if (c.codec == iso::Codec::Raw) {  // zero copy: touch the mapped bytes (checked)
+      for (std::byte b : reader.payload(c.id).bytes()) sum += uint64_t(b);
     } else {
       reader.decodePayload(c.id, buffer);
       sum += uint64_t(buffer[0]);

@@ -1,6 +1,7 @@
 // `iso info FILE`: what a file holds, for people or (--json) for programs.
 #include <fmt/core.h>
 
+#include <cstdint>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -23,6 +24,12 @@ struct Summary {
   LevelSummary kept;                   // the points chunks: the original points
 };
 
+// Point counts summed, stopping at 2^64 - 1: a file's surface and points chunks keep these sums
+// far below it (specs/iso-format.md, "Chunk table"), but chunks of other kinds have no rule.
+void addPoints(uint64_t& sum, uint64_t count) {
+  sum = count > UINT64_MAX - sum ? UINT64_MAX : sum + count;
+}
+
 Summary summarize(const Reader& reader) {
   Summary s;
   for (const ChunkInfo& c : reader.chunks()) {
@@ -30,12 +37,12 @@ Summary summarize(const Reader& reader) {
     s.rawBytes += c.rawSize;
     ++s.codecs[std::string(codecName(c.codec))];
     const bool points = c.kind == static_cast<uint8_t>(ChunkKind::Points);
-    if (c.parent == kNoParent && !points) s.points += c.pointCount;  // roots cover all points once
+    if (c.parent == kNoParent && !points) addPoints(s.points, c.pointCount);  // roots: all once
     LevelSummary& level = points ? s.kept : s.levels[c.level];
     ++level.chunks;
     level.storedBytes += c.storedSize;
     level.rawBytes += c.rawSize;
-    level.points += c.pointCount;
+    addPoints(level.points, c.pointCount);
   }
   return s;
 }

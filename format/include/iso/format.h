@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string_view>
 #include <vector>
 
@@ -28,6 +29,19 @@ inline constexpr uint64_t kMaxChunkRawSize = uint64_t{1} << 30;
 inline constexpr uint8_t kMinPayloadAlignmentLog2 = 3;
 inline constexpr uint8_t kMaxPayloadAlignmentLog2 = 16;
 inline constexpr uint8_t kDefaultPayloadAlignmentLog2 = 12;
+// The frame's limits (specs/iso-format.md, "Header"): its size is 2^-64 to 2^64 world units, so
+// that it and its finest cells (2^-21 of it) are normal binary32 numbers; each origin component is
+// at most 2^31 sizes from 0, so that binary64 world coordinates of the cube still tell its finest
+// cells apart.
+inline constexpr double kMinFrameSize = 0x1p-64;
+inline constexpr double kMaxFrameSize = 0x1p64;
+inline constexpr double kMaxFrameOriginInSizes = 0x1p31;
+// The most input points the surface chunks without a surface parent may count together
+// (specs/iso-format.md, "Chunk table"): counts stay exact in binary64.
+inline constexpr uint64_t kMaxPointCount = uint64_t{1} << 53;
+// The most bytes one stored byte of a zstd payload can decode to: a 4-byte RLE block gives at
+// most 128 KiB (specs/iso-format.md, "Payloads").
+inline constexpr uint64_t kMaxZstdRatio = 32768;
 
 enum class Semantic : uint8_t { SignedDistance = 1, Normal = 2, Color = 3, Occlusion = 4 };
 
@@ -105,6 +119,14 @@ struct ChunkInfo {
 
 // The reason an attribute schema is invalid, or empty when it is valid.
 std::string_view attributeSchemaProblem(const std::vector<AttributeDesc>& attributes);
+
+// The first rule of specs/iso-format.md ("Header") that a frame breaks: the field (0 to 2: that
+// component of the origin, 3: the size) and the reason; nullopt when the frame is valid.
+struct FrameProblem {
+  int field;
+  std::string_view reason;
+};
+std::optional<FrameProblem> frameProblem(const Frame& frame);
 
 // Whether key names a cell at level (key < 2^(3·level), level <= kMaxLevel).
 constexpr bool isValidKey(uint8_t level, uint64_t key) {

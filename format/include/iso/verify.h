@@ -23,9 +23,11 @@ struct VerifyResult {
   bool ok() const { return problems.empty(); }
 };
 
-// Check every payload's checksum, that every zstd payload decodes to exactly rawSize bytes, that
-// every surface chunk follows its rules, and that all padding is zero. (Whether the metadata is a
-// JSON object is for the caller to check.)
+// Check every chunk's data through the Reader's checked accessors (its checksum, that a zstd
+// payload decodes to exactly rawSize bytes), that every surface and points chunk follows its
+// rules, that all padding is zero and that the metadata does not start with a byte order mark.
+// (Whether the metadata is a JSON object is for the caller to check: this library parses no
+// JSON.)
 VerifyResult verifyFile(const Reader& reader);
 
 // "chunk 3 (level 1, key 0x5) at byte 8192: REASON" or "byte 300: REASON".
