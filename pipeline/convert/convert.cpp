@@ -132,8 +132,7 @@ void requireSurface(const PointSet& points) {
   if (points.size() < 3)
     throw ConvertError("a surface needs at least 3 distinct points; the input has " +
                        std::to_string(points.size()));
-  if (isCollinear(points))
-    throw ConvertError("all points lie on one line: they define no surface");
+  if (isCollinear(points)) throw ConvertError("all points lie on one line: they define no surface");
 }
 
 Prepared prepare(const PointCloud& cloud) {
@@ -169,7 +168,8 @@ constexpr size_t kVisibilityPoints = 20000;
 
 nlohmann::json visibilityReport(const Reader& written, std::span<const glm::dvec3> sample,
                                 double spacing) {
-  const size_t step = std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
+  const size_t step =
+      std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
   std::vector<glm::dvec3> points;
   for (size_t i = 0; i < sample.size(); i += step) points.push_back(sample[i]);
   VisibilityOptions options;
@@ -260,8 +260,7 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   if (options.removeOutliers) {
-    const Strays strays =
-        findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
+    const Strays strays = findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
     if (strays.sparse + strays.grouped > 0) {  // choose the frame again without them
       filtered = withoutStrays(*cloud, prepared, strays.flagged);
       ready.outliers = {cloud->size() - filtered.size(), strays.sparse, strays.grouped};
@@ -317,6 +316,28 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
 
 }  // namespace
 
+nlohmann::json coordinateSystemOf(const nlohmann::json& inputs) {
+  // Two inputs declare the same system when these agree (a name or the records it came from may
+  // differ).
+  const auto identity = [](const nlohmann::json& crs) {
+    nlohmann::json id;
+    for (const char* key : {"wkt", "epsg", "vertical_epsg"})
+      id[key] = crs.value(key, nlohmann::json());
+    return id;
+  };
+  nlohmann::json crs;
+  for (const nlohmann::json& input : inputs) {
+    if (!input.contains("crs")) continue;
+    if (crs.is_null()) {
+      crs = input["crs"];
+      crs["input"] = input.value("file", "");
+    } else if (identity(input["crs"]) != identity(crs)) {
+      crs["differing_inputs"].push_back(input.value("file", ""));
+    }
+  }
+  return crs;
+}
+
 nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source) {
   return convertWith(
@@ -356,9 +377,8 @@ namespace {
 
 // The texture (`--texture`), read before any work. Sampled at the points, it becomes their
 // colors here, in or out of core alike.
-std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image,
-                                          const TextureOptions& t, PointSet& points,
-                                          const Frame& frame, StageTimer& timer,
+std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image, const TextureOptions& t,
+                                          PointSet& points, const Frame& frame, StageTimer& timer,
                                           nlohmann::json& report) {
   if (!image) return std::nullopt;
   const double scale = t.scale > 0.0 ? t.scale : frame.size;
@@ -527,10 +547,13 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     for (const char* key :
          {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core"})
       r.erase(key);
-    return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
-                          {"inputs", source.inputs},
-                          {"parameters", optionsJson(options)},
-                          {"report", r}};
+    nlohmann::json m{{"generator", std::string("iso ") + ISO_VERSION},
+                     {"inputs", source.inputs},
+                     {"parameters", optionsJson(options)},
+                     {"report", r}};
+    if (nlohmann::json crs = coordinateSystemOf(source.inputs); !crs.is_null())
+      m["crs"] = std::move(crs);
+    return m;
   };
   write.metadata = metadata(report).dump();
   write.release = [&] {

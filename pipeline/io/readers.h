@@ -31,13 +31,31 @@ struct ReadOptions {
   bool keepExtras = false;
 };
 
+// The coordinate reference system a point file declares. LAS files hold it in records of user
+// "LASF_Projection": the OGC WKT (record 2112) and the GeoTIFF keys (34735, with their ASCII
+// parameters in 34737), in VLRs or in LAS 1.4 EVLRs. Text is UTF-8 (other bytes become '?').
+struct CoordinateSystem {
+  std::string wkt;               // OGC WKT as stored; empty when the file has none
+  std::optional<uint32_t> epsg;  // ProjectedCSTypeGeoKey (3072), else GeographicTypeGeoKey (2048)
+  std::optional<uint32_t> verticalEpsg;  // VerticalCSTypeGeoKey (4096)
+  // A short name: the GeoTIFF citation (PCSCitationGeoKey 3073, else GTCitationGeoKey 1026), else
+  // the WKT's first quoted name.
+  std::string name;
+  std::string source;  // the records it came from, e.g. "VLR LASF_Projection 2112 (OGC WKT)"
+};
+
 struct PointFileInfo {
   std::filesystem::path path;
-  std::string format;                 // "ply-ascii", "ply-binary-le", "ply-binary-be", "xyz", "las 1.2 format 2", ...
+  std::string
+      format;  // "ply-ascii", "ply-binary-le", "ply-binary-be", "xyz", "las 1.2 format 2", ...
   std::optional<uint64_t> declaredPoints;  // the header's count, when the format has one
   bool hasNormals = false;
   bool hasColors = false;
   std::vector<std::string> extraNames;  // the extras read() appends (empty unless keepExtras)
+  std::optional<CoordinateSystem> crs;  // when the file declares one
+  // What the reader decided that a user may want to know (columns guessed, a color coding
+  // detected, records ignored), one sentence each.
+  std::vector<std::string> notes;
 };
 
 struct ReadStats {
