@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "pipeline/io/little_endian.h"
+#include "pipeline/io/text_fields.h"
 
 namespace iso::io {
 namespace {
@@ -88,6 +89,32 @@ std::string wktName(const std::string& wkt) {
   if (open == std::string::npos) return "";
   const size_t close = wkt.find('"', open + 1);
   return close == std::string::npos ? "" : wkt.substr(open + 1, close - open - 1);
+}
+
+// The EPSG code of the authority element of a WKT's root ("...,AUTHORITY["EPSG","32612"]]" in
+// WKT 1, "...,ID["EPSG",32612]]" in WKT 2); nested elements' authorities are not the system's.
+std::optional<uint32_t> wktEpsg(const std::string& wkt) {
+  int depth = 0;
+  bool isQuoted = false;
+  for (size_t i = 0; i < wkt.size(); ++i) {
+    const char c = wkt[i];
+    if (c == '"') isQuoted = !isQuoted;
+    if (isQuoted || (c != '[' && c != ']')) continue;
+    depth += c == '[' ? 1 : -1;
+    if (c != '[' || depth != 2) continue;
+    size_t start = i;
+    while (start > 0 && std::isalpha(static_cast<unsigned char>(wkt[start - 1]))) --start;
+    const std::string keyword = wkt.substr(start, i - start);
+    if (keyword != "AUTHORITY" && keyword != "ID") continue;
+    std::string_view content = std::string_view(wkt).substr(i + 1);
+    content = content.substr(0, content.find(']'));
+    if (!content.starts_with("\"EPSG\",")) continue;
+    content.remove_prefix(7);
+    if (content.starts_with('"')) content = content.substr(1, content.find('"', 1) - 1);
+    int64_t code = 0;
+    if (parseInteger(content, code) && code > 0 && code < kUserDefined) return uint32_t(code);
+  }
+  return std::nullopt;
 }
 
 std::optional<uint32_t> epsgCode(std::optional<uint16_t> value) {
@@ -197,6 +224,7 @@ std::optional<CoordinateSystem> LasCoordinateRecords::coordinateSystem(
     return std::nullopt;
   }
   if (crs.name.empty()) crs.name = wktName(crs.wkt);
+  if (!crs.epsg) crs.epsg = wktEpsg(crs.wkt);
   for (const std::string& source : sources_)
     crs.source += (crs.source.empty() ? "" : ", ") + source;
   return crs;

@@ -725,6 +725,22 @@ class PcdPointReader final : public PointReader {
 
 }  // namespace
 
+bool looksLikePcd(InputStream& in) {
+  const std::span<const std::byte> bytes = in.peek(4096);
+  std::string_view rest(reinterpret_cast<const char*>(bytes.data()),
+                        std::min<size_t>(bytes.size(), 4096));
+  while (!rest.empty()) {
+    const size_t end = std::min(rest.find('\n'), rest.size());
+    std::string_view line = rest.substr(0, end);
+    rest.remove_prefix(std::min(end + 1, rest.size()));
+    if (line.starts_with("# .PCD")) return true;
+    std::string_view keyword;
+    if (!nextField<isBlank>(line, keyword) || keyword.starts_with('#')) continue;
+    return keyword == "VERSION" || keyword == "FIELDS";
+  }
+  return false;
+}
+
 std::unique_ptr<PointReader> makePcdReader(InputStream in) {
   return std::make_unique<PcdPointReader>(std::move(in));
 }

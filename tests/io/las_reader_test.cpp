@@ -240,12 +240,28 @@ TEST(LasReader, keepsTheWktOfAProjectionVlr) {
   const CoordinateSystem& crs = *reader->info().crs;
   EXPECT_EQ(crs.wkt, kUtm12Wkt);
   EXPECT_EQ(crs.name, "WGS 84 / UTM zone 12N");
-  EXPECT_FALSE(crs.epsg.has_value());  // from GeoTIFF keys only: the WKT is kept as it is
+  EXPECT_EQ(crs.epsg, 32612u);  // the authority of the root element
   EXPECT_EQ(crs.source, "VLR LASF_Projection 2112 (OGC WKT)");
   EXPECT_TRUE(reader->info().notes.empty());
   const PointCloud points = readPointFile(dir / "w.las");
   ASSERT_EQ(points.size(), 3u);
   EXPECT_EQ(points.positions[2], expectedPosition(spec, spec.points[2]));
+
+  // WKT 2 names its authority ID; a nested element's is not the system's; none at all.
+  const std::pair<std::string, std::optional<uint32_t>> cases[] = {
+      {R"(PROJCRS["x",BASEGEOGCRS["y",ID["EPSG",4326]],ID["EPSG",26912]])", 26912},
+      {R"(PROJCS["x",GEOGCS["y",AUTHORITY["EPSG","4326"]],UNIT["m",1]])", std::nullopt},
+      {R"(PROJCS["a ""quoted"" AUTHORITY[",AUTHORITY["ESRI","102100"]])", std::nullopt},
+      {R"(LOCAL_CS["site grid"])", std::nullopt}};
+  for (const auto& [wkt, epsg] : cases) {
+    SCOPED_TRACE(wkt);
+    spec.vlrs = {test::lasWktRecord(wkt)};
+    test::writeFile(dir / "w.las", makeLas(spec).bytes());
+    const auto other = openPointFile(dir / "w.las");
+    ASSERT_TRUE(other->info().crs.has_value());
+    EXPECT_EQ(other->info().crs->epsg, epsg);
+    EXPECT_EQ(other->info().crs->wkt, wkt);
+  }
 }
 
 TEST(LasReader, givesTheEpsgCodesAndCitationOfGeoTiffKeys) {
@@ -459,8 +475,8 @@ TEST(LasReader, usesTheSixtyFourBitCountOfLas14) {
 
 TEST(LasReader, refusesLazByPointFormatBitsAndByExtension) {
   const std::string message =
-      "LAZ (compressed LAS) is not supported: decompress it first (for example with laszip or pdal "
-      "translate)";
+      "LAZ (compressed LAS) is not supported: no LAZ decoder is packaged for Debian 12; decompress "
+      "it to LAS first, e.g. `pdal translate in.laz out.las` or `laszip -i in.laz -o out.las`";
   LasSpec spec{.format = 3};
   spec.points = samplePoints();
   for (uint8_t bit : {uint8_t{0x80}, uint8_t{0x40}}) {
