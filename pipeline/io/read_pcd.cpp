@@ -419,7 +419,7 @@ bool parsePackedColor(std::string_view text, uint32_t& bits) {
     return true;
   }
   float single = 0.0f;
-  if (!parseNumber(text, single)) return false;
+  if (!parseNumber(text, single) || std::isnan(single)) return false;  // a NaN's bits are lost
   bits = std::bit_cast<uint32_t>(single);
   return true;
 }
@@ -678,8 +678,8 @@ class PcdPointReader final : public PointReader {
       const auto slot = static_cast<Slot>(slotOfValue_[column]);
       const PcdField& field = header_.fields[static_cast<size_t>(header_.slotField[slot])];
       if (!parseSlotValue(slot, field.type, text, values[slot]))
-        in_.failLine(fmt::format("value {} (field '{}') is not a number: '{:.40}'", column + 1,
-                                 field.name, text));
+        in_.failLine(fmt::format("value {} (field '{}') is not a {}: '{:.40}'", column + 1,
+                                 field.name, slot == kPackedColor ? "color" : "number", text));
     }
     if (column != slotOfValue_.size())
       in_.failLine(fmt::format("expected {} values, found {}", slotOfValue_.size(), column));
