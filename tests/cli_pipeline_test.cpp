@@ -281,9 +281,9 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
 }
 
 TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
-  // Real scans with normals (the kitten) and 16-bit colors (the lion, when ../shared/data is
-  // there), and a sphere 5,000 km from the origin: every point back within the precision asked
-  // for, one to one.
+  // Real scans with normals (the kitten) and colors (the lion, 8-bit codes times 256, when
+  // ../shared/data is there), and a sphere 5,000 km from the origin: every point back within the
+  // precision asked for, one to one.
   const auto gen = runIso("gen sphere -n 20000 --seed 4 --offset 500000,4900000,1200 -o " +
                           quoted(dir_ / "far.ply"));
   ASSERT_EQ(gen.exitCode, 0) << gen.err;
@@ -302,7 +302,7 @@ TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   std::vector<Case> cases = {
       {kitten, 24, 0}, {dir_ / "colored.ply", 16, 0}, {dir_ / "far.ply", 30, 0}};
   const std::filesystem::path lion = std::filesystem::path(ISO_SHARED_DATA_DIR) / "lion_rgb.las";
-  if (std::filesystem::exists(lion)) cases.push_back({lion, 20, 1});  // 16-bit colors
+  if (std::filesystem::exists(lion)) cases.push_back({lion, 20, 0});  // read as 8-bit codes
   for (const Case& c : cases) {
     SCOPED_TRACE(c.input.string());
     const std::string iso = quoted(dir_ / "k.iso"), ply = quoted(dir_ / "k.ply");
@@ -684,8 +684,8 @@ TEST_F(CliPipeline, theCoordinateSystemOfLasInputsIsKeptAndShown) {
   test::writeFile(dir_ / "b.las", test::makeLas(b.spec).bytes());
   const std::string a_las = (dir_ / "a.las").string(), b_las = (dir_ / "b.las").string();
 
-  auto run = runIso("convert --progress none " + quoted(dir_ / "a.las") + " " + quoted(dir_ / "b.las") + " -o " +
-                    quoted(dir_ / "ab.iso"));
+  auto run = runIso("convert --progress none " + quoted(dir_ / "a.las") + " " +
+                    quoted(dir_ / "b.las") + " -o " + quoted(dir_ / "ab.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.err.find("coordinate system: EPSG:32612, \"WGS 84 / UTM zone 12N\", OGC WKT (" +
                          std::to_string(kUtm12Wkt.size()) + " characters), from " + a_las +
@@ -722,7 +722,8 @@ TEST_F(CliPipeline, theCoordinateSystemOfLasInputsIsKeptAndShown) {
   EXPECT_EQ(run.err, "warning: " + a_las + " declares another coordinate system than " + b_las +
                          ": the file's \"crs\" is the first one's (each input's is in its "
                          "\"inputs\" entry)\n");
-  run = runIso("convert --progress none -f " + quoted(dir_ / "a.las") + " -o " + quoted(dir_ / "a.iso"));
+  run = runIso("convert --progress none -f " + quoted(dir_ / "a.las") + " -o " +
+               quoted(dir_ / "a.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_EQ(run.err.find("warning"), std::string::npos) << run.err;
   EXPECT_FALSE(

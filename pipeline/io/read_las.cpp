@@ -1,5 +1,6 @@
 // The LAS reader, versions 1.0–1.4, point data formats 0–10 (ASPRS LAS Specification 1.4 R15,
-// section 2.4 "Public Header Block" and 2.6–2.16 "Point Data Records"; all fields little endian).
+// section 2.4 "Public Header Block" and 2.6–2.16 "Point Data Records"; all fields little endian),
+// with the coordinate system of its VLRs and EVLRs (las_records.h).
 #include <fmt/format.h>
 
 #include <algorithm>

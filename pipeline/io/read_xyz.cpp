@@ -1,5 +1,7 @@
-// The reader of XYZ-like text files (.xyz .txt .pts .csv): one point per line, numbers separated by
-// blanks, commas or semicolons, in the columns of ReadOptions::columns or guessed from their count.
+// The reader of XYZ-like text files (.xyz .txt .pts .csv .asc .neu .xyzrgb .xyzn, and others whose
+// content is text): one point per line, numbers separated by blanks, commas or semicolons, in the
+// columns of ReadOptions::columns or guessed from their count, values and the extension; and the
+// check that tells a text point file by its content (whyNotText).
 #include <fmt/format.h>
 
 #include <algorithm>

@@ -279,8 +279,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       "gzip-compressed (.gz); text of another extension is read when its lines are numbers, or "
       "always with --columns. The coordinate system of LAS inputs (OGC WKT, EPSG code of GeoTIFF "
       "keys) is kept in the file's metadata and shown by `iso info`.\n"
-      "LAZ and E57 are not read: no decoder for either is packaged for Debian 12. Convert them "
-      "where PDAL or LAStools is installed, then convert the LAS:\n"
+      "LAZ and E57 are not read: no decoder for either is packaged for Debian 12. Convert them to "
+      "LAS on a machine with PDAL (or LAStools' laszip for LAZ), then convert the LAS:\n"
       "  pdal translate in.laz out.las      (or: laszip -i in.laz -o out.las)\n"
       "  pdal translate in.e57 out.las");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
