@@ -7,9 +7,9 @@
 #include <unistd.h>
 
 #include <fstream>
-#include <nlohmann/json.hpp>
 #include <sstream>
 #include <vector>
+#include <nlohmann/json.hpp>
 
 #include <cstring>
 
@@ -80,9 +80,9 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   for (int threads : {1, 2, 0}) {
     const auto out = dir_ / ("t" + std::to_string(threads) + ".iso");
     // Small orientation blocks, so that components are aligned across blocks too.
-    const auto run =
-        runIso("convert -q --orient-block-points 512 --memory 4M --threads " +
-               std::to_string(threads) + " " + quoted(dir_ / "t.ply") + " -o " + quoted(out));
+    const auto run = runIso("convert -q --orient-block-points 512 --memory 4M --threads " +
+                            std::to_string(threads) + " " + quoted(dir_ / "t.ply") + " -o " +
+                            quoted(out));
     ASSERT_EQ(run.exitCode, 0) << run.err;
     bytes[threads] = test::slurp(out);
   }
@@ -176,8 +176,8 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
       EXPECT_LE(j["done"].get<uint64_t>(), j["total"].get<uint64_t>()) << line;
     }
   }
-  const std::vector<std::string> stages = {"read",   "distribute",      "points",    "orient",
-                                           "octree", "passive+balance", "corners",   "lod",
+  const std::vector<std::string> stages = {"read",   "distribute",      "points",  "orient",
+                                           "octree", "passive+balance", "corners", "lod",
                                            "write",  "accuracy",        "visibility"};
   EXPECT_EQ(ended, stages);
   const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
@@ -410,9 +410,9 @@ TEST_F(CliPipeline, evalMeasuresWhatTheViewerShowsAndWritesThePointsSeenThrough)
   // Points of a cube around the sphere, inside the frame: those outside the sphere's outline in a
   // view are seen through (a line through a point inside the sphere always meets it), and
   // written out.
-  ASSERT_EQ(
-      runIso("gen cube -n 4000 --half-size 0.99 --seed 5 -o " + quoted(dir_ / "cube.ply")).exitCode,
-      0);
+  ASSERT_EQ(runIso("gen cube -n 4000 --half-size 0.99 --seed 5 -o " + quoted(dir_ / "cube.ply"))
+                .exitCode,
+            0);
   run = runIso("eval " + iso + " --visibility --points " + quoted(dir_ / "cube.ply") +
                " --seen-through " + quoted(dir_ / "seen.ply"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
@@ -427,10 +427,10 @@ TEST_F(CliPipeline, evalMeasuresWhatTheViewerShowsAndWritesThePointsSeenThrough)
                " --seen-through " + quoted(dir_ / "seen.ply"));
   EXPECT_EQ(run.exitCode, 1);
   EXPECT_NE(run.err.find("seen.ply"), std::string::npos) << run.err;
-  EXPECT_EQ(
-      runIso("eval " + iso + " --points " + ply + " --seen-through " + quoted(dir_ / "other.ply"))
-          .exitCode,
-      2);
+  EXPECT_EQ(runIso("eval " + iso + " --points " + ply + " --seen-through " +
+                   quoted(dir_ / "other.ply"))
+                .exitCode,
+            2);
   ASSERT_EQ(runIso("convert -q " + ply + " -o " + quoted(dir_ / "plain.iso")).exitCode, 0);
   run = runIso("eval " + quoted(dir_ / "plain.iso") + " --visibility");
   EXPECT_EQ(run.exitCode, 1);
@@ -452,8 +452,8 @@ TEST_F(CliPipeline, convertRefusesImpossibleThreadAndProgressOptions) {
 std::string interruptWhileWriting(const std::filesystem::path& input,
                                   const std::filesystem::path& output, int signal) {
   const std::string binary = ISO_BINARY;
-  std::vector<std::string> args = {binary,         "convert", "-q",           "-f",
-                                   input.string(), "-o",      output.string()};
+  std::vector<std::string> args = {binary, "convert", "-q", "-f", input.string(), "-o",
+                                   output.string()};
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -461,7 +461,8 @@ std::string interruptWhileWriting(const std::filesystem::path& input,
   if (posix_spawn(&child, binary.c_str(), nullptr, nullptr, argv.data(), environ) != 0) return "";
   std::string temporary;
   for (int status = 0; temporary.empty();) {
-    const std::string prefix = "." + output.filename().string() + "." + std::to_string(child) + "-";
+    const std::string prefix =
+        "." + output.filename().string() + "." + std::to_string(child) + "-";
     for (const auto& entry : std::filesystem::directory_iterator(output.parent_path()))
       if (entry.path().filename().string().starts_with(prefix))
         temporary = entry.path().filename().string();
@@ -501,8 +502,8 @@ TEST_F(CliPipeline, anInterruptedConversionLeavesTheOldFileAndNoTemporaryFiles) 
   EXPECT_EQ(temporaries(), 2u);  // the output's and the directory of spilled points
   EXPECT_TRUE(test::slurp(dir_ / "out.iso") == old);
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
-  const auto run =
-      runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "again.iso"));
+  const auto run = runIso("convert -f " + quoted(dir_ / "sphere.ply") + " -o " +
+                          quoted(dir_ / "again.iso"));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.err.find("removed 2 temporary files"), std::string::npos) << run.err;
   EXPECT_EQ(temporaries(), 0u);
@@ -535,14 +536,10 @@ TEST_F(CliPipeline, badInputIsNamedAndLeavesNoOutput) {
   std::ofstream(dir_ / "two.xyz") << "1 2 3\n4 5 6\n";
   std::ofstream(dir_ / "line.xyz") << "0 0 0\n1 1 1\n2 2 2\n3 3 3\n";
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {"missing.ply", "missing.ply"},
-      {"cut.ply", "file ends after"},
-      {"empty.ply", "no points"},
-      {"scan.laz", "LAZ"},
-      {"one.xyz", "at least 3 distinct points"},
-      {"same.xyz", "the input has 1"},
-      {"two.xyz", "the input has 2"},
-      {"line.xyz", "one line"}};
+      {"missing.ply", "missing.ply"}, {"cut.ply", "file ends after"},
+      {"empty.ply", "no points"},     {"scan.laz", "LAZ"},
+      {"one.xyz", "at least 3 distinct points"}, {"same.xyz", "the input has 1"},
+      {"two.xyz", "the input has 2"}, {"line.xyz", "one line"}};
   for (const auto& [input, expected] : cases) {
     const auto run =
         runIso("convert -q " + quoted(dir_ / input) + " -o " + quoted(dir_ / "bad.iso"));

@@ -132,7 +132,8 @@ void requireSurface(const PointSet& points) {
   if (points.size() < 3)
     throw ConvertError("a surface needs at least 3 distinct points; the input has " +
                        std::to_string(points.size()));
-  if (isCollinear(points)) throw ConvertError("all points lie on one line: they define no surface");
+  if (isCollinear(points))
+    throw ConvertError("all points lie on one line: they define no surface");
 }
 
 Prepared prepare(const PointCloud& cloud) {
@@ -168,8 +169,7 @@ constexpr size_t kVisibilityPoints = 20000;
 
 nlohmann::json visibilityReport(const Reader& written, std::span<const glm::dvec3> sample,
                                 double spacing) {
-  const size_t step =
-      std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
+  const size_t step = std::max<size_t>(1, (sample.size() + kVisibilityPoints - 1) / kVisibilityPoints);
   std::vector<glm::dvec3> points;
   for (size_t i = 0; i < sample.size(); i += step) points.push_back(sample[i]);
   VisibilityOptions options;
@@ -260,7 +260,8 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   auto tree = std::make_unique<PointIndex>(prepared.points.position);
   Neighbors neighbors = findNeighbors(prepared.points, *tree, options.neighbors);
   if (options.removeOutliers) {
-    const Strays strays = findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
+    const Strays strays =
+        findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
     if (strays.sparse + strays.grouped > 0) {  // choose the frame again without them
       filtered = withoutStrays(*cloud, prepared, strays.flagged);
       ready.outliers = {cloud->size() - filtered.size(), strays.sparse, strays.grouped};
@@ -377,8 +378,9 @@ namespace {
 
 // The texture (`--texture`), read before any work. Sampled at the points, it becomes their
 // colors here, in or out of core alike.
-std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image, const TextureOptions& t,
-                                          PointSet& points, const Frame& frame, StageTimer& timer,
+std::optional<TriplanarTexture> textureOf(std::optional<LinearImage> image,
+                                          const TextureOptions& t, PointSet& points,
+                                          const Frame& frame, StageTimer& timer,
                                           nlohmann::json& report) {
   if (!image) return std::nullopt;
   const double scale = t.scale > 0.0 ? t.scale : frame.size;

@@ -27,13 +27,13 @@ struct Options {
   std::string columns;
   std::string fit = "sphere";
   std::string orient = "auto";
-  std::string memory = "auto";                 // --memory
-  std::string tmp;                             // --tmp; default: the output's directory
-  std::string maxTemp = "auto";                // --max-temp
-  std::string report;                          // --report FILE
-  std::string progress = "auto";               // auto, line, json, none
+  std::string memory = "auto";  // --memory
+  std::string tmp;              // --tmp; default: the output's directory
+  std::string maxTemp = "auto";    // --max-temp
+  std::string report;              // --report FILE
+  std::string progress = "auto";   // auto, line, json, none
   std::string texture, textureAt = "corners";  // --texture, --texture-at
-  int threads = 0;                             // 0: all cores
+  int threads = 0;                 // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
 };
@@ -52,11 +52,12 @@ void printReport(const nlohmann::json& r, const Options& o) {
                seconds > 0 ? withSeparators(uint64_t(double(input) / seconds)) : "-");
   }
   const auto& p = r["points"];
-  fmt::print("  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
-             withSeparators(p["used"].get<uint64_t>()),
-             withSeparators(p["duplicates_merged"].get<uint64_t>()),
-             withSeparators(p["outliers_removed"].get<uint64_t>()),
-             withSeparators(p["non_finite_dropped"].get<uint64_t>()));
+  fmt::print(
+      "  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
+      withSeparators(p["used"].get<uint64_t>()),
+      withSeparators(p["duplicates_merged"].get<uint64_t>()),
+      withSeparators(p["outliers_removed"].get<uint64_t>()),
+      withSeparators(p["non_finite_dropped"].get<uint64_t>()));
   fmt::print(
       "  normals: {} from the input, {} estimated, {} flipped to agree with their neighbours\n",
       withSeparators(r["normals"]["from_input"].get<uint64_t>()),
@@ -71,8 +72,8 @@ void printReport(const nlohmann::json& r, const Options& o) {
   const uint64_t fileChunks = f["chunks"].get<uint64_t>();
   fmt::print("  size: {} in {} chunk{}: {:.2f} bytes/leaf, {:.3f} bytes/point\n",
              byteSize(f["bytes_without_metadata"].get<uint64_t>()), fileChunks,
-             fileChunks == 1 ? "" : "s", f["bytes_per_leaf"].get<double>(),
-             f["bytes_per_point"].get<double>());
+             fileChunks == 1 ? "" : "s",
+             f["bytes_per_leaf"].get<double>(), f["bytes_per_point"].get<double>());
   if (r.contains("out_of_core")) {
     const auto& c = r["out_of_core"];
     const uint64_t chunks = c["chunks"].get<uint64_t>();
@@ -197,9 +198,9 @@ int run(Options& o) {
       throw FileError(o.output, std::nullopt, "is also an input");
   }
   const ProgressMode mode =
-      o.progress == "auto"
-          ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line : ProgressMode::None)
-          : named(kProgressNames, o.progress, "--progress", "auto, ");
+      o.progress == "auto" ? (isatty(fileno(stderr)) && !o.quiet ? ProgressMode::Line
+                                                                  : ProgressMode::None)
+                           : named(kProgressNames, o.progress, "--progress", "auto, ");
   if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.report.empty() && std::filesystem::is_directory(o.report))
     throw FileError(o.report, std::nullopt, "is a directory (--report wants a file name)");
@@ -251,8 +252,7 @@ int run(Options& o) {
     };
   nlohmann::json report;
   try {
-    report =
-        convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
+    report = convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
@@ -313,10 +313,9 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--zstd-level", o->build.zstdLevel, "zstd compression level of chunks")
       ->capture_default_str();
-  c->add_flag(
-      "--keep-outliers", o->keepOutliers,
-      "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
-      "instead of removing them");
+  c->add_flag("--keep-outliers", o->keepOutliers,
+              "Keep stray points (isolated, in small separate groups, or far sparser than the scan) "
+              "instead of removing them");
   c->add_option("--stray-group", o->build.strayGroupPoints,
                 "Separate groups of fewer points are strays (birds, multipath, dust)")
       ->capture_default_str()
@@ -378,7 +377,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");
   c->add_flag("-q,--quiet", o->quiet, "No progress on stderr");
-  c->callback([o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
+  c->callback(
+      [o, &exitCode] { exitCode = runGuarded("convert", [&] { return run(*o); }); });
 }
 
 }  // namespace iso::cli
