@@ -20,9 +20,12 @@
 
 #include <glm/geometric.hpp>
 
+#include "iso/reader.h"
+#include "iso/surface_model.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/io/readers.h"
 #include "tests/cli_support.h"
+#include "tests/io/las_file.h"
 #include "tests/pipeline/same_points.h"
 
 namespace iso {
@@ -279,9 +282,9 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
 }
 
 TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
-  // Real scans with normals (the kitten) and 16-bit colors (the lion, when ../shared/data is
-  // there), and a sphere 5,000 km from the origin: every point back within the precision asked
-  // for, one to one.
+  // Real scans with normals (the kitten) and colors (the lion, 8-bit codes times 256, when
+  // ../shared/data is there), and a sphere 5,000 km from the origin: every point back within the
+  // precision asked for, one to one.
   const auto gen = runIso("gen sphere -n 20000 --seed 4 --offset 500000,4900000,1200 -o " +
                           quoted(dir_ / "far.ply"));
   ASSERT_EQ(gen.exitCode, 0) << gen.err;
@@ -300,7 +303,7 @@ TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   std::vector<Case> cases = {
       {kitten, 24, 0}, {dir_ / "colored.ply", 16, 0}, {dir_ / "far.ply", 30, 0}};
   const std::filesystem::path lion = std::filesystem::path(ISO_SHARED_DATA_DIR) / "lion_rgb.las";
-  if (std::filesystem::exists(lion)) cases.push_back({lion, 20, 1});  // 16-bit colors
+  if (std::filesystem::exists(lion)) cases.push_back({lion, 20, 0});  // read as 8-bit codes
   for (const Case& c : cases) {
     SCOPED_TRACE(c.input.string());
     const std::string iso = quoted(dir_ / "k.iso"), ply = quoted(dir_ / "k.ply");
@@ -1095,6 +1098,153 @@ TEST_F(CliPipeline, aShellSeesStatus143WhenAConversionIsKilledAndNoneWhenItIgnor
   ASSERT_TRUE(WIFEXITED(status)) << status;
   EXPECT_EQ(WEXITSTATUS(status), 0) << test::slurp(dir_ / "err");
   EXPECT_EQ(runIso("verify " + quoted(dir_ / "out.iso")).exitCode, 0);
+}
+
+// The points as LAS (millimetre integers around a UTM-like offset) with colors (red, green, blue)
+// of each point as stored, and VLRs and EVLRs.
+struct LasScan {
+  test::LasSpec spec;
+  PointCloud expected;  // the positions the file holds, in double
+};
+
+LasScan lasOf(const PointCloud& points, int minor, int format,
+              const std::function<std::array<uint16_t, 3>(size_t)>& color) {
+  LasScan scan;
+  scan.spec = {.minor = minor,
+               .format = format,
+               .scale = glm::dvec3(1e-4),
+               .offset = {515000.0, 4918000.0, 2000.0}};
+  for (size_t i = 0; i < points.size(); ++i) {
+    const glm::dvec3 q = (points.positions[i] * 10.0) / scan.spec.scale;  // a 10 m sphere
+    const std::array<uint16_t, 3> c = color(i);
+    scan.spec.points.push_back({int32_t(std::lround(q.x)), int32_t(std::lround(q.y)),
+                                int32_t(std::lround(q.z)), c[0], c[1], c[2]});
+    const test::LasPoint& p = scan.spec.points.back();
+    scan.expected.positions.push_back(glm::dvec3(p.x, p.y, p.z) * scan.spec.scale +
+                                      scan.spec.offset);
+  }
+  return scan;
+}
+
+constexpr std::string_view kUtm12Wkt =
+    R"(PROJCS["WGS 84 / UTM zone 12N",GEOGCS["WGS 84",DATUM["WGS_1984",SPHEROID["WGS 84",)"
+    R"(6378137,298.257223563]],PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433]],)"
+    R"(PROJECTION["Transverse_Mercator"],PARAMETER["central_meridian",-111],UNIT["metre",1],)"
+    R"(AUTHORITY["EPSG","32612"]])";
+
+// The coordinate system of LAS inputs goes into the file's metadata (the first input's, with the
+// inputs that declare another named), is said while converting and shown by `iso info`.
+TEST_F(CliPipeline, theCoordinateSystemOfLasInputsIsKeptAndShown) {
+  const PointCloud sphere = readPointFile(dir_ / "sphere.ply");
+  PointCloud first, second;
+  for (size_t i = 0; i < sphere.size(); ++i)
+    (i % 2 == 0 ? first : second).positions.push_back(sphere.positions[i]);
+  const auto none = [](size_t) { return std::array<uint16_t, 3>{}; };
+  LasScan a = lasOf(first, 4, 6, none);
+  a.spec.vlrs = {test::lasGeoAsciiRecord("WGS 84 / UTM zone 12N|"),
+                 test::lasGeoKeysRecord({{3072, 0, 1, 32612}, {3073, 34737, 22, 0}})};
+  a.spec.evlrs = {test::lasWktRecord(kUtm12Wkt)};
+  LasScan b = lasOf(second, 2, 1, none);
+  b.spec.vlrs = {test::lasGeoKeysRecord({{3072, 0, 1, 32613}})};
+  test::writeFile(dir_ / "a.las", test::makeLas(a.spec).bytes());
+  test::writeFile(dir_ / "b.las", test::makeLas(b.spec).bytes());
+  const std::string a_las = (dir_ / "a.las").string(), b_las = (dir_ / "b.las").string();
+
+  auto run = runIso("convert --progress none " + quoted(dir_ / "a.las") + " " +
+                    quoted(dir_ / "b.las") + " -o " + quoted(dir_ / "ab.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.err.find("coordinate system: EPSG:32612, \"WGS 84 / UTM zone 12N\", OGC WKT (" +
+                         std::to_string(kUtm12Wkt.size()) + " characters), from " + a_las +
+                         " (kept in the file's metadata)"),
+            std::string::npos)
+      << run.err;
+  EXPECT_NE(run.err.find("warning: " + b_las + " declares another coordinate system than " + a_las),
+            std::string::npos)
+      << run.err;
+  run = runIso("info --json " + quoted(dir_ / "ab.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json info = nlohmann::json::parse(run.out);
+  const nlohmann::json expected = {
+      {"wkt", kUtm12Wkt},
+      {"epsg", 32612},
+      {"name", "WGS 84 / UTM zone 12N"},
+      {"source", "VLR LASF_Projection 34735 (GeoTIFF keys), EVLR LASF_Projection 2112 (OGC WKT)"},
+      {"input", a_las},
+      {"differing_inputs", {b_las}}};
+  EXPECT_EQ(info["crs"], expected);
+  EXPECT_EQ(info["metadata"]["crs"], expected);
+  EXPECT_EQ(
+      info["metadata"]["inputs"][1]["crs"],
+      nlohmann::json({{"epsg", 32613}, {"source", "VLR LASF_Projection 34735 (GeoTIFF keys)"}}));
+  run = runIso("info " + quoted(dir_ / "ab.iso"));
+  EXPECT_NE(run.out.find("crs         EPSG:32612, \"WGS 84 / UTM zone 12N\", OGC WKT"),
+            std::string::npos)
+      << run.out;
+
+  // Quiet: the warning only. One input: no warning, nothing differs. A PLY: no coordinate system.
+  run = runIso("convert -q -f " + quoted(dir_ / "b.las") + " " + quoted(dir_ / "a.las") + " -o " +
+               quoted(dir_ / "ab.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(run.err, "warning: " + a_las + " declares another coordinate system than " + b_las +
+                         ": the file's \"crs\" is the first one's (each input's is in its "
+                         "\"inputs\" entry)\n");
+  run = runIso("convert --progress none -f " + quoted(dir_ / "a.las") + " -o " +
+               quoted(dir_ / "a.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(run.err.find("warning"), std::string::npos) << run.err;
+  EXPECT_FALSE(
+      nlohmann::json::parse(runIso("info --json " + quoted(dir_ / "a.iso")).out)["crs"].contains(
+          "differing_inputs"));
+  ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"))
+                .exitCode,
+            0);
+  const nlohmann::json plain =
+      nlohmann::json::parse(runIso("info --json " + quoted(dir_ / "s.iso")).out);
+  EXPECT_TRUE(plain["crs"].is_null());
+  EXPECT_FALSE(plain["metadata"].contains("crs"));
+}
+
+// LAS colors stored as 8-bit codes times 256 come back as those codes: in the surface's corners
+// (white is 255, not 254) and in the kept points.
+TEST_F(CliPipeline, eightBitColorsTimes256ComeBackExactlyInTheSurfaceAndKeptPoints) {
+  const PointCloud sphere = readPointFile(dir_ / "sphere.ply");
+  const auto code = [](size_t i, int channel) { return uint16_t((i * (1 + 40 * channel)) % 256); };
+  LasScan varied = lasOf(sphere, 2, 2, [&](size_t i) {
+    return std::array<uint16_t, 3>{uint16_t(code(i, 0) * 256), uint16_t(code(i, 1) * 256),
+                                   uint16_t(code(i, 2) * 256)};
+  });
+  for (size_t i = 0; i < sphere.size(); ++i)
+    varied.expected.colors.emplace_back(srgb8ToLinear(uint8_t(code(i, 0))),
+                                        srgb8ToLinear(uint8_t(code(i, 1))),
+                                        srgb8ToLinear(uint8_t(code(i, 2))));
+  test::writeFile(dir_ / "varied.las", test::makeLas(varied.spec).bytes());
+  auto run = runIso("convert -q --keep-points --point-bits 30 " + quoted(dir_ / "varied.las") +
+                    " -o " + quoted(dir_ / "varied.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  ASSERT_EQ(
+      runIso("export " + quoted(dir_ / "varied.iso") + " --points " + quoted(dir_ / "kept.ply"))
+          .exitCode,
+      0);
+  test::expectSamePoints(varied.expected, readPointFile(dir_ / "kept.ply"), 1e-6, 0);
+
+  const LasScan white = lasOf(sphere, 4, 7, [](size_t) {
+    return std::array<uint16_t, 3>{65280, 65280, 65280};
+  });
+  test::writeFile(dir_ / "white.las", test::makeLas(white.spec).bytes());
+  run = runIso("convert --progress none " + quoted(dir_ / "white.las") + " -o " +
+               quoted(dir_ / "white.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.err.find("its colors are 8-bit codes times 256 (every low byte 0): read as 8-bit "
+                         "codes"),
+            std::string::npos)
+      << run.err;
+  const SurfaceModel surface = SurfaceModel::load(Reader::open(dir_ / "white.iso"));
+  ASSERT_TRUE(surface.hasColors());
+  ASSERT_FALSE(surface.corners().color.empty());
+  size_t notWhite = 0;
+  for (const std::array<float, 3>& color : surface.corners().color)
+    for (float channel : color) notWhite += linearToSrgb8(channel) != 255 ? 1 : 0;
+  EXPECT_EQ(notWhite, 0u);
 }
 
 }  // namespace

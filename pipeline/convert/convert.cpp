@@ -318,6 +318,28 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
 
 }  // namespace
 
+nlohmann::json coordinateSystemOf(const nlohmann::json& inputs) {
+  // Two inputs declare the same system when these agree (a name or the records it came from may
+  // differ).
+  const auto identity = [](const nlohmann::json& crs) {
+    nlohmann::json id;
+    for (const char* key : {"wkt", "epsg", "vertical_epsg"})
+      id[key] = crs.value(key, nlohmann::json());
+    return id;
+  };
+  nlohmann::json crs;
+  for (const nlohmann::json& input : inputs) {
+    if (!input.contains("crs")) continue;
+    if (crs.is_null()) {
+      crs = input["crs"];
+      crs["input"] = input.value("file", "");
+    } else if (identity(input["crs"]) != identity(crs)) {
+      crs["differing_inputs"].push_back(input.value("file", ""));
+    }
+  }
+  return crs;
+}
+
 nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source) {
   return convertWith(
@@ -543,10 +565,13 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     for (const char* key :
          {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core"})
       r.erase(key);
-    return nlohmann::json{{"generator", std::string("iso ") + ISO_VERSION},
-                          {"inputs", source.inputs},
-                          {"parameters", optionsJson(options)},
-                          {"report", r}};
+    nlohmann::json m{{"generator", std::string("iso ") + ISO_VERSION},
+                     {"inputs", source.inputs},
+                     {"parameters", optionsJson(options)},
+                     {"report", r}};
+    if (nlohmann::json crs = coordinateSystemOf(source.inputs); !crs.is_null())
+      m["crs"] = std::move(crs);
+    return m;
   };
   write.metadata = metadata(report).dump();
   write.release = [&] {

@@ -24,8 +24,9 @@ class ConvertError : public std::runtime_error {
 
 // Where the points came from, for the report and the file's metadata.
 struct ConvertSource {
-  nlohmann::json inputs =
-      nlohmann::json::array();    // e.g. [{"file": ..., "format": ..., "points": ...}]
+  // e.g. [{"file": ..., "format": ..., "points": ..., "crs": {...}}]; "crs" (the input's
+  // coordinate system: "wkt", "epsg", "vertical_epsg", "name", "source") only where it has one.
+  nlohmann::json inputs = nlohmann::json::array();
   double readSeconds = 0.0;       // reported as the "read" stage
   uint64_t nonFiniteDropped = 0;  // points the readers dropped
   // Called when a stage ends, with its name and duration.
@@ -36,10 +37,16 @@ struct ConvertSource {
   std::function<void(PointCloud strays)> onStrays;
 };
 
+// The coordinate system of a conversion's inputs (ConvertSource::inputs): the first input's that
+// has one, with "input" (its file) added and, when other inputs declare a different one,
+// "differing_inputs" (their files; each input's own is in its entry). Null when no input has one.
+nlohmann::json coordinateSystemOf(const nlohmann::json& inputs);
+
 // Convert the points into the .iso file at output (written atomically). Returns the report. The
-// file's metadata holds it under "report" (with "inputs", "parameters" and "generator") without
-// the parts that vary from run to run (stage times, points/s, peak memory): the output bytes
-// depend only on the input and the options.
+// file's metadata holds it under "report" (with "inputs", "parameters", "generator" and, when an
+// input declares one, "crs": coordinateSystemOf(inputs)) without the parts that vary from run to
+// run (stage times, points/s, peak memory): the output bytes depend only on the input and the
+// options.
 nlohmann::json convertToIso(const PointCloud& cloud, const std::filesystem::path& output,
                             const BuildOptions& options, const ConvertSource& source = {});
 

@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <climits>
 #include <cstring>
+#include <limits>
 #include <utility>
 
 #include "iso/error.h"
@@ -114,6 +115,24 @@ uint64_t InputStream::skip(uint64_t n) {
     skipped += take;
   }
   return skipped;
+}
+
+void InputStream::seek(uint64_t offset) {
+  if (offset >= base_ && offset <= base_ + end_) {
+    begin_ = static_cast<size_t>(offset - base_);
+    return;
+  }
+  errno = 0;
+  if (offset > uint64_t(std::numeric_limits<z_off_t>::max()) ||
+      gzseek(asGz(file_), static_cast<z_off_t>(offset), SEEK_SET) < 0) {
+    int status = Z_OK;
+    const char* message = gzerror(asGz(file_), &status);
+    failAt(offset,
+           std::string("cannot seek: ") + (status != Z_OK ? message : std::strerror(errno)));
+  }
+  base_ = offset;
+  begin_ = end_ = 0;
+  isAtEnd_ = false;
 }
 
 bool InputStream::readExact(void* destination, size_t n) {

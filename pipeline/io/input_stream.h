@@ -42,6 +42,9 @@ class InputStream {
   void consume(size_t n) { begin_ += n; }
   // Read and drop n bytes; returns how many there were (fewer only at the end of the file).
   uint64_t skip(uint64_t n);
+  // Continue at the given offset of the uncompressed stream: plain files seek, gzip streams
+  // decompress up to it (a reader past the end then finds no bytes there).
+  void seek(uint64_t offset);
   // Copy the next n bytes to destination; false (having read what there was) if the file ends.
   bool readExact(void* destination, size_t n);
 

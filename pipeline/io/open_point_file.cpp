@@ -2,6 +2,9 @@
 #include <algorithm>
 #include <cctype>
 #include <cstring>
+#include <iterator>
+#include <optional>
+#include <string_view>
 
 #include "iso/error.h"
 #include "pipeline/io/input_stream.h"
@@ -13,8 +16,14 @@ namespace {
 
 constexpr const char* kSupportedFormats =
     "supported: PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
-    ".csv), each optionally "
-    "gzip-compressed (.gz)";
+    ".csv .asc .neu .xyzrgb .xyzn, or any name with --columns), each optionally gzip-compressed "
+    "(.gz)";
+
+// Extensions always read as text (CloudCompare's ASCII cloud names among them).
+constexpr std::string_view kTextExtensions[] = {".xyz", ".txt", ".pts",    ".csv",
+                                                ".asc", ".neu", ".xyzrgb", ".xyzn"};
+
+enum class Format : uint8_t { kPly, kLas, kDraco, kPcd, kText };
 
 // Reservations follow the header's count only up to this many points, so that a hostile count
 // cannot allocate more than the file's content justifies.
@@ -39,26 +48,67 @@ std::string io::lowercaseExtension(const std::filesystem::path& path) {
   return extension;
 }
 
-std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
-                                           const ReadOptions& options) {
-  io::InputStream in(path);
-  const std::span<const std::byte> head = in.peek(5);
-  if (startsWith(head, "ply\n") || startsWith(head, "ply\r\n"))
-    return io::makePlyReader(std::move(in), options);
-  if (startsWith(head, "LASF")) return io::makeLasReader(std::move(in));
-  if (startsWith(head, "DRACO")) return io::makeDracoReader(std::move(in));
-  const std::string extension = io::lowercaseExtension(path);
+namespace {
+
+std::optional<Format> formatBySignature(io::InputStream& in) {
+  const std::span<const std::byte> head = in.peek(8);
+  if (startsWith(head, "ply\n") || startsWith(head, "ply\r\n")) return Format::kPly;
+  if (startsWith(head, "LASF")) return Format::kLas;
+  if (startsWith(head, "DRACO")) return Format::kDraco;
+  if (startsWith(head, "ASTM-E57")) throw FileError(in.name(), 0, io::kE57NotSupported);
+  return std::nullopt;
+}
+
+// A file of an unknown extension that is not text: what was tried and why each failed.
+[[noreturn]] void refuseUnknown(const io::InputStream& in, const std::string& extension,
+                                const std::string& whyNotText) {
+  const std::string what = extension.empty() ? "a name without extension" : "'" + extension + "'";
+  throw FileError(
+      in.name(), std::nullopt,
+      "unknown point file format (" + what +
+          "): it is not PLY (no 'ply' line first), LAS (no LASF signature), Draco (no DRACO "
+          "signature), E57 (no ASTM-E57 signature) or PCD (no PCD header), nor text (" +
+          whyNotText + "); " + kSupportedFormats);
+}
+
+// The format by signature, then by extension, then (a name of no known extension) by content.
+Format chooseFormat(io::InputStream& in, const ReadOptions& options) {
+  if (const std::optional<Format> format = formatBySignature(in)) return *format;
+  const std::string extension = io::lowercaseExtension(in.path());
   if (extension == ".laz") throw FileError(in.name(), std::nullopt, io::kLazNotSupported);
+  if (extension == ".e57") throw FileError(in.name(), 0, io::kE57NotSupported);
+  if (extension == ".pcd" || io::looksLikePcd(in)) return Format::kPcd;
+  if (!options.columns.empty()) return Format::kText;
   if (extension == ".ply")
     throw FileError(in.name(), 0, "not a PLY file: it does not start with 'ply'");
   if (extension == ".las") throw FileError(in.name(), 0, "not a LAS file: no LASF signature");
-  if (extension == ".pcd") return io::makePcdReader(std::move(in));
   if (extension == ".drc") throw FileError(in.name(), 0, "not a Draco file: no DRACO signature");
-  if (extension == ".xyz" || extension == ".txt" || extension == ".pts" || extension == ".csv")
-    return io::makeTextReader(std::move(in), options);
-  const std::string what = extension.empty() ? "a name without extension" : "'" + extension + "'";
-  throw FileError(in.name(), std::nullopt,
-                  "unknown point file format: " + what + " (" + kSupportedFormats + ")");
+  if (std::find(std::begin(kTextExtensions), std::end(kTextExtensions), extension) !=
+      std::end(kTextExtensions))
+    return Format::kText;
+  if (const std::optional<std::string> whyNot = io::whyNotText(in))
+    refuseUnknown(in, extension, *whyNot);
+  return Format::kText;
+}
+
+}  // namespace
+
+std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
+                                           const ReadOptions& options) {
+  io::InputStream in(path);
+  switch (chooseFormat(in, options)) {
+    case Format::kPly:
+      return io::makePlyReader(std::move(in), options);
+    case Format::kLas:
+      return io::makeLasReader(std::move(in));
+    case Format::kDraco:
+      return io::makeDracoReader(std::move(in));
+    case Format::kPcd:
+      return io::makePcdReader(std::move(in));
+    case Format::kText:
+      break;
+  }
+  return io::makeTextReader(std::move(in), options);
 }
 
 PointCloud readPointFile(const std::filesystem::path& path, const ReadOptions& options,

@@ -1,5 +1,6 @@
 // The LAS reader, versions 1.0–1.4, point data formats 0–10 (ASPRS LAS Specification 1.4 R15,
-// section 2.4 "Public Header Block" and 2.6–2.16 "Point Data Records"; all fields little endian).
+// section 2.4 "Public Header Block" and 2.6–2.16 "Point Data Records"; all fields little endian),
+// with the coordinate system of its VLRs and EVLRs (las_records.h).
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -7,9 +8,11 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "iso/error.h"
 #include "pipeline/io/color_table.h"
+#include "pipeline/io/las_records.h"
 #include "pipeline/io/little_endian.h"
 #include "pipeline/io/non_finite.h"
 #include "pipeline/io/point_readers.h"
@@ -22,11 +25,14 @@ constexpr size_t kVersionMajorAt = 24;
 constexpr size_t kVersionMinorAt = 25;
 constexpr size_t kHeaderSizeAt = 94;
 constexpr size_t kPointDataOffsetAt = 96;
+constexpr size_t kVlrCountAt = 100;
 constexpr size_t kPointFormatAt = 104;
 constexpr size_t kRecordLengthAt = 105;
 constexpr size_t kLegacyPointCountAt = 107;
 constexpr size_t kScaleAt = 131;       // x y z doubles
 constexpr size_t kOffsetAt = 155;      // x y z doubles
+constexpr size_t kEvlrStartAt = 235;   // LAS 1.4: offset of the first EVLR
+constexpr size_t kEvlrCountAt = 243;   // LAS 1.4: number of EVLRs
 constexpr size_t kPointCountAt = 247;  // LAS 1.4: 64-bit number of point records
 
 // Public header of LAS 1.0–1.3 (1.3 appends the waveform start, which is not read, so its absence
@@ -55,11 +61,17 @@ glm::dvec3 loadVector(const std::byte* p) {
   return {load<double>(p), load<double>(p + 8), load<double>(p + 16)};
 }
 
+// How the 16-bit RGB fields of a file hold its colors.
+enum class ColorCoding : uint8_t { kEight, kEightTimes256, kSixteen };
+
 struct LasHeader {
   int versionMajor = 1;
   int versionMinor = 2;
   uint64_t headerSize = 0;
   uint64_t pointDataOffset = 0;
+  uint32_t vlrCount = 0;
+  uint64_t evlrStart = 0;  // LAS 1.4
+  uint32_t evlrCount = 0;  // LAS 1.4
   int pointFormat = 0;
   uint64_t recordLength = 0;
   uint64_t pointCount = 0;
@@ -105,6 +117,7 @@ LasHeader readHeader(InputStream& in, bool isLazByName) {
   h.versionMinor = static_cast<int>(p[kVersionMinorAt]);
   h.headerSize = load<uint16_t>(p + kHeaderSizeAt);
   h.pointDataOffset = load<uint32_t>(p + kPointDataOffsetAt);
+  h.vlrCount = load<uint32_t>(p + kVlrCountAt);
   const int rawFormat = static_cast<int>(p[kPointFormatAt]);
   h.pointFormat = rawFormat & ~kCompressedFormatBits;
   h.recordLength = load<uint16_t>(p + kRecordLengthAt);
@@ -121,6 +134,8 @@ LasHeader readHeader(InputStream& in, bool isLazByName) {
     // 6–10; the 64-bit count is authoritative when set.
     const uint64_t count = load<uint64_t>(bytes.data() + kPointCountAt);
     if (count != 0) h.pointCount = count;
+    h.evlrStart = load<uint64_t>(bytes.data() + kEvlrStartAt);
+    h.evlrCount = load<uint32_t>(bytes.data() + kEvlrCountAt);
   }
   return h;
 }
@@ -143,16 +158,20 @@ class LasPointReader final : public PointReader {
   LasPointReader(InputStream in, bool isLazByName)
       : in_(std::move(in)), header_(readHeader(in_, isLazByName)) {
     checkAgainstFileSize(in_, header_);
+    info_.path = in_.path();
+    readCoordinateSystem();
     const uint64_t toPointData = header_.pointDataOffset - in_.offset();
     if (in_.skip(toPointData) != toPointData)
       in_.fail(fmt::format("file ends before the point data at byte {}", header_.pointDataOffset));
     rgbAt_ = kRgbAt[header_.pointFormat];
-    info_.path = in_.path();
     info_.format = fmt::format("las {}.{} format {}", header_.versionMajor, header_.versionMinor,
                                header_.pointFormat);
     info_.declaredPoints = header_.pointCount;
     info_.hasColors = rgbAt_ != 0;
-    if (info_.hasColors) hasEightBitColors_ = !probeSixteenBitColors();
+    if (info_.hasColors) colorCoding_ = probeColorCoding();
+    if (colorCoding_ == ColorCoding::kEightTimes256)
+      info_.notes.push_back(
+          "its colors are 8-bit codes times 256 (every low byte 0): read as 8-bit codes");
   }
 
   const PointFileInfo& info() const override { return info_; }
@@ -176,21 +195,47 @@ class LasPointReader final : public PointReader {
   }
 
  private:
-  // Many writers store 8-bit colors in the 16-bit RGB fields. Decide per file: when no channel of
-  // the first (up to) 64k points exceeds 255, the values are read as 8-bit; otherwise as 16-bit.
-  // Later 8-bit values above 255 are clamped.
-  bool probeSixteenBitColors() {
+  // The coordinate system from the VLRs (between the header and the point data), else from the
+  // EVLRs of LAS 1.4 (after the point data). Leaves the stream at the end of the VLRs.
+  void readCoordinateSystem() {
+    if (in_.skip(header_.headerSize) != header_.headerSize)
+      in_.fail(fmt::format("file ends inside the {}-byte header", header_.headerSize));
+    LasCoordinateRecords records;
+    readLasVlrs(in_, header_.pointDataOffset, header_.vlrCount, records, info_.notes);
+    if (!records.hasWkt() && header_.evlrCount > 0) {
+      const uint64_t maxPoints =
+          (std::numeric_limits<uint64_t>::max() - header_.pointDataOffset) / header_.recordLength;
+      const uint64_t pointDataEnd =
+          header_.pointCount > maxPoints
+              ? std::numeric_limits<uint64_t>::max()
+              : header_.pointDataOffset + header_.pointCount * header_.recordLength;
+      readLasEvlrs(in_.path(), header_.evlrStart, header_.evlrCount, pointDataEnd, records,
+                   info_.notes);
+    }
+    info_.crs = records.coordinateSystem(info_.notes);
+  }
+
+  // Many writers store 8-bit colors in the 16-bit RGB fields, as they are (0–255) or times 256
+  // (0–65280, every low byte 0). Decide per file from the channels of the first (up to) 64k
+  // points: none above 255 is 8-bit; every low byte 0 is 8-bit times 256; otherwise 16-bit.
+  ColorCoding probeColorCoding() {
     const uint64_t wanted =
         std::min<uint64_t>({header_.pointCount, kColorProbePoints,
                             std::max<uint64_t>(1, kColorProbeBytes / header_.recordLength)});
     const std::span<const std::byte> bytes = in_.peek(wanted * header_.recordLength);
     const size_t count = std::min<size_t>(wanted, bytes.size() / header_.recordLength);
+    uint16_t largest = 0;
+    uint16_t lowBits = 0;
     for (size_t i = 0; i < count; ++i) {
       const std::byte* rgb = bytes.data() + i * header_.recordLength + rgbAt_;
-      if (std::max({load<uint16_t>(rgb), load<uint16_t>(rgb + 2), load<uint16_t>(rgb + 4)}) > 255)
-        return true;
+      for (int channel = 0; channel < 3; ++channel) {
+        const uint16_t value = load<uint16_t>(rgb + 2 * channel);
+        largest = std::max(largest, value);
+        lowBits |= value & 0xFFu;
+      }
     }
-    return false;
+    if (largest <= 255) return ColorCoding::kEight;
+    return lowBits == 0 ? ColorCoding::kEightTimes256 : ColorCoding::kSixteen;
   }
 
   // Decode `count` records into out, dropping non-finite positions; returns the points appended.
@@ -198,8 +243,15 @@ class LasPointReader final : public PointReader {
     const std::array<float, 65536>& table = srgb16ToLinearTable();
     const auto channel = [&](const std::byte* p) {
       const uint16_t value = load<uint16_t>(p);
-      return hasEightBitColors_ ? table[size_t{std::min<uint16_t>(value, 255)} * 257]
-                                : table[value];
+      switch (colorCoding_) {
+        case ColorCoding::kEight:  // later values above 255 are clamped
+          return table[size_t{std::min<uint16_t>(value, 255)} * 257];
+        case ColorCoding::kEightTimes256:  // later values with low bits are rounded
+          return table[std::min<size_t>((size_t{value} + 128) >> 8, 255) * 257];
+        case ColorCoding::kSixteen:
+          break;
+      }
+      return table[value];
     };
     const size_t first = out.positions.size();
     size_t written = first;
@@ -229,7 +281,7 @@ class LasPointReader final : public PointReader {
   InputStream in_;
   LasHeader header_;
   size_t rgbAt_ = 0;
-  bool hasEightBitColors_ = false;
+  ColorCoding colorCoding_ = ColorCoding::kSixteen;
   uint64_t pointsDone_ = 0;
   PointFileInfo info_;
   ReadStats stats_;

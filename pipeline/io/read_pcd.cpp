@@ -419,7 +419,7 @@ bool parsePackedColor(std::string_view text, uint32_t& bits) {
     return true;
   }
   float single = 0.0f;
-  if (!parseNumber(text, single)) return false;
+  if (!parseNumber(text, single) || std::isnan(single)) return false;  // a NaN's bits are lost
   bits = std::bit_cast<uint32_t>(single);
   return true;
 }
@@ -678,8 +678,8 @@ class PcdPointReader final : public PointReader {
       const auto slot = static_cast<Slot>(slotOfValue_[column]);
       const PcdField& field = header_.fields[static_cast<size_t>(header_.slotField[slot])];
       if (!parseSlotValue(slot, field.type, text, values[slot]))
-        in_.failLine(fmt::format("value {} (field '{}') is not a number: '{:.40}'", column + 1,
-                                 field.name, text));
+        in_.failLine(fmt::format("value {} (field '{}') is not a {}: '{:.40}'", column + 1,
+                                 field.name, slot == kPackedColor ? "color" : "number", text));
     }
     if (column != slotOfValue_.size())
       in_.failLine(fmt::format("expected {} values, found {}", slotOfValue_.size(), column));
@@ -724,6 +724,22 @@ class PcdPointReader final : public PointReader {
 };
 
 }  // namespace
+
+bool looksLikePcd(InputStream& in) {
+  const std::span<const std::byte> bytes = in.peek(4096);
+  std::string_view rest(reinterpret_cast<const char*>(bytes.data()),
+                        std::min<size_t>(bytes.size(), 4096));
+  while (!rest.empty()) {
+    const size_t end = std::min(rest.find('\n'), rest.size());
+    std::string_view line = rest.substr(0, end);
+    rest.remove_prefix(std::min(end + 1, rest.size()));
+    if (line.starts_with("# .PCD")) return true;
+    std::string_view keyword;
+    if (!nextField<isBlank>(line, keyword) || keyword.starts_with('#')) continue;
+    return keyword == "VERSION" || keyword == "FIELDS";
+  }
+  return false;
+}
 
 std::unique_ptr<PointReader> makePcdReader(InputStream in) {
   return std::make_unique<PcdPointReader>(std::move(in));

@@ -1,10 +1,17 @@
-// The reader of XYZ-like text files (.xyz .txt .pts .csv): one point per line, numbers separated by
-// blanks, commas or semicolons, in the columns of ReadOptions::columns or guessed from their count.
+// The reader of XYZ-like text files (.xyz .txt .pts .csv .asc .neu .xyzrgb .xyzn, and others whose
+// content is text): one point per line, numbers separated by blanks, commas or semicolons, in the
+// columns of ReadOptions::columns or guessed from their count, values and the extension; and the
+// check that tells a text point file by its content (whyNotText).
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "iso/error.h"
@@ -16,6 +23,10 @@
 
 namespace iso::io {
 namespace {
+
+// Rows sampled at the start of a file to guess its columns and color scale.
+constexpr size_t kSampleRows = 100;
+constexpr size_t kSampleBytes = size_t{64} << 10;
 
 enum Slot : int8_t { kSkip = -1, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kSlotCount };
 constexpr std::array<std::string_view, kSlotCount> kSlotNames = {"x",  "y", "z", "nx", "ny",
@@ -63,20 +74,45 @@ ColumnSpec parseColumnSpec(const InputStream& in, std::string_view text) {
   return spec;
 }
 
-ColumnSpec guessColumns(const InputStream& in, size_t count) {
-  switch (count) {
+// Whether the three columns from `first` hold 0–255 colors in every sampled row, some above 1 (a
+// unit normal has no component above 1).
+bool looksLikeColors(const std::vector<std::vector<double>>& rows, size_t first) {
+  bool isAboveOne = false;
+  for (const std::vector<double>& row : rows)
+    for (size_t column = first; column < first + 3; ++column) {
+      if (!(row[column] >= 0.0 && row[column] <= 255.0)) return false;
+      isAboveOne = isAboveOne || row[column] > 1.0;
+    }
+  return isAboveOne;
+}
+
+// The columns of a file without a spec, from the count of its first rows and, where the count
+// leaves a choice, from their values and the extension (specs/pipeline.md §19).
+std::string guessColumns(const InputStream& in, const std::vector<std::vector<double>>& rows) {
+  const std::string extension = lowercaseExtension(in.path());
+  switch (rows.front().size()) {
     case 3:
-      return parseColumnSpec(in, "x,y,z");
+      return "x,y,z";
+    case 4:
+      return "x,y,z,_";
     case 6:
-      return parseColumnSpec(in, "x,y,z,nx,ny,nz");
+      if (extension == ".xyzrgb" || (extension != ".xyzn" && looksLikeColors(rows, 3)))
+        return "x,y,z,r,g,b";
+      return "x,y,z,nx,ny,nz";
+    case 7:
+      if (looksLikeColors(rows, 4)) return "x,y,z,_,r,g,b";
+      break;
     case 9:
-      return parseColumnSpec(in, "x,y,z,nx,ny,nz,r,g,b");
+      if (looksLikeColors(rows, 3) && !looksLikeColors(rows, 6)) return "x,y,z,r,g,b,nx,ny,nz";
+      return "x,y,z,nx,ny,nz,r,g,b";
     default:
-      in.failLine(fmt::format(
-          "cannot guess the meaning of {} columns (known: 3 = x,y,z; 6 = with normals; 9 = with "
-          "normals and r,g,b): give them with --columns, e.g. x,y,z,_,r,g,b",
-          count));
+      break;
   }
+  in.failLine(fmt::format(
+      "cannot guess the meaning of {} columns (known: 3 = x,y,z; 4 = x,y,z and a value not read; "
+      "6 = with normals, or r,g,b of 0-255; 7 = x,y,z, a value, r,g,b of 0-255; 9 = with normals "
+      "and r,g,b): give them with --columns, e.g. x,y,z,_,r,g,b",
+      rows.front().size()));
 }
 
 bool isCommentOrBlank(std::string_view line) {
@@ -93,6 +129,41 @@ std::vector<std::string_view> splitFields(std::string_view line) {
   return fields;
 }
 
+// The numbers of a line; false when a field is not one.
+bool parseRow(std::string_view line, std::vector<double>& row) {
+  row.clear();
+  std::string_view field;
+  while (nextField<isBlankCommaOrSemicolon>(line, field)) {
+    double value = 0.0;
+    if (!parseNumber(field, value)) return false;
+    row.push_back(value);
+  }
+  return true;
+}
+
+// Rows of numbers to guess the columns from: the first data line (NaN where it is not numbers, so
+// that reading it names the field) and the rows of as many numbers that follow it in the stream's
+// buffer (peeked, not read), up to kSampleRows.
+std::vector<std::vector<double>> sampleRows(InputStream& in, std::string_view first) {
+  std::vector<double> row;
+  if (!parseRow(first, row))
+    row.assign(splitFields(first).size(), std::numeric_limits<double>::quiet_NaN());
+  std::vector<std::vector<double>> rows = {row};
+  const std::span<const std::byte> bytes = in.peek(kSampleBytes);
+  std::string_view rest(reinterpret_cast<const char*>(bytes.data()),
+                        std::min(bytes.size(), kSampleBytes));
+  while (rows.size() < kSampleRows) {
+    const size_t end = rest.find('\n');
+    if (end == std::string_view::npos) break;
+    const std::string_view line = rest.substr(0, end);
+    rest.remove_prefix(end + 1);
+    if (isCommentOrBlank(line)) continue;
+    if (!parseRow(line, row) || row.size() != rows.front().size()) break;
+    rows.push_back(row);
+  }
+  return rows;
+}
+
 class TextPointReader final : public PointReader {
  public:
   TextPointReader(InputStream in, const ReadOptions& options) : in_(std::move(in)) {
@@ -101,9 +172,16 @@ class TextPointReader final : public PointReader {
     if (!options.columns.empty()) spec_ = parseColumnSpec(in_, options.columns);
     findFirstDataLine();
     if (hasPendingLine_) {
-      const std::vector<std::string_view> fields = splitFields(pendingLine_);
-      if (options.columns.empty()) spec_ = guessColumns(in_, fields.size());
-      colorFullScale_ = firstLineColorScale(fields);
+      const std::vector<std::vector<double>> rows = sampleRows(in_, pendingLine_);
+      if (options.columns.empty()) {
+        const std::string guessed = guessColumns(in_, rows);
+        spec_ = parseColumnSpec(in_, guessed);
+        if (rows.front().size() > 3)
+          info_.notes.push_back(fmt::format(
+              "its columns are taken as {} (guessed from its first lines; --columns says others)",
+              guessed));
+      }
+      colorFullScale_ = colorScale(rows);
     }
     info_.hasNormals = spec_.hasNormals;
     info_.hasColors = spec_.hasColors;
@@ -159,13 +237,11 @@ class TextPointReader final : public PointReader {
     }
   }
 
-  // Colors are 0–255 when any color value of the first data line exceeds 1, else 0–1.
-  double firstLineColorScale(const std::vector<std::string_view>& fields) const {
-    for (size_t column = 0; column < std::min(fields.size(), spec_.columns.size()); ++column) {
-      double value = 0.0;
-      if (spec_.columns[column] >= kRed && parseNumber(fields[column], value) && value > 1.0)
-        return 255.0;
-    }
+  // Colors are 0–255 when any color value of the sampled rows exceeds 1, else 0–1.
+  double colorScale(const std::vector<std::vector<double>>& rows) const {
+    for (const std::vector<double>& row : rows)
+      for (size_t column = 0; column < std::min(row.size(), spec_.columns.size()); ++column)
+        if (spec_.columns[column] >= kRed && row[column] > 1.0) return 255.0;
     return 1.0;
   }
 
@@ -209,6 +285,47 @@ class TextPointReader final : public PointReader {
 };
 
 }  // namespace
+
+std::optional<std::string> whyNotText(InputStream& in) {
+  const std::span<const std::byte> bytes = in.peek(kSampleBytes);
+  const std::string_view head(reinterpret_cast<const char*>(bytes.data()),
+                              std::min(bytes.size(), kSampleBytes));
+  if (head.empty()) return "the file is empty";
+  if (const size_t zero = head.find('\0'); zero != std::string_view::npos)
+    return fmt::format("byte {} is 0: binary data, not text", zero);
+  const bool isWhole = bytes.size() <= kSampleBytes;  // else the last line may be cut
+  std::string_view rest = head;
+  size_t columns = 0, rows = 0, columnsLine = 0;
+  bool mayBeCount = true, mayBeHeader = true;
+  for (size_t number = 1; !rest.empty() && rows < kSampleRows; ++number) {
+    const size_t end = rest.find('\n');
+    if (end == std::string_view::npos && !isWhole) break;
+    const std::string_view line = rest.substr(0, end);
+    rest.remove_prefix(end == std::string_view::npos ? rest.size() : end + 1);
+    if (isCommentOrBlank(line)) continue;
+    const std::vector<std::string_view> fields = splitFields(line);
+    double value = 0.0;
+    const auto isNumber = [&](std::string_view field) { return parseNumber(field, value); };
+    const size_t numbers = size_t(std::count_if(fields.begin(), fields.end(), isNumber));
+    if (std::exchange(mayBeCount, false) && fields.size() == 1 && numbers == 1) continue;
+    if (std::exchange(mayBeHeader, false) && numbers == 0) continue;  // column names
+    if (numbers < fields.size()) {
+      const auto field = *std::find_if_not(fields.begin(), fields.end(), isNumber);
+      return fmt::format("line {}: '{:.40}' is not a number", number, field);
+    }
+    if (fields.size() < 3)
+      return fmt::format("line {} has {} number{}, fewer than x, y and z", number, fields.size(),
+                         fields.size() == 1 ? "" : "s");
+    if (rows > 0 && fields.size() != columns)
+      return fmt::format("line {} has {} numbers, line {} has {}", number, fields.size(),
+                         columnsLine, columns);
+    columns = fields.size();
+    columnsLine = number;
+    ++rows;
+  }
+  if (rows == 0) return fmt::format("no line of numbers in its first {} bytes", head.size());
+  return std::nullopt;
+}
 
 std::unique_ptr<PointReader> makeTextReader(InputStream in, const ReadOptions& options) {
   return std::make_unique<TextPointReader>(std::move(in), options);

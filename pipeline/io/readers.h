@@ -1,5 +1,6 @@
 // Readers of point files: PLY (ASCII, binary little and big endian), XYZ-like text with a column
-// spec, LAS 1.0–1.4, PCD (ascii, binary, binary_compressed) and Draco. Gzip-compressed files (.gz)
+// spec or guessed columns, LAS 1.0–1.4 (with its coordinate system), PCD (ascii, binary,
+// binary_compressed) and Draco. Gzip-compressed files (.gz)
 // are read transparently. Readers stream: they hand out points in batches, so memory does not grow
 // with the file (except Draco, which decodes a whole file at once).
 //
@@ -21,9 +22,15 @@ namespace iso {
 
 struct ReadOptions {
   // Column spec for text files: comma-separated names among x,y,z,nx,ny,nz,r,g,b and "_" (skip),
-  // e.g. "x,y,z,_,r,g,b". Empty: guessed from the column count (3: xyz, 6: xyz + normals,
-  // 7: xyz + intensity + rgb is NOT guessed; 9: xyz + normals + rgb). Colors in text files are
-  // 0–255 when any value in the first line exceeds 1, else 0–1.
+  // e.g. "x,y,z,_,r,g,b". Set, it also makes openPointFile read a file of any extension as text
+  // unless its signature or a PCD header says otherwise. Empty: guessed from the column count of
+  // the first (up to 100) rows and, where the count leaves a choice, their values (r,g,b of 0–255
+  // have a value above 1, unit normals none) and the extension: 3 = x,y,z; 4 = x,y,z,_;
+  // 6 = x,y,z,nx,ny,nz, or x,y,z,r,g,b for such values or a .xyzrgb file (never for .xyzn);
+  // 7 = x,y,z,_,r,g,b (Leica PTS) for such values in the last three, else not guessed;
+  // 9 = x,y,z,nx,ny,nz,r,g,b, or x,y,z,r,g,b,nx,ny,nz (CloudCompare) when only columns 4–6 hold
+  // such values; others are not guessed. A guess of more than 3 columns is said in a note.
+  // Colors in text files are 0–255 when any color value of those rows exceeds 1, else 0–1.
   std::string columns;
   // PLY: carry every vertex scalar property that is not read as a position, normal or color
   // (intensity, confidence, scalar_*, ...) as a float extra, in header order. Other formats have
@@ -31,13 +38,33 @@ struct ReadOptions {
   bool keepExtras = false;
 };
 
+// The coordinate reference system a point file declares. LAS files hold it in records of user
+// "LASF_Projection": the OGC WKT (record 2112) and the GeoTIFF keys (34735, with their ASCII
+// parameters in 34737), in VLRs or in LAS 1.4 EVLRs. Text is UTF-8 (other bytes become '?').
+struct CoordinateSystem {
+  std::string wkt;  // OGC WKT as stored; empty when the file has none
+  // ProjectedCSTypeGeoKey (3072), else GeographicTypeGeoKey (2048), else the authority of the
+  // WKT's root element (AUTHORITY["EPSG","n"] or ID["EPSG",n]).
+  std::optional<uint32_t> epsg;
+  std::optional<uint32_t> verticalEpsg;  // VerticalCSTypeGeoKey (4096)
+  // A short name: the GeoTIFF citation (PCSCitationGeoKey 3073, else GTCitationGeoKey 1026), else
+  // the WKT's first quoted name.
+  std::string name;
+  std::string source;  // the records it came from, e.g. "VLR LASF_Projection 2112 (OGC WKT)"
+};
+
 struct PointFileInfo {
   std::filesystem::path path;
-  std::string format;                 // "ply-ascii", "ply-binary-le", "ply-binary-be", "xyz", "las 1.2 format 2", ...
+  std::string
+      format;  // "ply-ascii", "ply-binary-le", "ply-binary-be", "xyz", "las 1.2 format 2", ...
   std::optional<uint64_t> declaredPoints;  // the header's count, when the format has one
   bool hasNormals = false;
   bool hasColors = false;
   std::vector<std::string> extraNames;  // the extras read() appends (empty unless keepExtras)
+  std::optional<CoordinateSystem> crs;  // when the file declares one
+  // What the reader decided that a user may want to know (columns guessed, a color coding
+  // detected, records ignored), one sentence each.
+  std::vector<std::string> notes;
 };
 
 struct ReadStats {
@@ -56,9 +83,12 @@ class PointReader {
   virtual const ReadStats& stats() const = 0;
 };
 
-// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF", "DRACO")
-// and then by extension (.pcd, .xyz, .txt, .pts, .csv). LAZ files are refused with a clear
-// message.
+// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF", "DRACO"),
+// then by extension (.pcd; .xyz .txt .pts .csv .asc .neu .xyzrgb .xyzn as text), then by content
+// again: a PCD header, or text (whyNotText in point_readers.h) for a name of another extension, or
+// of any extension with ReadOptions::columns. LAZ and E57 files (by signature or extension) are
+// refused with a message saying how to convert them; a file of no known format with one naming
+// each format tried and why the text check failed.
 std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
                                            const ReadOptions& options = {});
 

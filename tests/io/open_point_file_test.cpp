@@ -36,14 +36,119 @@ TEST(OpenPointFile, rejectsUnknownFormatsListingTheSupportedOnes) {
   test::TempDir dir;
   test::writeText(dir / "a.obj", "v 1 2 3\n");
   const std::string error = test::readError(dir / "a.obj");
-  EXPECT_NE(error.find("unknown point file format: '.obj'"), std::string::npos) << error;
-  EXPECT_NE(error.find("PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts .csv)"),
+  EXPECT_NE(error.find("unknown point file format ('.obj'): it is not PLY (no 'ply' line first), "
+                       "LAS (no LASF signature), Draco (no DRACO signature), E57 (no ASTM-E57 "
+                       "signature) or PCD (no PCD header), nor text (line 1: 'v' is not a number)"),
+            std::string::npos)
+      << error;
+  EXPECT_NE(error.find("PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt "
+                       ".pts .csv .asc .neu .xyzrgb .xyzn, or any name with --columns)"),
             std::string::npos)
       << error;
   test::writeText(dir / "b.ply", "1 2 3\n");
   EXPECT_NE(test::readError(dir / "b.ply").find("not a PLY file"), std::string::npos);
   test::writeText(dir / "c.las", "LAS");
   EXPECT_NE(test::readError(dir / "c.las").find("not a LAS file"), std::string::npos);
+}
+
+// Scanner and CloudCompare exports come as .asc, .neu, .xyzrgb and names of any other extension:
+// those known are text; others are read as text when their content is.
+TEST(OpenPointFile, readsTextOfOtherExtensionsByTheirContent) {
+  test::TempDir dir;
+  const std::vector<std::pair<std::string, std::string>> files = {
+      {"a.asc", "1 2 3\n4 5 6\n"},
+      {"b.neu", "1 2 3\n4 5 6\n"},
+      {"c.XYZRGB", "1 2 3 0 0 1\n4 5 6 1 0.5 0\n"},
+      {"d.dat", "X;Y;Z\n1;2;3\n4;5;6\n"},
+      {"scan", "# exported\n2\n1,2,3\n4,5,6\n"},
+      {"e.txt2", "1\t2\t3\r\n4\t5\t6\r\n"},
+      {"f.dat.gz", "1 2 3\n4 5 6\n"},
+  };
+  for (const auto& [name, text] : files) {
+    SCOPED_TRACE(name);
+    if (name.ends_with(".gz")) {
+      test::writeGzip(dir / name, Bytes().text(text).bytes());
+    } else {
+      test::writeText(dir / name, text);
+    }
+    const auto reader = openPointFile(dir / name);
+    EXPECT_EQ(reader->info().format, "xyz");
+    const PointCloud points = test::readInBatches(dir / name);
+    ASSERT_EQ(points.size(), 2u);
+    EXPECT_EQ(points.positions[0], glm::dvec3(1, 2, 3));
+    EXPECT_EQ(points.positions[1], glm::dvec3(4, 5, 6));
+    EXPECT_EQ(points.hasColors(), name == "c.XYZRGB");
+  }
+}
+
+// With --columns every file not recognized by its signature (PLY, LAS, Draco) or PCD header is
+// read as text, whatever its name.
+TEST(OpenPointFile, aColumnSpecReadsAnyExtensionAsText) {
+  test::TempDir dir;
+  test::writeText(dir / "a.obj", "v 1 2 3\nv 4 5 6\n");
+  test::writeText(dir / "b.ply", "1 2 3 9\n");
+  EXPECT_NE(test::readError(dir / "a.obj").find("unknown point file format"), std::string::npos);
+  const PointCloud obj = readPointFile(dir / "a.obj", {.columns = "_,x,y,z"});
+  ASSERT_EQ(obj.size(), 2u);
+  EXPECT_EQ(obj.positions[1], glm::dvec3(4, 5, 6));
+  EXPECT_NE(test::readError(dir / "b.ply").find("not a PLY file"), std::string::npos);
+  EXPECT_EQ(readPointFile(dir / "b.ply", {.columns = "z,y,x,_"}).positions.at(0),
+            glm::dvec3(3, 2, 1));
+  writePly(dir / "c.dat", threePoints());  // a signature still wins
+  EXPECT_EQ(openPointFile(dir / "c.dat", {.columns = "x,y,z"})->info().format, "ply-binary-le");
+}
+
+TEST(OpenPointFile, refusingAFileSaysWhatWasTriedAndWhyItIsNotText) {
+  test::TempDir dir;
+  const std::vector<std::pair<Bytes, std::string>> cases = {
+      {Bytes().text("abc").fill(1, 0).text("def"), "byte 3 is 0: binary data, not text"},
+      {Bytes(), "the file is empty"},
+      {Bytes().text("1 2\n3 4\n"), "line 1 has 2 numbers, fewer than x, y and z"},
+      {Bytes().text("# c\nx y z\n1 2 3\n4 5 6 7\n"), "line 4 has 4 numbers, line 3 has 3"},
+      {Bytes().text("x y z\nname 1 2\n"), "line 2: 'name' is not a number"},
+      {Bytes().text("x y z\n# only names\n"), "no line of numbers in its first 19 bytes"},
+  };
+  for (const auto& [content, why] : cases) {
+    SCOPED_TRACE(why);
+    test::writeFile(dir / "scan.bin", content.bytes());
+    const std::string error = test::readError(dir / "scan.bin");
+    EXPECT_NE(error.find((dir / "scan.bin").string() + ": unknown point file format ('.bin'): it "
+                                                       "is not PLY"),
+              std::string::npos)
+        << error;
+    EXPECT_NE(error.find("nor text (" + why + ")"), std::string::npos) << error;
+  }
+  test::writeText(dir / "noextension", "\x01\x02");
+  EXPECT_NE(test::readError(dir / "noextension")
+                .find("unknown point file format (a name without extension)"),
+            std::string::npos);
+}
+
+TEST(OpenPointFile, readsPcdByItsHeaderWhateverTheExtension) {
+  test::TempDir dir;
+  const std::string header =
+      "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+      "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n";
+  test::writeText(dir / "scene.dat", header);
+  test::writeText(dir / "scene.txt", "# .PCD v0.7 - Point Cloud Data file format\n" + header);
+  for (const char* name : {"scene.dat", "scene.txt"}) {
+    EXPECT_EQ(openPointFile(dir / name)->info().format, "pcd-ascii") << name;
+    EXPECT_EQ(readPointFile(dir / name).positions.at(0), glm::dvec3(1, 2, 3)) << name;
+  }
+}
+
+TEST(OpenPointFile, refusesE57BySignatureAndExtensionSayingHowToConvertIt) {
+  test::TempDir dir;
+  test::writeFile(dir / "scan.data", Bytes().text("ASTM-E57").fill(40, 0).bytes());
+  test::writeText(dir / "scan.e57", "1 2 3\n");
+  for (const char* name : {"scan.data", "scan.e57"}) {
+    const std::string error = test::readError(dir / name, {.columns = "x,y,z"});
+    EXPECT_NE(error.find((dir / name).string() + ": byte 0: E57 is not supported: no E57 library "
+                                                 "is packaged for Debian 12"),
+              std::string::npos)
+        << error;
+    EXPECT_NE(error.find("`pdal translate in.e57 out.las`"), std::string::npos) << error;
+  }
 }
 
 TEST(OpenPointFile, missingFilesAndDirectoriesAreFileErrors) {

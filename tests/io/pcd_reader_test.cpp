@@ -283,6 +283,66 @@ TEST(PcdReader, decodesPackedRgbFromFloatBitsOrIntegersIgnoringAlpha) {
   expectColor(readPointFile(dir / "i.pcd").colors.at(0), 0x10, 0x20, 0x30);
 }
 
+// Packed colors as PCL writes them: rgb (PointXYZRGB) or rgba (PointXYZRGBA), TYPE F (the bits
+// of a float) or U, SIZE 4, in every data kind. Text holds the bits as an integer (current PCL) or
+// the float itself (older PCL; not for fully opaque colors, whose float is a NaN).
+TEST(PcdReader, readsPackedRgbAndRgbaAsFloatOrUnsignedInEveryDataKind) {
+  const std::vector<uint32_t> packed = {0xFF102030, 0x00FF8040, 0xFFFFFFFF, 0x7F0A141E, 0x00000001};
+  std::vector<glm::dvec3> positions;
+  for (size_t i = 0; i < packed.size(); ++i) positions.push_back({double(i), 2.0 * i, -0.5 * i});
+  test::TempDir dir;
+  for (const std::string data : {"ascii", "binary", "binary_compressed"})
+    for (const std::string field : {"rgb", "rgba"})
+      for (const std::string type : {"F", "U"}) {
+        SCOPED_TRACE(data + " " + field + " " + type);
+        const Header header{.fields = "x y z " + field,
+                            .size = "4 4 4 4",
+                            .type = "F F F " + type,
+                            .count = "1 1 1 1",
+                            .width = packed.size(),
+                            .data = data};
+        Bytes body;
+        if (data == "ascii") {
+          std::string lines;
+          for (size_t i = 0; i < packed.size(); ++i) {
+            const float asFloat = std::bit_cast<float>(packed[i]);
+            const bool asFloatText = type == "F" && (packed[i] >> 24) != 0xFF && i % 2 == 1;
+            lines += decimal(positions[i].x) + " " + decimal(positions[i].y) + " " +
+                     decimal(positions[i].z) + " " +
+                     (asFloatText ? decimal(asFloat) : std::to_string(packed[i])) + "\n";
+          }
+          body.text(lines);
+        } else if (data == "binary") {
+          for (size_t i = 0; i < packed.size(); ++i) {
+            append(body, floatRecords({positions[i]}));
+            body.le(packed[i]);
+          }
+        } else {
+          Bytes columns = floatColumns(positions);
+          for (uint32_t bits : packed) columns.le(bits);
+          body = compressedBlock(columns);
+        }
+        test::writeFile(dir / "c.pcd", pcdFile(header, body).bytes());
+        EXPECT_TRUE(openPointFile(dir / "c.pcd")->info().hasColors);
+        const PointCloud points = test::readInBatches(dir / "c.pcd", {}, nullptr, 2);
+        expectPositions(points, positions);
+        for (size_t i = 0; i < packed.size(); ++i)
+          expectColor(points.colors[i], int(packed[i] >> 16 & 0xFF), int(packed[i] >> 8 & 0xFF),
+                      int(packed[i] & 0xFF));
+      }
+}
+
+// A packed color written as the text of a NaN float has lost its bits: an error, not a made-up
+// color.
+TEST(PcdReader, aPackedColorWrittenAsNanIsAnError) {
+  const Header header{
+      .fields = "x y z rgba", .size = "4 4 4 4", .type = "F F F F", .count = "1 1 1 1", .width = 1};
+  EXPECT_NE(pcdError(header.text() + "1 2 3 nan\n")
+                .find("line 12: value 4 (field 'rgba') is not a color: 'nan'"),
+            std::string::npos)
+      << pcdError(header.text() + "1 2 3 nan\n");
+}
+
 TEST(PcdReader, decodesSeparateRgbFieldsAsBytesOrUnitFloats) {
   test::TempDir dir;
   const uint8_t codes[2][3] = {{255, 128, 0}, {1, 2, 3}};
@@ -578,7 +638,7 @@ TEST(PcdReader, asciiDataErrorsNameTheLine) {
               .width = 1}
                .text() +
            "1 2 3 red\n",
-       "line 12: value 4 (field 'rgb') is not a number: 'red'"},
+       "line 12: value 4 (field 'rgb') is not a color: 'red'"},
       {Header{.fields = "x y z rgb",
               .size = "4 4 4 4",
               .type = "F F F U",
@@ -586,7 +646,7 @@ TEST(PcdReader, asciiDataErrorsNameTheLine) {
               .width = 1}
                .text() +
            "1 2 3 4294967296\n",
-       "line 12: value 4 (field 'rgb') is not a number: '4294967296'"},
+       "line 12: value 4 (field 'rgb') is not a color: '4294967296'"},
   };
   for (const auto& [text, reason] : cases) {
     SCOPED_TRACE(reason);

@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "pipeline/io/color.h"
+#include "pipeline/io/ply.h"
 #include "tests/io/io_test_util.h"
 
 namespace iso {
@@ -184,6 +185,132 @@ TEST(PlyReader, doesNotReadElementsAfterTheVertexElement) {
   const PointCloud points = readPointFile(dir / "v.ply");
   ASSERT_EQ(points.size(), 1u);
   EXPECT_EQ(points.positions[0], glm::dvec3(1, 2, 3));
+}
+
+// A PLY file of the given encoding with one vertex element of these scalar properties (type,
+// name) and rows, and a face element of only a `list uchar int` index list named `indexList`,
+// before or after the vertices.
+struct PlyProperty {
+  std::string type, name;
+};
+
+void putValue(Bytes& b, const std::string& encoding, const std::string& type, double v) {
+  const bool big = encoding == "binary_big_endian";
+  const auto put = [&](auto value) { big ? b.be(value) : b.le(value); };
+  if (type == "uchar") return put(uint8_t(v));
+  if (type == "ushort") return put(uint16_t(v));
+  if (type == "int") return put(int32_t(v));
+  if (type == "float") return put(float(v));
+  put(v);  // double
+}
+
+Bytes plyWithFaces(const std::string& encoding, const std::vector<PlyProperty>& properties,
+                   const std::vector<std::vector<double>>& rows, const std::string& indexList,
+                   const std::vector<std::vector<int>>& faces, bool facesFirst) {
+  std::string header = "ply\nformat " + encoding + " 1.0\n";
+  std::string vertexHeader = "element vertex " + std::to_string(rows.size()) + "\n";
+  for (const PlyProperty& p : properties)
+    vertexHeader += "property " + p.type + " " + p.name + "\n";
+  const std::string faceHeader = "element face " + std::to_string(faces.size()) +
+                                 "\nproperty list uchar int " + indexList + "\n";
+  header += facesFirst ? faceHeader + vertexHeader : vertexHeader + faceHeader;
+  Bytes file;
+  file.text(header + "end_header\n");
+  const auto writeVertices = [&] {
+    for (const std::vector<double>& row : rows) {
+      for (size_t i = 0; i < row.size(); ++i) {
+        if (encoding != "ascii") {
+          putValue(file, encoding, properties[i].type, row[i]);
+          continue;
+        }
+        std::ostringstream text;
+        text << std::setprecision(17) << row[i] << (i + 1 < row.size() ? " " : "\n");
+        file.text(text.str());
+      }
+    }
+  };
+  const auto writeFaces = [&] {
+    for (const std::vector<int>& face : faces) {
+      if (encoding == "ascii") {
+        std::string line = std::to_string(face.size());
+        for (int index : face) line += " " + std::to_string(index);
+        file.text(line + "\n");
+        continue;
+      }
+      putValue(file, encoding, "uchar", double(face.size()));
+      for (int index : face) putValue(file, encoding, "int", index);
+    }
+  };
+  if (facesFirst) writeFaces();
+  writeVertices();
+  if (!facesFirst) writeFaces();
+  return file;
+}
+
+// Meshes as exported by scanners and MeshLab: faces holding only their index list (named
+// vertex_indices or vertex_index), before or after the vertices, whose properties come in any
+// order with unknown ones between; in every encoding, for the point and the mesh reader.
+TEST(PlyReader, readsOddPropertyOrdersAndIndexOnlyFacesInEveryEncoding) {
+  const std::vector<PlyProperty> properties = {
+      {"float", "nx"}, {"uchar", "red"},  {"double", "z"},         {"float", "quality"},
+      {"float", "y"},  {"double", "x"},   {"float", "ny"},         {"uchar", "green"},
+      {"float", "nz"}, {"uchar", "blue"}, {"ushort", "confidence"}};
+  // nx red z quality y x ny green nz blue confidence
+  const std::vector<std::vector<double>> rows = {
+      {0, 255, 3.25, 0.5, -2.5, 515000.125, 0, 10, 1, 20, 7},
+      {1, 0, -1e-3, 1.5, 0.75, -4.0, 0, 128, 0, 30, 65535},
+      {0, 64, 7, -2, 100.5, 1e6, -1, 1, 0, 2, 0}};
+  const std::vector<std::vector<int>> faces = {{0, 1, 2}, {2, 1, 0, 1}};
+  test::TempDir dir;
+  for (const std::string encoding : {"ascii", "binary_little_endian", "binary_big_endian"})
+    for (const std::string indexList : {"vertex_indices", "vertex_index"})
+      for (const bool facesFirst : {false, true}) {
+        SCOPED_TRACE(encoding + " " + indexList + (facesFirst ? ", faces first" : ""));
+        const Bytes file = plyWithFaces(encoding, properties, rows, indexList, faces, facesFirst);
+        test::writeFile(dir / "m.ply", file.bytes());
+        const PointCloud points =
+            test::readInBatches(dir / "m.ply", {.columns = "", .keepExtras = true}, nullptr, 2);
+        ASSERT_EQ(points.size(), 3u);
+        ASSERT_EQ(points.extraNames, (std::vector<std::string>{"quality", "confidence"}));
+        for (size_t i = 0; i < 3; ++i) {
+          const std::vector<double>& r = rows[i];
+          EXPECT_EQ(points.positions[i], glm::dvec3(r[5], r[4], r[2]));
+          EXPECT_EQ(points.normals[i], glm::vec3(r[0], r[6], r[8]));
+          EXPECT_NEAR(points.colors[i].r, test::linearOf8(int(r[1])), 1e-6);
+          EXPECT_NEAR(points.colors[i].g, test::linearOf8(int(r[7])), 1e-6);
+          EXPECT_NEAR(points.colors[i].b, test::linearOf8(int(r[9])), 1e-6);
+          EXPECT_EQ(points.extras[2 * i], float(r[3]));
+          EXPECT_EQ(points.extras[2 * i + 1], float(r[10]));
+        }
+        const TriangleMesh mesh = readPlyMesh(dir / "m.ply");
+        ASSERT_EQ(mesh.vertices.size(), 3u);
+        EXPECT_EQ(mesh.vertices[1], glm::dvec3(-4.0, 0.75, -1e-3));
+        EXPECT_EQ(mesh.triangles,
+                  (std::vector<std::array<uint32_t, 3>>{{0, 1, 2}, {2, 1, 0}, {2, 0, 1}}));
+      }
+}
+
+// "nx red z y x": one normal and one color component are neither normals nor colors; the
+// positions are read wherever they are.
+TEST(PlyReader, readsPositionsAfterIncompleteNormalsAndColorsInEveryEncoding) {
+  const std::vector<PlyProperty> properties = {
+      {"float", "nx"}, {"uchar", "red"}, {"double", "z"}, {"float", "y"}, {"double", "x"}};
+  const std::vector<std::vector<double>> rows = {{0.5, 200, 1.125, 2.5, 3.75},
+                                                 {-1, 3, -7, 8.25, -9.5}};
+  test::TempDir dir;
+  for (const std::string encoding : {"ascii", "binary_little_endian", "binary_big_endian"}) {
+    SCOPED_TRACE(encoding);
+    test::writeFile(
+        dir / "p.ply",
+        plyWithFaces(encoding, properties, rows, "vertex_indices", {{0, 1, 0}}, false).bytes());
+    const auto reader = openPointFile(dir / "p.ply");
+    EXPECT_FALSE(reader->info().hasNormals);
+    EXPECT_FALSE(reader->info().hasColors);
+    const PointCloud points = readPointFile(dir / "p.ply");
+    ASSERT_EQ(points.size(), 2u);
+    EXPECT_EQ(points.positions[0], glm::dvec3(3.75, 2.5, 1.125));
+    EXPECT_EQ(points.positions[1], glm::dvec3(-9.5, 8.25, -7));
+  }
 }
 
 TEST(PlyReader, decodesSixteenBitAndFloatColorsAndColorAliases) {

@@ -24,26 +24,35 @@ std::filesystem::path sharedData(const std::string& name) {
 
 glm::dvec3 asFloat(double x, double y, double z) { return test::roundedToFloat({x, y, z}); }
 
-float linearOf16(uint16_t code) {
-  const float c = float(code) / 65535.0f;
-  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-}
-
-TEST(RealData, lionLasHasSixteenBitColors) {
+TEST(RealData, lionLasHasEightBitColorsTimes256) {
   SKIP_WITHOUT_SHARED_DATA();
   const auto reader = openPointFile(sharedData("lion_rgb.las"));
   EXPECT_EQ(reader->info().format, "las 1.2 format 2");
   EXPECT_TRUE(reader->info().hasColors);
+  EXPECT_FALSE(reader->info().crs.has_value());
+  ASSERT_EQ(reader->info().notes.size(), 1u);
+  EXPECT_NE(reader->info().notes[0].find("8-bit codes times 256"), std::string::npos);
   ReadStats stats;
   const PointCloud points = readPointFile(sharedData("lion_rgb.las"), {}, &stats);
   ASSERT_EQ(points.size(), 341989u);
   EXPECT_EQ(stats.droppedNonFinite, 0u);
   EXPECT_EQ(points.positions.front(), glm::dvec3(-2.544, 2.878, 0.882));
   EXPECT_EQ(points.positions.back(), glm::dvec3(-2.076, 4.023, -0.548));
-  EXPECT_FLOAT_EQ(points.colors.front().r, linearOf16(49408));
-  EXPECT_FLOAT_EQ(points.colors.front().g, linearOf16(50688));
-  EXPECT_FLOAT_EQ(points.colors.front().b, linearOf16(52736));
-  EXPECT_FLOAT_EQ(points.colors.back().b, linearOf16(34816));
+  // The stored values are 49408, 50688, 52736 and 34816: 193, 198, 206 and 136 times 256.
+  EXPECT_NEAR(points.colors.front().r, test::linearOf8(193), 1e-6);
+  EXPECT_NEAR(points.colors.front().g, test::linearOf8(198), 1e-6);
+  EXPECT_NEAR(points.colors.front().b, test::linearOf8(206), 1e-6);
+  EXPECT_NEAR(points.colors.back().b, test::linearOf8(136), 1e-6);
+}
+
+// The lone-star scan is in UTM zone 12N, but its LAS file (1.2, format 1) has no VLRs at all: the
+// header's VLR count is 0 and its point data starts right after the 227-byte header.
+TEST(RealData, loneStarLasDeclaresNoCoordinateSystem) {
+  SKIP_WITHOUT_SHARED_DATA();
+  const auto reader = openPointFile(sharedData("lone_star_tls_utm.las"));
+  EXPECT_EQ(reader->info().format, "las 1.2 format 1");
+  EXPECT_FALSE(reader->info().crs.has_value());
+  EXPECT_TRUE(reader->info().notes.empty());
 }
 
 TEST(RealData, loneStarLasKeepsMillimetresAtUtmCoordinates) {

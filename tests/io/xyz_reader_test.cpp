@@ -34,14 +34,78 @@ TEST(XyzReader, guessesPositionsNormalsAndColorsFromTheColumnCount) {
   EXPECT_NEAR(points.colors[1].g, test::linearOf8(128), 1e-6);
 }
 
-TEST(XyzReader, readsColorsAsUnitRangeWhenTheFirstLineHasNoneAboveOne) {
+// Without --columns, a count that leaves a choice is decided by the values of the first lines
+// (colors 0–255 have a value above 1, unit normals none) and by the extension, and said in a note.
+TEST(XyzReader, guessesColumnsFromTheValuesOfTheFirstLinesAndTheExtension) {
+  struct Case {
+    std::string name, text;
+    bool hasNormals, hasColors;
+    std::string note;  // the guess the note names; empty: no note
+  };
+  const std::vector<Case> cases = {
+      {"i.asc", "1 2 3 -1200\n4 5 6 800\n", false, false, "x,y,z,_"},
+      {"c.asc", "1 2 3 0 1 1\n4 5 6 255 128 0\n", false, true, "x,y,z,r,g,b"},
+      {"n.asc", "1 2 3 0 0 1\n4 5 6 0.6 0.8 0\n", true, false, "x,y,z,nx,ny,nz"},
+      {"u.xyzrgb", "1 2 3 0 0 1\n4 5 6 1 0.5 0\n", false, true, "x,y,z,r,g,b"},
+      {"n.xyzn", "1 2 3 0 2 1\n4 5 6 9 0 0\n", true, false, "x,y,z,nx,ny,nz"},
+      {"l.pts", "2\n1 2 3 -1200 255 128 0\n4 5 6 300 0 1 2\n", false, true, "x,y,z,_,r,g,b"},
+      {"cc.txt", "1 2 3 255 128 0 0 0 1\n4 5 6 0 1 2 1 0 0\n", true, true, "x,y,z,r,g,b,nx,ny,nz"},
+      {"s.txt", "1 2 3 0 0 1 255 128 0\n4 5 6 1 0 0 0 1 2\n", true, true, "x,y,z,nx,ny,nz,r,g,b"},
+      {"p.txt", "1 2 3\n4 5 6\n", false, false, ""},
+  };
   test::TempDir dir;
-  test::writeText(dir / "c.txt", "0 0 0 0.5 1 0.25\n1 1 1 0.2 0.2 7\n");
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    test::writeText(dir / c.name, c.text);
+    const auto reader = openPointFile(dir / c.name);
+    EXPECT_EQ(reader->info().hasNormals, c.hasNormals);
+    EXPECT_EQ(reader->info().hasColors, c.hasColors);
+    if (c.note.empty()) {
+      EXPECT_TRUE(reader->info().notes.empty());
+    } else {
+      ASSERT_EQ(reader->info().notes.size(), 1u);
+      EXPECT_EQ(reader->info().notes[0], "its columns are taken as " + c.note +
+                                             " (guessed from its first lines; --columns says "
+                                             "others)");
+    }
+    const PointCloud points = test::readInBatches(dir / c.name);
+    ASSERT_EQ(points.size(), 2u);
+    EXPECT_EQ(points.positions[0], glm::dvec3(1, 2, 3));
+    EXPECT_EQ(points.positions[1], glm::dvec3(4, 5, 6));
+  }
+  // The values, where they decide: the PTS layout's colors after its intensity, CloudCompare's
+  // colors before its normals, unit-range colors of a .xyzrgb.
+  PointCloud points = readPointFile(dir / "l.pts");
+  EXPECT_NEAR(points.colors[0].g, test::linearOf8(128), 1e-6);
+  EXPECT_NEAR(points.colors[1].b, test::linearOf8(2), 1e-6);
+  points = readPointFile(dir / "cc.txt");
+  EXPECT_NEAR(points.colors[0].r, 1.0f, 1e-6);
+  EXPECT_EQ(points.normals[1], glm::vec3(1, 0, 0));
+  points = readPointFile(dir / "u.xyzrgb");
+  EXPECT_NEAR(points.colors[1].g, srgbToLinear(0.5f), 1e-6);
+}
+
+TEST(XyzReader, readsColorsAsUnitRangeWhenTheFirstLinesHaveNoneAboveOne) {
+  test::TempDir dir;
+  // 100 lines are sampled; a larger value after them is clamped on the 0–1 scale.
+  std::string text = "0 0 0 0.5 1 0.25\n";
+  for (int i = 0; i < 99; ++i) text += "0 0 0 0 0 1\n";
+  test::writeText(dir / "c.txt", text + "1 1 1 0.2 0.2 7\n");
   const PointCloud points = test::readInBatches(dir / "c.txt", {.columns = "x,y,z,r,g,b"});
-  ASSERT_EQ(points.size(), 2u);
+  ASSERT_EQ(points.size(), 101u);
   EXPECT_NEAR(points.colors[0].r, srgbToLinear(0.5f), 1e-6);
   EXPECT_FLOAT_EQ(points.colors[0].g, 1.0f);
-  EXPECT_FLOAT_EQ(points.colors[1].b, 1.0f);  // 7 on a 0–1 scale: clamped
+  EXPECT_FLOAT_EQ(points.colors[100].b, 1.0f);  // 7 on a 0–1 scale: clamped
+}
+
+TEST(XyzReader, readsColorsAsBytesWhenAnyOfTheFirstLinesHasOneAboveOne) {
+  test::TempDir dir;
+  // A first point of dark colors (all at most 1) does not make the file's colors 0–1.
+  test::writeText(dir / "d.txt", "0 0 0 1 0 1\n1 1 1 200 100 50\n");
+  const PointCloud points = readPointFile(dir / "d.txt", {.columns = "x,y,z,r,g,b"});
+  ASSERT_EQ(points.size(), 2u);
+  EXPECT_NEAR(points.colors[0].r, test::linearOf8(1), 1e-6);
+  EXPECT_NEAR(points.colors[1].g, test::linearOf8(100), 1e-6);
 }
 
 TEST(XyzReader, followsAColumnSpecWithSkippedColumns) {
@@ -96,8 +160,9 @@ TEST(XyzReader, errorsNameTheLineAndColumn) {
       {"1 2 3 0 0 1\n1 2 3 0 0 1\n# c\n1 2 3 0 1\n", "", "line 4: expected 6 numbers, found 5"},
       {"1 2 3\n1 2 3 4\n", "", "line 2: expected 3 numbers, found 4"},
       {"1 2 3\n1 abc 3\n", "", "line 2: column 2 (y) is not a number: 'abc'"},
-      {"1 2 3 4\n", "", "line 1: cannot guess the meaning of 4 columns"},
-      {"1 2 3 4\n", "", "--columns"},
+      {"1 2 3 4 5\n", "", "line 1: cannot guess the meaning of 5 columns"},
+      {"1 2 3 4 5\n", "", "--columns"},
+      {"# c\n1 2 3 0.5 0.5 0.5 0.5\n", "", "line 2: cannot guess the meaning of 7 columns"},
       {"1 2 3 4 5 6 7\n", "x,y,z,_,r,g,b", ""},
       {"1 2 3 4 5 6 x\n", "x,y,z,_,r,g,b", "line 1: column 7 (b) is not a number: 'x'"},
   };

@@ -9,6 +9,7 @@
 #include <random>
 #include <set>
 
+#include "iso/reader.h"
 #include "pipeline/base/options.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/convert/convert.h"
@@ -184,7 +185,8 @@ TEST(OutOfCore, straysInGroupsAndDustAreFoundAcrossChunksAsInCore) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const auto group = [&](PointCloud& cloud, const glm::dvec3& centre, int count) {
     for (int i = 0; i < count; ++i)
-      cloud.positions.push_back(centre + glm::dvec3(spread(random), spread(random), spread(random)));
+      cloud.positions.push_back(centre +
+                                glm::dvec3(spread(random), spread(random), spread(random)));
   };
   PointCloud inside = sphere;
   group(inside, glm::dvec3(0.0), 30);               // at the centre: on the borders of 8 chunks
@@ -213,6 +215,47 @@ TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {
   expectSameFiles(test::scanOf("plane", 30000, false, 0.2), options, 600, 20);
   BuildOptions defaults;
   expectSameFiles(test::scanOf("cube", 20000, false), defaults, 1u << 30, 1);
+}
+
+// The inputs' coordinate system is part of the file: the same in core and out of core.
+TEST(OutOfCore, theCoordinateSystemIsTheSameInBothFiles) {
+  ConvertSource source;
+  source.inputs = nlohmann::json::array(
+      {{{"file", "a.xyz"}, {"format", "xyz"}, {"points", 1}},
+       {{"file", "b.las"},
+        {"format", "las 1.4 format 6"},
+        {"points", 2},
+        {"crs", {{"wkt", "PROJCS[\"b\"]"}, {"epsg", 32612}, {"source", "VLR"}}}},
+       {{"file", "c.las"},
+        {"format", "las 1.2 format 0"},
+        {"points", 3},
+        {"crs", {{"wkt", "PROJCS[\"b\"]"}, {"epsg", 32612}, {"source", "EVLR"}}}},
+       {{"file", "d.las"},
+        {"format", "las 1.2 format 0"},
+        {"points", 4},
+        {"crs", {{"epsg", 32613}, {"source", "VLR"}}}}});
+  const nlohmann::json expected = {{"wkt", "PROJCS[\"b\"]"},
+                                   {"epsg", 32612},
+                                   {"source", "VLR"},
+                                   {"input", "b.las"},
+                                   {"differing_inputs", {"d.las"}}};
+  EXPECT_EQ(coordinateSystemOf(source.inputs), expected);
+  EXPECT_TRUE(coordinateSystemOf(nlohmann::json::array({source.inputs[0]})).is_null());
+
+  const PointCloud cloud = test::scanOf("sphere", 20000, false);
+  BuildOptions options;
+  options.orientBlockPoints = 512;
+  test::TempDir dir;
+  convertToIso(cloud, dir / "in.iso", options, source);
+  SpillDirectory spill(dir.path());
+  const auto raw = spillOf(spill, cloud);
+  const nlohmann::json streamed =
+      convertSpilled(*raw, spill, {1000, 1, 4096}, dir / "out.iso", options, source);
+  EXPECT_GE(streamed["out_of_core"]["chunks"].get<size_t>(), 20u);
+  EXPECT_TRUE(test::readFile(dir / "in.iso") == test::readFile(dir / "out.iso"));
+  const nlohmann::json metadata = nlohmann::json::parse(Reader::open(dir / "out.iso").metadata());
+  EXPECT_EQ(metadata["crs"], expected);
+  EXPECT_EQ(metadata["inputs"], source.inputs);
 }
 
 TEST(OutOfCore, tinyInputsGiveTheSameFileOrTheSameError) {

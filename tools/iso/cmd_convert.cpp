@@ -152,6 +152,20 @@ void printReport(const nlohmann::json& r, const Options& o) {
       v["depth_error_median"].get<double>());
 }
 
+// The inputs' coordinate system, kept in the file's metadata: said unless quiet; inputs that
+// declare another one are warned about even then.
+void reportCoordinateSystem(const nlohmann::json& crs, bool quiet) {
+  if (crs.is_null()) return;
+  if (!quiet)
+    fmt::print(stderr, "coordinate system: {} (kept in the file's metadata)\n",
+               describeCoordinateSystem(crs));
+  for (const auto& other : crs.value("differing_inputs", nlohmann::json::array()))
+    fmt::print(stderr,
+               "warning: {} declares another coordinate system than {}: the file's \"crs\" is "
+               "the first one's (each input's is in its \"inputs\" entry)\n",
+               other.get<std::string>(), crs["input"].get<std::string>());
+}
+
 // Bytes from a size (parseSize); "auto": half the physical memory.
 uint64_t parseBytes(const std::string& text, const char* option) {
   if (text == "auto")
@@ -290,6 +304,7 @@ int run(Options& o) {
                files.size(), files.size() == 1 ? "" : "s", loaded.seconds);
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
+  reportCoordinateSystem(coordinateSystemOf(loaded.inputs), o.quiet || mode == ProgressMode::Json);
   // The octree stages keep their arrays and hash tables in spilled files, but their work lists
   // stay in memory (specs/pipeline.md §15): about 5 bytes per point at 100M points of a sampled
   // scan (0.54 GiB). Say so before a long run when that alone exceeds the budget.
@@ -332,7 +347,17 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
   CLI::App* c = app.add_subcommand(
       "convert",
-      "Convert point files (PLY, LAS, PCD, Draco, XYZ/TXT/PTS/CSV; .gz too) into an .iso file");
+      "Convert point files (PLY, LAS, PCD, Draco, text: XYZ/TXT/PTS/CSV/ASC/NEU/XYZRGB or any "
+      "name with --columns; .gz too) into an .iso file");
+  c->footer(
+      "Inputs: PLY, LAS 1.0-1.4 (point formats 0-10), PCD, Draco .drc and text, each also "
+      "gzip-compressed (.gz); text of another extension is read when its lines are numbers, or "
+      "always with --columns. The coordinate system of LAS inputs (OGC WKT, EPSG code of GeoTIFF "
+      "keys) is kept in the file's metadata and shown by `iso info`.\n"
+      "LAZ and E57 are not read: no decoder for either is packaged for Debian 12. Convert them to "
+      "LAS on a machine with PDAL (or LAStools' laszip for LAZ), then convert the LAS:\n"
+      "  pdal translate in.laz out.las      (or: laszip -i in.laz -o out.las)\n"
+      "  pdal translate in.e57 out.las");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
   c->add_option("-o,--output", o->output,
                 "The .iso file to write (its directory must exist); Ctrl-C stops the conversion "
@@ -340,7 +365,9 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->required();
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   c->add_option("--columns", o->columns,
-                "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips)");
+                "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips); with it, an "
+                "input of any extension that is not PLY, LAS, Draco or PCD is read as text "
+                "(without it: guessed from the first lines)");
   c->add_option("--neighbors", o->build.neighbors,
                 "k of the k-nearest-neighbour radius of influence")
       ->capture_default_str();

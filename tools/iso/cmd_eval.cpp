@@ -180,7 +180,9 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--visibility-points", o->visibilityPoints,
                 "Points measured at most (every k-th; 0: all)")
       ->capture_default_str();
-  c->add_option("--columns", o->columns, "Column spec of text point files");
+  c->add_option("--columns", o->columns,
+                "Column spec of text point files, as for `iso convert` (with it, an input of any "
+                "extension that is not PLY, LAS, Draco or PCD is read as text)");
   c->add_option("--spacing", o->spacing,
                 "Point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();

@@ -47,6 +47,13 @@ Summary summarize(const Reader& reader) {
   return s;
 }
 
+// The coordinate system the metadata records ("crs", an object), or null.
+nlohmann::json coordinateSystemIn(const nlohmann::json& metadata) {
+  if (!metadata.is_object() || !metadata.contains("crs") || !metadata["crs"].is_object())
+    return nullptr;
+  return metadata["crs"];
+}
+
 nlohmann::json attributeJson(const AttributeDesc& a) {
   return {{"semantic", semanticName(a.semantic)},
           {"encoding", encodingName(a.encoding)},
@@ -106,6 +113,7 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
   } else {
     j["metadata"] = metadata;
   }
+  j["crs"] = coordinateSystemIn(metadata);
   if (withChunks) {
     j["chunks"] = nlohmann::json::array();
     for (const ChunkInfo& c : reader.chunks()) j["chunks"].push_back(chunkJson(c));
@@ -160,6 +168,8 @@ void printInfo(const Reader& reader, bool withChunks) {
                withSeparators(s.kept.points), withSeparators(s.kept.chunks),
                s.kept.chunks == 1 ? "" : "s", byteSize(s.kept.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
+  if (const nlohmann::json crs = coordinateSystemIn(metadata); !crs.is_null())
+    fmt::print("{:<12}{}\n", "crs", describeCoordinateSystem(crs));
   if (metadata.is_discarded())
     fmt::print("{:<12}(not valid JSON, {} bytes)\n", "metadata", reader.metadata().size());
   else

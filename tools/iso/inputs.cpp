@@ -14,9 +14,30 @@ bool isPointFileName(const std::filesystem::path& path) {
   std::transform(name.begin(), name.end(), name.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
   if (name.size() > 3 && name.ends_with(".gz")) name.resize(name.size() - 3);
-  for (const char* ext : {".ply", ".las", ".laz", ".pcd", ".drc", ".xyz", ".txt", ".pts", ".csv"})
+  for (const char* ext : {".ply", ".las", ".laz", ".pcd", ".drc", ".e57", ".xyz", ".txt", ".pts",
+                          ".csv", ".asc", ".neu", ".xyzrgb", ".xyzn"})
     if (name.ends_with(ext)) return true;
   return false;
+}
+
+nlohmann::json crsJson(const CoordinateSystem& crs) {
+  nlohmann::json j = {{"source", crs.source}};
+  if (!crs.wkt.empty()) j["wkt"] = crs.wkt;
+  if (crs.epsg) j["epsg"] = *crs.epsg;
+  if (crs.verticalEpsg) j["vertical_epsg"] = *crs.verticalEpsg;
+  if (!crs.name.empty()) j["name"] = crs.name;
+  return j;
+}
+
+// What the reader found and did: the input's entry in the report and the file's metadata.
+nlohmann::json inputJson(const PointReader& reader, uint64_t points) {
+  const PointFileInfo& info = reader.info();
+  nlohmann::json input = {{"file", info.path.string()},
+                          {"format", info.format},
+                          {"points", points},
+                          {"non_finite_dropped", reader.stats().droppedNonFinite}};
+  if (info.crs) input["crs"] = crsJson(*info.crs);
+  return input;
 }
 
 }  // namespace
@@ -84,10 +105,9 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
       add(batch);
     }
     summary.nonFiniteDropped += reader->stats().droppedNonFinite;
-    summary.inputs.push_back({{"file", reader->info().path.string()},
-                              {"format", reader->info().format},
-                              {"points", points},
-                              {"non_finite_dropped", reader->stats().droppedNonFinite}});
+    summary.inputs.push_back(inputJson(*reader, points));
+    for (const std::string& note : reader->info().notes)
+      summary.notes.push_back(reader->info().path.string() + ": " + note);
   }
   if (progress != nullptr) progress->end();
   summary.seconds =
@@ -95,8 +115,8 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
   return summary;
 }
 
-LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
-                        const ReadOptions& options, ProgressReporter* progress) {
+LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                        ProgressReporter* progress) {
   LoadedPoints loaded;
   PointCloud& cloud = loaded.cloud;
   static_cast<ReadSummary&>(loaded) = readPoints(

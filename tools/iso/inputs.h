@@ -13,7 +13,8 @@
 
 namespace iso::cli {
 
-// What reading found: per file its path, format, points and dropped points.
+// What reading found: per file its path, format, points, dropped points and coordinate system
+// (ConvertSource::inputs), and notes for the user (the readers' notes prefixed by their file).
 struct ReadSummary {
   nlohmann::json inputs = nlohmann::json::array();
   uint64_t nonFiniteDropped = 0;
@@ -38,7 +39,7 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
                        const std::function<void(const PointCloud&)>& add);
 
 // Read every file into one cloud.
-LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files,
-                        const ReadOptions& options, ProgressReporter* progress = nullptr);
+LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                        ProgressReporter* progress = nullptr);
 
 }  // namespace iso::cli

@@ -1,6 +1,7 @@
 #include "tools/iso/text.h"
 
 #include <optional>
+#include <vector>
 
 #include "iso/atomic_file.h"
 #include "iso/error.h"
@@ -14,6 +15,28 @@ std::string indentLines(const std::string& text, int columns) {
     if (c == '\n') out.append(size_t(columns), ' ');
   }
   return out;
+}
+
+std::string describeCoordinateSystem(const nlohmann::json& crs) {
+  // Written for any metadata: a key of another type than the one iso writes is left out.
+  const auto number = [&](const char* key) {
+    return crs.contains(key) && crs[key].is_number_unsigned() ? crs[key].get<uint64_t>()
+                                                              : std::optional<uint64_t>();
+  };
+  const auto text = [&](const char* key) {
+    return crs.contains(key) && crs[key].is_string() ? crs[key].get<std::string>() : "";
+  };
+  std::vector<std::string> parts;
+  if (const auto epsg = number("epsg")) parts.push_back("EPSG:" + std::to_string(*epsg));
+  if (const auto vertical = number("vertical_epsg"))
+    parts.push_back("vertical EPSG:" + std::to_string(*vertical));
+  if (!text("name").empty()) parts.push_back("\"" + text("name") + "\"");
+  if (!text("wkt").empty())
+    parts.push_back("OGC WKT (" + withSeparators(text("wkt").size()) + " characters)");
+  if (!text("input").empty()) parts.push_back("from " + text("input"));
+  std::string line;
+  for (const std::string& part : parts) line += (line.empty() ? "" : ", ") + part;
+  return line;
 }
 
 void writeTextFile(const std::filesystem::path& path, const std::string& text) {

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include "iso/error.h"
@@ -24,6 +25,11 @@ E named(const NameTable<E, N>& table, const std::string& text, const char* optio
                    "'");
 }
 std::string indentLines(const std::string& text, int columns);  // indent every line but the first
+
+// A coordinate system of a file's metadata (coordinateSystemOf) in a line: its EPSG codes, name,
+// WKT size and input, e.g. `EPSG:32612 "WGS 84 / UTM zone 12N", OGC WKT (412 characters), from
+// a.las`.
+std::string describeCoordinateSystem(const nlohmann::json& crs);
 
 // Write text to a file atomically (a temporary file renamed into place); throws iso::FileError.
 void writeTextFile(const std::filesystem::path& path, const std::string& text);
