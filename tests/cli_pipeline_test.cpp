@@ -616,7 +616,8 @@ TEST_F(CliPipeline, convertReportsTheStraysItRemovesAndWritesThemOnRequest) {
   PointCloud cloud = readPointFile(dir_ / "sphere.ply");
   const size_t sphere = cloud.size();
   std::vector<glm::dvec3> strays = {{3.0, 0.0, 0.0}, {0.0, -40.0, 2.0}};
-  for (int i = 0; i < 12; ++i) strays.push_back({0.1 * (i % 3), 2.5 + 0.01 * i, 0.05 * (i % 4)});
+  for (int i = 0; i < 12; ++i)  // inside the frame's cube, beside the sphere
+    strays.push_back({0.85 + 0.02 * (i % 3), 0.85 + 0.005 * i, 0.02 * (i % 4)});
   for (const glm::dvec3& p : strays) {
     cloud.positions.push_back(p);
     cloud.normals.push_back(glm::vec3(0.0f, 0.0f, 1.0f));
@@ -641,6 +642,18 @@ TEST_F(CliPipeline, convertReportsTheStraysItRemovesAndWritesThemOnRequest) {
   std::sort(strays.begin(), strays.end(), less);
   EXPECT_EQ(got, strays);  // positions are written as doubles: exactly the input's
   EXPECT_EQ(written.normals.size(), strays.size());
+  // iso eval leaves the same strays out of what it measures (none seen through), unless told.
+  const auto eval = runIso("eval --visibility " + quoted(dir_ / "with.iso") + " --points " +
+                           quoted(dir_ / "with.ply"));
+  ASSERT_EQ(eval.exitCode, 0) << eval.err;
+  const nlohmann::json measured = nlohmann::json::parse(eval.out);
+  EXPECT_EQ(measured["strays_left_out"], strays.size());
+  EXPECT_EQ(measured["visibility"]["seen_through"], 0);
+  const auto all = runIso("eval --visibility --keep-outliers " + quoted(dir_ / "with.iso") +
+                          " --points " + quoted(dir_ / "with.ply"));
+  ASSERT_EQ(all.exitCode, 0) << all.err;
+  EXPECT_EQ(nlohmann::json::parse(all.out)["strays_left_out"], 0);
+  EXPECT_GE(nlohmann::json::parse(all.out)["visibility"]["seen_through"].get<int>(), 1);
 
   const auto kept = runIso("convert -q --json --keep-outliers " + quoted(dir_ / "with.ply") +
                            " -o " + quoted(dir_ / "kept.iso"));

@@ -145,22 +145,6 @@ Prepared prepare(const PointCloud& cloud) {
   return p;
 }
 
-// The cloud without the stray points (and the duplicates merged into them, at their positions);
-// those go to `removed` when given.
-PointCloud withoutStrays(const PointCloud& cloud, const Prepared& prepared,
-                         const std::vector<uint8_t>& flagged, PointCloud* removed) {
-  StrayPositions strays;
-  for (size_t i = 0; i < prepared.points.size(); ++i)
-    if (flagged[i]) strays.add(prepared.points.position[i]);
-  strays.seal();
-  PointCloud out;
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    const bool isStray = strays.contains(glm::vec3(toFrame(cloud.positions[i], prepared.frame)));
-    if (!isStray || removed) appendPoint(isStray ? *removed : out, cloud, i);
-  }
-  return out;
-}
-
 // The conversion report's visibility (pipeline/analysis/visibility.h): up to kVisibilityPoints of
 // the accuracy sample, the 6 axis views and 2 random ones, pixels one spacing wide.
 constexpr size_t kVisibilityPoints = 20000;
@@ -262,8 +246,8 @@ ReadyPoints prepareInCore(const PointCloud& input, const BuildOptions& options, 
   if (options.removeOutliers) {
     const Strays strays = findStrays(prepared.points.size(), neighbors, options.strayGroupPoints);
     if (strays.sparse + strays.grouped > 0) {  // choose the frame again without them
-      filtered =
-          withoutStrays(*cloud, prepared, strays.flagged, collectStrays ? &ready.strays : nullptr);
+      filtered = withoutFlagged(*cloud, prepared.frame, prepared.points, strays.flagged,
+                                collectStrays ? &ready.strays : nullptr);
       ready.outliers = {cloud->size() - filtered.size(), strays.sparse, strays.grouped};
       cloud = &filtered;
       timer.next("prepare", cloud->size());  // both stages again, as their own entries

@@ -150,6 +150,13 @@ class StrayPositions {
   static Bits bitsOf(const glm::vec3& p);
   std::vector<Bits> bits_;
 };
+// The cloud without the input points at the positions (frame units) of the flagged ones of
+// `points` (so duplicates merged into a stray go too); those go to `removed` when given.
+PointCloud withoutFlagged(const PointCloud& cloud, const Frame& frame, const PointSet& points,
+                          std::span<const uint8_t> flagged, PointCloud* removed = nullptr);
+// The cloud without its strays, found as a conversion finds them (k neighbours, groups of fewer
+// than groupPoints): what `iso eval` measures against a file's input points.
+PointCloud withoutStrays(const PointCloud& cloud, int k, uint32_t groupPoints);
 // The median of values (reordered); 0 for none.
 float medianOf(std::span<float> values);
 

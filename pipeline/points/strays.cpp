@@ -11,6 +11,7 @@
 #include <numeric>
 #include <utility>
 
+#include "pipeline/points/knn.h"
 #include "pipeline/points/points.h"
 
 namespace iso {
@@ -112,6 +113,32 @@ Strays findStrays(size_t n, const Neighbors& neighbors, uint32_t groupPoints) {
   PointGroups groups(n);
   groups.joinNeighbors(neighbors, 0, uint32_t(n), {});
   return flagStrays(kth, {}, groups, groupPoints);
+}
+
+PointCloud withoutFlagged(const PointCloud& cloud, const Frame& frame, const PointSet& points,
+                          std::span<const uint8_t> flagged, PointCloud* removed) {
+  StrayPositions strays;
+  for (size_t i = 0; i < points.size(); ++i)
+    if (flagged[i]) strays.add(points.position[i]);
+  strays.seal();
+  PointCloud out;
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    const bool isStray = strays.contains(glm::vec3(toFrame(cloud.positions[i], frame)));
+    if (!isStray || removed) appendPoint(isStray ? *removed : out, cloud, i);
+  }
+  return out;
+}
+
+PointCloud withoutStrays(const PointCloud& cloud, int k, uint32_t groupPoints) {
+  if (cloud.size() < 2) return cloud;
+  const Frame frame = chooseFrame(cloud);
+  PointSet points = makePointSet(cloud, frame);
+  sortByKey(points);
+  mergeDuplicates(points);
+  const PointIndex index(points.position);
+  const Strays strays = findStrays(points.size(), findNeighbors(points, index, k), groupPoints);
+  if (strays.sparse + strays.grouped == 0) return cloud;
+  return withoutFlagged(cloud, frame, points, strays.flagged);
 }
 
 StrayPositions::Bits StrayPositions::bitsOf(const glm::vec3& p) {

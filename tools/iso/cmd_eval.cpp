@@ -2,6 +2,8 @@
 // `--visibility`: accuracy, and what the viewer shows of the scan, as JSON.
 #include <fmt/core.h>
 
+#include <algorithm>
+
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
@@ -9,8 +11,10 @@
 #include "pipeline/analysis/measure.h"
 #include "pipeline/analysis/visibility.h"
 #include "pipeline/base/files.h"
+#include "pipeline/base/options.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
+#include "pipeline/points/points.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/inputs.h"
 #include "tools/iso/interrupt.h"
@@ -34,7 +38,35 @@ struct Options {
   ShapeOptions truth;
   EvalOptions eval;
   double spacing = 0.0;
+  bool keepOutliers = false;  // --keep-outliers: measure the strays too
 };
+
+// The points measured, without the strays the conversion removed (found again by its rule and
+// parameters, unless it kept them or --keep-outliers is given); the count left out in `result`.
+PointCloud measuredPoints(PointCloud cloud, const Reader& reader, const Options& o,
+                          nlohmann::json& result) {
+  const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
+  const nlohmann::json parameters =
+      metadata.is_object() && metadata.contains("parameters") && metadata["parameters"].is_object()
+          ? metadata["parameters"]
+          : nlohmann::json::object();
+  const BuildOptions defaults;
+  const auto number = [&](const char* key, auto fallback) {
+    return parameters.contains(key) && parameters[key].is_number_unsigned()
+               ? parameters[key].get<decltype(fallback)>()
+               : fallback;
+  };
+  const bool removed =
+      !(parameters.contains("remove_outliers") && parameters["remove_outliers"].is_boolean() &&
+        !parameters["remove_outliers"].get<bool>());
+  result["strays_left_out"] = 0;
+  if (o.keepOutliers || !removed) return cloud;
+  const int k = std::clamp(number("neighbors", defaults.neighbors), 1, 1000);
+  const uint32_t group = std::max(number("stray_group_points", defaults.strayGroupPoints), 1u);
+  PointCloud kept = withoutStrays(cloud, k, group);
+  result["strays_left_out"] = cloud.size() - kept.size();
+  return kept;
+}
 
 // The point spacing of the file's input, from its conversion report (files written before the
 // spacing became a median name the mean).
@@ -47,20 +79,20 @@ double reportedSpacing(const Reader& reader) {
   return 0.0;
 }
 
-// The file's kept points (`iso convert --keep-points`), every step-th up to `limit`.
-std::vector<glm::dvec3> keptPoints(const Reader& reader, uint64_t limit) {
+// The file's kept points (`iso convert --keep-points`) without their strays, every step-th up to
+// `limit`.
+std::vector<glm::dvec3> keptPoints(const Reader& reader, uint64_t limit, const Options& o,
+                                   nlohmann::json& result) {
   const KeptPointsInfo info = keptPointsInfo(reader);
   if (info.points == 0)
     throw FileError(reader.name(), std::nullopt,
                     "keeps no points (convert it with --keep-points); give --points INPUT");
-  const uint64_t step = limit == 0 ? 1 : std::max<uint64_t>(1, (info.points + limit - 1) / limit);
-  std::vector<glm::dvec3> out;
-  uint64_t index = 0;
+  PointCloud all;
   forEachKeptPoints(reader, [&](const PointCloud& chunk) {
-    for (const glm::dvec3& p : chunk.positions)
-      if (index++ % step == 0) out.push_back(p);
+    all.positions.insert(all.positions.end(), chunk.positions.begin(), chunk.positions.end());
   });
-  return out;
+  return samplePoints(measuredPoints(std::move(all), reader, o, result),
+                      limit == 0 ? ~uint64_t{0} : limit);
 }
 
 // What the viewer shows of the points (`--visibility`), through its own tracer; the points seen
@@ -103,7 +135,8 @@ int run(Options& o) {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
       throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
-    result["visibility"] = visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
+    result["visibility"] =
+        visibilityOf(reader, keptPoints(reader, o.visibilityPoints, o, result), spacing, o);
     result["spacing"] = spacing;
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
@@ -113,8 +146,11 @@ int run(Options& o) {
   if (!o.points.empty()) {
     ReadOptions read;
     read.columns = o.columns;
-    const PointCloud cloud = loadPoints(expandInputs(o.points), read).cloud;
+    nlohmann::json strays;
+    const PointCloud cloud =
+        measuredPoints(loadPoints(expandInputs(o.points), read).cloud, reader, o, strays);
     result = evaluateAgainstPoints(surface, cloud);
+    result["strays_left_out"] = strays["strays_left_out"];
     if (o.perLevel) result["levels"] = evaluateLevels(reader, cloud);
     if (o.visibility)
       result["visibility"] = visibilityOf(
@@ -139,7 +175,7 @@ int run(Options& o) {
     result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
     if (o.visibility)
       result["visibility"] =
-          visibilityOf(reader, keptPoints(reader, o.visibilityPoints), spacing, o);
+          visibilityOf(reader, keptPoints(reader, o.visibilityPoints, o, result), spacing, o);
   }
   result["file"] = o.file;
   fmt::print("{}\n", result.dump(2));
@@ -183,8 +219,10 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--columns", o->columns,
                 "Column spec of text point files, as for `iso convert` (with it, an input of any "
                 "extension that is not PLY, LAS, Draco or PCD is read as text)");
-  c->add_option("--spacing", o->spacing,
-                "Point spacing (default: the file's conversion report)");
+  c->add_flag("--keep-outliers", o->keepOutliers,
+              "Measure every point: by default the strays the conversion removed (found again "
+              "by its rule, specs/pipeline.md §2) are left out and counted (strays_left_out)");
+  c->add_option("--spacing", o->spacing, "Point spacing (default: the file's conversion report)");
   c->add_option("--rays", o->eval.rays, "Rays for the hole rate")->capture_default_str();
   c->add_option("--samples", o->eval.truthSamples, "Samples of the truth")->capture_default_str();
   c->add_option("--seed", o->eval.seed, "Random seed (samples, rays, views)")
