@@ -73,10 +73,9 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
 // up to the first empty cell, past which the side is no longer known; 0 takes crossings either
 // way (camera rays see both sides). `strict` keeps the side rule all along (back faces hidden).
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
-// ask for chunks it lacks. Counts one ray in `rays`.
+// ask for chunks it lacks.
 bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
-               bool request, ISO_INOUT(Hit) hit, ISO_INOUT(uint) rays) {
-  rays += 1u;
+               bool request, ISO_INOUT(Hit) hit) {
   vec3 dir = d;
   if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
   if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
@@ -191,7 +190,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
     bracket.z = cubicAt(k, bracket.x);
     bracket.w = cubicAt(k, bracket.y);
     s = (bracket.z < 0.0f) == (bracket.w < 0.0f) ? 0.5f * (bracket.x + bracket.y)
-                                                  : refineRoot(k, bracket);
+                                                 : refineRoot(k, bracket);
   }
   hit.t = tIn + (tOut - tIn) * s;
   surfaceAttributes(hitCell, c, mix(ua, ub, s), hit);

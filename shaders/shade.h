@@ -45,7 +45,8 @@ vec3 background(vec3 d) {
 
 // Phong lighting at p with the shading normal hit.normal (facing the ray) seen from direction
 // -d, with shadow rays that leave the surface on the side `from` of the hit.
-vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+// `rays` counts the rays traced by kind: x camera, y shadow, z reflected and refracted.
+vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
   vec3 n = hit.normal;
   vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
   vec3 color = ambient * hit.occlusion * hit.color;
@@ -73,7 +74,8 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       bool lit = lambert > 0.0f;
       if (lit && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
-        lit = !intersect(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker, rays);
+        rays.y += 1u;
+        lit = !intersect(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker);
       }
       if (lit) {
         vec3 r = reflect(-l, n);
@@ -97,7 +99,7 @@ float packRayState(float side, bool inMedium) { return side + 1.0f + (inMedium ?
 // with the normal facing the ray; the rays that leave it keep the side they leave on.
 // Pending rays wait on a small stack of vec4s: origin and path length before it, direction and
 // bounce count, weight and the ray's state (packRayState).
-vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
+vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
   vec4 stackOrigin[kRayStack];
   vec4 stackDirection[kRayStack];
   vec4 stackWeight[kRayStack];
@@ -120,8 +122,12 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
   while (more) {
     Hit hit;
     bool primary = depth == 0u;
+    if (primary)
+      rays.x += 1u;
+    else
+      rays.z += 1u;
     if (!intersect(origin, direction, 0.0f, 1e30f, side, primary && hideBack, before,
-                   primary && (P.options.x & kOptionRequests) != 0u, hit, rays)) {
+                   primary && (P.options.x & kOptionRequests) != 0u, hit)) {
       color += weight * background(direction);
     } else {
       vec3 p = origin + direction * hit.t;
@@ -161,9 +167,9 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uint) rays) {
         stackOrigin[count] = vec4(leaves ? p - n * offset : p + n * offset, distance);
         stackDirection[count] =
             vec4(leaves ? normalize(r) : reflect(direction, n), float(depth + 1u));
-        stackWeight[count] = vec4(weight * exp(-absorption * hit.t),
-                                  leaves ? packRayState(-hit.from, false)
-                                         : packRayState(hit.from, true));
+        stackWeight[count] =
+            vec4(weight * exp(-absorption * hit.t),
+                 leaves ? packRayState(-hit.from, false) : packRayState(hit.from, true));
         count += 1u;
       }
     }
@@ -189,7 +195,7 @@ float linearToSrgb(float c) {
 }
 
 // The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
-uint renderPixel(uint x, uint y, ISO_INOUT(uint) rays) {
+uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
   uint samples = max(P.image.z, 1u);
   uint rng = hashUint(x * 1973u + y * 9277u + P.image.w * 26699u);
   vec3 sum = vec3(0.0f);

@@ -51,9 +51,12 @@ ISO_CONST uint kRecordFloatDistanceWords = 8u;
 ISO_CONST uint kRecordNormalWords = 4u;
 ISO_CONST uint kRecordColorWords = 8u;
 
-// Feedback from the shader, one buffer: the rays traced this frame, then per chunk the frame it
-// was last requested, then per chunk the frame it was last used.
-ISO_CONST uint kFeedbackRays = 0u;
+// Feedback from the shader, one buffer: the rays traced this frame by kind (camera rays, shadow
+// rays, reflected and refracted rays), then per chunk the frame it was last requested, then per
+// chunk the frame it was last used.
+ISO_CONST uint kFeedbackPrimaryRays = 0u;
+ISO_CONST uint kFeedbackShadowRays = 1u;
+ISO_CONST uint kFeedbackSecondaryRays = 2u;
 ISO_CONST uint kFeedbackHeaderWords = 4u;
 
 // The finest grid: 2^kGridLevels cells along an axis (the format's kMaxLevel).
@@ -77,8 +80,8 @@ ISO_CONST uint kOptionSwapRB = 32u;       // write BGRA (swapchains) instead of 
 ISO_CONST uint kOptionEnvironment = 64u;  // an environment map is bound
 ISO_CONST uint kOptionRequests = 128u;    // rays request missing chunks (streaming on)
 ISO_CONST uint kOptionOcclusion = 256u;   // the file has baked ambient occlusion
-ISO_CONST uint kOptionBackTint = 512u;    // back faces seen by camera rays take FrameParams.backface
-ISO_CONST uint kOptionBackHide = 1024u;   // camera rays pass through back faces
+ISO_CONST uint kOptionBackTint = 512u;   // back faces seen by camera rays take FrameParams.backface
+ISO_CONST uint kOptionBackHide = 1024u;  // camera rays pass through back faces
 ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
 
 // Light kinds (Light.position.w).

@@ -68,7 +68,9 @@ void main() {
   uint x = (tile % tilesX) * 8u + lx;
   uint y = (tile / tilesX) * 8u + ly;
   if (x >= P.image.x || y >= P.image.y) return;
-  uint rays = 0u;
+  uvec3 rays = uvec3(0u);
   pixels[y * P.image.x + x] = renderPixel(x, y, rays);
-  atomicAdd(feedback[kFeedbackRays], rays);
+  atomicAdd(feedback[kFeedbackPrimaryRays], rays.x);
+  if (rays.y != 0u) atomicAdd(feedback[kFeedbackShadowRays], rays.y);
+  if (rays.z != 0u) atomicAdd(feedback[kFeedbackSecondaryRays], rays.z);
 }

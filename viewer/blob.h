@@ -1,6 +1,7 @@
 // The GPU form of a surface chunk ("blob", specs/viewer.md): node records that the tracer walks
-// with popcounts, corner records with the file's distance codes, octahedral normals and sRGB colors, and
-// for cut nodes the links to the roots of the child chunks. Built on the CPU by the loader thread.
+// with popcounts, corner records with the file's distance codes, octahedral normals and sRGB
+// colors, and for cut nodes the links to the roots of the child chunks. Built on the CPU by the
+// loader thread.
 #pragma once
 
 #include <cstdint>
@@ -27,8 +28,8 @@ class ChunkTree {
 };
 
 struct BlobOptions {
-  bool normals = false;  // the records carry normals
-  bool colors = false;   // the records carry colors
+  bool normals = false;    // the records carry normals
+  bool colors = false;     // the records carry colors
   bool occlusion = false;  // ... and occlusion (in the color words, white without colors)
   // Distances as float32 (files whose distances are not snorm8), else as the file's codes.
   bool floatDistances = false;

@@ -94,15 +94,17 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
   CpuFrame frame;
   const uint32_t width = params.image.x, height = params.image.y;
   frame.pixels.resize(size_t(width) * height);
-  std::atomic<uint64_t> rays{0};
+  std::atomic<uint64_t> primary{0}, shadow{0}, secondary{0};
   tbb::parallel_for(uint32_t(0), height, [&](uint32_t y) {
     shader::Tracer tracer(pool, params, environment);
-    uint32_t count = 0;
+    glm::uvec3 count(0u);
     for (uint32_t x = 0; x < width; ++x)
       frame.pixels[size_t(y) * width + x] = tracer.renderPixel(x, y, count);
-    rays += count;
+    primary += count.x;
+    shadow += count.y;
+    secondary += count.z;
   });
-  frame.rays = rays;
+  frame.rays = {primary, shadow, secondary};
   return frame;
 }
 
@@ -120,8 +122,7 @@ std::optional<CpuHit> traceCpu(const CpuPool& pool, const gpu::FrameParams& para
                                glm::vec3 origin, glm::vec3 direction, float side, bool strict) {
   shader::Tracer tracer(pool, params, nullptr);
   shader::Tracer::Hit hit;
-  uint32_t rays = 0;
-  if (!tracer.intersect(origin, direction, 0.0f, 1e30f, side, strict, 0.0f, false, hit, rays))
+  if (!tracer.intersect(origin, direction, 0.0f, 1e30f, side, strict, 0.0f, false, hit))
     return std::nullopt;
   return CpuHit{hit.t, hit.from, hit.normal};
 }
@@ -132,11 +133,10 @@ void traceCpu(const CpuPool& pool, const gpu::FrameParams& params, std::span<con
   tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), 1024),
                     [&](const tbb::blocked_range<size_t>& range) {
                       shader::Tracer tracer(pool, params, nullptr);
-                      uint32_t count = 0;
                       for (size_t i = range.begin(); i < range.end(); ++i) {
                         shader::Tracer::Hit hit;
                         if (tracer.intersect(rays[i].origin, rays[i].direction, rays[i].tMin,
-                                             rays[i].tMax, 0.0f, false, 0.0f, false, hit, count))
+                                             rays[i].tMax, 0.0f, false, 0.0f, false, hit))
                           hits[i] = CpuHit{hit.t, hit.from, hit.normal};
                         else
                           hits[i].reset();

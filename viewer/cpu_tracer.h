@@ -32,9 +32,23 @@ struct CpuPool {
 using ChunkFilter = std::function<bool(const ChunkInfo&)>;
 CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds = {});
 
+// Rays traced, by kind.
+struct RayCounts {
+  uint64_t primary = 0;    // camera rays
+  uint64_t shadow = 0;     // toward lights
+  uint64_t secondary = 0;  // reflected and refracted
+  uint64_t total() const { return primary + shadow + secondary; }
+  RayCounts& operator+=(const RayCounts& o) {
+    primary += o.primary;
+    shadow += o.shadow;
+    secondary += o.secondary;
+    return *this;
+  }
+};
+
 struct CpuFrame {
   std::vector<uint32_t> pixels;  // RGBA8
-  uint64_t rays = 0;
+  RayCounts rays;
 };
 
 // Render a frame. params.pool is ignored (the host pool is one array).
@@ -50,7 +64,7 @@ gpu::FrameParams finestFrameParams(const CpuPool& pool);
 // surface starts on; `strict` keeps that rule past empty cells (back faces hidden).
 struct CpuHit {
   float t = 0;
-  float from = 1;     // the side the ray came from: +1 a front face, -1 a back face
+  float from = 1;      // the side the ray came from: +1 a front face, -1 a back face
   glm::vec3 normal{};  // unit, pointing outside
 };
 std::optional<CpuHit> traceCpu(const CpuPool& pool, const gpu::FrameParams& params,

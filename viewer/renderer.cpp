@@ -99,8 +99,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   // What is made here is destroyed with its member if a later step throws.
   params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
   chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
-  feedback_ = createBuffer(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4,
-                           storage, true);
+  feedback_ =
+      createBuffer(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4, storage, true);
   output_ = createBuffer(gpu, pixelsBytes, storage | src, true);
   environment_ = createBuffer(gpu, envBytes, storage, true);
   staging_ = createBuffer(gpu, stagingBytes, src, true);
@@ -208,7 +208,9 @@ void Renderer::prepare(gpu::FrameParams params) {
   else
     params.options.x &= ~gpu::kOptionRequests;
   std::memcpy(params_.mapped, &params, sizeof params);
-  static_cast<uint32_t*>(feedback_.mapped)[gpu::kFeedbackRays] = 0;
+  for (uint32_t kind :
+       {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
+    static_cast<uint32_t*>(feedback_.mapped)[kind] = 0;
 }
 
 void Renderer::record(VkCommandBuffer cb) {
@@ -237,7 +239,8 @@ void Renderer::record(VkCommandBuffer cb) {
 void Renderer::collect() {
   const auto* fb = static_cast<const uint32_t*>(feedback_.mapped);
   const uint32_t n = setup_.chunkCount;
-  stats_.rays = fb[gpu::kFeedbackRays];
+  stats_.rays = {fb[gpu::kFeedbackPrimaryRays], fb[gpu::kFeedbackShadowRays],
+                 fb[gpu::kFeedbackSecondaryRays]};
   stats_.requested = 0;
   for (uint32_t c = 0; c < n; ++c) {
     if (fb[gpu::kFeedbackHeaderWords + c] == frame_) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "viewer/asset.h"
+#include "viewer/cpu_tracer.h"
 #include "viewer/image.h"
 #include "viewer/streaming.h"
 #include "viewer/vulkan.h"
@@ -20,15 +21,15 @@ namespace iso::viewer {
 struct RendererOptions {
   uint32_t width = 1024, height = 1024;
   uint32_t capacityWidth = 0, capacityHeight = 0;  // the largest size resize() allows (0: this)
-  uint64_t vram = uint64_t(1) << 30;  // all device memory the viewer allocates
-  uint64_t uploadBytes = 16u << 20;   // chunk bytes uploaded per frame at most
-  bool swapRedBlue = false;           // BGRA output (swapchains)
-  bool streaming = true;              // rays request chunks; off: the top chunk alone
+  uint64_t vram = uint64_t(1) << 30;               // all device memory the viewer allocates
+  uint64_t uploadBytes = 16u << 20;                // chunk bytes uploaded per frame at most
+  bool swapRedBlue = false;                        // BGRA output (swapchains)
+  bool streaming = true;                           // rays request chunks; off: the top chunk alone
 };
 
 struct FrameStats {
   uint64_t frame = 0;
-  uint64_t rays = 0;            // traced in the frame
+  RayCounts rays;               // traced in the frame
   uint32_t requested = 0;       // chunks rays asked for that were not resident
   uint32_t uploadedChunks = 0;  // placed in this frame
   uint64_t uploadedBytes = 0;
@@ -65,7 +66,6 @@ class Renderer {
   uint32_t frameNumber() const { return frame_; }
 
  private:
-
   Gpu& gpu_;
   const Asset& asset_;
   RendererOptions options_;

@@ -99,8 +99,7 @@ LightSpec parseLight(const std::string& text) {
   if (parts[0] == "point") {
     light.position = parseVec3(parts[1]);
   } else if (parts[0] == "area") {
-    if (parts.size() < 4)
-      throw UsageError("light '" + text + "': an area light needs X,Y,Z:U:V");
+    if (parts.size() < 4) throw UsageError("light '" + text + "': an area light needs X,Y,Z:U:V");
     light.area = true;
     light.position = parseVec3(parts[1]);
     light.u = parseVec3(parts[2]);

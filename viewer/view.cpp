@@ -103,7 +103,7 @@ int viewHeadless(const ViewOptions& options) {
              options.out.string(), options.width, options.height, gpu.properties.deviceName, frames,
              frames == 1 ? "" : "s", seconds(Clock::now() - start),
              renderer.converged() ? "converged" : "not converged", lastFrame * 1e3,
-             lastFrame > 0 ? s.rays / lastFrame / 1e6 : 0.0);
+             lastFrame > 0 ? s.rays.total() / lastFrame / 1e6 : 0.0);
   fmt::print(
       "  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
       "(--vram {})\n",
@@ -138,7 +138,8 @@ int viewCpu(const ViewOptions& options) {
   fmt::print(
       "{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
       "{:.2f} s\n",
-      options.out.string(), options.width, options.height, render, frame.rays / render / 1e6, load);
+      options.out.string(), options.width, options.height, render,
+      frame.rays.total() / render / 1e6, load);
   return 0;
 }
 
@@ -164,7 +165,7 @@ int viewBench(const ViewOptions& options) {
     const FrameStats& s = renderer.stats();
     if (f > 0) {  // the first frame builds the pipeline's caches
       ms.push_back(dt * 1e3);
-      rays += s.rays;
+      rays += s.rays.total();
       total += dt;
     }
     uploaded.push_back(s.uploadedBytes);

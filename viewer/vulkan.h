@@ -85,8 +85,8 @@ struct Gpu {
   VkPhysicalDeviceProperties properties{};
   VkPhysicalDeviceMemoryProperties memory{};
   VkCommandPool commandPool = VK_NULL_HANDLE;
-  uint64_t memoryInUse = 0;                           // bytes of device memory allocated now
-  uint64_t memoryPeak = 0;                            // the most at once
+  uint64_t memoryInUse = 0;  // bytes of device memory allocated now
+  uint64_t memoryPeak = 0;   // the most at once
   // Messages of severity error (at a fixed address: the messenger's callback counts them).
   std::unique_ptr<std::atomic<uint32_t>> validationErrors;
 };
@@ -100,8 +100,8 @@ struct Buffer {
   Buffer(Buffer&& other) noexcept { *this = std::move(other); }
   Buffer& operator=(Buffer&& other) noexcept;
   ~Buffer() { release(); }
-  void release();          // destroy it now (it becomes empty)
-  Gpu* gpu = nullptr;      // its device, and the memory count it is charged to
+  void release();      // destroy it now (it becomes empty)
+  Gpu* gpu = nullptr;  // its device, and the memory count it is charged to
   VkBuffer buffer = VK_NULL_HANDLE;
   VkDeviceMemory memory = VK_NULL_HANDLE;
   VkDeviceSize size = 0;        // as asked

@@ -117,8 +117,7 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
     if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
     if (key == GLFW_KEY_R) in.reload = true;
-    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3)
-      in.toggled = key - GLFW_KEY_0;
+    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
     if (key == GLFW_KEY_B) in.toggled = 4;
     if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
     if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
@@ -424,7 +423,7 @@ int viewWindow(const ViewOptions& options) {
     ++frames;
     ++shownStats.frames;
     shownStats.gpuSeconds += shown.seconds;
-    shownStats.rays += renderer.stats().rays;
+    shownStats.rays += renderer.stats().rays.total();
     const bool last = options.frames > 0 && frames >= options.frames;
     if (input.screenshot || (last && !options.screenshot.empty())) {
       const std::filesystem::path file =
