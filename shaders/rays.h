@@ -42,7 +42,7 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
   if ((P.options.x & kOptionNormals) != 0u) {
     vec3 sum = vec3(0.0f);
     for (uint k = 0u; k < 8u; k += 2u) {
-      vec4 e = unpackSnorm4x8(blobWord(cell.page, word + k / 2u));
+      vec4 e = unpackSnorm4x8(blobWord(cell.base, word + k / 2u));
       sum += cornerWeight(k, u) * decodeOctahedral(vec2(e.x, e.y));
       sum += cornerWeight(k + 1u, u) * decodeOctahedral(vec2(e.z, e.w));
     }
@@ -56,7 +56,7 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
     vec3 sum = vec3(0.0f);
     float open = 0.0f;
     for (uint k = 0u; k < 8u; ++k) {
-      vec4 rgba = unpackUnorm4x8(blobWord(cell.page, word + k));
+      vec4 rgba = unpackUnorm4x8(blobWord(cell.base, word + k));
       sum += cornerWeight(k, u) * srgbToLinear(vec3(rgba.x, rgba.y, rgba.z));
       open += cornerWeight(k, u) * rgba.w;
     }
@@ -74,6 +74,13 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
 // way (camera rays see both sides). `strict` keeps the side rule all along (back faces hidden).
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
 // ask for chunks it lacks.
+//
+// The walk keeps its path: the node of every level down to the current cell, with its chunk.
+// From one cell to the next it climbs only to their deepest common ancestor (the highest bit in
+// which the two cells' grid coordinates differ) and descends from there, one node record (one
+// load) a level. A node is drawn in place of what is below it when its error (node records'
+// codes; a cut node's is its chunk's) covers less than P.lod.x pixels at the ray's distance, or
+// when the chunk below it is not resident (which `request` then asks for).
 bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
                bool request, ISO_INOUT(Hit) hit) {
   vec3 dir = d;
@@ -91,6 +98,15 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   if (t > tEnd) return false;
   vec3 p = o + d * t;
   uvec3 g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
+  uint pathNode[kGridLevels + 1u];
+  uint pathChunk[kGridLevels + 1u];
+  uint words = recordWords();
+  ChunkView chunk = chunkView(P.options.z);
+  useChunk(chunk.id);
+  uint level = 0u;
+  uint node = 0u;
+  pathNode[0] = 0u;
+  pathChunk[0] = chunk.id;
   bool havePrevious = false;
   float previous = 0.0f;  // f at the exit of the previous surface cell
   // The traversal only brackets the first crossing; the root and the attributes are computed once
@@ -101,7 +117,55 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   vec4 bracket = vec4(0.0f);  // s in [bracket.x, bracket.y] of that segment (equal: at its entry
                               // face), the values at both ends (before and after, at a face)
   for (uint step = 0u; step < kMaxSteps && !found; ++step) {
-    Cell cell = locate(g, distance + t, request);
+    // Down from the path's node at `level` to the cell that holds g.
+    float pixel = P.eye.w * (distance + t);  // a pixel's width at the ray's distance
+    float reach = P.lod.x * pixel;           // errors below this are not seen
+    Cell cell;
+    cell.filled = false;
+    for (;;) {
+      uvec2 n = nodeRecord(chunk, node);
+      uint mask = n.x & 0xFFu;
+      float edge = 1.0f / float(1u << level);
+      if (mask == 0u || (nodeError(n.x, edge) <= reach && edge <= kLodNodePixels * pixel)) {
+        cell.filled = true;
+        break;
+      }
+      uint shift = kGridLevels - 1u - level;
+      uint octant =
+          ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) | (((g.z >> shift) & 1u) << 2u);
+      if (((mask >> octant) & 1u) == 0u) {  // an empty child
+        level += 1u;
+        break;
+      }
+      uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
+      if ((n.x & kNodeCut) == 0u) {
+        node = n.y + before;
+      } else {
+        uint childChunk = blobWord(chunk.base, n.y + 2u * before);
+        uint childRoot = blobWord(chunk.base, n.y + 2u * before + 1u);
+        if (chunkState(childChunk).x == kNotResident) {
+          if (request) requestChunk(childChunk);
+          cell.filled = true;  // the cut node's own patch until the chunk arrives
+          break;
+        }
+        ChunkView below = chunkView(childChunk);
+        // (A root index past the child's nodes would only come from a file whose chunks disagree.)
+        if (childRoot >= blobWord(below.base, kBlobNodeCount)) {
+          cell.filled = true;
+          break;
+        }
+        chunk = below;
+        useChunk(chunk.id);
+        node = childRoot;
+      }
+      level += 1u;
+      pathNode[level] = node;
+      pathChunk[level] = chunk.id;
+    }
+    cell.level = level;
+    cell.coord = g >> (kGridLevels - level);
+    cell.base = chunk.base;
+    cell.record = chunk.data + node * words;
     float size = 1.0f / float(1u << cell.level);
     vec3 lo = vec3(cell.coord) * size;
     vec3 c0 = (lo - o) * inv;
@@ -113,7 +177,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
       // A cell the ray only touches (an edge or a corner, within rounding): nothing in it counts,
       // as in SurfaceModel.
     } else if (cell.filled) {
-      Corners c = loadCorners(cell.page, cell.record);
+      Corners c = loadCorners(cell.base, cell.record);
       float least = min(min(min(c.d0.x, c.d0.y), min(c.d0.z, c.d0.w)),
                         min(min(c.d1.x, c.d1.y), min(c.d1.z, c.d1.w)));
       float most = max(max(max(c.d0.x, c.d0.y), max(c.d0.z, c.d0.w)),
@@ -174,6 +238,12 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
         if (lower == 0u) return false;
         g[axis] = lower - 1u;
       }
+      // Up to the deepest common ancestor of this cell and the next: the cells of a level are
+      // the same for two grid points until their highest differing bit.
+      uint differ = (first.x ^ g.x) | (first.y ^ g.y) | (first.z ^ g.z);
+      level = kGridLevels - 1u - uint(findMSB(differ));
+      node = pathNode[level];
+      if (pathChunk[level] != chunk.id) chunk = chunkView(pathChunk[level]);
     }
   }
   if (!found) return false;
@@ -182,7 +252,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   vec3 lo = vec3(hitCell.coord) * size;
   vec3 ua = cellCoordinates(o, d, tIn, lo, size);
   vec3 ub = cellCoordinates(o, d, tOut, lo, size);
-  Corners c = loadCorners(hitCell.page, hitCell.record);
+  Corners c = loadCorners(hitCell.base, hitCell.record);
   vec4 k = segmentCubic(c, ua, ub);
   float s = 0.0f;
   if (bracket.y > bracket.x) {
@@ -190,7 +260,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
     bracket.z = cubicAt(k, bracket.x);
     bracket.w = cubicAt(k, bracket.y);
     s = (bracket.z < 0.0f) == (bracket.w < 0.0f) ? 0.5f * (bracket.x + bracket.y)
-                                                 : refineRoot(k, bracket);
+                                                  : refineRoot(k, bracket);
   }
   hit.t = tIn + (tOut - tIn) * s;
   surfaceAttributes(hitCell, c, mix(ua, ub, s), hit);

@@ -1,93 +1,56 @@
-// Chunks in the page pool: words of a chunk, the node that holds a point of the frame (walking
-// down from the root across chunks), and a surface cell's corner record. Part of the tracer
-// (trace.h, which lists what the includer provides).
+// Chunks in the page pool: a chunk's base address and regions, its node records, and a node's
+// corner record. Part of the tracer (trace.h, which lists what the includer provides).
 
-uint blobWord(uint firstPage, uint word) {
-  uint page = word >> kPageWordsLog2;
-  uint physical = firstPage;
-  if (page != 0u) physical = poolWord(firstPage * kPageWords + kBlobPageList + page);
-  return poolWord(physical * kPageWords + (word & (kPageWords - 1u)));
+// A resident chunk as the traversal reads it: resolved once when a ray enters it.
+struct ChunkView {
+  uint id;
+  ISO_ADDRESS base;  // the blob's first word
+  uint nodes;        // the word of node record 0
+  uint data;         // the word of corner record 0
+};
+
+ChunkView chunkView(uint chunk) {
+  ChunkView v;
+  v.id = chunk;
+  v.base = blobBase(chunkState(chunk).x);
+  v.nodes = blobWord(v.base, kBlobNodes);
+  v.data = blobWord(v.base, kBlobData);
+  return v;
 }
+
+// Node record i of the chunk, in one load: (childMask | flags | error code, link).
+uvec2 nodeRecord(ChunkView v, uint i) { return blobPair(v.base, v.nodes + 2u * i); }
 
 // Words of a corner record's distances.
 uint distanceWords() {
   return floatDistances() ? kRecordFloatDistanceWords : kRecordDistanceWords;
 }
 
-// The surface cell (filled leaf, or a coarser node drawn in place of what is below it) or the
-// empty cell that contains a grid point.
+// Words of a corner record.
+uint recordWords() {
+  uint words = distanceWords();
+  if ((P.options.x & kOptionNormals) != 0u) words += kRecordNormalWords;
+  if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) words += kRecordColorWords;
+  return words;
+}
+
+// The geometric error a node's record bounds (frame units; shared.h), for a node of the given
+// edge: 0 for a code of 0, infinite for 255.
+float nodeError(uint w0, float edge) {
+  uint code = (w0 >> kNodeErrorShift) & 0xFFu;
+  if (code == 0u) return 0.0f;
+  if (code == 255u) return 3.0e38f;
+  return edge * exp2(float(int(code) - 128) * 0.125f);
+}
+
+// A surface cell (a filled leaf, or a node drawn in place of what is below it) or an empty cell.
 struct Cell {
   bool filled;
   uint level;
-  uvec3 coord;  // cell coordinates at level
-  uint page;    // first pool page of the chunk holding the node
-  uint record;  // word of the corner record (filled)
+  uvec3 coord;       // cell coordinates at level
+  ISO_ADDRESS base;  // the chunk holding the node
+  uint record;       // word of the corner record (filled)
 };
-
-// Find the cell of grid point g, descending from the octree root through resident chunks. At a
-// cut node (children in other chunks) the node's own patch is drawn when the chunk's geometric
-// error covers less than P.lod.x pixels at distance `distance`, or when a child chunk is not
-// resident (which `request` then asks for).
-Cell locate(uvec3 g, float distance, bool request) {
-  Cell cell;
-  cell.filled = false;
-  uint chunk = P.options.z;
-  uint page = chunkState(chunk).x;
-  uint nodes = blobWord(page, kBlobNodes);
-  uint data = blobWord(page, kBlobData);
-  uint recordWords = distanceWords();
-  if ((P.options.x & kOptionNormals) != 0u) recordWords += kRecordNormalWords;
-  if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) recordWords += kRecordColorWords;
-  useChunk(chunk);
-  uint node = 0u;
-  uint level = 0u;
-  for (; level < kGridLevels; ++level) {
-    uint w0 = blobWord(page, nodes + 2u * node);
-    uint w1 = blobWord(page, nodes + 2u * node + 1u);
-    uint mask = w0 & 0xFFu;
-    if (mask == 0u) {  // a filled leaf
-      cell.filled = true;
-      cell.record = data + w1 * recordWords;
-      break;
-    }
-    uint shift = kGridLevels - 1u - level;
-    uint octant =
-        ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) | (((g.z >> shift) & 1u) << 2u);
-    if (((mask >> octant) & 1u) == 0u) {  // an empty child
-      level += 1u;
-      break;
-    }
-    uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
-    if ((w0 & kNodeCut) == 0u) {
-      node = w1 + before;
-      continue;
-    }
-    uint ownRecord = data + blobWord(page, w1) * recordWords;
-    uint childChunk = blobWord(page, w1 + 1u + 2u * before);
-    uint childRoot = blobWord(page, w1 + 2u + 2u * before);
-    float error = uintBitsToFloat(chunkState(chunk).z);
-    uvec4 child = chunkState(childChunk);
-    bool fineEnough = error <= P.lod.x * P.eye.w * distance;
-    // (A root index past the child's nodes would only come from a file whose chunks disagree.)
-    bool usable = child.x != kNotResident && childRoot < blobWord(child.x, kBlobNodeCount);
-    if (fineEnough || !usable) {
-      if (!fineEnough && request) requestChunk(childChunk);
-      cell.filled = true;
-      cell.record = ownRecord;
-      break;
-    }
-    chunk = childChunk;
-    page = child.x;
-    nodes = blobWord(page, kBlobNodes);
-    data = blobWord(page, kBlobData);
-    node = childRoot;
-    useChunk(chunk);
-  }
-  cell.level = level;
-  cell.coord = g >> (kGridLevels - level);
-  cell.page = page;
-  return cell;
-}
 
 // The 8 corner distances of a surface cell (corner c = x + 2y + 4z: d0 holds 0-3, d1 holds 4-7),
 // in units of the cell's size.
@@ -109,21 +72,20 @@ vec4 decodeDistances(uint codes, uint shifts) {
   return (q / 127.0f) * unit;
 }
 
-Corners loadCorners(uint page, uint record) {
+Corners loadCorners(ISO_ADDRESS base, uint record) {
   Corners c;
   if (floatDistances()) {
-    c.d0 = vec4(uintBitsToFloat(blobWord(page, record)),
-                uintBitsToFloat(blobWord(page, record + 1u)),
-                uintBitsToFloat(blobWord(page, record + 2u)),
-                uintBitsToFloat(blobWord(page, record + 3u)));
-    c.d1 = vec4(uintBitsToFloat(blobWord(page, record + 4u)),
-                uintBitsToFloat(blobWord(page, record + 5u)),
-                uintBitsToFloat(blobWord(page, record + 6u)),
-                uintBitsToFloat(blobWord(page, record + 7u)));
+    c.d0 = vec4(uintBitsToFloat(blobWord(base, record)), uintBitsToFloat(blobWord(base, record + 1u)),
+                uintBitsToFloat(blobWord(base, record + 2u)),
+                uintBitsToFloat(blobWord(base, record + 3u)));
+    c.d1 = vec4(uintBitsToFloat(blobWord(base, record + 4u)),
+                uintBitsToFloat(blobWord(base, record + 5u)),
+                uintBitsToFloat(blobWord(base, record + 6u)),
+                uintBitsToFloat(blobWord(base, record + 7u)));
     return c;
   }
-  uint shifts = blobWord(page, record + 2u);
-  c.d0 = decodeDistances(blobWord(page, record), shifts);
-  c.d1 = decodeDistances(blobWord(page, record + 1u), shifts >> 16u);
+  uint shifts = blobWord(base, record + 2u);
+  c.d0 = decodeDistances(blobWord(base, record), shifts);
+  c.d1 = decodeDistances(blobWord(base, record + 1u), shifts >> 16u);
   return c;
 }

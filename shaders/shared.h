@@ -20,24 +20,29 @@ using uint = uint32_t;
 #endif
 
 // The page pool: pages of 2^13 words (32 KiB) in up to kPoolBuffers buffers, read through their
-// device addresses (FrameParams.poolAddress).
+// device addresses (FrameParams.poolAddress). A chunk takes consecutive pages of one buffer, so
+// its words are read from one base address.
 ISO_CONST uint kPageWordsLog2 = 13u;
 ISO_CONST uint kPageWords = 1u << kPageWordsLog2;
 ISO_CONST uint kPoolBuffers = 8u;
 ISO_CONST uint kNotResident = 0xFFFFFFFFu;
 
-// A chunk on the GPU ("blob"), in 32-bit words from its first word. Word w lies on page
-// w >> kPageWordsLog2 of the chunk, whose pool page is word kBlobPageList + (w >> kPageWordsLog2).
-ISO_CONST uint kBlobNodeCount = 0u;  // nodes of the chunk
-ISO_CONST uint kBlobPageCount = 1u;  // pages the blob spans
-ISO_CONST uint kBlobNodes = 2u;      // holds the word of node 0; node i is the 2 words 2i on
-ISO_CONST uint kBlobData = 3u;       // holds the word of corner record 0
-ISO_CONST uint kBlobPageList = 4u;   // the pool pages of the blob, in order
-// Node records: word 0 = childMask | kNodeCut; word 1 = the first child's node index (internal
-// node), the corner record index (filled leaf), or the word of the node's link list (cut node:
-// a node whose children are roots of other chunks). A link list is the cut node's corner record
-// index, then (chunk, root node index) per existing child in octant order.
+// A chunk on the GPU ("blob"), in 32-bit words from its first word.
+ISO_CONST uint kBlobNodeCount = 0u;    // nodes of the chunk
+ISO_CONST uint kBlobWords = 1u;        // words of the blob
+ISO_CONST uint kBlobNodes = 2u;        // holds the word of node 0 (even); node i is the 2 words 2i on
+ISO_CONST uint kBlobData = 3u;         // holds the word of corner record 0 (even)
+ISO_CONST uint kBlobHeaderWords = 4u;  // the node records follow
+// Node records, read as one uvec2: word 0 = childMask (bits 0-7; 0 for a filled leaf) | kNodeCut
+// | the node's geometric error code << kNodeErrorShift; word 1 = the first child's node index
+// (internal node) or the word of the node's link list (cut node: a node whose children are roots
+// of other chunks), 0 for a leaf. A link list is (chunk, root node index) per existing child in
+// octant order. Node i's corner record is record i (every node has one: a leaf's patch, or an
+// internal node's coarser patch drawn in place of its children). The error code e (8 bits) bounds
+// the distance between the node's patch and the finest surface below it: 0 for none, else
+// 2^((e - 128) / 8) node edges; 255 is never small enough.
 ISO_CONST uint kNodeCut = 0x100u;
+ISO_CONST uint kNodeErrorShift = 16u;
 // Corner records: the 8 distances, then, when the file has them, 8 normals (octahedral snorm8
 // pairs, 4 words), then, when it has colors or occlusion, 8 colors (sRGB RGB8, white without
 // colors, and the occlusion as unorm8 alpha, 255 without it; 8 words). The distances are the file's
@@ -69,6 +74,9 @@ ISO_CONST uint kMaxLights = 4u;
 ISO_CONST uint kRayStack = 8u;        // pending reflection/refraction rays per sample
 ISO_CONST uint kMaxSteps = 4096u;     // cells one ray may visit (a guard, never a visible limit)
 ISO_CONST uint kWorkgroupSize = 64u;  // one 8×8 tile of pixels, visited in Z-order
+// A node is drawn in place of its children only when it spans at most this many pixels (its
+// colors and normals are interpolated across it), besides its error being small enough.
+ISO_CONST float kLodNodePixels = 2.0f;
 
 // Bits of FrameParams.options.x.
 ISO_CONST uint kOptionShadows = 1u;

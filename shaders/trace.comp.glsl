@@ -17,19 +17,28 @@ layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
 layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
 layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
 layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
-// The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit and no
-// branch on which buffer a word is in).
+// The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
+// lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
   uint words[];
 };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer PoolPairs {
+  uvec2 pairs[];
+};
 
-uint poolWord(uint word) {
+#define ISO_ADDRESS uint64_t
+
+uint64_t blobBase(uint firstPage) {
+  uint word = firstPage * kPageWords;
   uint which = word >> P.pool.x;
   uvec4 pair = P.poolAddress[which >> 1u];
   uvec2 address = (which & 1u) == 0u ? uvec2(pair.x, pair.y) : uvec2(pair.z, pair.w);
-  PoolWords pool = PoolWords(packUint2x32(address));
-  return pool.words[word & ((1u << P.pool.x) - 1u)];
+  return packUint2x32(address) + uint64_t(word & ((1u << P.pool.x) - 1u)) * 4ul;
 }
+
+uint blobWord(uint64_t base, uint word) { return PoolWords(base).words[word]; }
+
+uvec2 blobPair(uint64_t base, uint word) { return PoolPairs(base).pairs[word >> 1u]; }
 
 uvec4 chunkState(uint chunk) { return chunks[chunk].state; }
 

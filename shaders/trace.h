@@ -3,7 +3,10 @@
 //
 // The includer provides, before including this file:
 //   FrameParams P;                       the frame's parameters
-//   uint poolWord(uint word);            a word of the page pool (global word index)
+//   ISO_ADDRESS                          a type (macro) that locates a chunk's blob in the pool
+//   ISO_ADDRESS blobBase(uint firstPage);      the blob that starts on this pool page
+//   uint blobWord(ISO_ADDRESS base, uint word);   a word of a blob
+//   uvec2 blobPair(ISO_ADDRESS base, uint word);  words `word` (even) and `word` + 1, one load
 //   uvec4 chunkState(uint chunk);        the chunk table entry (ChunkEntry.state)
 //   void requestChunk(uint chunk);       a ray needs this chunk (streaming)
 //   void useChunk(uint chunk);           a ray went through this chunk (for the LRU)
@@ -18,7 +21,7 @@
 // Float literals carry an `f` so that the C++ build does the same single-precision arithmetic.
 //
 // The tracer is four files, in the order they build on each other:
-//   records.h  chunks in the page pool, node lookup, corner records
+//   records.h  chunks in the page pool, node records, corner records
 //   cell.h     the surface inside one cell: the cubic along the ray and its first root
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
 //   shade.h    shading, shadows, reflections, refractions, one pixel

@@ -18,10 +18,10 @@ namespace {
 using gpu::kBlobData;
 using gpu::kBlobNodeCount;
 using gpu::kBlobNodes;
-using gpu::kBlobPageCount;
-using gpu::kBlobPageList;
+using gpu::kBlobHeaderWords;
+using gpu::kBlobWords;
 using gpu::kNodeCut;
-using gpu::kPageWords;
+using gpu::kNodeErrorShift;
 
 // Two octahedral normals as the snorm8 pairs of one word (the file's own 8-bit encoding).
 uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& b) {
@@ -130,15 +130,76 @@ uint32_t recordWords(const BlobOptions& options) {
          (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);
 }
 
-uint32_t blobPages(size_t words) { return uint32_t((words + kPageWords - 1) / kPageWords); }
+namespace {
+
+// The node's trilinear interpolation at local coordinates u in [0, 1]^3 (corner c = x + 2y + 4z).
+float trilinear(const std::array<float, 8>& f, float x, float y, float z) {
+  const float a = f[0] + (f[1] - f[0]) * x, b = f[2] + (f[3] - f[2]) * x;
+  const float c = f[4] + (f[5] - f[4]) * x, d = f[6] + (f[7] - f[6]) * x;
+  const float e = a + (b - a) * y, g = c + (d - c) * y;
+  return e + (g - e) * z;
+}
+
+std::array<float, 8> distancesOf(const SurfaceNode& node, const CornerValues& values) {
+  std::array<float, 8> f{};
+  for (int c = 0; c < 8; ++c) f[c] = values.distance.at(node.corners[c]);
+  return f;
+}
+
+}  // namespace
+
+uint32_t encodeNodeError(double error, uint8_t level) {
+  if (!(error > 0.0)) return 0;
+  const double relative = std::ldexp(error, int(level));  // in units of the node's edge
+  const double code = std::ceil(8.0 * std::log2(relative)) + 128.0;
+  return code >= 255.0 ? 255u : uint32_t(std::max(code, 1.0));
+}
+
+std::vector<float> nodeErrors(const SurfaceChunk& chunk, float chunkError, uint32_t lastLevel) {
+  const std::vector<SurfaceNode>& nodes = chunk.layout.nodes;
+  std::vector<float> error(nodes.size(), 0.0f);
+  // Children follow their parents (topology order): bottom up from the last node.
+  for (size_t i = nodes.size(); i-- > 0;) {
+    const SurfaceNode& node = nodes[i];
+    if (node.isLeaf()) continue;
+    if (node.level == lastLevel) {  // a cut node: its children are in other chunks
+      error[i] = chunkError;
+      continue;
+    }
+    const std::array<float, 8> f = distancesOf(node, chunk.lodValues);
+    float worst = 0.0f;
+    uint32_t child = node.firstChild;
+    for (int o = 0; o < 8; ++o) {
+      if (!(node.childMask & (1u << o))) continue;
+      const SurfaceNode& c = nodes[child];
+      const std::array<float, 8> g = distancesOf(c, c.isLeaf() ? chunk.leafValues : chunk.lodValues);
+      float deviation = 0.0f;
+      for (int k = 0; k < 8; ++k) {
+        const float x = 0.5f * float((o & 1) + (k & 1)), y = 0.5f * float(((o >> 1) & 1) + ((k >> 1) & 1)),
+                    z = 0.5f * float(((o >> 2) & 1) + ((k >> 2) & 1));
+        deviation = std::max(deviation, std::abs(trilinear(f, x, y, z) - g[k]));
+      }
+      worst = std::max(worst, error[child] + deviation);
+      ++child;
+    }
+    error[i] = worst;
+  }
+  return error;
+}
 
 std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const ChunkTree& tree,
                                 const BlobOptions& options) {
   const std::vector<SurfaceNode>& nodes = chunk.layout.nodes;
   const uint8_t lastLevel = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
-  // Records: one per filled leaf and per cut node, in node order.
+  // Records: one per node, in node order (a leaf's patch, or an internal node's coarser one).
   std::vector<uint32_t> records;
-  std::vector<uint32_t> recordOf(nodes.size(), kNoNode);
+  records.reserve(nodes.size() * recordWords(options));
+  for (const SurfaceNode& node : nodes) {
+    if (node.isLeaf())
+      appendRecord(records, node, chunk.leafValues, chunk.layout.leafCorners, options);
+    else
+      appendRecord(records, node, chunk.lodValues, chunk.layout.lodCorners, options);
+  }
   // Cut nodes: links to the roots of the child chunks. A child chunk's roots are the children of
   // this chunk's last-level nodes inside its cell, in key order, so counting them in node order
   // gives each one's root index there.
@@ -147,12 +208,7 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
   std::vector<std::pair<uint32_t, uint32_t>> rootCounts;  // (child chunk, roots so far)
   for (size_t i = 0; i < nodes.size(); ++i) {
     const SurfaceNode& node = nodes[i];
-    if (node.isLeaf()) {
-      recordOf[i] = uint32_t(records.size() / recordWords(options));
-      appendRecord(records, node, chunk.leafValues, chunk.layout.leafCorners, options);
-      continue;
-    }
-    if (node.level != lastLevel) continue;
+    if (node.isLeaf() || node.level != lastLevel) continue;
     std::vector<uint32_t> nodeLinks;
     bool complete = true;
     for (int o = 0; o < 8 && complete; ++o) {
@@ -169,34 +225,28 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
       nodeLinks.push_back(child);
       nodeLinks.push_back(it->second++);
     }
-    recordOf[i] = uint32_t(records.size() / recordWords(options));
-    appendRecord(records, node, chunk.lodValues, chunk.layout.lodCorners, options);
     if (complete) {  // else (a file without the child chunk) the node is drawn as its patch
       linkOf[i] = uint32_t(links.size());
-      links.push_back(recordOf[i]);
       links.insert(links.end(), nodeLinks.begin(), nodeLinks.end());
     }
   }
+  const std::vector<float> errors = nodeErrors(chunk, tree.geometricError(id), lastLevel);
   const uint32_t nodeCount = uint32_t(nodes.size());
-  const size_t pagesGuess =
-      blobPages(kBlobPageList + 2 * size_t(nodeCount) + links.size() + records.size() + 64) + 1;
-  const size_t header = kBlobPageList + pagesGuess;
-  const size_t nodesAt = header, linksAt = nodesAt + 2 * size_t(nodeCount);
-  const size_t dataAt = linksAt + links.size();
+  const size_t nodesAt = kBlobHeaderWords, linksAt = nodesAt + 2 * size_t(nodeCount);
+  const size_t dataAt = (linksAt + links.size() + 1) & ~size_t(1);  // records start on 8 bytes
   const size_t total = dataAt + records.size();
-  if (pagesGuess > kPageWords - kBlobPageList || total > (size_t(1) << 31))
+  if (total > (size_t(1) << 31))
     throw std::length_error("chunk " + std::to_string(id) + " is too large for the viewer");
-  ISO_CHECK(blobPages(total) <= pagesGuess);
   std::vector<uint32_t> blob(total, 0);
   blob[kBlobNodeCount] = nodeCount;
-  blob[kBlobPageCount] = blobPages(total);
+  blob[kBlobWords] = uint32_t(total);
   blob[kBlobNodes] = uint32_t(nodesAt);
   blob[kBlobData] = uint32_t(dataAt);
   for (size_t i = 0; i < nodes.size(); ++i) {
     const SurfaceNode& node = nodes[i];
     uint32_t w0 = node.childMask, w1 = 0;
     if (node.isLeaf()) {
-      w1 = recordOf[i];
+      // A filled leaf: its record is the node's.
     } else if (node.level != lastLevel) {
       w1 = node.firstChild;
     } else if (linkOf[i] != kNoNode) {
@@ -204,8 +254,8 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
       w1 = uint32_t(linksAt + linkOf[i]);
     } else {
       w0 = 0;  // children missing from the file: a leaf with the node's own patch
-      w1 = recordOf[i];
     }
+    if (w0 != 0) w0 |= encodeNodeError(errors[i], node.level) << kNodeErrorShift;
     blob[nodesAt + 2 * i] = w0;
     blob[nodesAt + 2 * i + 1] = w1;
   }

@@ -20,6 +20,7 @@ class ChunkTree {
   // The child chunk of `parent` whose cell contains the cell (level, key), or kNoParent.
   uint32_t childCovering(uint32_t parent, uint8_t level, uint64_t key) const;
   uint32_t topChunk() const { return top_; }  // the surface chunk holding the root, or kNoParent
+  float geometricError(uint32_t chunk) const { return chunks_[chunk].geometricError; }
 
  private:
   std::span<const ChunkInfo> chunks_;
@@ -45,12 +46,20 @@ uint32_t recordWords(const BlobOptions& options);
 // The option bits of FrameParams.options.x that say what records carry (kOptionNormals, ...).
 uint32_t recordOptionBits(const BlobOptions& options);
 
-// The blob of a decoded chunk, without its page list (filled in when its pages are known):
-// words [kBlobPageList, kBlobPageList + pageCount) are left zero for it.
+// The blob of a decoded chunk: header, node records, cut nodes' links, a corner record per node
+// (shaders/shared.h). Contiguous: the pool holds it in consecutive words.
 std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const ChunkTree& tree,
                                 const BlobOptions& options);
 
-// Pages a blob of `words` words spans.
-uint32_t blobPages(size_t words);
+// The geometric error of drawing each node of a chunk in place of what is below it (frame units):
+// 0 for leaves; the chunk's error for its cut nodes (their children are other chunks' roots);
+// for other nodes, the largest over their children of the child's error plus the distance between
+// the node's patch and the child's at the child's corners.
+std::vector<float> nodeErrors(const SurfaceChunk& chunk, float chunkError, uint32_t lastLevel);
+
+// A node's error as the 8-bit code of its node record (shared.h, kNodeErrorShift): 0 for none,
+// else the error over the node's edge rounded up to an eighth of a power of two, 255 for 2^15.875
+// edges or more (never drawn in place of its children).
+uint32_t encodeNodeError(double error, uint8_t level);
 
 }  // namespace iso::viewer

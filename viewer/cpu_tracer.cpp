@@ -19,6 +19,7 @@ using namespace glm;
 using namespace iso::gpu;
 #define ISO_INOUT(T) T&
 #define ISO_PRECISE
+#define ISO_ADDRESS uint64_t
 
 // The GLSL environment of trace.h: the parameters and accessors that the shader gets from its
 // bindings, here from host memory. Its member functions are the shader's functions.
@@ -29,7 +30,11 @@ class Tracer {
 
   FrameParams P;
 
-  uint poolWord(uint word) { return pool_.words[word]; }
+  uint64_t blobBase(uint firstPage) { return uint64_t(firstPage) * kPageWords; }
+  uint blobWord(uint64_t base, uint word) { return pool_.words[base + word]; }
+  uvec2 blobPair(uint64_t base, uint word) {
+    return uvec2(pool_.words[base + word], pool_.words[base + word + 1]);
+  }
   uvec4 chunkState(uint chunk) { return pool_.chunks[chunk].state; }
   void requestChunk(uint) {}
   void useChunk(uint) {}
@@ -53,6 +58,7 @@ class Tracer {
 
 #undef ISO_INOUT
 #undef ISO_PRECISE
+#undef ISO_ADDRESS
 }  // namespace shader
 
 CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
@@ -69,8 +75,9 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
     if (chunks[i].kind != kSurfaceKind || (holds && !holds(chunks[i]))) return;
     blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
   });
+  const auto pagesOf = [](size_t words) { return (words + gpu::kPageWords - 1) / gpu::kPageWords; };
   size_t pages = 0;
-  for (const auto& b : blobs) pages += blobPages(b.size());
+  for (const auto& b : blobs) pages += pagesOf(b.size());
   pool.words.assign(pages * gpu::kPageWords, 0);
   uint32_t next = 0;
   for (size_t i = 0; i < chunks.size(); ++i) {
@@ -79,8 +86,7 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
                chunks[i].parent};
     if (blobs[i].empty()) continue;
     std::vector<uint32_t>& b = blobs[i];
-    const uint32_t n = blobPages(b.size());
-    for (uint32_t p = 0; p < n; ++p) b[gpu::kBlobPageList + p] = next + p;
+    const uint32_t n = uint32_t(pagesOf(b.size()));
     std::copy(b.begin(), b.end(), pool.words.begin() + size_t(next) * gpu::kPageWords);
     e.state.x = next;
     next += n;

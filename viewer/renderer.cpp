@@ -19,12 +19,12 @@ const uint32_t kTraceSpirv[] =
 constexpr uint64_t kPageBytes = uint64_t(gpu::kPageWords) * 4;
 
 // An upper bound of a chunk's blob size from its table entry (buildBlob's layout): node records,
-// a record per leaf, and at most a link list (17 words) and a record per internal node.
+// a record per node, and at most a link list (16 words) per internal node.
 uint64_t blobBound(const ChunkInfo& c, const BlobOptions& o) {
   const uint64_t leaves = std::min(c.leafCount, c.nodeCount), inner = c.nodeCount - leaves;
   const uint64_t words =
       2 * uint64_t(c.nodeCount) + leaves * recordWords(o) + inner * (17 + recordWords(o)) + 64;
-  return (words + gpu::kBlobPageList + words / gpu::kPageWords + 2) * 4;
+  return (words + gpu::kBlobHeaderWords + 2) * 4;
 }
 
 }  // namespace
@@ -73,6 +73,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
       stagingBytes = std::max(stagingBytes, bound);
       fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
     }
+  const uint64_t stagingBound = stagingBytes;
   stagingBytes = std::max(stagingBytes, std::min(options.uploadBytes, fileBytes));
   const uint64_t fixed =
       bufferFootprint(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT) +
@@ -84,18 +85,23 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   uint64_t poolPages = options.vram > fixed + kPageBytes ? (options.vram - fixed) / kPageBytes : 0;
   // Each buffer's memory may round up (alignment); leave a page a buffer for it. A pool larger
   // than the whole file would be wasted.
+  // A chunk's pages are consecutive in one buffer: buffers hold the largest blob at least, and
+  // each may leave up to a blob's pages unused at its end.
+  const uint64_t largest = (stagingBound + kPageBytes - 1) / kPageBytes;
   poolPages = poolPages > gpu::kPoolBuffers ? poolPages - gpu::kPoolBuffers : 0;
-  poolPages = std::min(poolPages, fileBytes / kPageBytes);
+  poolPages = std::min(poolPages, fileBytes / kPageBytes + gpu::kPoolBuffers * largest);
   const uint64_t maxPagesPerBuffer = std::bit_floor(maxBuffer / kPageBytes);
   pagesPerBuffer_ = uint32_t(std::min<uint64_t>(
-      maxPagesPerBuffer, std::bit_ceil((poolPages + gpu::kPoolBuffers - 1) / gpu::kPoolBuffers)));
+      maxPagesPerBuffer,
+      std::bit_ceil(std::max((poolPages + gpu::kPoolBuffers - 1) / gpu::kPoolBuffers, largest))));
   pagesPerBuffer_ = std::max<uint32_t>(pagesPerBuffer_, 1);
   poolPages = std::min<uint64_t>(poolPages, uint64_t(pagesPerBuffer_) * gpu::kPoolBuffers);
   if (poolPages == 0)
     throw std::runtime_error(
         fmt::format("--vram {} is too small: the frame buffers and tables alone take {} bytes",
                     options.vram, fixed));
-  cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages));
+  cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages),
+                                        pagesPerBuffer_);
   // What is made here is destroyed with its member if a later step throws.
   params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
   chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
@@ -180,13 +186,9 @@ void Renderer::prepare(gpu::FrameParams params) {
     const uint64_t bytes = up.words.size() * 4;
     ISO_CHECK(offset + bytes <= staging_.size);
     std::memcpy(staging + offset, up.words.data(), bytes);
-    for (size_t p = 0; p < up.pages.size(); ++p) {
-      const uint64_t size = std::min<uint64_t>(kPageBytes, bytes - p * kPageBytes);
-      copies_.push_back(
-          {up.pages[p] / pagesPerBuffer_,
-           {offset + p * kPageBytes, (up.pages[p] % pagesPerBuffer_) * kPageBytes, size}});
-    }
-    table[up.chunk].state.x = up.pages[0];
+    copies_.push_back({up.firstPage / pagesPerBuffer_,
+                       {offset, (up.firstPage % pagesPerBuffer_) * kPageBytes, bytes}});
+    table[up.chunk].state.x = up.firstPage;
     offset += bytes;
   }
   stats_.uploadedChunks = uint32_t(uploads.size());

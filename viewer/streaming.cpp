@@ -10,12 +10,21 @@
 
 namespace iso::viewer {
 
+namespace {
+
+uint32_t pagesOf(size_t words) { return uint32_t((words + gpu::kPageWords - 1) / gpu::kPageWords); }
+
+}  // namespace
+
 ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options,
-                       uint32_t poolPages)
-    : reader_(reader), tree_(tree), options_(options), poolPages_(poolPages) {
+                       uint32_t poolPages, uint32_t pagesPerBuffer)
+    : reader_(reader),
+      tree_(tree),
+      options_(options),
+      poolPages_(poolPages),
+      pagesPerBuffer_(std::max<uint32_t>(pagesPerBuffer, 1)) {
   state_.resize(reader.chunks().size());
-  freePages_.resize(poolPages);
-  for (uint32_t i = 0; i < poolPages; ++i) freePages_[i] = poolPages - 1 - i;  // low pages first
+  used_.assign(poolPages, 0);
   if (tree.topChunk() == kNoParent) throw std::runtime_error("the file has no surface chunk");
   {
     std::lock_guard lock(mutex_);
@@ -23,10 +32,10 @@ ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions 
     state_[tree.topChunk()].pinned = true;
     ready_.emplace_back(tree.topChunk(), prepare(tree.topChunk()));
   }
-  if (blobPages(ready_.front().second.size()) > poolPages)
+  if (pagesOf(ready_.front().second.size()) > std::min(poolPages, pagesPerBuffer_))
     throw std::runtime_error(
         "--vram is too small: the coarsest chunk alone needs " +
-        std::to_string(blobPages(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
+        std::to_string(pagesOf(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
         " bytes of page pool");
   loader_ = std::thread([this] { loaderLoop(); });
 }
@@ -95,23 +104,36 @@ void ChunkCache::loaderLoop() {
   }
 }
 
-bool ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted) {
-  while (freePages_.size() < pages) {
+uint32_t ChunkCache::freeRun(uint32_t pages) const {
+  uint32_t run = 0;
+  for (uint32_t p = 0; p < poolPages_; ++p) {
+    if (p % pagesPerBuffer_ == 0) run = 0;  // runs stay inside a buffer
+    run = used_[p] ? 0 : run + 1;
+    if (run == pages) return p + 1 - pages;  // the lowest run that fits
+  }
+  return kNone;
+}
+
+uint32_t ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted) {
+  if (pages > std::min(poolPages_, pagesPerBuffer_)) return kNone;
+  for (;;) {
+    const uint32_t first = freeRun(pages);
+    if (first != kNone) return first;
     uint32_t victim = kNone;
     for (uint32_t c = 0; c < state_.size(); ++c) {
       const State& s = state_[c];
       if (s.firstPage == kNone || s.pinned || s.lastUsed >= frame) continue;
       if (victim == kNone || s.lastUsed < state_[victim].lastUsed) victim = c;
     }
-    if (victim == kNone) return false;
+    if (victim == kNone) return kNone;
     State& s = state_[victim];
-    freePages_.insert(freePages_.end(), s.pages.rbegin(), s.pages.rend());
-    s.pages.clear();
+    std::fill_n(used_.begin() + s.firstPage, s.pages, uint8_t{0});
+    pagesInUse_ -= s.pages;
+    s.pages = 0;
     s.firstPage = kNone;
     --residentCount_;
     evicted.push_back(victim);
   }
-  return true;
 }
 
 std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBytes,
@@ -128,26 +150,27 @@ std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBy
     auto [chunk, words] = std::move(ready.front());
     ready.pop_front();
     State& s = state_[chunk];
-    const uint32_t pages = blobPages(words.size());
+    const uint32_t pages = pagesOf(words.size());
     // Past this frame's upload budget, or a chunk no longer wanted: wait, or drop.
     const bool wanted = s.pinned || s.lastRequested + 8 >= frame;
     if (!wanted) {
       s.queued = false;
       continue;
     }
-    if ((bytes > 0 && bytes + words.size() * 4 > maxBytes) || !makeRoom(pages, frame, evicted)) {
+    const uint32_t first = (bytes > 0 && bytes + words.size() * 4 > maxBytes)
+                               ? kNone
+                               : makeRoom(pages, frame, evicted);
+    if (first == kNone) {
       keep.emplace_back(chunk, std::move(words));
       continue;
     }
     Upload up;
     up.chunk = chunk;
-    for (uint32_t i = 0; i < pages; ++i) {
-      up.pages.push_back(freePages_.back());
-      freePages_.pop_back();
-    }
-    std::copy(up.pages.begin(), up.pages.end(), words.begin() + gpu::kBlobPageList);
-    s.pages = up.pages;
-    s.firstPage = up.pages[0];
+    up.firstPage = first;
+    std::fill_n(used_.begin() + first, pages, uint8_t{1});
+    pagesInUse_ += pages;
+    s.pages = pages;
+    s.firstPage = first;
     s.queued = false;
     s.lastUsed = std::max(s.lastUsed, frame);
     ++residentCount_;

@@ -1,4 +1,5 @@
-// Which chunks live in the GPU's page pool: a page allocator with an LRU over chunks, and a
+// Which chunks live in the GPU's page pool: an allocator of runs of consecutive pages (a chunk's
+// blob is contiguous, in one pool buffer) with an LRU over chunks, and a
 // loader thread that decodes requested chunks from the memory-mapped file into blobs (blob.h)
 // while frames go on. No Vulkan here: the renderer uploads what place() hands out.
 //
@@ -22,8 +23,10 @@ namespace iso::viewer {
 
 class ChunkCache {
  public:
-  // A pool of poolPages pages. Throws when the top chunk alone does not fit.
-  ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options, uint32_t poolPages);
+  // A pool of poolPages pages in buffers of pagesPerBuffer pages (a run never crosses from one to
+  // the next). Throws when the top chunk alone does not fit.
+  ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options, uint32_t poolPages,
+             uint32_t pagesPerBuffer);
   ~ChunkCache();
   ChunkCache(const ChunkCache&) = delete;
   ChunkCache& operator=(const ChunkCache&) = delete;
@@ -37,8 +40,8 @@ class ChunkCache {
 
   struct Upload {
     uint32_t chunk = 0;
-    std::vector<uint32_t> pages;  // pool pages, in blob order
-    std::vector<uint32_t> words;  // the blob with its page list filled in
+    uint32_t firstPage = 0;       // the blob's pages are firstPage, firstPage + 1, ...
+    std::vector<uint32_t> words;  // the blob
   };
   // Place prepared chunks into the pool, up to about maxBytes of them, evicting the least
   // recently used chunks that no ray used in `frame` (the last one with feedback) and that are not
@@ -48,7 +51,7 @@ class ChunkCache {
   bool resident(uint32_t chunk) const { return state_[chunk].firstPage != kNone; }
   uint32_t firstPage(uint32_t chunk) const { return state_[chunk].firstPage; }
   uint32_t residentChunks() const { return residentCount_; }
-  uint32_t pagesInUse() const { return poolPages_ - uint32_t(freePages_.size()); }
+  uint32_t pagesInUse() const { return pagesInUse_; }
   uint32_t poolPages() const { return poolPages_; }
   // Chunks asked for and not resident (queued, being decoded, or decoded and waiting for room).
   uint32_t pendingChunks() const;
@@ -61,20 +64,24 @@ class ChunkCache {
   static constexpr uint32_t kNone = 0xFFFFFFFFu;
   struct State {
     uint32_t firstPage = kNone;
-    std::vector<uint32_t> pages;
+    uint32_t pages = 0;
     uint64_t lastUsed = 0;
     uint64_t lastRequested = 0;
     bool queued = false;  // asked of the loader, not yet resident
     bool pinned = false;
   };
   void loaderLoop();
-  bool makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted);
+  // A free run of `pages` pages in one buffer, evicting the least recently used chunks that no
+  // ray used in `frame` until one is found; kNone when none can be.
+  uint32_t makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted);
+  uint32_t freeRun(uint32_t pages) const;
 
   const Reader& reader_;
   const ChunkTree& tree_;
   BlobOptions options_;
-  uint32_t poolPages_;
-  std::vector<uint32_t> freePages_;
+  uint32_t poolPages_, pagesPerBuffer_;
+  std::vector<uint8_t> used_;  // per pool page
+  uint32_t pagesInUse_ = 0;
   std::vector<State> state_;
   uint32_t residentCount_ = 0;
 

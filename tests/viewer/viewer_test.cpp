@@ -333,8 +333,9 @@ TEST(ViewerTracer, hitsAgreeWithTheSurfaceModelAndTheAnalyticSphere) {
   const CpuPool pool = buildCpuPool(asset->reader);
   const Frame& frame = asset->reader.header().frame;
   const Scene scene = sceneFor(*asset);
-  const auto params = frameParams(scene, frame, asset->reader.header().maxLevel,
-                                  cpuFrameSetup(*asset, 64, 64, nullptr));
+  auto params = frameParams(scene, frame, asset->reader.header().maxLevel,
+                            cpuFrameSetup(*asset, 64, 64, nullptr));
+  params.lod.x = -1.0f;  // the finest leaves everywhere, as SurfaceModel's
   const double cell = std::ldexp(1.0, -int(asset->reader.header().maxLevel));
   std::mt19937 rng(7);
   std::normal_distribution<double> normal;
