@@ -101,6 +101,8 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   uint pathNode[kGridLevels + 1u];
   uint pathChunk[kGridLevels + 1u];
   uint words = recordWords();
+  LodRule lod = lodRule(0.0f, 0.0f);
+  float lodDistance = -1.0f;  // the distance up to which `lod` holds
   ChunkView chunk = chunkView(P.options.z);
   useChunk(chunk.id);
   uint level = 0u;
@@ -118,15 +120,19 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
                               // face), the values at both ends (before and after, at a face)
   for (uint step = 0u; step < kMaxSteps && !found; ++step) {
     // Down from the path's node at `level` to the cell that holds g.
-    float pixel = P.eye.w * (distance + t);  // a pixel's width at the ray's distance
-    float reach = P.lod.x * pixel;           // errors below this are not seen
+    if (distance + t > lodDistance) {
+      // The rule at this distance, kept until the distance grows by an eighth of an octave (the
+      // error codes' step): a little finer than needed in between, never coarser.
+      float pixel = P.eye.w * (distance + t);  // a pixel's width at the ray's distance
+      lod = lodRule(pixel, P.lod.x * pixel);
+      lodDistance = (distance + t) * 1.0905077f;
+    }
     Cell cell;
     cell.filled = false;
     for (;;) {
       uvec2 n = nodeRecord(chunk, node);
       uint mask = n.x & 0xFFu;
-      float edge = 1.0f / float(1u << level);
-      if (mask == 0u || (nodeError(n.x, edge) <= reach && edge <= kLodNodePixels * pixel)) {
+      if (mask == 0u || drawnInstead(lod, n.x, level)) {
         cell.filled = true;
         break;
       }

@@ -34,13 +34,29 @@ uint recordWords() {
   return words;
 }
 
-// The geometric error a node's record bounds (frame units; shared.h), for a node of the given
-// edge: 0 for a code of 0, infinite for 255.
-float nodeError(uint w0, float edge) {
-  uint code = (w0 >> kNodeErrorShift) & 0xFFu;
-  if (code == 0u) return 0.0f;
-  if (code == 255u) return 3.0e38f;
-  return edge * exp2(float(int(code) - 128) * 0.125f);
+// Which nodes may be drawn in place of their children at a ray's distance, where a pixel is
+// `pixel` frame units wide: those whose error is at most `reach` and whose edge is at most
+// kLodNodePixels pixels. A node at level L has edge 2^-L and error at most 2^-L · 2^((e - 128) / 8)
+// (shared.h), so the test is on integers: L >= fromLevel and e <= maxCode + 8·L.
+struct LodRule {
+  int fromLevel;
+  int maxCode;
+};
+
+LodRule lodRule(float pixel, float reach) {
+  LodRule r;
+  r.fromLevel = 64;  // none
+  r.maxCode = -1;
+  if (reach > 0.0f && pixel > 0.0f) {
+    r.fromLevel = int(ceil(-log2(kLodNodePixels * pixel)));
+    r.maxCode = int(floor(128.0f + 8.0f * log2(reach)));
+  }
+  return r;
+}
+
+bool drawnInstead(LodRule r, uint w0, uint level) {
+  int code = int((w0 >> kNodeErrorShift) & 0xFFu);
+  return int(level) >= r.fromLevel && code != 255 && code <= r.maxCode + 8 * int(level);
 }
 
 // A surface cell (a filled leaf, or a node drawn in place of what is below it) or an empty cell.

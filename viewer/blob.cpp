@@ -16,9 +16,9 @@ namespace iso::viewer {
 namespace {
 
 using gpu::kBlobData;
+using gpu::kBlobHeaderWords;
 using gpu::kBlobNodeCount;
 using gpu::kBlobNodes;
-using gpu::kBlobHeaderWords;
 using gpu::kBlobWords;
 using gpu::kNodeCut;
 using gpu::kNodeErrorShift;
@@ -172,10 +172,12 @@ std::vector<float> nodeErrors(const SurfaceChunk& chunk, float chunkError, uint3
     for (int o = 0; o < 8; ++o) {
       if (!(node.childMask & (1u << o))) continue;
       const SurfaceNode& c = nodes[child];
-      const std::array<float, 8> g = distancesOf(c, c.isLeaf() ? chunk.leafValues : chunk.lodValues);
+      const std::array<float, 8> g =
+          distancesOf(c, c.isLeaf() ? chunk.leafValues : chunk.lodValues);
       float deviation = 0.0f;
       for (int k = 0; k < 8; ++k) {
-        const float x = 0.5f * float((o & 1) + (k & 1)), y = 0.5f * float(((o >> 1) & 1) + ((k >> 1) & 1)),
+        const float x = 0.5f * float((o & 1) + (k & 1)),
+                    y = 0.5f * float(((o >> 1) & 1) + ((k >> 1) & 1)),
                     z = 0.5f * float(((o >> 2) & 1) + ((k >> 2) & 1));
         deviation = std::max(deviation, std::abs(trilinear(f, x, y, z) - g[k]));
       }
