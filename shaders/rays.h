@@ -65,6 +65,185 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
   }
 }
 
+// A ray's walk through the octree: the ray, its segment still to go, the cell-to-cell state of
+// the seam rule, and its path (the node of every level down to the current cell, with its
+// chunk).
+struct Walk {
+  vec3 o;
+  vec3 d;
+  vec3 dir;  // d without zero components
+  vec3 inv;  // 1 / dir
+  float t;   // where the current cell is entered
+  float tEnd;
+  float side;
+  bool strict;
+  bool request;
+  float distance;  // path length before o
+  uvec3 g;         // a grid point of the current cell
+  uint level;
+  uint node;
+  ChunkView chunk;
+  uint words;  // per corner record
+  LodRule lod;
+  float lodDistance;  // the distance up to which `lod` holds
+  bool havePrevious;
+  float previous;  // f at the exit of the previous surface cell
+  bool found;
+  Cell hitCell;
+  float tIn;    // the hit cell's segment
+  float tOut;
+  vec4 bracket;  // s in [bracket.x, bracket.y] of that segment (equal: at its entry face), the
+                 // values at both ends (before and after, at a face)
+  uint pathNode[kGridLevels + 1u];
+  uint pathChunk[kGridLevels + 1u];
+};
+
+// The level-of-detail rule at the walk's distance, kept until the distance grows by an eighth of
+// an octave (the error codes' step): a little finer than needed in between, never coarser.
+void updateLod(ISO_INOUT(Walk) w) {
+  float at = w.distance + w.t;
+  if (at <= w.lodDistance) return;
+  float pixel = P.eye.w * at;  // a pixel's width at the ray's distance
+  w.lod = lodRule(pixel, P.lod.x * pixel);
+  w.lodDistance = at * 1.0905077f;
+}
+
+// One level down from the walk's node toward the cell that holds w.g. Returns true when that
+// cell is found: `cell.filled` says whether it is a surface cell (a filled leaf, a node drawn in
+// place of its children, or a cut node whose chunk is not resident) or an empty child.
+bool descend(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
+  uvec2 n = nodeRecord(w.chunk, w.node);
+  uint mask = n.x & 0xFFu;
+  if (mask == 0u || drawnInstead(w.lod, n.x, w.level)) {
+    cell.filled = true;
+    return true;
+  }
+  uint shift = kGridLevels - 1u - w.level;
+  uint octant = ((w.g.x >> shift) & 1u) | (((w.g.y >> shift) & 1u) << 1u) |
+                (((w.g.z >> shift) & 1u) << 2u);
+  if (((mask >> octant) & 1u) == 0u) {  // an empty child
+    w.level += 1u;
+    cell.filled = false;
+    return true;
+  }
+  uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
+  if ((n.x & kNodeCut) == 0u) {
+    w.node = n.y + before;
+  } else {
+    uint childChunk = blobWord(w.chunk.base, n.y + 2u * before);
+    uint childRoot = blobWord(w.chunk.base, n.y + 2u * before + 1u);
+    if (chunkState(childChunk).x == kNotResident) {
+      if (w.request) requestChunk(childChunk);
+      cell.filled = true;  // the cut node's own patch until the chunk arrives
+      return true;
+    }
+    ChunkView below = chunkView(childChunk);
+    // (A root index past the child's nodes would only come from a file whose chunks disagree.)
+    if (childRoot >= blobWord(below.base, kBlobNodeCount)) {
+      cell.filled = true;
+      return true;
+    }
+    w.chunk = below;
+    useChunk(w.chunk.id);
+    w.node = childRoot;
+  }
+  w.level += 1u;
+  w.pathNode[w.level] = w.node;
+  w.pathChunk[w.level] = w.chunk.id;
+  return false;
+}
+
+// The cell that holds w.g (found by descend): a crossing in it or at its entry face ends the walk
+// (w.found); else the walk steps into the face neighbour across its exit and climbs to the
+// deepest common ancestor of the two cells. Returns false when the ray leaves the cube or its
+// segment first.
+bool visit(ISO_INOUT(Walk) w, Cell cell) {
+  cell.level = w.level;
+  cell.coord = w.g >> (kGridLevels - w.level);
+  cell.base = w.chunk.base;
+  cell.record = w.chunk.data + w.node * w.words;
+  float size = 1.0f / float(1u << cell.level);
+  vec3 lo = vec3(cell.coord) * size;
+  vec3 c0 = (lo - w.o) * w.inv;
+  vec3 c1 = (lo + vec3(size) - w.o) * w.inv;
+  vec3 cFar = max(c0, c1);
+  float tExit = min(cFar.x, min(cFar.y, cFar.z));
+  float tStop = min(tExit, w.tEnd);
+  if (!(tStop > w.t)) {
+    // A cell the ray only touches (an edge or a corner, within rounding): nothing in it counts,
+    // as in SurfaceModel.
+  } else if (cell.filled) {
+    Corners c = loadCorners(cell.base, cell.record);
+    float least = min(min(min(c.d0.x, c.d0.y), min(c.d0.z, c.d0.w)),
+                      min(min(c.d1.x, c.d1.y), min(c.d1.z, c.d1.w)));
+    float most = max(max(max(c.d0.x, c.d0.y), max(c.d0.z, c.d0.w)),
+                     max(max(c.d1.x, c.d1.y), max(c.d1.z, c.d1.w)));
+    float entry, exit;
+    if (least >= 0.0f || most < 0.0f) {
+      // One sign at every corner, and so everywhere in the cell: no crossing inside it.
+      entry = least >= 0.0f ? 1.0f : -1.0f;
+      exit = entry;
+      if (w.havePrevious && crossing(w.previous, entry, w.side)) {
+        w.found = true;
+        w.bracket = vec4(0.0f, 0.0f, w.previous, entry);
+      }
+    } else {
+      vec3 ua = cellCoordinates(w.o, w.d, w.t, lo, size);
+      vec3 ub = cellCoordinates(w.o, w.d, tStop, lo, size);
+      vec4 k = segmentCubic(c, ua, ub);
+      entry = k.x;
+      exit = k.x + k.y + k.z + k.w;
+      if (w.havePrevious && crossing(w.previous, entry, w.side)) {
+        w.found = true;  // the sign changed at the face
+        w.bracket = vec4(0.0f, 0.0f, w.previous, entry);
+      } else {
+        w.found = firstCrossing(k, w.side, w.bracket);
+      }
+    }
+    if (w.found) {
+      w.hitCell = cell;
+      w.tIn = w.t;
+      w.tOut = tStop;
+      return true;
+    }
+    w.havePrevious = true;
+    w.previous = exit;
+  } else {
+    w.havePrevious = false;
+    if (!w.strict) w.side = 0.0f;
+  }
+  if (tExit >= w.tEnd) return false;
+  // Step into the face neighbour across the exit face: one cell along the exit axis, and on the
+  // other axes a point of this cell's face (the rounded point of the ray may lie in a diagonal
+  // neighbour behind it, near an edge, from which the ray would step back), so that every step
+  // moves forward.
+  w.t = max(w.t, tExit);
+  vec3 p = w.o + w.d * w.t;
+  uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
+  uint shift = kGridLevels - cell.level;
+  uvec3 first = cell.coord << shift;
+  uvec3 g = clamp(uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax)))), first,
+                  first + uvec3((1u << shift) - 1u));
+  uint lower = first[axis];
+  uint upper = (cell.coord[axis] + 1u) << shift;
+  if (w.dir[axis] > 0.0f) {
+    if (upper > kGridMax) return false;
+    g[axis] = upper;
+  } else {
+    if (lower == 0u) return false;
+    g[axis] = lower - 1u;
+  }
+  w.g = g;
+  // Up to the deepest common ancestor of this cell and the next: the cells of a level are the
+  // same for two grid points until their highest differing bit.
+  uint differ = (first.x ^ g.x) | (first.y ^ g.y) | (first.z ^ g.z);
+  w.level = kGridLevels - 1u - uint(findMSB(differ));
+  w.node = w.pathNode[w.level];
+  if (w.pathChunk[w.level] != w.chunk.id) w.chunk = chunkView(w.pathChunk[w.level]);
+  updateLod(w);
+  return true;
+}
+
 // The first crossing of the surface by the ray o + t·d, t in [tMin, tMax]: the first sign change
 // of the trilinear along the ray, found exactly in each cell (segmentCubic, firstCrossing), or
 // between the exit of one cell and the entry of the next (the seam rule of SurfaceModel).
@@ -75,192 +254,81 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
 // ask for chunks it lacks.
 //
-// The walk keeps its path: the node of every level down to the current cell, with its chunk.
-// From one cell to the next it climbs only to their deepest common ancestor (the highest bit in
-// which the two cells' grid coordinates differ) and descends from there, one node record (one
-// load) a level. A node is drawn in place of what is below it when its error (node records'
-// codes; a cut node's is its chunk's) covers less than P.lod.x pixels at the ray's distance, or
-// when the chunk below it is not resident (which `request` then asks for).
+// The walk keeps its path (Walk): from one cell to the next it climbs only to their deepest
+// common ancestor (the highest bit in which the two cells' grid coordinates differ) and descends
+// from there, one node record (one load) a level. A node is drawn in place of what is below it
+// when its error (node records' codes; a cut node's is its chunk's) covers less than P.lod.x
+// pixels at the ray's distance and it spans at most kLodNodePixels pixels, or when the chunk
+// below it is not resident (which `request` then asks for). The traversal only brackets the first
+// crossing; the root and the attributes are computed once after it (in SIMD execution, work
+// inside the loop costs every lane every step). Two loop shapes (flatTraversal(), measured in
+// specs/viewer.md): a loop of cells, each with its own loop down the tree, or one loop whose
+// turns either descend a level or visit a cell.
 bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
                bool request, ISO_INOUT(Hit) hit) {
-  vec3 dir = d;
-  if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
-  if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
-  if (abs(dir.z) < 1e-12f) dir.z = 1e-12f;
-  vec3 inv = vec3(1.0f) / dir;
+  Walk w;
+  w.o = o;
+  w.d = d;
+  w.dir = d;
+  if (abs(w.dir.x) < 1e-12f) w.dir.x = 1e-12f;
+  if (abs(w.dir.y) < 1e-12f) w.dir.y = 1e-12f;
+  if (abs(w.dir.z) < 1e-12f) w.dir.z = 1e-12f;
+  w.inv = vec3(1.0f) / w.dir;
   // Clip to the root cube.
-  vec3 ta = (vec3(0.0f) - o) * inv;
-  vec3 tb = (vec3(1.0f) - o) * inv;
+  vec3 ta = (vec3(0.0f) - o) * w.inv;
+  vec3 tb = (vec3(1.0f) - o) * w.inv;
   vec3 tNear = min(ta, tb);
   vec3 tFar = max(ta, tb);
-  float t = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
-  float tEnd = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
-  if (t > tEnd) return false;
-  vec3 p = o + d * t;
-  uvec3 g = uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
-  uint pathNode[kGridLevels + 1u];
-  uint pathChunk[kGridLevels + 1u];
-  uint words = recordWords();
-  LodRule lod = lodRule(0.0f, 0.0f);
-  float lodDistance = -1.0f;  // the distance up to which `lod` holds
-  ChunkView chunk = chunkView(P.options.z);
-  useChunk(chunk.id);
-  uint level = 0u;
-  uint node = 0u;
-  pathNode[0] = 0u;
-  pathChunk[0] = chunk.id;
-  bool havePrevious = false;
-  float previous = 0.0f;  // f at the exit of the previous surface cell
-  // The traversal only brackets the first crossing; the root and the attributes are computed once
-  // after it (in SIMD execution, work inside the loop costs every lane every step).
-  bool found = false;
-  Cell hitCell;
-  float tIn = 0.0f, tOut = 0.0f;  // the hit cell's segment
-  vec4 bracket = vec4(0.0f);  // s in [bracket.x, bracket.y] of that segment (equal: at its entry
-                              // face), the values at both ends (before and after, at a face)
-  for (uint step = 0u; step < kMaxSteps && !found; ++step) {
-    // Down from the path's node at `level` to the cell that holds g.
-    if (distance + t > lodDistance) {
-      // The rule at this distance, kept until the distance grows by an eighth of an octave (the
-      // error codes' step): a little finer than needed in between, never coarser.
-      float pixel = P.eye.w * (distance + t);  // a pixel's width at the ray's distance
-      lod = lodRule(pixel, P.lod.x * pixel);
-      lodDistance = (distance + t) * 1.0905077f;
+  w.t = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
+  w.tEnd = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
+  if (w.t > w.tEnd) return false;
+  w.g = uvec3(clamp((o + d * w.t) * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
+  w.side = side;
+  w.strict = strict;
+  w.request = request;
+  w.distance = distance;
+  w.words = recordWords();
+  w.lodDistance = -1.0f;
+  updateLod(w);
+  w.chunk = chunkView(P.options.z);
+  useChunk(w.chunk.id);
+  w.level = 0u;
+  w.node = 0u;
+  w.pathNode[0] = 0u;
+  w.pathChunk[0] = w.chunk.id;
+  w.havePrevious = false;
+  w.previous = 0.0f;
+  w.found = false;
+  w.bracket = vec4(0.0f);
+  Cell cell;
+  cell.filled = false;
+  if (flatTraversal()) {
+    bool descending = true;
+    uint steps = 0u;
+    for (uint turn = 0u; turn < 8u * kMaxSteps && !w.found; ++turn) {
+      if (descending && !descend(w, cell)) continue;
+      descending = false;
+      if (++steps > kMaxSteps || !visit(w, cell)) return false;
+      descending = true;
     }
-    Cell cell;
-    cell.filled = false;
-    for (;;) {
-      uvec2 n = nodeRecord(chunk, node);
-      uint mask = n.x & 0xFFu;
-      if (mask == 0u || drawnInstead(lod, n.x, level)) {
-        cell.filled = true;
-        break;
+  } else {
+    for (uint step = 0u; step < kMaxSteps && !w.found; ++step) {
+      while (!descend(w, cell)) {
       }
-      uint shift = kGridLevels - 1u - level;
-      uint octant =
-          ((g.x >> shift) & 1u) | (((g.y >> shift) & 1u) << 1u) | (((g.z >> shift) & 1u) << 2u);
-      if (((mask >> octant) & 1u) == 0u) {  // an empty child
-        level += 1u;
-        break;
-      }
-      uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
-      if ((n.x & kNodeCut) == 0u) {
-        node = n.y + before;
-      } else {
-        uint childChunk = blobWord(chunk.base, n.y + 2u * before);
-        uint childRoot = blobWord(chunk.base, n.y + 2u * before + 1u);
-        if (chunkState(childChunk).x == kNotResident) {
-          if (request) requestChunk(childChunk);
-          cell.filled = true;  // the cut node's own patch until the chunk arrives
-          break;
-        }
-        ChunkView below = chunkView(childChunk);
-        // (A root index past the child's nodes would only come from a file whose chunks disagree.)
-        if (childRoot >= blobWord(below.base, kBlobNodeCount)) {
-          cell.filled = true;
-          break;
-        }
-        chunk = below;
-        useChunk(chunk.id);
-        node = childRoot;
-      }
-      level += 1u;
-      pathNode[level] = node;
-      pathChunk[level] = chunk.id;
-    }
-    cell.level = level;
-    cell.coord = g >> (kGridLevels - level);
-    cell.base = chunk.base;
-    cell.record = chunk.data + node * words;
-    float size = 1.0f / float(1u << cell.level);
-    vec3 lo = vec3(cell.coord) * size;
-    vec3 c0 = (lo - o) * inv;
-    vec3 c1 = (lo + vec3(size) - o) * inv;
-    vec3 cFar = max(c0, c1);
-    float tExit = min(cFar.x, min(cFar.y, cFar.z));
-    float tStop = min(tExit, tEnd);
-    if (!(tStop > t)) {
-      // A cell the ray only touches (an edge or a corner, within rounding): nothing in it counts,
-      // as in SurfaceModel.
-    } else if (cell.filled) {
-      Corners c = loadCorners(cell.base, cell.record);
-      float least = min(min(min(c.d0.x, c.d0.y), min(c.d0.z, c.d0.w)),
-                        min(min(c.d1.x, c.d1.y), min(c.d1.z, c.d1.w)));
-      float most = max(max(max(c.d0.x, c.d0.y), max(c.d0.z, c.d0.w)),
-                       max(max(c.d1.x, c.d1.y), max(c.d1.z, c.d1.w)));
-      float entry, exit;
-      if (least >= 0.0f || most < 0.0f) {
-        // One sign at every corner, and so everywhere in the cell: no crossing inside it.
-        entry = least >= 0.0f ? 1.0f : -1.0f;
-        exit = entry;
-        if (havePrevious && crossing(previous, entry, side)) {
-          found = true;
-          bracket = vec4(0.0f, 0.0f, previous, entry);
-        }
-      } else {
-        vec3 ua = cellCoordinates(o, d, t, lo, size);
-        vec3 ub = cellCoordinates(o, d, tStop, lo, size);
-        vec4 k = segmentCubic(c, ua, ub);
-        entry = k.x;
-        exit = k.x + k.y + k.z + k.w;
-        if (havePrevious && crossing(previous, entry, side)) {
-          found = true;  // the sign changed at the face
-          bracket = vec4(0.0f, 0.0f, previous, entry);
-        } else {
-          found = firstCrossing(k, side, bracket);
-        }
-      }
-      if (found) {
-        hitCell = cell;
-        tIn = t;
-        tOut = tStop;
-        hit.from = bracket.z < 0.0f ? -1.0f : 1.0f;
-      }
-      havePrevious = true;
-      previous = exit;
-    } else {
-      havePrevious = false;
-      if (!strict) side = 0.0f;
-    }
-    if (!found) {
-      if (tExit >= tEnd) return false;
-      // Step into the face neighbour across the exit face: one cell along the exit axis, and on
-      // the other axes a point of this cell's face (the rounded point of the ray may lie in a
-      // diagonal neighbour behind it, near an edge, from which the ray would step back), so that
-      // every step moves forward.
-      t = max(t, tExit);
-      p = o + d * t;
-      uint axis = (cFar.x <= cFar.y && cFar.x <= cFar.z) ? 0u : (cFar.y <= cFar.z ? 1u : 2u);
-      uint shift = kGridLevels - cell.level;
-      uvec3 first = cell.coord << shift;
-      g = clamp(uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax)))), first,
-                first + uvec3((1u << shift) - 1u));
-      uint lower = first[axis];
-      uint upper = (cell.coord[axis] + 1u) << shift;
-      if (dir[axis] > 0.0f) {
-        if (upper > kGridMax) return false;
-        g[axis] = upper;
-      } else {
-        if (lower == 0u) return false;
-        g[axis] = lower - 1u;
-      }
-      // Up to the deepest common ancestor of this cell and the next: the cells of a level are
-      // the same for two grid points until their highest differing bit.
-      uint differ = (first.x ^ g.x) | (first.y ^ g.y) | (first.z ^ g.z);
-      level = kGridLevels - 1u - uint(findMSB(differ));
-      node = pathNode[level];
-      if (pathChunk[level] != chunk.id) chunk = chunkView(pathChunk[level]);
+      if (!visit(w, cell)) return false;
     }
   }
-  if (!found) return false;
+  if (!w.found) return false;
+  hit.from = w.bracket.z < 0.0f ? -1.0f : 1.0f;
   // The root in the bracket, once, on the hit cell's cubic.
-  float size = 1.0f / float(1u << hitCell.level);
-  vec3 lo = vec3(hitCell.coord) * size;
-  vec3 ua = cellCoordinates(o, d, tIn, lo, size);
-  vec3 ub = cellCoordinates(o, d, tOut, lo, size);
-  Corners c = loadCorners(hitCell.base, hitCell.record);
+  float size = 1.0f / float(1u << w.hitCell.level);
+  vec3 lo = vec3(w.hitCell.coord) * size;
+  vec3 ua = cellCoordinates(o, d, w.tIn, lo, size);
+  vec3 ub = cellCoordinates(o, d, w.tOut, lo, size);
+  Corners c = loadCorners(w.hitCell.base, w.hitCell.record);
   vec4 k = segmentCubic(c, ua, ub);
   float s = 0.0f;
+  vec4 bracket = w.bracket;
   if (bracket.y > bracket.x) {
     // The ends again from the cubic just computed (the same arithmetic as in the loop).
     bracket.z = cubicAt(k, bracket.x);
@@ -268,7 +336,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
     s = (bracket.z < 0.0f) == (bracket.w < 0.0f) ? 0.5f * (bracket.x + bracket.y)
                                                   : refineRoot(k, bracket);
   }
-  hit.t = tIn + (tOut - tIn) * s;
-  surfaceAttributes(hitCell, c, mix(ua, ub, s), hit);
+  hit.t = w.tIn + (w.tOut - w.tIn) * s;
+  surfaceAttributes(w.hitCell, c, mix(ua, ub, s), hit);
   return true;
 }

@@ -91,6 +91,7 @@ ISO_CONST uint kOptionOcclusion = 256u;   // the file has baked ambient occlusio
 ISO_CONST uint kOptionBackTint = 512u;   // back faces seen by camera rays take FrameParams.backface
 ISO_CONST uint kOptionBackHide = 1024u;  // camera rays pass through back faces
 ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
+ISO_CONST uint kOptionFlatTraversal = 4096u;   // one loop of turns, not a loop of cells (rays.h)
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;

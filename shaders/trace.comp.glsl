@@ -10,7 +10,8 @@
 #define ISO_PRECISE precise
 #include "shared.h"
 
-layout(local_size_x = 64) in;
+// The workgroup's size (a power of two, 8 to 1024): a tile of pixels visited in Z-order.
+layout(local_size_x_id = 2) in;
 
 layout(std140, binding = 0) uniform Frame { FrameParams P; };
 layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
@@ -65,17 +66,25 @@ vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) { return fma(a, b, c); }
 // branch on it is compiled away (as a uniform branch it cost lavapipe a fifth of its speed).
 layout(constant_id = 0) const bool kFloatDistances = false;
 bool floatDistances() { return kFloatDistances; }
+layout(constant_id = 1) const bool kFlatTraversal = false;
+bool flatTraversal() { return kFlatTraversal; }
 
 #include "trace.h"
 
 void main() {
-  uint tilesX = (P.image.x + 7u) / 8u;
+  // A tile of tileWidth × tileHeight pixels (as wide as high, or twice as wide), tiles row by row.
+  uint tileWidth = 1u << uint((findMSB(gl_WorkGroupSize.x) + 1) / 2);
+  uint tileHeight = gl_WorkGroupSize.x / tileWidth;
+  uint tilesX = (P.image.x + tileWidth - 1u) / tileWidth;
   uint tile = gl_WorkGroupID.x;
   uint i = gl_LocalInvocationIndex;  // Z-order inside the tile: x from even bits, y from odd
-  uint lx = (i & 1u) | ((i >> 1u) & 2u) | ((i >> 2u) & 4u);
-  uint ly = ((i >> 1u) & 1u) | ((i >> 2u) & 2u) | ((i >> 3u) & 4u);
-  uint x = (tile % tilesX) * 8u + lx;
-  uint y = (tile / tilesX) * 8u + ly;
+  uint lx = 0u, ly = 0u;
+  for (uint b = 0u; b < 5u; ++b) {
+    lx |= ((i >> (2u * b)) & 1u) << b;
+    ly |= ((i >> (2u * b + 1u)) & 1u) << b;
+  }
+  uint x = (tile % tilesX) * tileWidth + lx;
+  uint y = (tile / tilesX) * tileHeight + ly;
   if (x >= P.image.x || y >= P.image.y) return;
   uvec3 rays = uvec3(0u);
   pixels[y * P.image.x + x] = renderPixel(x, y, rays);

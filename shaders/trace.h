@@ -14,6 +14,8 @@
 //   vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c);  a·b + c with one rounding
 //   bool floatDistances();               records hold float32 distances (kOptionFloatDistances;
 //                                        on the GPU a specialization constant, so no branch runs)
+//   bool flatTraversal();                the loop shape of intersect (kOptionFlatTraversal; on
+//                                        the GPU a specialization constant)
 // and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`) and ISO_PRECISE (GLSL `precise`: no
 // reassociation; C++ keeps the written order anyway).
 //

@@ -39,6 +39,7 @@ class Tracer {
   void requestChunk(uint) {}
   void useChunk(uint) {}
   bool floatDistances() const { return (P.options.x & kOptionFloatDistances) != 0u; }
+  bool flatTraversal() const { return (P.options.x & kOptionFlatTraversal) != 0u; }
   static vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) {
     return vec3(std::fma(a.x, b.x, c.x), std::fma(a.y, b.y, c.y), std::fma(a.z, b.z, c.z));
   }

@@ -126,7 +126,11 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                       glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
 
   const uint32_t counts[] = {1, 1, 1, 1};
-  const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u};  // kFloatDistances
+  ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
+            options.workgroupSize <= 1024);
+  // kFloatDistances, kFlatTraversal, the workgroup size (trace.comp.glsl).
+  const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u,
+                                options.flatTraversal ? 1u : 0u, options.workgroupSize};
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants);
   std::vector<VkDescriptorBufferInfo> infos;
   infos.push_back({params_.buffer, 0, VK_WHOLE_SIZE});
@@ -155,6 +159,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.blob = asset.blob;
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
+  setup_.flatTraversal = options.flatTraversal;
   stats_.poolBytes = poolPages * kPageBytes;
 }
 
@@ -228,7 +233,11 @@ void Renderer::record(VkCommandBuffer cb) {
   vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipeline);
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1,
                           &pipeline_.set, 0, nullptr);
-  const uint32_t tiles = ((options_.width + 7) / 8) * ((options_.height + 7) / 8);
+  // Tiles of the workgroup's size, as the shader lays them out.
+  const uint32_t tileWidth = 1u << ((std::countr_zero(options_.workgroupSize) + 1) / 2);
+  const uint32_t tileHeight = options_.workgroupSize / tileWidth;
+  const uint32_t tiles = ((options_.width + tileWidth - 1) / tileWidth) *
+                         ((options_.height + tileHeight - 1) / tileHeight);
   vkCmdDispatch(cb, tiles, 1, 1);
   VkMemoryBarrier after{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
   after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;

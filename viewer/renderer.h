@@ -25,6 +25,8 @@ struct RendererOptions {
   uint64_t uploadBytes = 16u << 20;                // chunk bytes uploaded per frame at most
   bool swapRedBlue = false;                        // BGRA output (swapchains)
   bool streaming = true;                           // rays request chunks; off: the top chunk alone
+  bool flatTraversal = false;                      // the tracer's loop shape (shaders/rays.h)
+  uint32_t workgroupSize = 64;  // invocations a workgroup: a power of two, 8 to 1024
 };
 
 struct FrameStats {

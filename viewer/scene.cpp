@@ -317,6 +317,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.swapRedBlue) options |= gpu::kOptionSwapRB;
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;
+  if (s.flatTraversal) options |= gpu::kOptionFlatTraversal;
   if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
   if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};

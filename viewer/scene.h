@@ -103,6 +103,7 @@ struct FrameSetup {
   uint32_t environmentWidth = 0, environmentHeight = 0;
   BlobOptions blob;  // what the corner records carry
   bool swapRedBlue = false, requests = true;
+  bool flatTraversal = false;  // the loop shape of the tracer (shaders/rays.h)
 };
 
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.

@@ -40,6 +40,8 @@ RendererOptions rendererOptions(const ViewOptions& o) {
   r.height = o.height;
   r.vram = o.vram;
   r.uploadBytes = o.uploadBytes;
+  r.flatTraversal = o.flatTraversal;
+  r.workgroupSize = o.workgroupSize;
   return r;
 }
 
@@ -128,9 +130,10 @@ int viewCpu(const ViewOptions& options) {
   const auto t0 = Clock::now();
   const CpuPool pool = buildCpuPool(asset->reader);
   const double load = seconds(Clock::now() - t0);
+  FrameSetup setup = cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr);
+  setup.flatTraversal = options.flatTraversal;
   const auto params =
-      frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel,
-                  cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr));
+      frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel, setup);
   const auto t1 = Clock::now();
   const CpuFrame frame = renderCpu(pool, params, env ? &*env : nullptr);
   const double render = seconds(Clock::now() - t1);

@@ -27,6 +27,9 @@ struct ViewOptions {
   std::filesystem::path screenshot;  // save the last frame here when quitting
   // Benchmark
   uint32_t benchFrames = 120;
+  // The tracer's loop shape and workgroup size (measured in specs/viewer.md).
+  bool flatTraversal = false;
+  uint32_t workgroupSize = 64;
 };
 
 struct Asset;

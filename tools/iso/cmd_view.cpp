@@ -21,6 +21,7 @@ struct ViewArgs {
   std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
+  std::string traversal = "nested";
 };
 
 viewer::Vec3d parseUp(const std::string& text) {
@@ -173,6 +174,16 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_option("--bench-frames", a->view.benchFrames, "Frames of the --bench camera path")
       ->capture_default_str()
       ->check(CLI::Range(2, 100000));
+  c->add_option("--traversal", a->traversal,
+                "The tracer's loop shape: nested (a loop of cells, each descending the tree) or "
+                "flat (one loop whose turns descend a level or visit a cell); for measurements")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"nested", "flat"}));
+  c->add_option("--workgroup", a->view.workgroupSize,
+                "Invocations per GPU workgroup (a tile of pixels): 8 to 1024, a power of two; for "
+                "measurements")
+      ->capture_default_str()
+      ->check(CLI::IsMember({8u, 16u, 32u, 64u, 128u, 256u, 512u, 1024u}));
   c->add_flag("--validation", a->view.validation,
               "Enable the Vulkan validation layer (errors make the command fail)");
   c->add_option("--device", a->view.device, "Use the Vulkan device whose name contains this");
@@ -188,6 +199,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
         return kExitUsage;
       }
       a->view.vram = parseSize(a->vram, "--vram");
+      a->view.flatTraversal = a->traversal == "flat";
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
       checkPictures(*a);
       buildScene(*a);
