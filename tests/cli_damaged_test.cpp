@@ -61,7 +61,12 @@ const std::vector<Command>& commands() {
       {"export --vdb", "export FILE --vdb OUT", Answer::Vdb, "surface.vdb"},
       {"export --points", "export FILE --points OUT", Answer::File, "points.ply"},
   };
-  return list;
+  static const std::vector<Command> withoutVdb = [] {  // ISO_WITH_OPENVDB=OFF
+    std::vector<Command> l = list;
+    std::erase_if(l, [](const Command& c) { return c.answer == Answer::Vdb; });
+    return l;
+  }();
+  return ISO_WITH_OPENVDB ? list : withoutVdb;
 }
 
 std::string replaced(std::string text, const std::string& what, const std::string& with) {

@@ -82,11 +82,11 @@ TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
   if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
     GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
   TempDir dir;
-  const std::string command = "xvfb-run -a -s '-screen 0 800x600x24' " +
-                              quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" /
-                                     "window_session.sh") +
-                              " " + std::string(ISO_BINARY) + " " + quoted(kittenIso()) + " " +
-                              quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
+  const std::string command =
+      "xvfb-run -a -s '-screen 0 800x600x24' " +
+      quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" / "window_session.sh") +
+      " " + std::string(ISO_BINARY) + " " + quoted(kittenIso()) + " " + quoted(dir.path()) + " 2>" +
+      quoted(dir / "session.txt");
   const int status = std::system(command.c_str());
   ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
       << slurp(dir / "session.txt") << slurp(dir / "err.txt");
@@ -166,6 +166,21 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
   EXPECT_EQ(small.exitCode, 1);
   EXPECT_NE(small.err.find("--vram"), std::string::npos) << small.err;
   EXPECT_FALSE(std::filesystem::exists("x.png"));
+  // A picture of a kind this build cannot write: refused before any work. Builds without
+  // OpenImageIO write PNG and PPM files only, and say so.
+  TempDir dir;
+  const CommandResult kind =
+      iso("view " + file + " --cpu --out " + quoted(dir / "x.not-an-image-format"));
+  EXPECT_EQ(kind.exitCode, 2);
+  EXPECT_NE(kind.err.find("--out"), std::string::npos) << kind.err;
+  EXPECT_TRUE(std::filesystem::is_empty(dir.path()));
+  const CommandResult exr =
+      iso("view " + file + " --cpu --out " + quoted(dir / "x.exr") + " --width 16 --height 16");
+  EXPECT_EQ(exr.exitCode, ISO_WITH_OPENIMAGEIO ? 0 : 2) << exr.err;
+  EXPECT_EQ(std::filesystem::exists(dir / "x.exr"), bool(ISO_WITH_OPENIMAGEIO));
+  if (!ISO_WITH_OPENIMAGEIO) {
+    EXPECT_NE(exr.err.find("this build of iso has no OpenImageIO"), std::string::npos) << exr.err;
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
-// Pictures in and out of the viewer, through OpenImageIO: rendered frames written atomically (the
-// format follows the file name's extension) and environment maps read from any image it reads.
+// Pictures in and out of the viewer, through pipeline/io/image.h (OpenImageIO, or PNG and PPM files
+// in builds without it): rendered frames written atomically (the format follows the file name's
+// extension) and environment maps read from any image that reads.
 #pragma once
 
 #include <cstdint>

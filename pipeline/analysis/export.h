@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <glm/vec3.hpp>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "iso/surface_model.h"
@@ -46,6 +47,10 @@ struct VdbStats {
   double voxelSize = 0.0;  // world units: the finest leaf's edge
   int level = 0;           // the finest leaves' level
 };
+
+// Throw iso::UsageError naming `option` in builds without OpenVDB (ISO_WITH_OPENVDB=OFF:
+// export_vdb_none.cpp), where writeVdb and sampleVdb throw it too; nothing in builds with it.
+void requireOpenVdb(const std::string& option);
 
 // The surface as an OpenVDB narrow-band level set (pipeline/analysis/export_vdb.cpp): a float grid
 // named "surface" of class level set, voxel size the finest leaf's edge, voxel (i, j, k) at the

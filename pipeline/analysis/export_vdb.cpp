@@ -1,5 +1,5 @@
 // The OpenVDB export (pipeline/analysis/export.h), alone in its file: OpenVDB's headers are slow to
-// compile.
+// compile, and builds without OpenVDB (ISO_WITH_OPENVDB=OFF) take export_vdb_none.cpp instead.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -50,6 +50,8 @@ void requireVdbVoxel(double voxelSize, const std::filesystem::path& path) {
 }
 
 }  // namespace
+
+void requireOpenVdb(const std::string&) {}
 
 std::vector<double> sampleVdb(const std::filesystem::path& path,
                               std::span<const glm::dvec3> world) {

@@ -74,6 +74,11 @@ ReadOnlyDirectory::~ReadOnlyDirectory() {
   }
 }
 
+std::filesystem::path builtPath(const char* variable, const char* built) {
+  const char* set = std::getenv(variable);
+  return set != nullptr && *set != '\0' ? std::filesystem::path(set) : std::filesystem::path(built);
+}
+
 std::vector<std::byte> readFile(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot read " + path.string());

@@ -42,6 +42,11 @@ class ReadOnlyDirectory {
   bool mounted_ = false, ok_ = false;
 };
 
+// The file or folder a test program was built to find at `built` (a path in the checkout it was
+// built from), or the one the environment variable `variable` names instead: for test programs
+// run from a copy elsewhere (the bundle of `tools/run device-bundle`).
+std::filesystem::path builtPath(const char* variable, const char* built);
+
 std::vector<std::byte> readFile(const std::filesystem::path& path);
 void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& bytes);
 

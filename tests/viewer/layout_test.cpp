@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "shaders/shared.h"
+#include "tests/support/support.h"
 
 namespace iso::test {
 namespace {
@@ -63,7 +64,7 @@ SpirvLayout readSpirv(const std::string& path) {
 }
 
 TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
-  const SpirvLayout spirv = readSpirv(ISO_TRACE_DEBUG_SPIRV);
+  const SpirvLayout spirv = readSpirv(builtPath("ISO_TRACE_DEBUG_SPIRV", ISO_TRACE_DEBUG_SPIRV));
   using gpu::FrameParams;
   const std::map<std::string, uint32_t> frame = {
       {"eye", offsetof(FrameParams, eye)},

@@ -109,10 +109,11 @@ TEST(OneSurface, theTracerAndTheSurfaceModelFindTheSameFirstHitOnGeneratedShapes
 
 TEST(OneSurface, theTracerAndTheSurfaceModelFindTheSameFirstHitOnScans) {
   TempDir dir;
-  expectOneSurface("kitten", converted(dir, "kitten",
-                                       readPointFile(std::filesystem::path(ISO_TEST_DATA_DIR) /
-                                                     "kitten_normals.xyz")));
-  const std::filesystem::path data = ISO_SHARED_DATA_DIR;
+  expectOneSurface("kitten",
+                   converted(dir, "kitten",
+                             readPointFile(builtPath("ISO_TEST_DATA_DIR", ISO_TEST_DATA_DIR) /
+                                           "kitten_normals.xyz")));
+  const std::filesystem::path data = builtPath("ISO_SHARED_DATA_DIR", ISO_SHARED_DATA_DIR);
   if (!std::filesystem::exists(data / "bunny_zipper.ply")) {
     GTEST_SKIP() << "no ../shared/data: the real scans are not measured";
   }
@@ -151,8 +152,8 @@ TEST(OneSurface, raysThatLeaveASurfaceKeepTheirSide) {
     withoutSide += viewer::traceCpu(pool, params, glm::vec3(p), glm::vec3(d), 0.0f).has_value();
     const auto in = viewer::traceCpu(pool, params, glm::vec3(p), glm::vec3(-d), -1.0f);
     // The chord of the unit sphere (world) from p along -d.
-    const glm::dvec3 world = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) +
-                             p * frame.size;
+    const glm::dvec3 world =
+        glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) + p * frame.size;
     const double chord = -2.0 * glm::dot(world, -d) / frame.size;
     inwardAgree += in && in->from < 0.0f && std::abs(double(in->t) - chord) < 0.01;
   }

@@ -35,7 +35,7 @@ struct Files {
     sphereSpacing = convertToIso(scanOf("sphere", 30000), sphere, quiet)["spacing"];
     convertToIso(scanOf("torus", 30000), torus, quiet);
     const PointCloud kittenPoints =
-        readPointFile(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz");
+        readPointFile(builtPath("ISO_TEST_DATA_DIR", ISO_TEST_DATA_DIR) / "kitten_normals.xyz");
     convertToIso(kittenPoints, kitten, quiet);
     BuildOptions small;  // many chunks, to stream
     small.chunkNodes = 600;

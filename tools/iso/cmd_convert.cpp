@@ -404,7 +404,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->check(CLI::Range(1u, 1000000000u));
   CLI::Option* texture = c->add_option(
       "--texture", o->texture,
-      "An image (any OpenImageIO reads) projected along the three axes and blended by the "
+      "An image (any OpenImageIO reads; PNG or PPM in builds without it) projected along the three "
+      "axes and blended by the "
       "normal, baked into the colors (times the points' own colors when they have some)");
   c->add_option("--texture-scale", o->build.texture.scale,
                 "World units one repeat of the texture spans (default: the frame's size)")

@@ -126,6 +126,7 @@ int run(const Options& o) {
   if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
     throw UsageError("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
+  if (!o.vdb.empty()) requireOpenVdb("--vdb");
   checkOutputs(o);
   say("reading " + o.file);
   const Reader reader = Reader::open(o.file);
@@ -199,7 +200,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
                 "cut into tetrahedra that match its neighbours' faces (marching tetrahedra)");
   c->add_option("--vdb", o->vdb,
                 "OpenVDB narrow-band level set (float grid \"surface\"), voxels the finest "
-                "leaves' size");
+                "leaves' size (not in builds without OpenVDB)");
   c->add_option("--points", o->points,
                 "The original points (binary PLY with their normals and colors), when the file "
                 "keeps them (iso convert --keep-points)");

@@ -4,6 +4,7 @@
 
 #include "iso/error.h"
 #include "pipeline/base/files.h"
+#include "pipeline/io/image.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
@@ -84,8 +85,8 @@ void buildScene(ViewArgs& a) {
   if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
 }
 
-// The pictures to write (--out, --screenshot), checked before the file is opened; they replace
-// what is there.
+// The pictures to write (--out, --screenshot), checked before the file is opened: in a directory
+// that takes them, not the input, of a kind this build writes; they replace what is there.
 void checkPictures(const ViewArgs& a) {
   const std::pair<std::filesystem::path, const char*> pictures[] = {
       {a.view.out, "--out"}, {a.view.screenshot, "--screenshot"}};
@@ -93,6 +94,7 @@ void checkPictures(const ViewArgs& a) {
     if (path.empty()) continue;
     checkOutputPath(path, option, true);
     refuseOutputOverInput(path, a.view.file, option);
+    checkImageWritable(path, option);
     setInterruptMessage("iso view: interrupted; nothing was written");
   }
 }
@@ -111,7 +113,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--bench", a->bench,
               "Render a camera path (an orbit) and print ms/frame, rays/s, GPU memory, chunks "
               "resident and bytes streamed");
-  c->add_option("--out,-o", a->view.out, "Picture to write (.png, .jpg, .exr, ...)");
+  c->add_option("--out,-o", a->view.out,
+                "Picture to write (.png, .jpg, .exr, ...; .png or .ppm in builds without "
+                "OpenImageIO)");
   c->add_option("--width", a->view.width, "Picture width in pixels")
       ->capture_default_str()
       ->check(CLI::Range(8, 16384));
@@ -147,7 +151,8 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_option("--ior", a->ior, "Index of refraction")->check(CLI::Range(1.0, 4.0));
   c->add_option("--shininess", a->shininess, "Phong exponent")->check(CLI::Range(1.0, 10000.0));
   c->add_option("--env", a->environment,
-                "Environment map: an equirectangular image OpenImageIO reads")
+                "Environment map: an equirectangular image OpenImageIO reads (PNG or PPM in builds "
+                "without it)")
       ->check(CLI::ExistingFile);
   c->add_option("--env-intensity", a->environmentIntensity, "Environment map scale")
       ->check(CLI::Range(0.0, 1000.0));

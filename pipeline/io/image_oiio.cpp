@@ -1,4 +1,4 @@
-// Images through OpenImageIO (image.h).
+// Images through OpenImageIO (image.h): the builds with ISO_WITH_OPENIMAGEIO.
 #include "pipeline/io/image.h"
 
 #include <OpenImageIO/imagebuf.h>
@@ -7,6 +7,7 @@
 
 #include <algorithm>
 
+#include "iso/atomic_file.h"
 #include "iso/error.h"
 #include "iso/quantize.h"
 
@@ -67,6 +68,49 @@ LinearImage readLinearImage(const std::filesystem::path& path, uint32_t maxWidth
     const float* p = &pixels[i * n];
     const bool gray = n < 3;
     out.texels[i] = {linear(p[0]), linear(gray ? p[0] : p[1]), linear(gray ? p[0] : p[2])};
+  }
+  return out;
+}
+
+void checkImageWritable(const std::filesystem::path& path, const std::string& option) {
+  if (!OIIO::ImageOutput::create(path.string()))
+    throw UsageError(option + ": cannot write this kind of image (" + path.string() + ": " +
+                     OIIO::geterror() + ")");
+}
+
+void writeRgba8Image(const std::filesystem::path& path, uint32_t width, uint32_t height,
+                     const std::vector<uint32_t>& rgba) {
+  AtomicFile file(path);
+  auto out = OIIO::ImageOutput::create(path.string());
+  if (!out)
+    throw FileError(path.string(), std::nullopt,
+                    "cannot write this kind of image (" + OIIO::geterror() + ")");
+  // RGB alone where the format has no alpha (PPM, JPEG): each pixel's fourth byte skipped.
+  const int channels = out->supports("alpha") ? 4 : 3;
+  const OIIO::ImageSpec spec(int(width), int(height), channels, OIIO::TypeDesc::UINT8);
+  if (!out->open(file.temporaryPath().string(), spec) ||
+      !out->write_image(OIIO::TypeDesc::UINT8, rgba.data(), sizeof(uint32_t)) || !out->close())
+    throw FileError(path.string(), std::nullopt, "cannot write the image: " + out->geterror());
+  file.commit();
+}
+
+std::vector<uint32_t> readRgba8Image(const std::filesystem::path& path, uint32_t& width,
+                                     uint32_t& height) {
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in)
+    throw FileError(path.string(), std::nullopt, "cannot read the image: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  width = uint32_t(spec.width);
+  height = uint32_t(spec.height);
+  std::vector<uint8_t> pixels(size_t(width) * height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT8, pixels.data()))
+    throw FileError(path.string(), std::nullopt, "cannot read the image: " + in->geterror());
+  std::vector<uint32_t> out(size_t(width) * height);
+  const int n = spec.nchannels;
+  for (size_t i = 0; i < out.size(); ++i) {
+    const uint8_t* p = &pixels[i * n];
+    const uint32_t r = p[0], g = n > 1 ? p[1] : r, b = n > 2 ? p[2] : r, a = n > 3 ? p[3] : 255;
+    out[i] = r | g << 8 | b << 16 | a << 24;
   }
   return out;
 }
