@@ -95,8 +95,24 @@ void ChunkCache::loaderLoop() {
   }
 }
 
+void ChunkCache::gpuProgress(uint64_t submitted, uint64_t completed) {
+  submitted_ = submitted;
+  completed_ = completed;
+  releaseRetired();
+}
+
+void ChunkCache::releaseRetired() {
+  while (!retired_.empty() && retired_.front().lastReader <= completed_) {
+    freePages_.push_back(retired_.front().page);
+    retired_.pop_front();
+  }
+}
+
+// Evicts until the free pages and those waiting for frames in flight cover `pages`; true when
+// the free ones alone do (a chunk that must wait for retired pages is placed in a later frame).
 bool ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted) {
-  while (freePages_.size() < pages) {
+  releaseRetired();
+  while (freePages_.size() + retired_.size() < pages) {
     uint32_t victim = kNone;
     for (uint32_t c = 0; c < state_.size(); ++c) {
       const State& s = state_[c];
@@ -105,13 +121,14 @@ bool ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>&
     }
     if (victim == kNone) return false;
     State& s = state_[victim];
-    freePages_.insert(freePages_.end(), s.pages.rbegin(), s.pages.rend());
+    for (auto p = s.pages.rbegin(); p != s.pages.rend(); ++p) retired_.push_back({*p, submitted_});
     s.pages.clear();
     s.firstPage = kNone;
     --residentCount_;
     evicted.push_back(victim);
   }
-  return true;
+  releaseRetired();
+  return freePages_.size() >= pages;
 }
 
 std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBytes,

@@ -45,6 +45,14 @@ class ChunkCache {
   // pinned. `evicted` receives the chunks that left. The top chunk is placed, pinned, first.
   std::vector<Upload> place(uint64_t frame, uint64_t maxBytes, std::vector<uint32_t>& evicted);
 
+  // The GPU's progress, told before place(): frames up to `submitted` were given chunk tables and
+  // may read the pool; those up to `completed` are done. The pages of a chunk evicted now are
+  // reused only once every frame submitted before its eviction has completed (frames in flight
+  // read the pages their tables name). Without this call (both 0), pages are reused at once.
+  void gpuProgress(uint64_t submitted, uint64_t completed);
+  // Pages of evicted chunks that frames in flight may still read.
+  uint32_t retiredPages() const { return uint32_t(retired_.size()); }
+
   bool resident(uint32_t chunk) const { return state_[chunk].firstPage != kNone; }
   uint32_t firstPage(uint32_t chunk) const { return state_[chunk].firstPage; }
   uint32_t residentChunks() const { return residentCount_; }
@@ -69,12 +77,19 @@ class ChunkCache {
   };
   void loaderLoop();
   bool makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted);
+  void releaseRetired();
 
   const Reader& reader_;
   const ChunkTree& tree_;
   BlobOptions options_;
   uint32_t poolPages_;
   std::vector<uint32_t> freePages_;
+  struct Retired {
+    uint32_t page;
+    uint64_t lastReader;  // the last frame that may read it
+  };
+  std::deque<Retired> retired_;  // in eviction order, so lastReader never decreases
+  uint64_t submitted_ = 0, completed_ = 0;
   std::vector<State> state_;
   uint32_t residentCount_ = 0;
 
