@@ -66,6 +66,7 @@ struct Orbit {
   gpu::FrameParams firstParams{};  // with its frame number
   std::vector<FrameStats> frames;  // the other views, pipelined, in order
   std::vector<double> wallMs;      // per frame: from the previous completion to its own
+  std::vector<double> idleMs;      // per frame after the first: the GPU idle before it
   double wallSeconds = 0;          // from the first submit to the last completion
   uint32_t maxResident = 0;
   RayCounts rays;  // of `frames`
@@ -73,7 +74,9 @@ struct Orbit {
 };
 
 // The first view of the orbit, frame by frame as --headless renders, so that it shows what the
-// CPU draws with the whole file resident; then the other views with frames in flight.
+// CPU draws with the whole file resident; then the other views with frames in flight. The orbit
+// goes on past its last view for the frames in flight less one, untimed, so that every timed
+// frame completes while the next ones are queued (a drain would show frames completing at once).
 Orbit runOrbit(GpuView& view, const ViewOptions& o) {
   Orbit orbit;
   Renderer& r = view.renderer;
@@ -88,7 +91,11 @@ Orbit runOrbit(GpuView& view, const ViewOptions& o) {
   orbit.firstParams.image.w = uint32_t(orbit.first.frame);
   auto previous = Clock::now();
   const auto start = previous;
+  const uint64_t lastTimed = orbit.first.frame + o.benchFrames - 1;
   r.onCollected([&](const FrameStats& s) {
+    if (s.frame > lastTimed) return;
+    if (!orbit.frames.empty() && s.gpuStart > 0)
+      orbit.idleMs.push_back(std::max(0.0, s.gpuStart - orbit.frames.back().gpuEnd) * 1e3);
     orbit.frames.push_back(s);
     orbit.wallMs.push_back(seconds(s.completed - previous) * 1e3);
     previous = s.completed;
@@ -97,7 +104,7 @@ Orbit runOrbit(GpuView& view, const ViewOptions& o) {
     orbit.dispatchSeconds += s.dispatchSeconds;
     orbit.gpuSeconds += s.gpuSeconds;
   });
-  for (uint32_t f = 1; f < o.benchFrames; ++f)
+  for (uint32_t f = 1; f < o.benchFrames + r.framesInFlight() - 1; ++f)
     renderFrame(r, view.params(orbitScene(view.scene, f, o.benchFrames)));
   r.finish();
   r.onCollected({});
@@ -142,7 +149,7 @@ json ratesJson(const RayRates& r) {
 
 // Everything the benchmark measured.
 struct BenchNumbers {
-  Spread wallMs, gpuMs;
+  Spread wallMs, gpuMs, idleMs;
   bool timestamps = false;
   RayRates gpuRates, cpuRates;
   double raysPerPixel = 0, fps = 0;
@@ -157,6 +164,7 @@ BenchNumbers numbersOf(const GpuView& view, const ViewOptions& o, const Orbit& o
   for (const FrameStats& s : orbit.frames) gpuMs.push_back(s.dispatchSeconds * 1e3);
   n.timestamps = view.renderer.hasTimestamps() && orbit.dispatchSeconds > 0;
   if (n.timestamps) n.gpuMs = spreadOf(gpuMs);
+  if (n.timestamps) n.idleMs = spreadOf(orbit.idleMs);
   n.gpuRates = ratesOf(orbit.rays, n.timestamps ? orbit.dispatchSeconds : orbit.wallSeconds);
   if (cpu.ran) n.cpuRates = ratesOf(cpu.rays, cpu.seconds);
   const double frames = double(std::max<size_t>(orbit.frames.size(), 1));
@@ -185,6 +193,7 @@ json benchJson(const GpuView& view, const ViewOptions& o, const Orbit& orbit, co
             {"wall_ms", spreadJson(n.wallMs)},
             {"fps", n.fps},
             {"gpu_ms", n.timestamps ? spreadJson(n.gpuMs) : json()},
+            {"gpu_idle_ms", n.timestamps ? spreadJson(n.idleMs) : json()},
             {"rays_per_second", ratesJson(n.gpuRates)},
             {"rays_per_second_from", n.timestamps ? "timestamps" : "wall"},
             {"rays_per_pixel", n.raysPerPixel},
@@ -201,12 +210,15 @@ json benchJson(const GpuView& view, const ViewOptions& o, const Orbit& orbit, co
   json frames = json::array();
   for (size_t i = 0; i < orbit.frames.size(); ++i) {
     const FrameStats& s = orbit.frames[i];
-    frames.push_back({{"wall_ms", orbit.wallMs[i]},
-                      {"dispatch_ms", s.dispatchSeconds * 1e3},
-                      {"rays", raysJson(s.rays)},
-                      {"uploaded_bytes", s.uploadedBytes},
-                      {"evicted", s.evicted},
-                      {"resident", s.resident}});
+    frames.push_back(
+        {{"wall_ms", orbit.wallMs[i]},
+         {"dispatch_ms", s.dispatchSeconds * 1e3},
+         {"gpu_ms", s.gpuSeconds * 1e3},
+         {"gpu_idle_ms", i > 0 && i <= orbit.idleMs.size() ? json(orbit.idleMs[i - 1]) : json()},
+         {"rays", raysJson(s.rays)},
+         {"uploaded_bytes", s.uploadedBytes},
+         {"evicted", s.evicted},
+         {"resident", s.resident}});
   }
   j["orbit_frames"] = frames;
   if (cpu.ran)
@@ -240,6 +252,11 @@ void printTimes(const Orbit& orbit, const BenchNumbers& n) {
         "from timestamps); {:.2f} with the uploads, on average\n",
         n.gpuMs.median, n.gpuMs.p95, n.gpuMs.max, n.gpuMs.maxOverMedian(),
         orbit.gpuSeconds * 1e3 / double(std::max<size_t>(orbit.frames.size(), 1)));
+  if (n.timestamps)
+    fmt::print(
+        "  GPU idle    median {:.2f}, max {:.2f} ms between one frame's end and the next one's "
+        "start (timestamps; the host did not keep the queue fed when large)\n",
+        n.idleMs.median, n.idleMs.max);
   else
     fmt::print("  GPU ms      no timestamps on this queue\n");
   fmt::print("  rays/s      {} ({}; {:.2f} rays a pixel)\n", ratesText(n.gpuRates),

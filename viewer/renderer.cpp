@@ -50,6 +50,10 @@ constexpr auto kUniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
 constexpr auto kTransferDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 
+// A slot's three timestamps, copied by the GPU into a host-visible buffer: reading them with
+// vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
+constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
+
 uint64_t feedbackBytes(uint32_t chunkCount) {
   return (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4;
 }
@@ -58,9 +62,11 @@ uint64_t feedbackBytes(uint32_t chunkCount) {
 // and staging region; the output and the environment map once.
 uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stagingRegion,
                     uint64_t pixelsBytes, uint64_t envBytes) {
-  const uint64_t perSlot = bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
-                           bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
-                           bufferFootprint(gpu, feedbackBytes(chunkCount), kStorage);
+  const uint64_t perSlot =
+      bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
+      bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
+      bufferFootprint(gpu, feedbackBytes(chunkCount), kStorage) +
+      (gpu.timestampValidBits > 0 ? bufferFootprint(gpu, kTimestampBytes, kTransferDst) : 0);
   return slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
          bufferFootprint(gpu, envBytes, kStorage) +
          bufferFootprint(gpu, slots * stagingRegion, kTransferSrc);
@@ -153,6 +159,8 @@ void Renderer::createSlots(uint64_t stagingRegion) {
     s.table = createBuffer(gpu_, uint64_t(chunkCount) * 16, kStorage, true);
     s.feedback = createBuffer(gpu_, feedbackBytes(chunkCount), kStorage, true);
     std::memset(s.feedback.mapped, 0, s.feedback.size);
+    if (gpu_.timestampValidBits > 0)
+      s.timestamps = createBuffer(gpu_, kTimestampBytes, kTransferDst, true);
     s.set = pipeline_.sets[i];
     s.stagingOffset = i * stagingRegion;
     s.fence = createFence(gpu_, false);
@@ -305,12 +313,15 @@ VkCommandBuffer Renderer::record() {
                           nullptr);
   const uint32_t tiles = ((options_.width + 7) / 8) * ((options_.height + 7) / 8);
   vkCmdDispatch(cb, tiles, 1, 1);
-  if (hasTimestamps())
+  if (hasTimestamps()) {
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 2);
+    vkCmdCopyQueryPoolResults(cb, queries_, query, 3, slot.timestamps.buffer, 0, sizeof(uint64_t),
+                              VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
+  }
   VkMemoryBarrier after{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
   after.dstAccessMask = VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                        VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
                        nullptr, 0, nullptr);
   return cb;
@@ -347,7 +358,7 @@ bool Renderer::collectNext() {
   ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
   inFlight_.erase(inFlight_.begin());
   slot.stats.completed = std::chrono::steady_clock::now();
-  readTimestamps(index, slot.stats);
+  readTimestamps(slot, slot.stats);
   collect(slot);
   return true;
 }
@@ -357,13 +368,14 @@ void Renderer::finish() {
   }
 }
 
-void Renderer::readTimestamps(uint32_t slot, FrameStats& stats) {
+void Renderer::readTimestamps(const Slot& slot, FrameStats& stats) const {
   if (!hasTimestamps()) return;
-  uint64_t t[3] = {};
-  ISO_VK(vkGetQueryPoolResults(gpu_.device, queries_, 3 * slot, 3, sizeof t, t, sizeof(uint64_t),
-                               VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+  uint64_t t[3];
+  std::memcpy(t, slot.timestamps.mapped, sizeof t);
   stats.gpuSeconds = double((t[2] - t[0]) & timestampMask_) * timestampSeconds_;
   stats.dispatchSeconds = double((t[2] - t[1]) & timestampMask_) * timestampSeconds_;
+  stats.gpuStart = double(t[0] & timestampMask_) * timestampSeconds_;
+  stats.gpuEnd = double(t[2] & timestampMask_) * timestampSeconds_;
 }
 
 // The slot's feedback, read once its frame completed: the rays by kind, the chunks its rays asked

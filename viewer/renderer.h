@@ -52,8 +52,9 @@ struct FrameStats {
   uint32_t resident = 0;  // now, when collected
   uint32_t pending = 0;   // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
-  double gpuSeconds = 0;       // copies and dispatch, from timestamps (0 without them)
-  double dispatchSeconds = 0;  // the dispatch alone, from timestamps (0 without them)
+  double gpuSeconds = 0;            // copies and dispatch, from timestamps (0 without them)
+  double dispatchSeconds = 0;       // the dispatch alone, from timestamps (0 without them)
+  double gpuStart = 0, gpuEnd = 0;  // the device's clock at the frame's start and end (seconds)
   std::chrono::steady_clock::time_point completed;  // when the host saw it done
 };
 
@@ -113,7 +114,7 @@ class Renderer {
   struct Slot {
     VkCommandBuffer cb = VK_NULL_HANDLE;
     Owned<VkFence> fence;
-    Buffer params, table, feedback;
+    Buffer params, table, feedback, timestamps;
     VkDescriptorSet set = VK_NULL_HANDLE;
     uint64_t stagingOffset = 0;
     std::vector<Copy> copies;
@@ -123,7 +124,7 @@ class Renderer {
   void writeDescriptors(const Slot& slot);
   void stage(Slot& slot);
   void collect(Slot& slot);
-  void readTimestamps(uint32_t slot, FrameStats& stats);
+  void readTimestamps(const Slot& slot, FrameStats& stats) const;
 
   Gpu& gpu_;
   const Asset& asset_;

@@ -449,7 +449,8 @@ int viewWindow(const ViewOptions& options) {
       w.resize(uint32_t(fbWidth), uint32_t(fbHeight));
     renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
     stale = w.draw();
-    const bool lastFrame = options.frames > 0 && ++frames >= options.frames;
+    ++frames;
+    const bool lastFrame = options.frames > 0 && frames >= options.frames;
     if (input.screenshot)
       saveScreenshot(fmt::format("iso-screenshot-{}.png", ++screenshots), renderer, bgra);
     input.screenshot = false;
