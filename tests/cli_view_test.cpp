@@ -60,8 +60,8 @@ TEST(CliView, benchPrintsItsNumbers) {
   const CommandResult run = iso("view " + quoted(kittenIso()) +
                                 " --bench --bench-frames 4 --width 64 --height 64 --vram 64M");
   ASSERT_EQ(run.exitCode, 0) << run.err;
-  for (const char* line : {"ms/frame", "max/median", "GPU ms", "rays/s", "first view", "CPU rays/s",
-                           "GPU/CPU", "GPU memory", "chunks", "streamed"})
+  for (const char* line : {"ms/frame", "max/median", "GPU ms", "GPU idle", "rays/s", "first view",
+                           "CPU rays/s", "GPU/CPU", "GPU memory", "chunks", "streamed"})
     EXPECT_NE(run.out.find(line), std::string::npos) << line << "\n" << run.out;
   const CommandResult gpuOnly = iso("view " + quoted(kittenIso()) +
                                     " --bench --bench-frames 2 --width 32 --height 32 "
