@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "iso/reader.h"
@@ -59,8 +60,47 @@ TEST(CliView, benchPrintsItsNumbers) {
   const CommandResult run = iso("view " + quoted(kittenIso()) +
                                 " --bench --bench-frames 4 --width 64 --height 64 --vram 64M");
   ASSERT_EQ(run.exitCode, 0) << run.err;
-  for (const char* line : {"ms/frame", "rays/s", "GPU memory", "chunks", "streamed"})
+  for (const char* line : {"ms/frame", "max/median", "GPU ms", "GPU idle", "rays/s", "first view",
+                           "CPU rays/s", "GPU/CPU", "GPU memory", "chunks", "streamed"})
     EXPECT_NE(run.out.find(line), std::string::npos) << line << "\n" << run.out;
+  const CommandResult gpuOnly = iso("view " + quoted(kittenIso()) +
+                                    " --bench --bench-frames 2 --width 32 --height 32 "
+                                    "--no-cpu-compare --frames-in-flight 3");
+  ASSERT_EQ(gpuOnly.exitCode, 0) << gpuOnly.err;
+  EXPECT_NE(gpuOnly.out.find("3 in flight"), std::string::npos) << gpuOnly.out;
+  EXPECT_EQ(gpuOnly.out.find("CPU rays/s"), std::string::npos) << gpuOnly.out;
+}
+
+// The bench traces its first view on the GPU (converged) and on the CPU with the whole file,
+// with the same parameters and frame number (the jitter of 2 samples a pixel hashes it): the same
+// rays of each kind. Camera rays are equal by construction; the others follow the hits, which
+// agree but for float rounding (the kitten: equal; the lion: 1 shadow ray in 8,053 differs).
+TEST(CliView, benchTracesTheSameRaysOfEachKindOnTheGpuAndTheCpu) {
+  const uint32_t w = 160, h = 120, frames = 3;
+  const CommandResult run =
+      iso("view " + quoted(kittenIso()) + " --bench --json --bench-frames " +
+          std::to_string(frames) + " --width " + std::to_string(w) + " --height " +
+          std::to_string(h) + " --spp 2 --reflectivity 0.3 --bounces 1 --lod-pixels 0.5");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto j = nlohmann::json::parse(run.out);
+  ASSERT_TRUE(j["first_view"]["converged"].get<bool>()) << run.out;
+  const auto& gpu = j["first_view"]["rays"];
+  const auto& cpu = j["cpu"]["rays"];
+  EXPECT_EQ(gpu["primary"].get<uint64_t>(), 2 * uint64_t(w) * h);
+  EXPECT_EQ(cpu["primary"].get<uint64_t>(), 2 * uint64_t(w) * h);
+  EXPECT_GT(gpu["shadow"].get<uint64_t>(), uint64_t(w) * h / 20) << gpu;
+  EXPECT_GT(gpu["secondary"].get<uint64_t>(), uint64_t(w) * h / 20) << gpu;
+  for (const char* kind : {"shadow", "secondary"})
+    EXPECT_NEAR(gpu[kind].get<double>(), cpu[kind].get<double>(), 1e-3 * cpu[kind].get<double>())
+        << kind;
+  // The orbit's other frames are all timed, and the rates add up.
+  ASSERT_EQ(j["orbit_frames"].size(), frames - 1);
+  const auto& rates = j["rays_per_second"];
+  EXPECT_NEAR(rates["all"].get<double>(),
+              rates["primary"].get<double>() + rates["shadow"].get<double>() +
+                  rates["secondary"].get<double>(),
+              1e-6 * rates["all"].get<double>());
+  EXPECT_GT(j["cpu"]["gpu_over_cpu"]["all"].get<double>(), 0.0);
 }
 
 TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
@@ -159,6 +199,8 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
                 .exitCode,
             2);
   EXPECT_EQ(iso("view /nonexistent.iso --headless --out x.png").exitCode, 2);
+  EXPECT_EQ(iso("view " + file + " --headless --out x.png --json").exitCode, 2);  // not --bench
+  EXPECT_EQ(iso("view " + file + " --bench --frames-in-flight 4").exitCode, 2);
   const CommandResult faces = iso("view " + file + " --cpu --out x.png --backfaces invisible");
   EXPECT_EQ(faces.exitCode, 2);
   EXPECT_NE(faces.err.find("--backfaces"), std::string::npos) << faces.err;

@@ -62,4 +62,7 @@ std::vector<float> nodeErrors(const SurfaceChunk& chunk, float chunkError, uint3
 // edges or more (never drawn in place of its children).
 uint32_t encodeNodeError(double error, uint8_t level);
 
+// Pages a blob of `words` words spans in the pool.
+uint32_t blobPages(size_t words);
+
 }  // namespace iso::viewer

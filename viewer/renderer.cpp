@@ -27,75 +27,94 @@ uint64_t blobBound(const ChunkInfo& c, const BlobOptions& o) {
   return (words + gpu::kBlobHeaderWords + 2) * 4;
 }
 
-}  // namespace
+// The staging bytes a frame may fill: the largest blob (a frame always takes one), or the upload
+// budget when larger (but no more than the whole file); and the pool bytes of all blobs.
+struct BlobSizes {
+  uint64_t stagingRegion = 0, fileBytes = 0, largestBlob = 0;
+};
 
-void submitAndWait(Gpu& gpu, VkCommandBuffer cb, VkFence fence) {
-  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-  submit.commandBufferCount = 1;
-  submit.pCommandBuffers = &cb;
-  ISO_VK(vkResetFences(gpu.device, 1, &fence));
-  ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
-  ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
+BlobSizes blobSizes(const Asset& asset, uint64_t uploadBytes) {
+  BlobSizes b;
+  for (const ChunkInfo& c : asset.reader.chunks())
+    if (c.kind == kSurfaceKind) {
+      const uint64_t bound = blobBound(c, asset.blob);
+      b.stagingRegion = std::max(b.stagingRegion, bound);
+      b.fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
+    }
+  b.largestBlob = b.stagingRegion;
+  b.stagingRegion = std::max(b.stagingRegion, std::min(uploadBytes, b.fileBytes));
+  return b;
 }
 
-double renderFrame(Gpu& gpu, Renderer& renderer, const gpu::FrameParams& params, VkCommandBuffer cb,
-                   VkFence fence) {
+constexpr auto kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+constexpr auto kUniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
+constexpr auto kTransferDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
+
+// A slot's three timestamps, copied by the GPU into a host-visible buffer: reading them with
+// vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
+constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
+
+uint64_t feedbackBytes(uint32_t chunkCount) {
+  return (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4;
+}
+
+// Device memory of everything but the pool: per frame slot its parameters, chunk table, feedback
+// and staging region; the output and the environment map once.
+uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stagingRegion,
+                    uint64_t pixelsBytes, uint64_t envBytes) {
+  const uint64_t perSlot =
+      bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
+      bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
+      bufferFootprint(gpu, feedbackBytes(chunkCount), kStorage) +
+      (gpu.timestampValidBits > 0 ? bufferFootprint(gpu, kTimestampBytes, kTransferDst) : 0);
+  return slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
+         bufferFootprint(gpu, envBytes, kStorage) +
+         bufferFootprint(gpu, slots * stagingRegion, kTransferSrc);
+}
+
+// Pool pages under the budget: what the rest leaves, less a page a buffer for alignment, in
+// buffers of pagesPerBuffer pages. A chunk's pages are consecutive in one buffer: buffers hold
+// the largest blob at least, and each may leave up to a blob's pages unused at its end; more than
+// the whole file's blobs and that slack would be wasted.
+uint64_t poolPagesFor(uint64_t vram, uint64_t fixed, uint64_t fileBytes, uint64_t largestBlob,
+                      uint32_t& pagesPerBuffer) {
+  const uint64_t maxBuffer = uint64_t(1) << 30;  // the pool is addressed, not bound
+  const uint64_t largest = (largestBlob + kPageBytes - 1) / kPageBytes;
+  uint64_t poolPages = vram > fixed + kPageBytes ? (vram - fixed) / kPageBytes : 0;
+  poolPages = poolPages > gpu::kPoolBuffers ? poolPages - gpu::kPoolBuffers : 0;
+  poolPages = std::min(poolPages, fileBytes / kPageBytes + gpu::kPoolBuffers * largest);
+  const uint64_t maxPagesPerBuffer = std::bit_floor(maxBuffer / kPageBytes);
+  pagesPerBuffer = uint32_t(std::min<uint64_t>(
+      maxPagesPerBuffer,
+      std::bit_ceil(std::max((poolPages + gpu::kPoolBuffers - 1) / gpu::kPoolBuffers, largest))));
+  pagesPerBuffer = std::max<uint32_t>(pagesPerBuffer, 1);
+  return std::min<uint64_t>(poolPages, uint64_t(pagesPerBuffer) * gpu::kPoolBuffers);
+}
+
+}  // namespace
+
+void renderFrame(Renderer& renderer, const gpu::FrameParams& params) {
   renderer.prepare(params);
-  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  ISO_VK(vkBeginCommandBuffer(cb, &begin));
-  renderer.record(cb);
-  ISO_VK(vkEndCommandBuffer(cb));
-  const auto t0 = std::chrono::steady_clock::now();
-  submitAndWait(gpu, cb, fence);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  renderer.collect();
-  return seconds;
+  renderer.record();
+  renderer.submit();
 }
 
 Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                    RendererOptions options)
     : gpu_(gpu), asset_(asset), options_(options) {
+  ISO_CHECK(options.framesInFlight >= 1 && options.framesInFlight <= kMaxFramesInFlight);
   const auto chunks = asset.reader.chunks();
   const uint32_t chunkCount = uint32_t(chunks.size());
-  constexpr auto storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-  constexpr auto dst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-  constexpr auto src = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
   options_.capacityWidth = std::max(options.capacityWidth, options.width);
   options_.capacityHeight = std::max(options.capacityHeight, options.height);
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
-  uint64_t stagingBytes = 0, fileBytes = 0;  // the largest blob; all blobs
-  for (const ChunkInfo& c : chunks)
-    if (c.kind == kSurfaceKind) {
-      const uint64_t bound = blobBound(c, asset.blob);
-      stagingBytes = std::max(stagingBytes, bound);
-      fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
-    }
-  const uint64_t stagingBound = stagingBytes;
-  stagingBytes = std::max(stagingBytes, std::min(options.uploadBytes, fileBytes));
-  const uint64_t fixed =
-      bufferFootprint(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT) +
-      bufferFootprint(gpu, uint64_t(chunkCount) * 16, storage) +
-      bufferFootprint(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4, storage) +
-      bufferFootprint(gpu, pixelsBytes, storage | src) + bufferFootprint(gpu, envBytes, storage) +
-      bufferFootprint(gpu, stagingBytes, src);
-  const uint64_t maxBuffer = uint64_t(1) << 30;  // the pool is addressed, not bound
-  uint64_t poolPages = options.vram > fixed + kPageBytes ? (options.vram - fixed) / kPageBytes : 0;
-  // Each buffer's memory may round up (alignment); leave a page a buffer for it. A pool larger
-  // than the whole file would be wasted.
-  // A chunk's pages are consecutive in one buffer: buffers hold the largest blob at least, and
-  // each may leave up to a blob's pages unused at its end.
-  const uint64_t largest = (stagingBound + kPageBytes - 1) / kPageBytes;
-  poolPages = poolPages > gpu::kPoolBuffers ? poolPages - gpu::kPoolBuffers : 0;
-  poolPages = std::min(poolPages, fileBytes / kPageBytes + gpu::kPoolBuffers * largest);
-  const uint64_t maxPagesPerBuffer = std::bit_floor(maxBuffer / kPageBytes);
-  pagesPerBuffer_ = uint32_t(std::min<uint64_t>(
-      maxPagesPerBuffer,
-      std::bit_ceil(std::max((poolPages + gpu::kPoolBuffers - 1) / gpu::kPoolBuffers, largest))));
-  pagesPerBuffer_ = std::max<uint32_t>(pagesPerBuffer_, 1);
-  poolPages = std::min<uint64_t>(poolPages, uint64_t(pagesPerBuffer_) * gpu::kPoolBuffers);
+  const BlobSizes sizes = blobSizes(asset, options.uploadBytes);
+  const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
+                                    pixelsBytes, envBytes);
+  const uint64_t poolPages =
+      poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
     throw std::runtime_error(
         fmt::format("--vram {} is too small: the frame buffers and tables alone take {} bytes",
@@ -103,51 +122,30 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages),
                                         pagesPerBuffer_);
   // What is made here is destroyed with its member if a later step throws.
-  params_ = createBuffer(gpu, sizeof(gpu::FrameParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
-  chunkTable_ = createBuffer(gpu, uint64_t(chunkCount) * 16, storage, true);
-  feedback_ =
-      createBuffer(gpu, (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4, storage, true);
-  output_ = createBuffer(gpu, pixelsBytes, storage | src, true);
-  environment_ = createBuffer(gpu, envBytes, storage, true);
-  staging_ = createBuffer(gpu, stagingBytes, src, true);
+  output_ = createBuffer(gpu, pixelsBytes, kStorage | kTransferSrc, true);
+  environment_ = createBuffer(gpu, envBytes, kStorage, true);
+  staging_ = createBuffer(gpu, options.framesInFlight * sizes.stagingRegion, kTransferSrc, true);
   for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
     const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
     pool_.push_back(createBuffer(gpu, pages * kPageBytes,
-                                 dst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
+                                 kTransferDst | VK_BUFFER_USAGE_SHADER_DEVICE_ADDRESS_BIT, false));
   }
   if (environment)
     std::memcpy(environment_.mapped, environment->texels.data(), envBytes);
   else
     std::memset(environment_.mapped, 0, envBytes);
-  std::memset(feedback_.mapped, 0, feedback_.size);
-  auto* table = static_cast<gpu::ChunkEntry*>(chunkTable_.mapped);
+  table_.resize(chunkCount);
   for (uint32_t i = 0; i < chunkCount; ++i)
-    table[i].state = {gpu::kNotResident, chunks[i].level,
-                      glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
-
+    table_[i].state = {gpu::kNotResident, chunks[i].level,
+                       glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
   const uint32_t counts[] = {1, 1, 1, 1};
   ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
             options.workgroupSize <= 1024);
   // kFloatDistances, kFlatTraversal, the workgroup size (trace.comp.glsl).
   const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u,
                                 options.flatTraversal ? 1u : 0u, options.workgroupSize};
-  pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants);
-  std::vector<VkDescriptorBufferInfo> infos;
-  infos.push_back({params_.buffer, 0, VK_WHOLE_SIZE});
-  infos.push_back({chunkTable_.buffer, 0, VK_WHOLE_SIZE});
-  infos.push_back({feedback_.buffer, 0, VK_WHOLE_SIZE});
-  infos.push_back({output_.buffer, 0, VK_WHOLE_SIZE});
-  infos.push_back({environment_.buffer, 0, VK_WHOLE_SIZE});
-  std::vector<VkWriteDescriptorSet> writes(5, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
-  for (uint32_t i = 0; i < 5; ++i) {
-    writes[i].dstSet = pipeline_.set;
-    writes[i].dstBinding = i;
-    writes[i].descriptorCount = 1;
-    writes[i].descriptorType =
-        i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[i].pBufferInfo = &infos[i];
-  }
-  vkUpdateDescriptorSets(gpu.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
+  pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants, options.framesInFlight);
+  createSlots(sizes.stagingRegion);
   setup_.width = options.width;
   setup_.height = options.height;
   setup_.topChunk = asset.tree.topChunk();
@@ -163,43 +161,82 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   stats_.poolBytes = poolPages * kPageBytes;
 }
 
+// Each slot's buffers, descriptor set, command buffer and fence; the timestamp queries when the
+// queue has timestamps.
+void Renderer::createSlots(uint64_t stagingRegion) {
+  const uint32_t chunkCount = uint32_t(table_.size());
+  slots_.resize(options_.framesInFlight);
+  for (uint32_t i = 0; i < slots_.size(); ++i) {
+    Slot& s = slots_[i];
+    s.params = createBuffer(gpu_, sizeof(gpu::FrameParams), kUniform, true);
+    s.table = createBuffer(gpu_, uint64_t(chunkCount) * 16, kStorage, true);
+    s.feedback = createBuffer(gpu_, feedbackBytes(chunkCount), kStorage, true);
+    std::memset(s.feedback.mapped, 0, s.feedback.size);
+    if (gpu_.timestampValidBits > 0)
+      s.timestamps = createBuffer(gpu_, kTimestampBytes, kTransferDst, true);
+    s.set = pipeline_.sets[i];
+    s.stagingOffset = i * stagingRegion;
+    s.fence = createFence(gpu_, false);
+    s.cb = allocateCommandBuffer(gpu_);
+    writeDescriptors(s);
+  }
+  if (gpu_.timestampValidBits > 0) {
+    queries_ = createTimestampQueries(gpu_, 3 * uint32_t(slots_.size()));
+    timestampSeconds_ = double(gpu_.properties.limits.timestampPeriod) * 1e-9;
+    timestampMask_ =
+        gpu_.timestampValidBits >= 64 ? ~uint64_t(0) : (uint64_t(1) << gpu_.timestampValidBits) - 1;
+  }
+}
+
+void Renderer::writeDescriptors(const Slot& slot) {
+  const VkDescriptorBufferInfo infos[5] = {{slot.params.buffer, 0, VK_WHOLE_SIZE},
+                                           {slot.table.buffer, 0, VK_WHOLE_SIZE},
+                                           {slot.feedback.buffer, 0, VK_WHOLE_SIZE},
+                                           {output_.buffer, 0, VK_WHOLE_SIZE},
+                                           {environment_.buffer, 0, VK_WHOLE_SIZE}};
+  std::vector<VkWriteDescriptorSet> writes(5, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
+  for (uint32_t i = 0; i < 5; ++i) {
+    writes[i].dstSet = slot.set;
+    writes[i].dstBinding = i;
+    writes[i].descriptorCount = 1;
+    writes[i].descriptorType =
+        i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[i].pBufferInfo = &infos[i];
+  }
+  vkUpdateDescriptorSets(gpu_.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
+}
+
 Renderer::~Renderer() {
   // The buffers and the pipeline go with their members, once the device is done with them.
-  if (gpu_.device) vkDeviceWaitIdle(gpu_.device);
+  if (gpu_.device) {
+    vkDeviceWaitIdle(gpu_.device);
+    for (Slot& s : slots_)
+      if (s.cb) vkFreeCommandBuffers(gpu_.device, gpu_.commandPool, 1, &s.cb);
+  }
   cache_.reset();
 }
 
 void Renderer::resize(uint32_t width, uint32_t height) {
   ISO_CHECK(width > 0 && height > 0 && width <= options_.capacityWidth &&
             height <= options_.capacityHeight);
+  finish();
   options_.width = setup_.width = width;
   options_.height = setup_.height = height;
 }
 
 void Renderer::prepare(gpu::FrameParams params) {
+  ISO_CHECK(!prepared_);
   if (auto error = cache_->error()) throw std::runtime_error(*error);
+  const uint32_t next = frame_ % uint32_t(slots_.size());
+  // Slots are taken in turn, so the frame that held this one is the oldest in flight.
+  while (std::find(inFlight_.begin(), inFlight_.end(), next) != inFlight_.end()) collectNext();
   ++frame_;
-  stats_.frame = frame_;
-  std::vector<uint32_t> evicted;
-  const auto uploads = cache_->place(frame_ - 1, staging_.size, evicted);
-  auto* table = static_cast<gpu::ChunkEntry*>(chunkTable_.mapped);
-  for (uint32_t c : evicted) table[c].state.x = gpu::kNotResident;
-  copies_.clear();
-  uint64_t offset = 0;
-  auto* staging = static_cast<std::byte*>(staging_.mapped);
-  for (const ChunkCache::Upload& up : uploads) {
-    const uint64_t bytes = up.words.size() * 4;
-    ISO_CHECK(offset + bytes <= staging_.size);
-    std::memcpy(staging + offset, up.words.data(), bytes);
-    copies_.push_back({up.firstPage / pagesPerBuffer_,
-                       {offset, (up.firstPage % pagesPerBuffer_) * kPageBytes, bytes}});
-    table[up.chunk].state.x = up.firstPage;
-    offset += bytes;
-  }
-  stats_.uploadedChunks = uint32_t(uploads.size());
-  stats_.uploadedBytes = offset;
-  stats_.streamedBytes += offset;
-  stats_.evicted = uint32_t(evicted.size());
+  current_ = next;
+  prepared_ = true;
+  Slot& slot = slots_[current_];
+  slot.stats = {};
+  slot.stats.frame = frame_;
+  stage(slot);
   params.image.w = frame_;
   params.options.z = setup_.topChunk;
   params.options.w = setup_.chunkCount;
@@ -214,62 +251,179 @@ void Renderer::prepare(gpu::FrameParams params) {
     params.options.x |= gpu::kOptionRequests;
   else
     params.options.x &= ~gpu::kOptionRequests;
-  std::memcpy(params_.mapped, &params, sizeof params);
+  std::memcpy(slot.params.mapped, &params, sizeof params);
   for (uint32_t kind :
        {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
-    static_cast<uint32_t*>(feedback_.mapped)[kind] = 0;
+    static_cast<uint32_t*>(slot.feedback.mapped)[kind] = 0;
 }
 
-void Renderer::record(VkCommandBuffer cb) {
-  for (const Copy& c : copies_)
+// Place what the loader has ready, copy it into the slot's staging region, list the copies into
+// the pool, and give the slot the chunk table as it now is. Frames in flight keep their tables,
+// and the pages of chunks evicted here wait for them (gpuProgress).
+void Renderer::stage(Slot& slot) {
+  cache_->gpuProgress(frame_ - 1, lastCollected_);
+  std::vector<uint32_t> evicted;
+  const uint64_t region = staging_.size / slots_.size();
+  const auto uploads = cache_->place(lastCollected_, region, evicted);
+  for (uint32_t c : evicted) table_[c].state.x = gpu::kNotResident;
+  slot.copies.clear();
+  uint64_t offset = 0;
+  auto* staging = static_cast<std::byte*>(staging_.mapped) + slot.stagingOffset;
+  for (const ChunkCache::Upload& up : uploads) {
+    const uint64_t bytes = up.words.size() * 4;
+    ISO_CHECK(offset + bytes <= region);
+    std::memcpy(staging + offset, up.words.data(), bytes);
+    slot.copies.push_back({up.firstPage / pagesPerBuffer_,
+                           {slot.stagingOffset + offset, (up.firstPage % pagesPerBuffer_) * kPageBytes,
+                            bytes}});
+    table_[up.chunk].state.x = up.firstPage;
+    offset += bytes;
+  }
+  std::memcpy(slot.table.mapped, table_.data(), table_.size() * sizeof(gpu::ChunkEntry));
+  streamedBytes_ += offset;
+  slot.stats.uploadedChunks = uint32_t(uploads.size());
+  slot.stats.uploadedBytes = offset;
+  slot.stats.streamedBytes = streamedBytes_;
+  slot.stats.evicted = uint32_t(evicted.size());
+}
+
+VkCommandBuffer Renderer::record() {
+  ISO_CHECK(prepared_);
+  const Slot& slot = slots_[current_];
+  VkCommandBuffer cb = slot.cb;
+  ISO_VK(vkResetCommandBuffer(cb, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  const uint32_t query = 3 * current_;
+  if (hasTimestamps()) {
+    vkCmdResetQueryPool(cb, queries_, query, 3);
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query);
+  }
+  // The copies write only pages that no frame in flight reads (evicted pages wait), so they need
+  // no barrier against earlier frames.
+  for (const Copy& c : slot.copies)
     vkCmdCopyBuffer(cb, staging_.buffer, pool_[c.buffer].buffer, 1, &c.region);
+  // Before the dispatch: this frame's copies, and earlier frames' use of the one output buffer
+  // (their dispatches write it; a window copies it into a swapchain image).
   VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT;
+  barrier.srcAccessMask =
+      VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_SHADER_WRITE_BIT;
   barrier.dstAccessMask =
       VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_UNIFORM_READ_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
+  vkCmdPipelineBarrier(cb,
+                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
+                           VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
                        nullptr);
+  if (hasTimestamps())
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 1);
   vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipeline);
-  vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1,
-                          &pipeline_.set, 0, nullptr);
+  vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
+                          nullptr);
   // Tiles of the workgroup's size, as the shader lays them out.
   const uint32_t tileWidth = 1u << ((std::countr_zero(options_.workgroupSize) + 1) / 2);
   const uint32_t tileHeight = options_.workgroupSize / tileWidth;
   const uint32_t tiles = ((options_.width + tileWidth - 1) / tileWidth) *
                          ((options_.height + tileHeight - 1) / tileHeight);
   vkCmdDispatch(cb, tiles, 1, 1);
+  if (hasTimestamps()) {
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 2);
+    vkCmdCopyQueryPoolResults(cb, queries_, query, 3, slot.timestamps.buffer, 0, sizeof(uint64_t),
+                              VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
+  }
   VkMemoryBarrier after{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
   after.dstAccessMask = VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                        VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
                        nullptr, 0, nullptr);
+  return cb;
 }
 
-void Renderer::collect() {
-  const auto* fb = static_cast<const uint32_t*>(feedback_.mapped);
-  const uint32_t n = setup_.chunkCount;
-  stats_.rays = {fb[gpu::kFeedbackPrimaryRays], fb[gpu::kFeedbackShadowRays],
-                 fb[gpu::kFeedbackSecondaryRays]};
-  stats_.requested = 0;
-  for (uint32_t c = 0; c < n; ++c) {
-    if (fb[gpu::kFeedbackHeaderWords + c] == frame_) {
-      if (!cache_->resident(c)) ++stats_.requested;
-      cache_->request(c, frame_);
-    }
-    if (fb[gpu::kFeedbackHeaderWords + n + c] == frame_) cache_->use(c, frame_);
+void Renderer::submit(VkSemaphore wait, VkPipelineStageFlags waitStage, VkSemaphore signal) {
+  ISO_CHECK(prepared_);
+  Slot& slot = slots_[current_];
+  ISO_VK(vkEndCommandBuffer(slot.cb));
+  VkSubmitInfo info{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  info.commandBufferCount = 1;
+  info.pCommandBuffers = &slot.cb;
+  if (wait) {
+    info.waitSemaphoreCount = 1;
+    info.pWaitSemaphores = &wait;
+    info.pWaitDstStageMask = &waitStage;
   }
-  stats_.resident = cache_->residentChunks();
-  stats_.pending = cache_->pendingChunks();
-  stats_.vramInUse = gpu_.memoryInUse;
-  stats_.vramPeak = gpu_.memoryPeak;
-  stats_.poolBytesInUse = uint64_t(cache_->pagesInUse()) * kPageBytes;
-  const bool progress = stats_.uploadedChunks > 0 || !cache_->idle();
-  stalledFrames_ = (!progress && stats_.requested > 0) ? stalledFrames_ + 1 : 0;
+  if (signal) {
+    info.signalSemaphoreCount = 1;
+    info.pSignalSemaphores = &signal;
+  }
+  VkFence fence = slot.fence;
+  ISO_VK(vkResetFences(gpu_.device, 1, &fence));
+  ISO_VK(vkQueueSubmit(gpu_.queue, 1, &info, fence));
+  inFlight_.push_back(current_);
+  prepared_ = false;
 }
 
-std::vector<uint32_t> Renderer::pixels() const {
+bool Renderer::collectNext() {
+  if (inFlight_.empty()) return false;
+  const uint32_t index = inFlight_.front();
+  Slot& slot = slots_[index];
+  VkFence fence = slot.fence;
+  ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+  inFlight_.erase(inFlight_.begin());
+  slot.stats.completed = std::chrono::steady_clock::now();
+  readTimestamps(slot, slot.stats);
+  collect(slot);
+  return true;
+}
+
+void Renderer::finish() {
+  while (collectNext()) {
+  }
+}
+
+void Renderer::readTimestamps(const Slot& slot, FrameStats& stats) const {
+  if (!hasTimestamps()) return;
+  uint64_t t[3];
+  std::memcpy(t, slot.timestamps.mapped, sizeof t);
+  stats.gpuSeconds = double((t[2] - t[0]) & timestampMask_) * timestampSeconds_;
+  stats.dispatchSeconds = double((t[2] - t[1]) & timestampMask_) * timestampSeconds_;
+  stats.gpuStart = double(t[0] & timestampMask_) * timestampSeconds_;
+  stats.gpuEnd = double(t[2] & timestampMask_) * timestampSeconds_;
+}
+
+// The slot's feedback, read once its frame completed: the rays by kind, the chunks its rays asked
+// for that its table lacked (queued for the loader), and the chunks they went through (LRU).
+void Renderer::collect(Slot& slot) {
+  const auto* fb = static_cast<const uint32_t*>(slot.feedback.mapped);
+  const auto* table = static_cast<const gpu::ChunkEntry*>(slot.table.mapped);
+  const uint32_t n = setup_.chunkCount;
+  const uint32_t frame = uint32_t(slot.stats.frame);
+  FrameStats& s = slot.stats;
+  s.rays = {fb[gpu::kFeedbackPrimaryRays], fb[gpu::kFeedbackShadowRays],
+            fb[gpu::kFeedbackSecondaryRays]};
+  for (uint32_t c = 0; c < n; ++c) {
+    if (fb[gpu::kFeedbackHeaderWords + c] == frame) {
+      if (table[c].state.x == gpu::kNotResident) ++s.requested;
+      cache_->request(c, frame);
+    }
+    if (fb[gpu::kFeedbackHeaderWords + n + c] == frame) cache_->use(c, frame);
+  }
+  lastCollected_ = frame;
+  s.resident = cache_->residentChunks();
+  s.pending = cache_->pendingChunks();
+  s.vramInUse = gpu_.memoryInUse;
+  s.vramPeak = gpu_.memoryPeak;
+  s.poolBytes = stats_.poolBytes;
+  s.poolBytesInUse = uint64_t(cache_->pagesInUse()) * kPageBytes;
+  const bool progress = s.uploadedChunks > 0 || !cache_->idle() || cache_->retiredPages() > 0;
+  stalledFrames_ = (!progress && s.requested > 0) ? stalledFrames_ + 1 : 0;
+  stats_ = s;
+  if (onCollected_) onCollected_(stats_);
+}
+
+std::vector<uint32_t> Renderer::pixels() {
+  finish();
   const auto* p = static_cast<const uint32_t*>(output_.mapped);
   return {p, p + size_t(options_.width) * options_.height};
 }

@@ -10,12 +10,6 @@
 
 namespace iso::viewer {
 
-namespace {
-
-uint32_t pagesOf(size_t words) { return uint32_t((words + gpu::kPageWords - 1) / gpu::kPageWords); }
-
-}  // namespace
-
 ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options,
                        uint32_t poolPages, uint32_t pagesPerBuffer)
     : reader_(reader),
@@ -32,10 +26,10 @@ ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions 
     state_[tree.topChunk()].pinned = true;
     ready_.emplace_back(tree.topChunk(), prepare(tree.topChunk()));
   }
-  if (pagesOf(ready_.front().second.size()) > std::min(poolPages, pagesPerBuffer_))
+  if (blobPages(ready_.front().second.size()) > std::min(poolPages, pagesPerBuffer_))
     throw std::runtime_error(
         "--vram is too small: the coarsest chunk alone needs " +
-        std::to_string(pagesOf(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
+        std::to_string(blobPages(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
         " bytes of page pool");
   loader_ = std::thread([this] { loaderLoop(); });
 }
@@ -104,11 +98,28 @@ void ChunkCache::loaderLoop() {
   }
 }
 
-uint32_t ChunkCache::freeRun(uint32_t pages) const {
+void ChunkCache::gpuProgress(uint64_t submitted, uint64_t completed) {
+  submitted_ = submitted;
+  completed_ = completed;
+  releaseRetired();
+}
+
+void ChunkCache::releaseRetired() {
+  while (!retired_.empty() && retired_.front().lastReader <= completed_) {
+    const Retired& r = retired_.front();
+    std::fill_n(used_.begin() + r.firstPage, r.pages, uint8_t{kFree});
+    pagesInUse_ -= r.pages;
+    retiredPages_ -= r.pages;
+    retired_.pop_front();
+  }
+}
+
+uint32_t ChunkCache::freeRun(uint32_t pages, bool retiredFree) const {
   uint32_t run = 0;
   for (uint32_t p = 0; p < poolPages_; ++p) {
     if (p % pagesPerBuffer_ == 0) run = 0;  // runs stay inside a buffer
-    run = used_[p] ? 0 : run + 1;
+    const bool free = used_[p] == kFree || (retiredFree && used_[p] == kRetired);
+    run = free ? run + 1 : 0;
     if (run == pages) return p + 1 - pages;  // the lowest run that fits
   }
   return kNone;
@@ -117,8 +128,10 @@ uint32_t ChunkCache::freeRun(uint32_t pages) const {
 uint32_t ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted) {
   if (pages > std::min(poolPages_, pagesPerBuffer_)) return kNone;
   for (;;) {
-    const uint32_t first = freeRun(pages);
+    releaseRetired();
+    const uint32_t first = freeRun(pages, false);
     if (first != kNone) return first;
+    if (freeRun(pages, true) != kNone) return kNone;  // free once frames in flight complete
     uint32_t victim = kNone;
     for (uint32_t c = 0; c < state_.size(); ++c) {
       const State& s = state_[c];
@@ -127,8 +140,9 @@ uint32_t ChunkCache::makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32
     }
     if (victim == kNone) return kNone;
     State& s = state_[victim];
-    std::fill_n(used_.begin() + s.firstPage, s.pages, uint8_t{0});
-    pagesInUse_ -= s.pages;
+    std::fill_n(used_.begin() + s.firstPage, s.pages, uint8_t{kRetired});
+    retired_.push_back({s.firstPage, s.pages, submitted_});
+    retiredPages_ += s.pages;
     s.pages = 0;
     s.firstPage = kNone;
     --residentCount_;
@@ -150,7 +164,7 @@ std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBy
     auto [chunk, words] = std::move(ready.front());
     ready.pop_front();
     State& s = state_[chunk];
-    const uint32_t pages = pagesOf(words.size());
+    const uint32_t pages = blobPages(words.size());
     // Past this frame's upload budget, or a chunk no longer wanted: wait, or drop.
     const bool wanted = s.pinned || s.lastRequested + 8 >= frame;
     if (!wanted) {
@@ -167,7 +181,7 @@ std::vector<ChunkCache::Upload> ChunkCache::place(uint64_t frame, uint64_t maxBy
     Upload up;
     up.chunk = chunk;
     up.firstPage = first;
-    std::fill_n(used_.begin() + first, pages, uint8_t{1});
+    std::fill_n(used_.begin() + first, pages, uint8_t{kResident});
     pagesInUse_ += pages;
     s.pages = pages;
     s.firstPage = first;

@@ -48,9 +48,18 @@ class ChunkCache {
   // pinned. `evicted` receives the chunks that left. The top chunk is placed, pinned, first.
   std::vector<Upload> place(uint64_t frame, uint64_t maxBytes, std::vector<uint32_t>& evicted);
 
+  // The GPU's progress, told before place(): frames up to `submitted` were given chunk tables and
+  // may read the pool; those up to `completed` are done. The pages of a chunk evicted now are
+  // reused only once every frame submitted before its eviction has completed (frames in flight
+  // read the pages their tables name). Without this call (both 0), pages are reused at once.
+  void gpuProgress(uint64_t submitted, uint64_t completed);
+  // Pages of evicted chunks that frames in flight may still read.
+  uint32_t retiredPages() const { return retiredPages_; }
+
   bool resident(uint32_t chunk) const { return state_[chunk].firstPage != kNone; }
   uint32_t firstPage(uint32_t chunk) const { return state_[chunk].firstPage; }
   uint32_t residentChunks() const { return residentCount_; }
+  // Pages resident or retired (waiting for frames in flight).
   uint32_t pagesInUse() const { return pagesInUse_; }
   uint32_t poolPages() const { return poolPages_; }
   // Chunks asked for and not resident (queued, being decoded, or decoded and waiting for room).
@@ -72,16 +81,27 @@ class ChunkCache {
   };
   void loaderLoop();
   // A free run of `pages` pages in one buffer, evicting the least recently used chunks that no
-  // ray used in `frame` until one is found; kNone when none can be.
+  // ray used in `frame` until one is free, or until one would be once frames in flight complete
+  // (then kNone: the chunk is placed in a later frame); kNone also when no eviction can make one.
   uint32_t makeRoom(uint32_t pages, uint64_t frame, std::vector<uint32_t>& evicted);
-  uint32_t freeRun(uint32_t pages) const;
+  // The lowest run of `pages` free pages in one buffer (retired pages counted as free when
+  // `retiredFree`), or kNone.
+  uint32_t freeRun(uint32_t pages, bool retiredFree) const;
+  void releaseRetired();
 
   const Reader& reader_;
   const ChunkTree& tree_;
   BlobOptions options_;
   uint32_t poolPages_, pagesPerBuffer_;
+  enum : uint8_t { kFree, kResident, kRetired };
   std::vector<uint8_t> used_;  // per pool page
-  uint32_t pagesInUse_ = 0;
+  uint32_t pagesInUse_ = 0, retiredPages_ = 0;
+  struct Retired {
+    uint32_t firstPage, pages;
+    uint64_t lastReader;  // the last frame that may read them
+  };
+  std::deque<Retired> retired_;  // in eviction order, so lastReader never decreases
+  uint64_t submitted_ = 0, completed_ = 0;
   std::vector<State> state_;
   uint32_t residentCount_ = 0;
 

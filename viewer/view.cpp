@@ -1,4 +1,5 @@
-// Headless pictures, the CPU reference picture and the benchmark of `iso view` (view.h).
+// Headless pictures and the CPU reference picture of `iso view` (view.h); the benchmark is
+// bench.cpp.
 #include "viewer/view.h"
 
 #include <fmt/core.h>
@@ -12,6 +13,7 @@
 #include "pipeline/base/text.h"
 #include "viewer/asset.h"
 #include "viewer/cpu_tracer.h"
+#include "viewer/gpu_view.h"
 #include "viewer/image.h"
 #include "viewer/renderer.h"
 
@@ -22,11 +24,6 @@ using Clock = std::chrono::steady_clock;
 
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-std::optional<Environment> environmentOf(const Scene& scene) {
-  if (scene.environment.empty()) return std::nullopt;
-  return loadEnvironment(scene.environment);
-}
-
 Gpu gpuFor(const ViewOptions& o) {
   GpuOptions g;
   g.validation = o.validation;
@@ -34,7 +31,7 @@ Gpu gpuFor(const ViewOptions& o) {
   return createGpu(g);
 }
 
-RendererOptions rendererOptions(const ViewOptions& o) {
+RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
   RendererOptions r;
   r.width = o.width;
   r.height = o.height;
@@ -42,37 +39,28 @@ RendererOptions rendererOptions(const ViewOptions& o) {
   r.uploadBytes = o.uploadBytes;
   r.flatTraversal = o.flatTraversal;
   r.workgroupSize = o.workgroupSize;
+  r.framesInFlight = framesInFlight;
   return r;
 }
 
-// What the GPU modes share: the asset and its scene, a device, a renderer, and the command
-// buffer and fence of a frame.
-struct GpuView {
-  std::unique_ptr<Asset> asset;
-  Scene scene;
-  std::optional<Environment> env;
-  Gpu gpu;  // outlives what is made from it (members are destroyed in reverse order)
-  Renderer renderer;
-  VkCommandBuffer cb;
-  Owned<VkFence> fence;
-
-  explicit GpuView(const ViewOptions& o)
-      : asset(Asset::open(o.file)),
-        scene(completeScene(o, *asset)),
-        env(environmentOf(scene)),
-        gpu(gpuFor(o)),
-        renderer(gpu, *asset, env ? &*env : nullptr, rendererOptions(o)),
-        cb(allocateCommandBuffer(gpu)),
-        fence(createFence(gpu, false)) {}
-  // Render a frame of `s` and wait for it; the seconds from submit to done.
-  double frame(const Scene& s) {
-    const FileHeader& header = asset->reader.header();
-    return renderFrame(gpu, renderer,
-                       frameParams(s, header.frame, header.maxLevel, renderer.setup()), cb, fence);
-  }
-};
-
 }  // namespace
+
+std::optional<Environment> environmentOf(const Scene& scene) {
+  if (scene.environment.empty()) return std::nullopt;
+  return loadEnvironment(scene.environment);
+}
+
+GpuView::GpuView(const ViewOptions& o, uint32_t framesInFlight)
+    : asset(Asset::open(o.file)),
+      scene(completeScene(o, *asset)),
+      env(environmentOf(scene)),
+      gpu(gpuFor(o)),
+      renderer(gpu, *asset, env ? &*env : nullptr, rendererOptions(o, framesInFlight)) {}
+
+gpu::FrameParams GpuView::params(const Scene& s) const {
+  const FileHeader& header = asset->reader.header();
+  return frameParams(s, header.frame, header.maxLevel, renderer.setup());
+}
 
 Scene completeScene(const ViewOptions& options, const Asset& asset) {
   Scene scene = options.scene;
@@ -84,7 +72,9 @@ Scene completeScene(const ViewOptions& options, const Asset& asset) {
 }
 
 int viewHeadless(const ViewOptions& options) {
-  GpuView view(options);
+  // One frame at a time: a view converging needs each frame's requests before the next frame,
+  // so frames in flight would only delay the chunks it asks for.
+  GpuView view(options, 1);
   Gpu& gpu = view.gpu;
   Renderer& renderer = view.renderer;
   const Asset* asset = view.asset.get();
@@ -92,7 +82,10 @@ int viewHeadless(const ViewOptions& options) {
   double lastFrame = 0;
   uint32_t frames = 0;
   for (; frames < options.maxFrames; ++frames) {
-    lastFrame = view.frame(view.scene);
+    const auto t0 = Clock::now();
+    renderFrame(renderer, view.params(view.scene));
+    renderer.finish();
+    lastFrame = seconds(Clock::now() - t0);
     if (renderer.converged() || renderer.stalled()) {
       ++frames;
       break;
@@ -144,65 +137,6 @@ int viewCpu(const ViewOptions& options) {
       options.out.string(), options.width, options.height, render,
       frame.rays.total() / render / 1e6, load);
   return 0;
-}
-
-int viewBench(const ViewOptions& options) {
-  GpuView view(options);
-  Gpu& gpu = view.gpu;
-  Renderer& renderer = view.renderer;
-  const Asset* asset = view.asset.get();
-  const Scene& base = view.scene;
-  // The camera path: a full orbit around the target at the starting distance.
-  const Camera c0 = *base.camera;
-  const Vec3d axis = normalized(c0.up), offset = c0.eye - c0.target;
-  std::vector<double> ms;
-  std::vector<uint64_t> uploaded;
-  uint64_t rays = 0;
-  double total = 0;
-  uint32_t maxResident = 0;
-  for (uint32_t f = 0; f < options.benchFrames; ++f) {
-    const double a = 2 * M_PI * f / options.benchFrames;
-    Scene scene = base;
-    scene.camera->eye = c0.target + rotated(offset, axis, a);
-    const double dt = view.frame(scene);
-    const FrameStats& s = renderer.stats();
-    if (f > 0) {  // the first frame builds the pipeline's caches
-      ms.push_back(dt * 1e3);
-      rays += s.rays.total();
-      total += dt;
-    }
-    uploaded.push_back(s.uploadedBytes);
-    maxResident = std::max(maxResident, s.resident);
-  }
-  const FrameStats& s = renderer.stats();
-  std::vector<double> sorted = ms;
-  std::sort(sorted.begin(), sorted.end());
-  const double mean = std::accumulate(ms.begin(), ms.end(), 0.0) / std::max<size_t>(ms.size(), 1);
-  const uint64_t upTotal = std::accumulate(uploaded.begin(), uploaded.end(), uint64_t(0));
-  const uint64_t upMax = *std::max_element(uploaded.begin(), uploaded.end());
-  fmt::print(
-      "bench {}: {}x{} on {}, {} frames orbiting, samples {}, shadows {}, reflections {}, "
-      "--vram {}\n",
-      options.file.filename().string(), options.width, options.height, gpu.properties.deviceName,
-      options.benchFrames, base.samples, base.shadows ? "on" : "off",
-      base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(options.vram));
-  fmt::print("  ms/frame    mean {:.2f}, median {:.2f}, max {:.2f}\n", mean,
-             sorted.empty() ? 0 : sorted[sorted.size() / 2], sorted.empty() ? 0 : sorted.back());
-  fmt::print(
-      "  rays/s      {:.2f} M ({:.2f} rays a pixel)\n", total > 0 ? rays / total / 1e6 : 0,
-      double(rays) / std::max<size_t>(ms.size(), 1) / (double(options.width) * options.height));
-  fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", byteSize(s.vramInUse),
-             byteSize(s.vramPeak), byteSize(s.poolBytesInUse), byteSize(s.poolBytes));
-  fmt::print("  chunks      {} resident at the end, {} at most, of {}\n", s.resident, maxResident,
-             asset->reader.chunks().size());
-  const size_t half = uploaded.size() / 2;
-  const uint64_t upLater = std::accumulate(uploaded.begin() + half, uploaded.end(), uint64_t(0));
-  fmt::print(
-      "  streamed    {} in all, {:.1f} KiB a frame on average ({:.1f} KiB in the second "
-      "half of the path), {} at most in a frame\n",
-      byteSize(upTotal), upTotal / 1024.0 / uploaded.size(),
-      upLater / 1024.0 / std::max<size_t>(uploaded.size() - half, 1), byteSize(upMax));
-  return *gpu.validationErrors > 0 ? 1 : 0;
 }
 
 }  // namespace iso::viewer

@@ -1,5 +1,5 @@
 // `iso view`: the drivers behind the command (tools/iso/cmd_view.cpp) — a window, a headless
-// picture (GPU or CPU reference tracer), and a benchmark along a camera path.
+// picture (GPU or CPU reference tracer), and a benchmark along a camera path (bench.cpp).
 #pragma once
 
 #include <cstdint>
@@ -17,6 +17,7 @@ struct ViewOptions {
   uint32_t width = 1024, height = 1024;
   uint64_t vram = uint64_t(1) << 30;
   uint64_t uploadBytes = 16u << 20;
+  uint32_t framesInFlight = 2;  // window and benchmark; --headless renders a frame at a time
   bool validation = false;
   std::string device;
   // Headless
@@ -30,6 +31,8 @@ struct ViewOptions {
   // The tracer's loop shape and workgroup size (measured in specs/viewer.md).
   bool flatTraversal = false;
   uint32_t workgroupSize = 64;
+  bool cpuCompare = true;  // also trace the first view with the CPU reference tracer
+  bool benchJson = false;  // print the numbers as one JSON object instead of text
 };
 
 struct Asset;

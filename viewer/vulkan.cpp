@@ -147,6 +147,7 @@ void choosePhysicalDevice(Gpu& gpu, const std::string& name) {
         best = deviceRank(p.deviceType);
         gpu.physical = d;
         gpu.queueFamily = f;
+        gpu.timestampValidBits = props[f].timestampValidBits;
       }
       break;
     }
@@ -248,6 +249,7 @@ Gpu::Gpu(Gpu&& o) noexcept
       device(std::exchange(o.device, VK_NULL_HANDLE)),
       queue(o.queue),
       queueFamily(o.queueFamily),
+      timestampValidBits(o.timestampValidBits),
       properties(o.properties),
       memory(o.memory),
       commandPool(std::exchange(o.commandPool, VK_NULL_HANDLE)),
@@ -349,7 +351,7 @@ void Buffer::release() {
 
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts,
-                                      std::span<const uint32_t> constants) {
+                                      std::span<const uint32_t> constants, uint32_t setCount) {
   ComputePipeline p;  // destroyed if a step below throws
   p.gpu = &gpu;
   std::vector<VkDescriptorSetLayoutBinding> bindings;
@@ -389,18 +391,20 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
       vkCreateComputePipelines(gpu.device, VK_NULL_HANDLE, 1, &info, nullptr, &p.pipeline);
   vkDestroyShaderModule(gpu.device, module, nullptr);
   ISO_VK(made);
-  VkDescriptorPoolSize sizes[2] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1},
-                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storage}};
+  VkDescriptorPoolSize sizes[2] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, setCount},
+                                   {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, storage * setCount}};
   VkDescriptorPoolCreateInfo poolInfo{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-  poolInfo.maxSets = 1;
+  poolInfo.maxSets = setCount;
   poolInfo.poolSizeCount = 2;
   poolInfo.pPoolSizes = sizes;
   ISO_VK(vkCreateDescriptorPool(gpu.device, &poolInfo, nullptr, &p.descriptorPool));
   VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
   alloc.descriptorPool = p.descriptorPool;
-  alloc.descriptorSetCount = 1;
-  alloc.pSetLayouts = &p.setLayout;
-  ISO_VK(vkAllocateDescriptorSets(gpu.device, &alloc, &p.set));
+  const std::vector<VkDescriptorSetLayout> layouts(setCount, p.setLayout);
+  alloc.descriptorSetCount = setCount;
+  alloc.pSetLayouts = layouts.data();
+  p.sets.resize(setCount);
+  ISO_VK(vkAllocateDescriptorSets(gpu.device, &alloc, p.sets.data()));
   return p;
 }
 
@@ -412,7 +416,7 @@ ComputePipeline& ComputePipeline::operator=(ComputePipeline&& o) noexcept {
     layout = std::exchange(o.layout, VK_NULL_HANDLE);
     pipeline = std::exchange(o.pipeline, VK_NULL_HANDLE);
     descriptorPool = std::exchange(o.descriptorPool, VK_NULL_HANDLE);
-    set = std::exchange(o.set, VK_NULL_HANDLE);
+    sets = std::exchange(o.sets, {});
   }
   return *this;
 }
@@ -429,7 +433,7 @@ void ComputePipeline::release() {
   layout = VK_NULL_HANDLE;
   pipeline = VK_NULL_HANDLE;
   descriptorPool = VK_NULL_HANDLE;
-  set = VK_NULL_HANDLE;
+  sets.clear();
 }
 
 VkCommandBuffer allocateCommandBuffer(Gpu& gpu) {
@@ -440,6 +444,16 @@ VkCommandBuffer allocateCommandBuffer(Gpu& gpu) {
   VkCommandBuffer cb;
   ISO_VK(vkAllocateCommandBuffers(gpu.device, &info, &cb));
   return cb;
+}
+
+Owned<VkQueryPool> createTimestampQueries(Gpu& gpu, uint32_t count) {
+  VkQueryPoolCreateInfo info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+  info.queryType = VK_QUERY_TYPE_TIMESTAMP;
+  info.queryCount = count;
+  VkQueryPool pool;
+  ISO_VK(vkCreateQueryPool(gpu.device, &info, nullptr, &pool));
+  VkDevice device = gpu.device;
+  return {pool, [device](VkQueryPool q) { vkDestroyQueryPool(device, q, nullptr); }};
 }
 
 Owned<VkFence> createFence(Gpu& gpu, bool signaled) {

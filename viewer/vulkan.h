@@ -82,6 +82,7 @@ struct Gpu {
   VkDevice device = VK_NULL_HANDLE;
   VkQueue queue = VK_NULL_HANDLE;
   uint32_t queueFamily = 0;
+  uint32_t timestampValidBits = 0;  // of the queue family; 0: no timestamps
   VkPhysicalDeviceProperties properties{};
   VkPhysicalDeviceMemoryProperties memory{};
   VkCommandPool commandPool = VK_NULL_HANDLE;
@@ -126,18 +127,22 @@ struct ComputePipeline {
   VkPipelineLayout layout = VK_NULL_HANDLE;
   VkPipeline pipeline = VK_NULL_HANDLE;
   VkDescriptorPool descriptorPool = VK_NULL_HANDLE;
-  VkDescriptorSet set = VK_NULL_HANDLE;
+  std::vector<VkDescriptorSet> sets;  // of the one layout (a set a frame in flight)
 };
 
-// A compute pipeline whose one descriptor set has a uniform buffer at binding 0 and storage
+// A compute pipeline whose descriptor set layout has a uniform buffer at binding 0 and storage
 // buffers at bindings 1 to storageBindings (each binding an array of `counts[i]` buffers), with
-// the 32-bit specialization constants `constants` (constant_id i is constants[i]).
+// the 32-bit specialization constants `constants` (constant_id i is constants[i]), and `setCount`
+// descriptor sets of that layout.
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts,
-                                      std::span<const uint32_t> constants = {});
+                                      std::span<const uint32_t> constants = {},
+                                      uint32_t setCount = 1);
 
-// From the Gpu's command pool (freed with it).
+// From the Gpu's command pool (freed with it, or by vkFreeCommandBuffers).
 VkCommandBuffer allocateCommandBuffer(Gpu& gpu);
+// A pool of `count` timestamp queries.
+Owned<VkQueryPool> createTimestampQueries(Gpu& gpu, uint32_t count);
 Owned<VkFence> createFence(Gpu& gpu, bool signaled);
 Owned<VkSemaphore> createSemaphore(Gpu& gpu);
 

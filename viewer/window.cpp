@@ -207,21 +207,12 @@ void reloadScene(const ViewOptions& options, const Asset& asset, Input& input, S
   input.reload = false;
 }
 
-struct Presented {
-  double seconds;  // from submit to done
-  bool stale;      // the swapchain no longer matches the window
-};
-
-// Trace the prepared frame, copy it into swapchain image `index` (acquired, signalling
-// `acquired`), present it and wait for it.
-Presented drawAndPresent(Gpu& gpu, Renderer& renderer, VkCommandBuffer cb,
-                         const Swapchain& swapchain, uint32_t index, VkSemaphore acquired,
-                         VkSemaphore rendered, VkFence fence) {
-  ISO_VK(vkResetCommandBuffer(cb, 0));
-  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  ISO_VK(vkBeginCommandBuffer(cb, &begin));
-  renderer.record(cb);
+// Record the copy of the prepared frame's picture into swapchain image `index` (acquired,
+// signalling `acquired`), submit the frame (signalling `rendered`) and present the image. The
+// host does not wait for it. Returns whether the swapchain no longer matches the window.
+bool drawAndPresent(Gpu& gpu, Renderer& renderer, const Swapchain& swapchain, uint32_t index,
+                    VkSemaphore acquired, VkSemaphore rendered) {
+  VkCommandBuffer cb = renderer.record();
   VkImage image = swapchain.images[index];
   imageBarrier(cb, image, VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 0,
                VK_ACCESS_TRANSFER_WRITE_BIT);
@@ -233,20 +224,8 @@ Presented drawAndPresent(Gpu& gpu, Renderer& renderer, VkCommandBuffer cb,
                          1, &copy);
   imageBarrier(cb, image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR,
                VK_ACCESS_TRANSFER_WRITE_BIT, 0);
-  ISO_VK(vkEndCommandBuffer(cb));
-  const VkPipelineStageFlags waitStage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  renderer.submit(acquired, VK_PIPELINE_STAGE_TRANSFER_BIT, rendered);
   const VkSwapchainKHR presentTo = swapchain.swapchain;
-  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-  submit.waitSemaphoreCount = 1;
-  submit.pWaitSemaphores = &acquired;
-  submit.pWaitDstStageMask = &waitStage;
-  submit.commandBufferCount = 1;
-  submit.pCommandBuffers = &cb;
-  submit.signalSemaphoreCount = 1;
-  submit.pSignalSemaphores = &rendered;
-  ISO_VK(vkResetFences(gpu.device, 1, &fence));
-  const auto t0 = Clock::now();
-  ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
   VkPresentInfoKHR present{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
   present.waitSemaphoreCount = 1;
   present.pWaitSemaphores = &rendered;
@@ -256,8 +235,15 @@ Presented drawAndPresent(Gpu& gpu, Renderer& renderer, VkCommandBuffer cb,
   const VkResult presented = vkQueuePresentKHR(gpu.queue, &present);
   const bool stale = presented == VK_ERROR_OUT_OF_DATE_KHR || presented == VK_SUBOPTIMAL_KHR;
   if (!stale) checkVk(presented, "vkQueuePresentKHR");
-  ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
-  return {std::chrono::duration<double>(Clock::now() - t0).count(), stale};
+  return stale;
+}
+
+// A semaphore per frame slot (an image acquired for the slot's frame) or per swapchain image
+// (its frame rendered, for the presentation to wait on).
+std::vector<Owned<VkSemaphore>> semaphores(Gpu& gpu, size_t count) {
+  std::vector<Owned<VkSemaphore>> v;
+  for (size_t i = 0; i < count; ++i) v.push_back(createSemaphore(gpu));
+  return v;
 }
 
 // The window's surface, which the device must be able to present to.
@@ -285,24 +271,29 @@ RendererOptions windowRendererOptions(const ViewOptions& options, const Swapchai
   ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
   ro.vram = options.vram;
   ro.uploadBytes = options.uploadBytes;
+  ro.framesInFlight = options.framesInFlight;
   ro.swapRedBlue = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
   return ro;
 }
 
-// The frames since the title last changed.
+// The frames collected since the title last changed.
 struct TitleStats {
   uint32_t frames = 0;
   uint64_t rays = 0;
-  double gpuSeconds = 0;
+  double dispatchSeconds = 0;  // from timestamps (0 without them)
 };
 
+// ms a frame and fps are the wall time between frames (frames in flight overlap); rays/s are
+// over the dispatches' GPU time when the queue has timestamps, else over the wall time.
 std::string titleText(const std::string& title, const TitleStats& t, double seconds,
                       const FrameStats& s) {
+  const uint32_t frames = std::max(t.frames, 1u);
+  const double raySeconds = t.dispatchSeconds > 0 ? t.dispatchSeconds : seconds;
   return fmt::format(
       "{} | {:.1f} ms ({:.0f} fps) | {:.1f} Mrays/s | GPU memory {:.1f} MiB | chunks {} "
       "resident, {} requested",
-      title, t.gpuSeconds / t.frames * 1e3, t.frames / seconds,
-      t.rays / std::max(t.gpuSeconds, 1e-9) / 1e6, s.vramInUse / 1048576.0, s.resident, s.pending);
+      title, seconds / frames * 1e3, t.frames / seconds, t.rays / std::max(raySeconds, 1e-9) / 1e6,
+      s.vramInUse / 1048576.0, s.resident, s.pending);
 }
 
 // GLFW, initialized, and one window without a graphics API (Vulkan draws into it), for as long
@@ -337,6 +328,77 @@ class GlfwWindow {
   GLFWwindow* window_ = nullptr;
 };
 
+// The window's GPU side: the device, the surface and its swapchain, the semaphores of the frames
+// in flight, and the renderer; destroyed in reverse order (the renderer first: it waits for the
+// device).
+struct WindowGpu {
+  Gpu gpu;
+  Owned<VkSurfaceKHR> surface;
+  Swapchain swapchain;
+  RendererOptions options;
+  std::vector<Owned<VkSemaphore>> acquired;  // per frame slot
+  std::vector<Owned<VkSemaphore>> rendered;  // per swapchain image
+  Renderer renderer;
+
+  WindowGpu(GLFWwindow* window, const ViewOptions& o, const Asset& asset, const Environment* env)
+      : gpu(createGpu(gpuOptions(o))),
+        surface(surfaceOf(gpu, window)),
+        swapchain(createSwapchain(gpu, surface, o.width, o.height)),
+        options(windowRendererOptions(o, swapchain)),
+        acquired(semaphores(gpu, options.framesInFlight)),
+        rendered(semaphores(gpu, swapchain.images.size())),
+        renderer(gpu, asset, env, options) {}
+
+  static GpuOptions gpuOptions(const ViewOptions& o) {
+    uint32_t extensionCount = 0;
+    const char** extensions = glfwGetRequiredInstanceExtensions(&extensionCount);
+    GpuOptions g;
+    g.instanceExtensions.assign(extensions, extensions + extensionCount);
+    g.swapchain = true;
+    g.validation = o.validation;
+    g.deviceName = o.device;
+    return g;
+  }
+
+  // A new swapchain at the window's size, once the frames in flight are done; the renderer draws
+  // at that size (at the capacity beyond the screen's size, on another monitor).
+  void resize(uint32_t width, uint32_t height) {
+    renderer.finish();
+    ISO_VK(vkDeviceWaitIdle(gpu.device));
+    swapchain = createSwapchain(gpu, surface, width, height,
+                                swapchain.swapchain);  // the old one goes after
+    rendered = semaphores(gpu, swapchain.images.size());
+    renderer.resize(std::min(swapchain.extent.width, options.capacityWidth),
+                    std::min(swapchain.extent.height, options.capacityHeight));
+  }
+
+  // Trace the prepared frame and show it. Returns whether the swapchain no longer matches the
+  // window. An image that cannot be acquired leaves the frame traced and not shown.
+  bool draw() {
+    // prepare() waited for the frame that last used this slot, and so for its acquisition.
+    VkSemaphore slotAcquired = acquired[renderer.slot()];
+    uint32_t index = 0;
+    const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
+                                                   slotAcquired, VK_NULL_HANDLE, &index);
+    if (acquire == VK_ERROR_OUT_OF_DATE_KHR) {
+      renderer.record();
+      renderer.submit();
+      return true;
+    }
+    if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
+      checkVk(acquire, "vkAcquireNextImageKHR");
+    return drawAndPresent(gpu, renderer, swapchain, index, slotAcquired, rendered[index]) ||
+           acquire == VK_SUBOPTIMAL_KHR;
+  }
+};
+
+// Save the last frame drawn (this waits for the frames in flight).
+void saveScreenshot(const std::filesystem::path& file, Renderer& renderer, bool bgra) {
+  const std::vector<uint32_t> pixels = toRgba(renderer.pixels(), bgra);
+  writeImage(file, renderer.setup().width, renderer.setup().height, pixels);
+  fmt::print("iso view: saved {}\n", file.string());
+}
+
 }  // namespace
 
 int viewWindow(const ViewOptions& options) {
@@ -348,29 +410,18 @@ int viewWindow(const ViewOptions& options) {
   const std::string title = "iso view " + options.file.filename().string();
   const GlfwWindow glfw(options.width, options.height, title);
   GLFWwindow* window = glfw.window();
-
-  uint32_t extensionCount = 0;
-  const char** extensions = glfwGetRequiredInstanceExtensions(&extensionCount);
-  GpuOptions g;
-  g.instanceExtensions.assign(extensions, extensions + extensionCount);
-  g.swapchain = true;
-  g.validation = options.validation;
-  g.deviceName = options.device;
-  // Everything below is destroyed in reverse order when this function leaves, normally or by an
-  // exception: the renderer first (it waits for the device), the device last.
-  Gpu gpu = createGpu(g);
-  const Owned<VkSurfaceKHR> surface = surfaceOf(gpu, window);
-  Swapchain swapchain = createSwapchain(gpu, surface, options.width, options.height);
-  const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
-  const RendererOptions ro = windowRendererOptions(options, swapchain);
-  const Owned<VkSemaphore> acquired = createSemaphore(gpu), rendered = createSemaphore(gpu);
-  const Owned<VkFence> fence = createFence(gpu, false);
-  Renderer renderer(gpu, *asset, env ? &*env : nullptr, ro);
-  VkCommandBuffer cb = allocateCommandBuffer(gpu);
+  WindowGpu w(window, options, *asset, env ? &*env : nullptr);
+  Renderer& renderer = w.renderer;
+  const bool bgra = w.swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+  TitleStats shownStats;
+  renderer.onCollected([&](const FrameStats& s) {
+    ++shownStats.frames;
+    shownStats.rays += s.rays.total();
+    shownStats.dispatchSeconds += s.dispatchSeconds;
+  });
 
   Input input;
   listen(window, input);
-
   std::filesystem::file_time_type sceneTime{};
   if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
   bool stale = false;  // the swapchain no longer matches the window
@@ -378,76 +429,49 @@ int viewWindow(const ViewOptions& options) {
   glfwGetCursorPos(window, &mouse.x, &mouse.y);
   auto last = Clock::now(), titleTime = last;
   uint32_t frames = 0, screenshots = 0;
-  TitleStats shownStats;
   const auto header = asset->reader.header();
   while (!glfwWindowShouldClose(window)) {
     glfwPollEvents();
     const auto now = Clock::now();
     const double dt = std::chrono::duration<double>(now - last).count();
     last = now;
-    moveCamera(window, *scene.camera, input, mouse, dt, swapchain.extent.height);
+    moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height);
     applySwitches(input, scene);
     reloadScene(options, *asset, input, scene, sceneTime);
-
-    // A new window size: a new swapchain, and the renderer draws at that size.
     int fbWidth = 0, fbHeight = 0;
     glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
     if (fbWidth == 0 || fbHeight == 0) {  // minimized
       glfwWaitEvents();
       continue;
     }
-    if (stale || uint32_t(fbWidth) != swapchain.extent.width ||
-        uint32_t(fbHeight) != swapchain.extent.height) {
-      ISO_VK(vkDeviceWaitIdle(gpu.device));
-      swapchain = createSwapchain(gpu, surface, uint32_t(fbWidth), uint32_t(fbHeight),
-                                  swapchain.swapchain);  // the old one goes after
-      // Beyond the screen's size (another monitor) the picture is drawn at the capacity.
-      renderer.resize(std::min(swapchain.extent.width, ro.capacityWidth),
-                      std::min(swapchain.extent.height, ro.capacityHeight));
-      stale = false;
-    }
-    uint32_t index = 0;
-    const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
-                                                   acquired, VK_NULL_HANDLE, &index);
-    if (acquire == VK_ERROR_OUT_OF_DATE_KHR) {
-      stale = true;
-      continue;
-    }
-    if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
-      checkVk(acquire, "vkAcquireNextImageKHR");
+    if (stale || uint32_t(fbWidth) != w.swapchain.extent.width ||
+        uint32_t(fbHeight) != w.swapchain.extent.height)
+      w.resize(uint32_t(fbWidth), uint32_t(fbHeight));
     renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-    const Presented shown =
-        drawAndPresent(gpu, renderer, cb, swapchain, index, acquired, rendered, fence);
-    stale = stale || shown.stale;
-    renderer.collect();
+    stale = w.draw();
     ++frames;
-    ++shownStats.frames;
-    shownStats.gpuSeconds += shown.seconds;
-    shownStats.rays += renderer.stats().rays.total();
-    const bool last = options.frames > 0 && frames >= options.frames;
-    if (input.screenshot || (last && !options.screenshot.empty())) {
-      const std::filesystem::path file =
-          last && !options.screenshot.empty()
-              ? options.screenshot
-              : std::filesystem::path(fmt::format("iso-screenshot-{}.png", ++screenshots));
-      writeImage(file, renderer.setup().width, renderer.setup().height,
-                 toRgba(renderer.pixels(), bgra));
-      fmt::print("iso view: saved {}\n", file.string());
-      input.screenshot = false;
-    }
+    const bool lastFrame = options.frames > 0 && frames >= options.frames;
+    if (input.screenshot)
+      saveScreenshot(fmt::format("iso-screenshot-{}.png", ++screenshots), renderer, bgra);
+    input.screenshot = false;
+    if (lastFrame && !options.screenshot.empty())
+      saveScreenshot(options.screenshot, renderer, bgra);
+    if (lastFrame) renderer.finish();
     const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
-    if (sinceTitle > 0.5 || last) {
+    if (sinceTitle > 0.5 || lastFrame) {
       const std::string text = titleText(title, shownStats, sinceTitle, renderer.stats());
       glfwSetWindowTitle(window, text.c_str());
-      if (last) fmt::print("{}\n", text);
+      if (lastFrame) fmt::print("{}\n", text);
       titleTime = Clock::now();
       shownStats = {};
     }
-    if (last) break;
+    if (lastFrame) break;
   }
-  vkDeviceWaitIdle(gpu.device);
-  if (*gpu.validationErrors == 0) return 0;
-  fmt::print(stderr, "iso view: {} Vulkan validation errors\n", gpu.validationErrors->load());
+  renderer.finish();
+  vkDeviceWaitIdle(w.gpu.device);
+  renderer.onCollected({});
+  if (*w.gpu.validationErrors == 0) return 0;
+  fmt::print(stderr, "iso view: {} Vulkan validation errors\n", w.gpu.validationErrors->load());
   return 1;
 }
 

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <thread>
 
 #include "iso/error.h"
+#include "iso/surface.h"
 #include "iso/surface_model.h"
 #include "iso/writer.h"
 #include "pipeline/base/options.h"
@@ -18,6 +20,7 @@
 #include "viewer/image.h"
 #include "viewer/renderer.h"
 #include "viewer/scene.h"
+#include "viewer/streaming.h"
 #include "viewer/vulkan.h"
 
 namespace iso::test {
@@ -78,45 +81,54 @@ std::vector<uint32_t> renderReference(const Asset& asset, const Scene& scene, ui
 
 struct GpuRun {
   std::vector<uint32_t> pixels;
-  std::vector<std::vector<uint32_t>> frames;  // every frame's picture
+  std::vector<uint32_t> first;  // the first frame's picture
   FrameStats stats;
   uint32_t frameCount = 0;
   bool converged = false;
   uint64_t peak = 0;  // device memory at most, from the allocator
 };
 
+RendererOptions rendererOptions(uint32_t w, uint32_t h, uint64_t vram, uint32_t framesInFlight) {
+  RendererOptions o;
+  o.width = w;
+  o.height = h;
+  o.vram = vram;
+  o.uploadBytes = 64 << 10;  // a few chunks a frame, so that streaming takes frames
+  o.framesInFlight = framesInFlight;
+  return o;
+}
+
+// Frames of `scene` until one converges (frames in flight go on while the renderer learns it).
+void renderUntilConverged(Renderer& renderer, const Asset& asset, const Scene& scene,
+                          uint32_t maxFrames, GpuRun& run) {
+  const auto header = asset.reader.header();
+  for (uint32_t f = 0; f < maxFrames; ++f) {
+    renderFrame(renderer, frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+    if (run.frameCount++ == 0) run.first = renderer.pixels();
+    if (!renderer.converged()) continue;
+    renderer.finish();  // the last frame in flight is the one shown
+    if (renderer.converged()) {
+      run.converged = true;
+      break;
+    }
+  }
+  run.pixels = renderer.pixels();
+  run.stats = renderer.stats();
+}
+
 GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h, uint64_t vram,
-                 const Environment* env = nullptr, uint32_t maxFrames = 200, bool flat = false,
-                 uint32_t workgroup = 64) {
+                 const Environment* env = nullptr, uint32_t maxFrames = 200,
+                 uint32_t framesInFlight = 1, bool flat = false, uint32_t workgroup = 64) {
   Gpu& g = gpu();
   const uint64_t before = g.memoryInUse;
   g.memoryPeak = before;
   GpuRun run;
   {
-    RendererOptions o;
-    o.width = w;
-    o.height = h;
-    o.vram = vram;
-    o.uploadBytes = 64 << 10;  // a few chunks a frame, so that streaming takes frames
+    RendererOptions o = rendererOptions(w, h, vram, framesInFlight);
     o.flatTraversal = flat;
     o.workgroupSize = workgroup;
     Renderer renderer(g, asset, env, o);
-    VkCommandBuffer cb = allocateCommandBuffer(g);
-    const Owned<VkFence> fence = createFence(g, false);
-    const auto header = asset.reader.header();
-    for (uint32_t f = 0; f < maxFrames; ++f) {
-      renderFrame(g, renderer, frameParams(scene, header.frame, header.maxLevel, renderer.setup()),
-                  cb, fence);
-      run.frames.push_back(renderer.pixels());
-      ++run.frameCount;
-      if (renderer.converged()) {
-        run.converged = true;
-        break;
-      }
-    }
-    run.pixels = renderer.pixels();
-    run.stats = renderer.stats();
-    vkFreeCommandBuffers(g.device, g.commandPool, 1, &cb);
+    renderUntilConverged(renderer, asset, scene, maxFrames, run);
   }
   run.peak = g.memoryPeak - before;
   EXPECT_EQ(g.validationErrors->load(), 0u) << "Vulkan validation errors";
@@ -357,7 +369,7 @@ TEST(ViewerGolden, everyLoopShapeAndWorkgroupSizeDrawsTheSamePicture) {
     for (const uint32_t workgroup : {8u, 32u, 64u, 256u}) {
       if (!flat && workgroup == 64) continue;
       const GpuRun run =
-          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, flat, workgroup);
+          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, flat, workgroup);
       EXPECT_TRUE(run.converged);
       EXPECT_EQ(run.pixels, reference) << (flat ? "flat" : "nested") << ", workgroup " << workgroup;
     }
@@ -513,7 +525,7 @@ TEST(ViewerStreaming, aTinyBudgetIsKeptAndConvergesToThePictureOfAnUnlimitedOne)
   EXPECT_LE(tiny.peak, vram);
   EXPECT_TRUE(tiny.converged);
   EXPECT_GT(tiny.frameCount, 2u);  // it took frames: the first ones show coarser levels
-  EXPECT_GT(differing(tiny.frames.front(), tiny.pixels), 0.01);
+  EXPECT_GT(differing(tiny.first, tiny.pixels), 0.01);
   EXPECT_EQ(differing(tiny.pixels, unlimited.pixels, 0), 0.0);
   // Orbiting with that budget evicts chunks and stays inside it.
   Scene moved = scene;
@@ -521,6 +533,137 @@ TEST(ViewerStreaming, aTinyBudgetIsKeptAndConvergesToThePictureOfAnUnlimitedOne)
   for (int k = 0; k < 3; ++k) m.eye[k] = 2 * m.target[k] - m.eye[k];
   const GpuRun other = renderGpu(*asset, moved, w, h, vram);
   EXPECT_LE(other.peak, vram);
+}
+
+// A close view of part of the chunked torus: it needs some chunks, not all.
+Scene closeView(const Asset& asset) {
+  Scene scene = sceneFor(asset);
+  Camera& c = *scene.camera;
+  for (int k = 0; k < 3; ++k) c.eye[k] = c.target[k] + 0.25 * (c.eye[k] - c.target[k]);
+  return scene;
+}
+
+TEST(ViewerStreaming,
+     anOrbitWithFramesInFlightUnderATinyBudgetConvergesToThePictureOfAnUnlimitedOne) {
+  const uint32_t w = 96, h = 96, views = 12;
+  const auto asset = Asset::open(files().chunked);
+  const Scene start = closeView(*asset);
+  const auto header = asset->reader.header();
+  const auto orbitView = [&](uint32_t f) {
+    Scene s = start;
+    const Camera& c = *start.camera;
+    s.camera->eye = c.target + rotated(c.eye - c.target, normalized(c.up), 2 * M_PI * f / views);
+    return s;
+  };
+  const Scene end = orbitView(views / 2);  // half way round
+  for (uint32_t inFlight : {2u, 3u}) {
+    SCOPED_TRACE(inFlight);
+    const GpuRun unlimited =
+        renderGpu(*asset, end, w, h, uint64_t(1) << 30, nullptr, 200, inFlight);
+    ASSERT_TRUE(unlimited.converged);
+    ASSERT_LT(unlimited.stats.resident, asset->reader.chunks().size());
+    // Room for what one view needs and two pages more (and a page a pool buffer for alignment).
+    const uint64_t vram = unlimited.peak - unlimited.stats.poolBytes +
+                          unlimited.stats.poolBytesInUse + (2 + gpu::kPoolBuffers) * 32768;
+    Gpu& g = gpu();
+    const uint64_t before = g.memoryInUse;
+    g.memoryPeak = before;
+    GpuRun tiny;
+    uint32_t evicted = 0, maxInFlight = 0;
+    {
+      Renderer renderer(g, *asset, nullptr, rendererOptions(w, h, vram, inFlight));
+      renderer.onCollected([&](const FrameStats& s) { evicted += s.evicted; });
+      // Around the torus without waiting for any frame: every view brings chunks in and evicts.
+      for (uint32_t f = 0; f <= views / 2; f += 1) {
+        for (int repeat = 0; repeat < 3; ++repeat) {
+          const Scene view = orbitView(f);
+          renderFrame(renderer, frameParams(view, header.frame, header.maxLevel, renderer.setup()));
+          maxInFlight = std::max(maxInFlight, renderer.inFlight());
+        }
+      }
+      renderUntilConverged(renderer, *asset, end, 200, tiny);
+    }
+    tiny.peak = g.memoryPeak - before;
+    EXPECT_EQ(g.validationErrors->load(), 0u) << "Vulkan validation errors";
+    EXPECT_EQ(maxInFlight, inFlight);
+    EXPECT_GT(evicted, 0u) << "the orbit should not fit the budget";
+    EXPECT_LE(tiny.peak, vram);
+    EXPECT_TRUE(tiny.converged);
+    EXPECT_EQ(differing(tiny.pixels, unlimited.pixels, 0), 0.0);
+  }
+}
+
+std::vector<uint32_t> decodeAndBuild(const Asset& asset, uint32_t chunk) {
+  return buildBlob(decodeSurfaceChunk(asset.reader, chunk), chunk, asset.tree, asset.blob);
+}
+
+// Wait until the loader has decoded what was asked of it.
+void waitForLoader(const ChunkCache& cache) {
+  for (int i = 0; i < 2000 && !cache.idle(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ASSERT_TRUE(cache.idle());
+}
+
+std::vector<uint32_t> pagesOf(const std::vector<ChunkCache::Upload>& uploads, uint32_t chunk) {
+  std::vector<uint32_t> pages;
+  for (const auto& up : uploads)
+    if (up.chunk == chunk)
+      for (uint32_t p = 0; p < blobPages(up.words.size()); ++p) pages.push_back(up.firstPage + p);
+  return pages;
+}
+
+TEST(ViewerStreaming, pagesOfAnEvictedChunkAreNotReusedBeforeTheFramesThatMayReadThemComplete) {
+  const auto asset = Asset::open(files().chunked);
+  const auto chunks = asset->reader.chunks();
+  const uint32_t top = asset->tree.topChunk();
+  // The two largest chunks besides the top one, a and b; a pool with room for the top and a.
+  std::vector<std::pair<uint32_t, uint32_t>> bySize;  // (pages, chunk)
+  for (uint32_t c = 0; c < chunks.size(); ++c)
+    if (c != top && chunks[c].kind == kSurfaceKind)
+      bySize.push_back({blobPages(decodeAndBuild(*asset, c).size()), c});
+  std::sort(bySize.rbegin(), bySize.rend());
+  ASSERT_GE(bySize.size(), 2u);
+  const uint32_t a = bySize[0].second, b = bySize[1].second;
+  const uint32_t topPages = blobPages(decodeAndBuild(*asset, top).size());
+  for (const bool deferred : {true, false}) {
+    SCOPED_TRACE(deferred ? "frames in flight" : "one frame at a time");
+    ChunkCache cache(asset->reader, asset->tree, asset->blob, topPages + bySize[0].first,
+                     topPages + bySize[0].first);
+    std::vector<uint32_t> evicted;
+    cache.gpuProgress(0, 0);
+    ASSERT_EQ(cache.place(0, 1 << 30, evicted).size(), 1u);  // frame 1: the top chunk
+    cache.request(a, 1);                                     // frame 1's rays ask for a
+    waitForLoader(cache);
+    cache.gpuProgress(1, 1);
+    const auto placedA = cache.place(1, 1 << 30, evicted);  // frame 2 draws a
+    const std::vector<uint32_t> pagesA = pagesOf(placedA, a);
+    ASSERT_EQ(pagesA.size(), bySize[0].first);
+    cache.request(b, 2);  // frame 2's rays ask for b and no ray uses a
+    waitForLoader(cache);
+    // Frame 4 is prepared while frame 3 is in flight (or, one at a time, after it completed):
+    // placing b evicts a, whose pages frames 2 and 3 were told about.
+    cache.gpuProgress(3, deferred ? 2 : 3);
+    const auto atFrame4 = cache.place(2, 1 << 30, evicted);
+    EXPECT_EQ(evicted, std::vector<uint32_t>{a});
+    EXPECT_FALSE(cache.resident(a));
+    if (!deferred) {  // nothing in flight: a's pages are b's at once
+      EXPECT_EQ(cache.retiredPages(), 0u);
+      ASSERT_EQ(pagesOf(atFrame4, b).size(), bySize[1].first);
+      continue;
+    }
+    EXPECT_TRUE(atFrame4.empty()) << "b was placed on pages frame 3 may still read";
+    EXPECT_EQ(cache.retiredPages(), pagesA.size());
+    cache.gpuProgress(4, 2);  // frame 5: frame 3 still in flight
+    EXPECT_TRUE(cache.place(2, 1 << 30, evicted).empty());
+    EXPECT_FALSE(cache.resident(b));
+    cache.gpuProgress(5, 3);  // frame 6: frame 3 completed
+    const std::vector<uint32_t> pagesB = pagesOf(cache.place(3, 1 << 30, evicted), b);
+    ASSERT_EQ(pagesB.size(), bySize[1].first);
+    EXPECT_EQ(cache.retiredPages(), 0u);
+    for (uint32_t p : pagesB)  // the only free pages were a's
+      EXPECT_NE(std::find(pagesA.begin(), pagesA.end(), p), pagesA.end());
+    EXPECT_EQ(evicted.size(), 1u);  // and nothing else was evicted meanwhile
+  }
 }
 
 TEST(ViewerScene, sceneFilesSetEverythingAndNameWhatTheyCannotUse) {

@@ -8,6 +8,7 @@
 #include "tools/iso/commands.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
+#include "viewer/renderer.h"
 #include "viewer/view.h"
 
 namespace iso::cli {
@@ -111,8 +112,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--headless", a->headless, "Render a picture to --out without a window (GPU)");
   c->add_flag("--cpu", a->cpu, "Render the picture with the CPU reference tracer instead");
   c->add_flag("--bench", a->bench,
-              "Render a camera path (an orbit) and print ms/frame, rays/s, GPU memory, chunks "
-              "resident and bytes streamed");
+              "Render a camera path (an orbit) with frames in flight and print ms/frame, GPU "
+              "time, rays/s by kind, the first view on the CPU reference tracer, GPU memory, "
+              "chunks resident and bytes streamed");
   c->add_option("--out,-o", a->view.out,
                 "Picture to write (.png, .jpg, .exr, ...; .png or .ppm in builds without "
                 "OpenImageIO)");
@@ -189,6 +191,15 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "measurements")
       ->capture_default_str()
       ->check(CLI::IsMember({8u, 16u, 32u, 64u, 128u, 256u, 512u, 1024u}));
+  c->add_flag("!--no-cpu-compare", a->view.cpuCompare,
+              "--bench: skip tracing the first view on the CPU reference tracer (it decodes the "
+              "whole file into memory)");
+  c->add_flag("--json", a->view.benchJson, "--bench: print the numbers as one JSON object");
+  c->add_option("--frames-in-flight", a->view.framesInFlight,
+                "Frames the window and --bench keep in flight on the GPU (--headless renders "
+                "one at a time)")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, viewer::kMaxFramesInFlight));
   c->add_flag("--validation", a->view.validation,
               "Enable the Vulkan validation layer (errors make the command fail)");
   c->add_option("--device", a->view.device, "Use the Vulkan device whose name contains this");
@@ -197,6 +208,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       const int modes = int(a->headless) + int(a->cpu) + int(a->bench);
       if (modes > 1) {
         fmt::print(stderr, "iso view: choose one of --headless, --cpu and --bench\n");
+        return kExitUsage;
+      }
+      if (a->view.benchJson && !a->bench) {
+        fmt::print(stderr, "iso view: --json goes with --bench\n");
         return kExitUsage;
       }
       if ((a->headless || a->cpu) && a->view.out.empty()) {
