@@ -66,8 +66,7 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
 }
 
 // A ray's walk through the octree: the ray, its segment still to go, the cell-to-cell state of
-// the seam rule, and its path (the node of every level down to the current cell, with its
-// chunk).
+// the seam rule, and where it restarts its descents (the root of the chunk it is in).
 struct Walk {
   vec3 o;
   vec3 d;
@@ -94,8 +93,8 @@ struct Walk {
   float tOut;
   vec4 bracket;  // s in [bracket.x, bracket.y] of that segment (equal: at its entry face), the
                  // values at both ends (before and after, at a face)
-  uint pathNode[kGridLevels + 1u];
-  uint pathChunk[kGridLevels + 1u];
+  uint rootLevel;  // the current chunk's root (the walk restarts there while it stays inside)
+  uint rootNode;
 };
 
 // The level-of-detail rule at the walk's distance, kept until the distance grows by an eighth of
@@ -146,17 +145,17 @@ bool descend(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
     w.chunk = below;
     useChunk(w.chunk.id);
     w.node = childRoot;
+    w.rootLevel = w.level + 1u;
+    w.rootNode = childRoot;
   }
   w.level += 1u;
-  w.pathNode[w.level] = w.node;
-  w.pathChunk[w.level] = w.chunk.id;
   return false;
 }
 
 // The cell that holds w.g (found by descend): a crossing in it or at its entry face ends the walk
-// (w.found); else the walk steps into the face neighbour across its exit and climbs to the
-// deepest common ancestor of the two cells. Returns false when the ray leaves the cube or its
-// segment first.
+// (w.found); else the walk steps into the face neighbour across its exit and restarts at the root
+// of its chunk when that chunk holds both cells, else at the top. Returns false when the ray
+// leaves the cube or its segment first.
 bool visit(ISO_INOUT(Walk) w, Cell cell) {
   cell.level = w.level;
   cell.coord = w.g >> (kGridLevels - w.level);
@@ -234,12 +233,18 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
     g[axis] = lower - 1u;
   }
   w.g = g;
-  // Up to the deepest common ancestor of this cell and the next: the cells of a level are the
-  // same for two grid points until their highest differing bit.
+  // The deepest common ancestor of this cell and the next (the cells of a level are the same for
+  // two grid points until their highest differing bit): when it is in this chunk, the next cell
+  // is below the chunk's root too.
   uint differ = (first.x ^ g.x) | (first.y ^ g.y) | (first.z ^ g.z);
-  w.level = kGridLevels - 1u - uint(findMSB(differ));
-  w.node = w.pathNode[w.level];
-  if (w.pathChunk[w.level] != w.chunk.id) w.chunk = chunkView(w.pathChunk[w.level]);
+  uint ancestor = kGridLevels - 1u - uint(findMSB(differ));
+  if (ancestor < w.rootLevel) {
+    w.chunk = chunkView(P.options.z);
+    w.rootLevel = 0u;
+    w.rootNode = 0u;
+  }
+  w.level = w.rootLevel;
+  w.node = w.rootNode;
   updateLod(w);
   return true;
 }
@@ -254,9 +259,12 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
 // ask for chunks it lacks.
 //
-// The walk keeps its path (Walk): from one cell to the next it climbs only to their deepest
-// common ancestor (the highest bit in which the two cells' grid coordinates differ) and descends
-// from there, one node record (one load) a level. A node is drawn in place of what is below it
+// The walk restarts each descent at the root of the chunk it is in while the next cell is below
+// it (their deepest common ancestor, the highest bit in which the two cells' grid coordinates
+// differ, is not above it), else at the top chunk, and descends one node record (one load) a
+// level. (A stack of the path's nodes, to restart at the common ancestor itself, read fewer
+// records but halved lavapipe's speed: arrays indexed per invocation go through memory there;
+// specs/viewer.md.) A node is drawn in place of what is below it
 // when its error (node records' codes; a cut node's is its chunk's) covers less than P.lod.x
 // pixels at the ray's distance and it spans at most kLodNodePixels pixels, or when the chunk
 // below it is not resident (which `request` then asks for). The traversal only brackets the first
@@ -294,8 +302,8 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   useChunk(w.chunk.id);
   w.level = 0u;
   w.node = 0u;
-  w.pathNode[0] = 0u;
-  w.pathChunk[0] = w.chunk.id;
+  w.rootLevel = 0u;
+  w.rootNode = 0u;
   w.havePrevious = false;
   w.previous = 0.0f;
   w.found = false;
