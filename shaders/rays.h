@@ -66,7 +66,8 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
 }
 
 // A ray's walk through the octree: the ray, its segment still to go, the cell-to-cell state of
-// the seam rule, and where it restarts its descents (the root of the chunk it is in).
+// the seam rule, and where it restarts its descents (the last ancestors of its node, the root of
+// the chunk it is in).
 struct Walk {
   vec3 o;
   vec3 d;
@@ -95,6 +96,10 @@ struct Walk {
                  // values at both ends (before and after, at a face)
   uint rootLevel;  // the current chunk's root (the walk restarts there while it stays inside)
   uint rootNode;
+  uint up1;  // the node's ancestors one, two and three levels up, in its chunk, the first
+  uint up2;  // `known` of them (scalars, not an array: see intersect)
+  uint up3;
+  uint known;
 };
 
 // The level-of-detail rule at the walk's distance, kept until the distance grows by an eighth of
@@ -126,6 +131,7 @@ bool descend(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
     return true;
   }
   uint before = uint(bitCount(mask & ((1u << octant) - 1u)));
+  uint parent = w.node;
   if ((n.x & kNodeCut) == 0u) {
     w.node = n.y + before;
   } else {
@@ -148,13 +154,18 @@ bool descend(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
     w.rootLevel = w.level + 1u;
     w.rootNode = childRoot;
   }
+  w.up3 = w.up2;
+  w.up2 = w.up1;
+  w.up1 = parent;
+  w.known = min(w.known + 1u, 3u);
   w.level += 1u;
   return false;
 }
 
 // The cell that holds w.g (found by descend): a crossing in it or at its entry face ends the walk
-// (w.found); else the walk steps into the face neighbour across its exit and restarts at the root
-// of its chunk when that chunk holds both cells, else at the top. Returns false when the ray
+// (w.found); else the walk steps into the face neighbour across its exit and restarts at the two
+// cells' common ancestor when it keeps it, else at the root of its chunk when that chunk holds
+// both cells, else at the top. Returns false when the ray
 // leaves the cube or its segment first.
 bool visit(ISO_INOUT(Walk) w, Cell cell) {
   cell.level = w.level;
@@ -238,13 +249,26 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
   // is below the chunk's root too.
   uint differ = (first.x ^ g.x) | (first.y ^ g.y) | (first.z ^ g.z);
   uint ancestor = kGridLevels - 1u - uint(findMSB(differ));
-  if (ancestor < w.rootLevel) {
-    w.chunk = chunkView(P.options.z);
-    w.rootLevel = 0u;
-    w.rootNode = 0u;
+  uint nodeLevel = cell.filled ? cell.level : cell.level - 1u;  // an empty cell's node: its parent
+  uint up = nodeLevel - ancestor;
+  if (ancestor >= w.rootLevel && up <= w.known) {
+    // The ancestor is the node, or one of the three kept above it.
+    uint a1 = w.up1, a2 = w.up2, a3 = w.up3;
+    w.node = up == 0u ? w.node : (up == 1u ? a1 : (up == 2u ? a2 : a3));
+    w.up1 = up == 0u ? a1 : (up == 1u ? a2 : a3);
+    w.up2 = up == 0u ? a2 : a3;
+    w.known -= up;
+    w.level = ancestor;
+  } else {
+    if (ancestor < w.rootLevel) {
+      w.chunk = chunkView(P.options.z);
+      w.rootLevel = 0u;
+      w.rootNode = 0u;
+    }
+    w.level = w.rootLevel;
+    w.node = w.rootNode;
+    w.known = 0u;
   }
-  w.level = w.rootLevel;
-  w.node = w.rootNode;
   updateLod(w);
   return true;
 }
@@ -259,12 +283,12 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
 // `distance` is the path length before o (for the level-of-detail rule); `request` lets the ray
 // ask for chunks it lacks.
 //
-// The walk restarts each descent at the root of the chunk it is in while the next cell is below
-// it (their deepest common ancestor, the highest bit in which the two cells' grid coordinates
-// differ, is not above it), else at the top chunk, and descends one node record (one load) a
-// level. (A stack of the path's nodes, to restart at the common ancestor itself, read fewer
-// records but halved lavapipe's speed: arrays indexed per invocation go through memory there;
-// specs/viewer.md.) A node is drawn in place of what is below it
+// From one cell to the next the walk restarts its descent at their deepest common ancestor (the
+// highest bit in which the two cells' grid coordinates differ) when that is the cell's node or
+// one of the three ancestors it keeps (Walk.up1-3, in its chunk), else at the root of the chunk it
+// is in while the next cell is below it, else at the top chunk; it descends one node record (one
+// load) a level. (A stack of the whole path halved lavapipe's speed: arrays indexed per
+// invocation go through memory there; specs/viewer.md.) A node is drawn in place of what is below it
 // when its error (node records' codes; a cut node's is its chunk's) covers less than P.lod.x
 // pixels at the ray's distance and it spans at most kLodNodePixels pixels, or when the chunk
 // below it is not resident (which `request` then asks for). The traversal only brackets the first
@@ -304,6 +328,10 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   w.node = 0u;
   w.rootLevel = 0u;
   w.rootNode = 0u;
+  w.up1 = 0u;
+  w.up2 = 0u;
+  w.up3 = 0u;
+  w.known = 0u;
   w.havePrevious = false;
   w.previous = 0.0f;
   w.found = false;
