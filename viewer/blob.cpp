@@ -266,6 +266,8 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
   return blob;
 }
 
-uint32_t blobPages(size_t words) { return uint32_t((words + gpu::kPageWords - 1) / gpu::kPageWords); }
+uint32_t blobPages(size_t words) {
+  return uint32_t((words + gpu::kPageWords - 1) / gpu::kPageWords);
+}
 
 }  // namespace iso::viewer

@@ -273,9 +273,9 @@ void Renderer::stage(Slot& slot) {
     const uint64_t bytes = up.words.size() * 4;
     ISO_CHECK(offset + bytes <= region);
     std::memcpy(staging + offset, up.words.data(), bytes);
-    slot.copies.push_back({up.firstPage / pagesPerBuffer_,
-                           {slot.stagingOffset + offset, (up.firstPage % pagesPerBuffer_) * kPageBytes,
-                            bytes}});
+    slot.copies.push_back(
+        {up.firstPage / pagesPerBuffer_,
+         {slot.stagingOffset + offset, (up.firstPage % pagesPerBuffer_) * kPageBytes, bytes}});
     table_[up.chunk].state.x = up.firstPage;
     offset += bytes;
   }
