@@ -20,12 +20,8 @@ vec3 decodeOctahedral(vec2 e) {
   return normalize(n);
 }
 
-vec3 srgbToLinear(vec3 c) {
-  vec3 lo = c / 12.92f;
-  vec3 hi = pow((c + 0.055f) / 1.055f, vec3(2.4f));
-  return vec3(c.x <= 0.04045f ? lo.x : hi.x, c.y <= 0.04045f ? lo.y : hi.y,
-              c.z <= 0.04045f ? lo.z : hi.z);
-}
+// The linear value of an 8-bit sRGB code (FrameParams.srgbToLinear).
+float linearOfSrgb(uint code) { return P.srgbToLinear[code >> 2u][code & 3u]; }
 
 // Trilinear weight of corner k at u.
 float cornerWeight(uint k, vec3 u) {
@@ -56,9 +52,11 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
     vec3 sum = vec3(0.0f);
     float open = 0.0f;
     for (uint k = 0u; k < 8u; ++k) {
-      vec4 rgba = unpackUnorm4x8(blobWord(cell.base, word + k));
-      sum += cornerWeight(k, u) * srgbToLinear(vec3(rgba.x, rgba.y, rgba.z));
-      open += cornerWeight(k, u) * rgba.w;
+      uint rgba = blobWord(cell.base, word + k);
+      float weight = cornerWeight(k, u);
+      sum += weight * vec3(linearOfSrgb(rgba & 0xFFu), linearOfSrgb((rgba >> 8u) & 0xFFu),
+                           linearOfSrgb((rgba >> 16u) & 0xFFu));
+      open += weight * (float(rgba >> 24u) / 255.0f);
     }
     if ((P.options.x & kOptionColors) != 0u) hit.color = sum;
     if ((P.options.x & kOptionOcclusion) != 0u) hit.occlusion = open;

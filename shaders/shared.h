@@ -128,6 +128,9 @@ struct FrameParams {
   vec4 surface;    // x: the unit of a distance code at level 0, float(√3 · the distance scale)
   Light lights[kMaxLights];
   uvec4 poolAddress[kPoolBuffers / 2u];  // device addresses of the pool buffers, two a vec4
+  // The linear value of each 8-bit sRGB code i of the corner records' colors, at [i / 4][i % 4]
+  // (a table: 24 powers a hit cost the CPU tracer 8 % of its time; setColorTable in blob.h).
+  vec4 srgbToLinear[64];
 };
 
 // One chunk in the chunk table (binding 1).

@@ -130,6 +130,10 @@ uint32_t recordWords(const BlobOptions& options) {
          (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);
 }
 
+void setColorTable(gpu::FrameParams& params) {
+  for (uint32_t i = 0; i < 256; ++i) params.srgbToLinear[i / 4][i % 4] = srgb8ToLinear(uint8_t(i));
+}
+
 namespace {
 
 // The node's trilinear interpolation at local coordinates u in [0, 1]^3 (corner c = x + 2y + 4z).

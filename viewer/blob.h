@@ -10,6 +10,7 @@
 
 #include "iso/format.h"
 #include "iso/surface.h"
+#include "shaders/shared.h"
 
 namespace iso::viewer {
 
@@ -45,6 +46,9 @@ uint32_t recordWords(const BlobOptions& options);
 
 // The option bits of FrameParams.options.x that say what records carry (kOptionNormals, ...).
 uint32_t recordOptionBits(const BlobOptions& options);
+
+// Fills FrameParams.srgbToLinear, the table that decodes the records' sRGB colors.
+void setColorTable(gpu::FrameParams& params);
 
 // The blob of a decoded chunk: header, node records, cut nodes' links, a corner record per node
 // (shaders/shared.h). Contiguous: the pool holds it in consecutive words.

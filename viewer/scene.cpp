@@ -322,6 +322,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
   p.pool = {s.poolWordsLog2, s.poolWords, s.environmentWidth, s.environmentHeight};
+  setColorTable(p);
   // Rays leave surfaces a hundredth of the finest cell away (the side flag does the rest).
   p.lod = vec4(scene.lodPixels, float(0.01 * std::ldexp(1.0, -int(maxLevel))),
                scene.environmentIntensity, 0);

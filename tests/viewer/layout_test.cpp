@@ -85,7 +85,8 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"backface", offsetof(FrameParams, backface)},
       {"surface", offsetof(FrameParams, surface)},
       {"lights", offsetof(FrameParams, lights)},
-      {"poolAddress", offsetof(FrameParams, poolAddress)}};
+      {"poolAddress", offsetof(FrameParams, poolAddress)},
+      {"srgbToLinear", offsetof(FrameParams, srgbToLinear)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},
