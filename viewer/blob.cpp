@@ -23,13 +23,6 @@ using gpu::kBlobWords;
 using gpu::kNodeCut;
 using gpu::kNodeErrorShift;
 
-// Two octahedral normals as the snorm8 pairs of one word (the file's own 8-bit encoding).
-uint32_t packNormals(const std::array<float, 3>& a, const std::array<float, 3>& b) {
-  const auto qa = encodeOctahedral(a, 8), qb = encodeOctahedral(b, 8);
-  return uint32_t(uint8_t(qa[0])) | uint32_t(uint8_t(qa[1])) << 8 | uint32_t(uint8_t(qb[0])) << 16 |
-         uint32_t(uint8_t(qb[1])) << 24;
-}
-
 // The distances of a record (shared.h): the file's snorm8 codes, found again from the decoded
 // values (value / unit rounds back to the code exactly), with each corner's scale as a shift
 // from the node's level; or float32 in cell units. Either way the tracer's values are the decoded
@@ -59,26 +52,51 @@ void appendDistances(std::vector<uint32_t>& out, const SurfaceNode& node,
   out.push_back(shifts);
 }
 
-// Append the corner record of a node: its 8 corners' values.
-void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
-                  std::span<const CornerKey> keys, const BlobOptions& options) {
-  appendDistances(out, node, values, keys, options);
+// The normal and color words of each corner of a chunk's values, encoded once (a corner is shared
+// by up to 8 nodes): the octahedral snorm8 pair of its normal (the file's own 8-bit encoding), and
+// its sRGB RGB8 color with the occlusion as unorm8 alpha (shared.h).
+struct CornerWords {
+  std::vector<uint16_t> normals;
+  std::vector<uint32_t> colors;
+};
+
+CornerWords encodeCorners(const CornerValues& values, const BlobOptions& options) {
+  CornerWords words;
   if (options.normals) {
-    for (int c = 0; c < 8; c += 2)
-      out.push_back(
-          packNormals(values.normal.at(node.corners[c]), values.normal.at(node.corners[c + 1])));
+    words.normals.resize(values.size());
+    for (size_t i = 0; i < values.size(); ++i) {
+      const auto q = encodeOctahedral(values.normal.at(i), 8);
+      words.normals[i] = uint16_t(uint8_t(q[0]) | uint8_t(q[1]) << 8);
+    }
   }
   if (options.colors || options.occlusion) {
-    for (int c = 0; c < 8; ++c) {
+    words.colors.resize(values.size());
+    for (size_t i = 0; i < values.size(); ++i) {
       uint32_t word = 0x00FFFFFFu;
       if (options.colors) {
-        const auto& rgb = values.color.at(node.corners[c]);
+        const auto& rgb = values.color.at(i);
         word = uint32_t(linearToSrgb8(rgb[0])) | uint32_t(linearToSrgb8(rgb[1])) << 8 |
                uint32_t(linearToSrgb8(rgb[2])) << 16;
       }
-      const float open = options.occlusion ? values.occlusion.at(node.corners[c]) : 1.0f;
-      out.push_back(word | uint32_t(std::lround(std::clamp(open, 0.0f, 1.0f) * 255.0f)) << 24);
+      const float open = options.occlusion ? values.occlusion.at(i) : 1.0f;
+      words.colors[i] = word | uint32_t(std::lround(std::clamp(open, 0.0f, 1.0f) * 255.0f)) << 24;
     }
+  }
+  return words;
+}
+
+// Append the corner record of a node: its 8 corners' values.
+void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
+                  const CornerWords& words, std::span<const CornerKey> keys,
+                  const BlobOptions& options) {
+  appendDistances(out, node, values, keys, options);
+  if (options.normals) {
+    for (int c = 0; c < 8; c += 2)
+      out.push_back(uint32_t(words.normals.at(node.corners[c])) |
+                    uint32_t(words.normals.at(node.corners[c + 1])) << 16);
+  }
+  if (options.colors || options.occlusion) {
+    for (int c = 0; c < 8; ++c) out.push_back(words.colors.at(node.corners[c]));
   }
 }
 
@@ -200,11 +218,13 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
   // Records: one per node, in node order (a leaf's patch, or an internal node's coarser one).
   std::vector<uint32_t> records;
   records.reserve(nodes.size() * recordWords(options));
+  const CornerWords leafWords = encodeCorners(chunk.leafValues, options);
+  const CornerWords lodWords = encodeCorners(chunk.lodValues, options);
   for (const SurfaceNode& node : nodes) {
     if (node.isLeaf())
-      appendRecord(records, node, chunk.leafValues, chunk.layout.leafCorners, options);
+      appendRecord(records, node, chunk.leafValues, leafWords, chunk.layout.leafCorners, options);
     else
-      appendRecord(records, node, chunk.lodValues, chunk.layout.lodCorners, options);
+      appendRecord(records, node, chunk.lodValues, lodWords, chunk.layout.lodCorners, options);
   }
   // Cut nodes: links to the roots of the child chunks. A child chunk's roots are the children of
   // this chunk's last-level nodes inside its cell, in key order, so counting them in node order
