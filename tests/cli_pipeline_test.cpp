@@ -77,6 +77,28 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
   EXPECT_EQ(nlohmann::json::parse(run.out)["points"], 20000);
 }
 
+TEST_F(CliPipeline, genWritesLasByItsExtensionAndRefusesOtherExtensions) {
+  auto run = runIso("gen sphere -n 5000 --seed 3 --offset 515000,4918000,300 -o " +
+                    quoted(dir_ / "sphere.las"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("LAS 1.2 holds no normals"), std::string::npos) << run.out;
+  const PointCloud las = readPointFile(dir_ / "sphere.las");
+  run = runIso("gen sphere -n 5000 --seed 3 --offset 515000,4918000,300 -o " +
+               quoted(dir_ / "same.ply"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const PointCloud ply = readPointFile(dir_ / "same.ply");
+  ASSERT_EQ(las.size(), ply.size());
+  EXPECT_FALSE(las.hasNormals());
+  for (size_t i = 0; i < las.size(); ++i)
+    ASSERT_LT(glm::length(las.positions[i] - ply.positions[i]), 1e-6) << i;
+  for (const char* name : {"sphere.xyz", "sphere"}) {
+    run = runIso("gen sphere -n 100 -o " + quoted(dir_ / name));
+    EXPECT_EQ(run.exitCode, 2) << name;
+    EXPECT_NE(run.err.find("write .ply or .las"), std::string::npos) << run.err;
+    EXPECT_FALSE(std::filesystem::exists(dir_ / name)) << name;
+  }
+}
+
 TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   // Without input normals, so that estimation and orientation run too.
   const auto gen = runIso("gen torus -n 30000 --seed 5 --no-normals -o " + quoted(dir_ / "t.ply"));

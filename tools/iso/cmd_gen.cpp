@@ -1,9 +1,14 @@
-// `iso gen SHAPE -o OUT.ply`: a synthetic scan with a known answer.
+// `iso gen SHAPE -o OUT.ply|OUT.las`: a synthetic scan with a known answer.
 #include <fmt/core.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
 
 #include "iso/error.h"
 #include "pipeline/base/files.h"
 #include "pipeline/geom/generate.h"
+#include "pipeline/io/las.h"
 #include "pipeline/io/ply.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/interrupt.h"
@@ -24,6 +29,14 @@ struct Options {
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
     throw UsageError("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+  std::string extension = std::filesystem::path(o.output).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  const bool las = extension == ".las";
+  if (!las && extension != ".ply")
+    throw UsageError(
+        fmt::format("-o {}: write .ply or .las (the format follows the extension)", o.output));
+  if (las && o.ascii) throw UsageError("--ascii is for PLY output; LAS is binary");
   checkOutputPath(o.output, "-o", o.force);
   if (!o.truth.mesh.empty()) refuseOutputOverInput(o.output, o.truth.mesh, "-o");
   setInterruptMessage("iso gen: interrupted; nothing was written");
@@ -32,17 +45,21 @@ int run(Options& o) {
   placed.offset = "0,0,0";  // generateScan adds the offset itself
   const std::unique_ptr<Shape> shape = makeTruth(placed);
   o.generate.offset = parseVector(o.truth.offset, "--offset");
-  o.generate.normals = !o.noNormals;
+  o.generate.normals = !o.noNormals && !las;
   const PointCloud points = generateScan(*shape, o.generate);
   PlyWriteOptions write;
   write.binary = !o.ascii;
   write.comments = {fmt::format(
       "iso gen {}: {} points, noise {} spacings, density ratio {}, seed {}", shape->name(),
       o.generate.count, o.generate.noise, o.generate.densityRatio, o.generate.seed)};
-  writePly(o.output, points, write);
-  fmt::print("{}: {} points of a {} (area {:.6g}, expected spacing {:.6g})\n", o.output,
+  if (las)
+    writeLas(o.output, points);
+  else
+    writePly(o.output, points, write);
+  fmt::print("{}: {} points of a {} (area {:.6g}, expected spacing {:.6g}){}\n", o.output,
              withSeparators(points.size()), shape->name(), shape->area(),
-             expectedSpacing(shape->area(), o.generate.count));
+             expectedSpacing(shape->area(), o.generate.count),
+             las && !o.noNormals ? "; LAS 1.2 holds no normals" : "");
   return kExitOk;
 }
 
@@ -50,9 +67,11 @@ int run(Options& o) {
 
 void addGenCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
-  CLI::App* c = app.add_subcommand("gen", "Write a synthetic scan with a known answer (PLY)");
+  CLI::App* c = app.add_subcommand(
+      "gen", "Write a synthetic scan with a known answer (PLY, or LAS by the extension)");
   c->add_option("shape", o->shape, "sphere, torus, cube, plane or sheets (or --mesh)");
-  c->add_option("-o,--output", o->output, "The PLY file to write")->required();
+  c->add_option("-o,--output", o->output, "The file to write: .ply, or .las (LAS 1.2, no normals)")
+      ->required();
   c->add_option("-n,--count", o->generate.count, "Number of points (1 to 2^32)")
       ->capture_default_str()
       ->check(CLI::Range(uint64_t{1}, uint64_t{1} << 32));
