@@ -88,18 +88,30 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
     const glm::vec3 p(toFrame(points[i], frame));
     cells[keyOf(p) >> (3 * (kMaxLevel - level))].push_back(i);
   }
-  // Chunks of cells coarser than the regions' meet many of them: decoded once.
+  // Chunks of cells coarser than the regions' meet many of them: decoded once, up front.
+  std::vector<uint32_t> coarseIds;
+  for (const ChunkInfo& info : reader.chunks())
+    if (info.kind == kSurfaceKind && info.level < level) coarseIds.push_back(info.id);
+  std::vector<std::shared_ptr<const SurfaceChunk>> coarseChunks(coarseIds.size());
+  tbb::parallel_for(size_t{0}, coarseIds.size(), [&](size_t j) {
+    coarseChunks[j] =
+        std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, coarseIds[j]));
+  });
   std::map<uint32_t, std::shared_ptr<const SurfaceChunk>> coarse;
+  for (size_t j = 0; j < coarseIds.size(); ++j) coarse[coarseIds[j]] = coarseChunks[j];
   const SurfaceModel::ChunkSource source = [&](uint32_t id) {
-    if (reader.chunk(id).level >= level)
-      return std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
-    auto& cached = coarse[id];
-    if (!cached) cached = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
-    return cached;
+    const auto cached = coarse.find(id);
+    if (cached != coarse.end()) return cached->second;
+    return std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
   };
+  // Regions in parallel (each loads its own chunks; their points are their own).
+  std::vector<std::pair<uint64_t, std::vector<uint32_t>>> regions(cells.begin(), cells.end());
+  cells.clear();
   std::vector<double> distance(points.size(), -1.0);
   std::vector<uint8_t> escaped(points.size(), 0);
-  for (auto& [key, which] : cells) {
+  tbb::parallel_for(size_t{0}, regions.size(), [&](size_t r) {
+    const uint64_t key = regions[r].first;
+    std::vector<uint32_t>& which = regions[r].second;
     const auto cell = mortonDecode(key);
     for (double margin = edge / 16; !which.empty(); margin *= 2.0) {
       SurfaceModel::Region region;
@@ -115,7 +127,7 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
       std::erase_if(which, [&](uint32_t i) { return !escaped[i]; });
       for (const uint32_t i : which) escaped[i] = 0;
     }
-  }
+  });
   return statsOf(distance, keepValues);
 }
 

@@ -29,6 +29,7 @@ struct Options {
 int run(Options& o) {
   if (o.shape.empty() == o.truth.mesh.empty())
     throw UsageError("name one shape (sphere, torus, cube, plane, sheets) or give --mesh FILE.ply");
+  checkOutputPath(o.output, "-o", o.force);
   std::string extension = std::filesystem::path(o.output).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
                  [](unsigned char c) { return char(std::tolower(c)); });
@@ -37,7 +38,6 @@ int run(Options& o) {
     throw UsageError(
         fmt::format("-o {}: write .ply or .las (the format follows the extension)", o.output));
   if (las && o.ascii) throw UsageError("--ascii is for PLY output; LAS is binary");
-  checkOutputPath(o.output, "-o", o.force);
   if (!o.truth.mesh.empty()) refuseOutputOverInput(o.output, o.truth.mesh, "-o");
   setInterruptMessage("iso gen: interrupted; nothing was written");
   if (o.truth.mesh.empty()) o.truth.params.name = o.shape;
