@@ -53,9 +53,13 @@ struct Accumulated {
   size_t k = 0;  // neighbours per point (fewer than asked when the input has few points)
   OrientationComponents components;  // `of` per point in `points`
   std::vector<ChunkRecord> chunks;
-  // While finding strays: the groups of the input points and each point's k-th distance.
+  // While finding strays: the groups of the points, named by their place in `points` (Morton
+  // order, so that the groups' table is read where it was just written), each point's k-th
+  // distance, and the near edges to points of other chunks: (place, input index of the other),
+  // joined once every point has its place.
   std::unique_ptr<PointGroups> groups;
   SpillVector<float> kth;
+  SpillVector<std::array<uint32_t, 2>> edgesOut;
   uint64_t haloPoints = 0, widenings = 0, maxLoaded = 0;
 };
 
@@ -259,7 +263,11 @@ class ChunkRunner {
     const size_t k = size_t(neighbors.k);
     out.k = k;
     if (out.groups) {  // each own point's edges, from its exact k-NN list (specs: strays)
-      out.groups->joinNeighbors(neighbors, ownBegin, ownEnd, points.source);
+      const size_t before = out.edgesOut.size();
+      out.groups->joinNeighbors(neighbors, ownBegin, ownEnd, uint32_t(out.points.size()),
+                                out.edgesOut);
+      for (size_t e = before; e < out.edgesOut.size(); ++e)
+        out.edgesOut[e][1] = points.source[out.edgesOut[e][1]];
       for (uint32_t i = ownBegin; i < ownEnd; ++i)
         out.kth.push_back(neighbors.distance[size_t(i) * k + k - 1]);
     }
@@ -416,6 +424,17 @@ void joinChunks(Accumulated& done, uint64_t rawSize, bool align) {
                     });
 }
 
+// Join the near edges between points of different chunks, now that every point has its place.
+// (A neighbour merged into a duplicate has none: its survivor, the first of its copies in the
+// chunk's file order, was the neighbour wherever it was loaded.)
+void joinEdgesOut(Accumulated& done, uint64_t rawSize) {
+  SpillVector<uint32_t> place(rawSize, kNoNode);
+  for (size_t i = 0; i < done.points.size(); ++i) place[done.points.source[i]] = uint32_t(i);
+  for (const auto& [from, to] : done.edgesOut)
+    if (place[to] != kNoNode) done.groups->join(from, place[to]);
+  SpillVector<std::array<uint32_t, 2>>().swap(done.edgesOut);
+}
+
 // Every k-th kept input point (world units), for the accuracy measure, as in core.
 std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<uint8_t>& keep) {
   size_t kept = 0;
@@ -458,12 +477,12 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     stage("points", distribution.size());
     done = Accumulated{};
     reserveFor(done, distribution.size(), raw.layout());
-    if (findingOutliers) done.groups = std::make_unique<PointGroups>(raw.size());
+    if (findingOutliers) done.groups = std::make_unique<PointGroups>(distribution.size());
     ChunkRunner runner(distribution, ready.frame, options, raw.layout().normals);
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (!findingOutliers) break;
-    const Strays found =
-        flagStrays(done.kth, done.points.source, *done.groups, options.strayGroupPoints);
+    joinEdgesOut(done, raw.size());
+    const Strays found = flagStrays(done.kth, *done.groups, options.strayGroupPoints);
     done.groups.reset();
     done.kth = {};
     if (found.sparse + found.grouped == 0) break;

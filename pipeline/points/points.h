@@ -116,9 +116,11 @@ struct StrayRule {
 class PointGroups {
  public:
   explicit PointGroups(size_t ids);
-  // Join points [begin, end) to their near neighbours; ids[i] names point i (empty: i itself).
-  void joinNeighbors(const Neighbors& neighbors, uint32_t begin, uint32_t end,
-                     std::span<const uint32_t> ids);
+  // Join points [begin, end) to their near neighbours, point i named `first + i - begin`. An edge
+  // to a neighbour outside [begin, end) is not joined but appended to `outside` as (the point's
+  // name, the neighbour's index) for the caller, who knows its name, to join.
+  void joinNeighbors(const Neighbors& neighbors, uint32_t begin, uint32_t end, uint32_t first,
+                     SpillVector<std::array<uint32_t, 2>>& outside);
   void join(uint32_t a, uint32_t b);
   uint32_t root(uint32_t id);
 
@@ -132,9 +134,9 @@ struct Strays {
 };
 // The median k-th distance beyond which a group is sparse (StrayRule).
 float sparseThreshold(std::span<const float> kth);
-// Strays among points with these k-th distances and ids in `groups`.
-Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, PointGroups& groups,
-                  uint32_t groupPoints);
+// Strays among points 0 … kth.size() - 1 with these k-th distances, grouped in `groups` (under
+// their own numbers). Memory beyond the flags: spilled arrays of a word a point.
+Strays flagStrays(std::span<const float> kth, PointGroups& groups, uint32_t groupPoints);
 // Strays among n points with these neighbours, in core.
 Strays findStrays(size_t n, const Neighbors& neighbors, uint32_t groupPoints);
 // The positions (frame units) of stray points: an input point at one of them (a duplicate merged

@@ -46,23 +46,26 @@ void PointGroups::join(uint32_t a, uint32_t b) {
 }
 
 void PointGroups::joinNeighbors(const Neighbors& neighbors, uint32_t begin, uint32_t end,
-                                std::span<const uint32_t> ids) {
+                                uint32_t first, SpillVector<std::array<uint32_t, 2>>& outside) {
   const size_t k = size_t(neighbors.k);
   if (k == 0) return;
-  const auto id = [&](uint32_t i) { return ids.empty() ? i : ids[i]; };
   for (uint32_t i = begin; i < end; ++i) {
     const float own = neighbors.distance[size_t(i) * k + k - 1];
     for (size_t e = 0; e < k; ++e) {
       const uint32_t j = neighbors.index[size_t(i) * k + e];
       const float reach = kEdgeReach * std::min(own, neighbors.distance[size_t(j) * k + k - 1]);
-      if (neighbors.distance[size_t(i) * k + e] <= reach) join(id(i), id(j));
+      if (!(neighbors.distance[size_t(i) * k + e] <= reach)) continue;
+      if (j >= begin && j < end)
+        join(first + (i - begin), first + (j - begin));
+      else
+        outside.push_back({first + (i - begin), j});
     }
   }
 }
 
 float sparseThreshold(std::span<const float> kth) {
   if (kth.empty()) return std::numeric_limits<float>::max();
-  std::vector<float> logs(kth.size());
+  SpillVector<float> logs(kth.size());
   for (size_t i = 0; i < kth.size(); ++i) logs[i] = std::log(std::max(kth[i], 1e-30f));
   const float median = medianOf(logs);
   for (float& v : logs) v = std::abs(v - median);
@@ -72,30 +75,35 @@ float sparseThreshold(std::span<const float> kth) {
   return float(std::exp(double(median)) * factor);
 }
 
-Strays flagStrays(std::span<const float> kth, std::span<const uint32_t> ids, PointGroups& groups,
-                  uint32_t groupPoints) {
+Strays flagStrays(std::span<const float> kth, PointGroups& groups, uint32_t groupPoints) {
   const size_t n = kth.size();
   Strays out;
   out.flagged.assign(n, 0);
   const float threshold = sparseThreshold(kth);
-  // Each point's group and k-th distance, sorted: a group is a run, its size the run's length and
-  // its median k-th distance the run's middle.
-  std::vector<std::pair<uint32_t, float>> members(n);
-  for (size_t i = 0; i < n; ++i)
-    members[i] = {groups.root(ids.empty() ? uint32_t(i) : ids[i]), kth[i]};
+  // Each point's group is named by its root; a group's size is counted at its root. Only the
+  // groups that can be sparse strays (at least groupPoints points, less than half of all) need
+  // their median k-th distance: their members, sorted, make runs whose middles are the medians.
+  SpillVector<uint32_t> rootOf(n), size(n, 0);
+  for (size_t i = 0; i < n; ++i) ++size[rootOf[i] = groups.root(uint32_t(i))];
+  const auto isHalf = [&](size_t count) { return 2 * count >= n; };  // never the half of the scan
+  SpillVector<std::pair<uint32_t, float>> members;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t count = size[rootOf[i]];
+    if (count >= groupPoints && !isHalf(count)) members.push_back({rootOf[i], kth[i]});
+  }
   std::sort(members.begin(), members.end());
   std::vector<std::pair<uint32_t, StrayKind>> verdicts;  // by root, for the groups that are strays
-  for (size_t a = 0, b = 0; a < n; a = b) {
-    while (b < n && members[b].first == members[a].first) ++b;
-    const size_t size = b - a;
-    if (2 * size >= n) continue;  // never the half of the scan
-    if (size < groupPoints)
-      verdicts.emplace_back(members[a].first, StrayKind::SmallGroup);
-    else if (members[a + size / 2].second > threshold)
+  for (size_t i = 0; i < n; ++i)
+    if (rootOf[i] == i && size[i] < groupPoints && !isHalf(size[i]))
+      verdicts.emplace_back(uint32_t(i), StrayKind::SmallGroup);
+  for (size_t a = 0, b = 0; a < members.size(); a = b) {
+    while (b < members.size() && members[b].first == members[a].first) ++b;
+    if (members[a + (b - a) / 2].second > threshold)
       verdicts.emplace_back(members[a].first, StrayKind::Sparse);
   }
+  std::sort(verdicts.begin(), verdicts.end());
   for (size_t i = 0; i < n; ++i) {
-    const uint32_t root = groups.root(ids.empty() ? uint32_t(i) : ids[i]);
+    const uint32_t root = rootOf[i];
     const auto it = std::lower_bound(verdicts.begin(), verdicts.end(),
                                      std::pair<uint32_t, StrayKind>{root, StrayKind{}});
     if (it == verdicts.end() || it->first != root) continue;
@@ -111,8 +119,9 @@ Strays findStrays(size_t n, const Neighbors& neighbors, uint32_t groupPoints) {
   std::vector<float> kth(n);
   for (size_t i = 0; i < n; ++i) kth[i] = neighbors.distance[i * k + k - 1];
   PointGroups groups(n);
-  groups.joinNeighbors(neighbors, 0, uint32_t(n), {});
-  return flagStrays(kth, {}, groups, groupPoints);
+  SpillVector<std::array<uint32_t, 2>> outside;  // none: every neighbour is among the n
+  groups.joinNeighbors(neighbors, 0, uint32_t(n), 0, outside);
+  return flagStrays(kth, groups, groupPoints);
 }
 
 PointCloud withoutFlagged(const PointCloud& cloud, const Frame& frame, const PointSet& points,
