@@ -516,7 +516,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       ready.frame = frame;
       continue;
     }
-    stage("points", distribution.size());
+    stage("points again", distribution.size());  // the chunks that held strays, without them
     preparedAgain = prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals,
                                         keep, strays, done);
     break;
