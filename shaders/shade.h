@@ -89,6 +89,23 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
   return color;
 }
 
+// shade() at a hit outside transparent objects, whose normal already faces the ray: back faces
+// seen from behind (hit.from < 0) take the back-face tint when it is on.
+vec3 shadeOutside(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng,
+                  ISO_INOUT(uvec3) rays) {
+  if (hit.from < 0.0f && (P.options.x & kOptionBackTint) != 0u)
+    hit.color *= vec3(P.backface.x, P.backface.y, P.backface.z);
+  return shade(p, d, hit, distance, rng, rays);
+}
+
+// The part of a surface's color shaded locally: the rest is reflected and refracted
+// (FrameParams.material.z and .w, when those rays are on).
+float localFraction() {
+  float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
+  float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
+  return 1.0f - reflectivity - transparency;
+}
+
 // A pending ray's side of the surface (-1, 0, +1) and whether it travels inside a transparent
 // object, packed into one float of the ray stack.
 float packRayState(float side, bool inMedium) { return side + 1.0f + (inMedium ? 4.0f : 0.0f); }
@@ -137,10 +154,8 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
       bool bounce = depth < P.options.y;
       if (!inMedium) {
         // Local shading, then the transmitted and the mirror rays.
-        if (hit.from < 0.0f && (P.options.x & kOptionBackTint) != 0u)
-          hit.color *= vec3(P.backface.x, P.backface.y, P.backface.z);
-        color += weight * (1.0f - reflectivity - transparency) *
-                 shade(p, direction, hit, distance, rng, rays);
+        color += weight * localFraction() *
+                 shadeOutside(p, direction, hit, distance, rng, rays);
         float mirror = reflectivity;
         if (bounce && transparency > 0.0f) {
           vec3 r = refract(direction, n, 1.0f / eta);
@@ -194,24 +209,21 @@ float linearToSrgb(float c) {
   return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
 }
 
-// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
-uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
-  uint samples = max(P.image.z, 1u);
-  uint rng = hashUint(x * 1973u + y * 9277u + P.image.w * 26699u);
-  vec3 sum = vec3(0.0f);
+// The direction of the camera ray through pixel (x, y) at offset (jx, jy) in it.
+vec3 cameraDirection(uint x, uint y, float jx, float jy) {
   vec3 right = vec3(P.right.x, P.right.y, P.right.z);
   vec3 up = vec3(P.up.x, P.up.y, P.up.z);
   vec3 forward = vec3(P.forward.x, P.forward.y, P.forward.z);
-  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
-  for (uint s = 0u; s < samples; ++s) {
-    float jx = samples > 1u ? randomUnit(rng) : 0.5f;
-    float jy = samples > 1u ? randomUnit(rng) : 0.5f;
-    float sx = 2.0f * (float(x) + jx) / float(P.image.x) - 1.0f;
-    float sy = 1.0f - 2.0f * (float(y) + jy) / float(P.image.y);
-    vec3 d = normalize(forward + sx * right + sy * up);
-    sum += radiance(eye, d, rng, rays);
-  }
-  vec3 c = sum / float(samples);
+  float sx = 2.0f * (float(x) + jx) / float(P.image.x) - 1.0f;
+  float sy = 1.0f - 2.0f * (float(y) + jy) / float(P.image.y);
+  return normalize(forward + sx * right + sy * up);
+}
+
+// The pixel's random state at the start of its samples.
+uint pixelSeed(uint x, uint y) { return hashUint(x * 1973u + y * 9277u + P.image.w * 26699u); }
+
+// A linear color as the packed 8-bit sRGB pixel (BGRA with kOptionSwapRB).
+uint packPixel(vec3 c) {
   uint r = uint(linearToSrgb(c.x) * 255.0f + 0.5f);
   uint gc = uint(linearToSrgb(c.y) * 255.0f + 0.5f);
   uint b = uint(linearToSrgb(c.z) * 255.0f + 0.5f);
@@ -221,4 +233,18 @@ uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
     b = swap;
   }
   return r | (gc << 8u) | (b << 16u) | (255u << 24u);
+}
+
+// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
+uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
+  uint samples = max(P.image.z, 1u);
+  uint rng = pixelSeed(x, y);
+  vec3 sum = vec3(0.0f);
+  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
+  for (uint s = 0u; s < samples; ++s) {
+    float jx = samples > 1u ? randomUnit(rng) : 0.5f;
+    float jy = samples > 1u ? randomUnit(rng) : 0.5f;
+    sum += radiance(eye, cameraDirection(x, y, jx, jy), rng, rays);
+  }
+  return packPixel(sum / float(samples));
 }

@@ -18,6 +18,11 @@ layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
 layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
 layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
 layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
+// The two passes of a wavefront frame (kPass 1 and 2): the camera rays' hits, three vec4s each
+// (t, side, occlusion, pixel index; normal; color), and their count followed by the indirect
+// dispatch of the second pass (x, y, z workgroups).
+layout(std430, binding = 5) buffer Hits { vec4 hits[]; };
+layout(std430, binding = 6) buffer Queue { uint queue[]; };
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
 // lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
@@ -68,27 +73,109 @@ layout(constant_id = 0) const bool kFloatDistances = false;
 bool floatDistances() { return kFloatDistances; }
 layout(constant_id = 1) const bool kFlatTraversal = false;
 bool flatTraversal() { return kFlatTraversal; }
+// 0: each invocation draws its pixel whole (one kernel). A wavefront frame (one sample a pixel,
+// no secondary rays) runs two: 1 traces the camera rays and appends their hits to a queue, 2
+// shades the queued hits with their shadow rays, the hits side by side in the SIMD lanes.
+layout(constant_id = 3) const uint kPass = 0u;
 
 #include "trace.h"
 
-void main() {
-  // A tile of tileWidth × tileHeight pixels (as wide as high, or twice as wide), tiles row by row.
+// The pixel of this invocation: a tile of tileWidth × tileHeight pixels (as wide as high, or twice
+// as wide), tiles row by row, Z-order inside the tile.
+uvec2 tilePixel() {
   uint tileWidth = 1u << uint((findMSB(gl_WorkGroupSize.x) + 1) / 2);
   uint tileHeight = gl_WorkGroupSize.x / tileWidth;
   uint tilesX = (P.image.x + tileWidth - 1u) / tileWidth;
   uint tile = gl_WorkGroupID.x;
-  uint i = gl_LocalInvocationIndex;  // Z-order inside the tile: x from even bits, y from odd
+  uint i = gl_LocalInvocationIndex;  // x from even bits, y from odd
   uint lx = 0u, ly = 0u;
   for (uint b = 0u; b < 5u; ++b) {
     lx |= ((i >> (2u * b)) & 1u) << b;
     ly |= ((i >> (2u * b + 1u)) & 1u) << b;
   }
-  uint x = (tile % tilesX) * tileWidth + lx;
-  uint y = (tile / tilesX) * tileHeight + ly;
-  if (x >= P.image.x || y >= P.image.y) return;
-  uvec3 rays = uvec3(0u);
-  pixels[y * P.image.x + x] = renderPixel(x, y, rays);
-  atomicAdd(feedback[kFeedbackPrimaryRays], rays.x);
+  return uvec2((tile % tilesX) * tileWidth + lx, (tile / tilesX) * tileHeight + ly);
+}
+
+void countRays(uvec3 rays) {
+  if (rays.x != 0u) atomicAdd(feedback[kFeedbackPrimaryRays], rays.x);
   if (rays.y != 0u) atomicAdd(feedback[kFeedbackShadowRays], rays.y);
   if (rays.z != 0u) atomicAdd(feedback[kFeedbackSecondaryRays], rays.z);
+}
+
+shared uint groupHits;
+shared uint groupFirst;
+
+// Pass 1: the camera ray of each pixel; a miss writes the background, a hit is appended to the
+// queue (one global atomic a workgroup) for pass 2.
+void traceCameraRays() {
+  uvec2 xy = tilePixel();
+  bool inside = xy.x < P.image.x && xy.y < P.image.y;
+  if (gl_LocalInvocationIndex == 0u) groupHits = 0u;
+  barrier();
+  Hit hit;
+  bool found = false;
+  uint slot = 0u;
+  if (inside) {
+    vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
+    vec3 d = cameraDirection(xy.x, xy.y, 0.5f, 0.5f);
+    bool hideBack = (P.options.x & kOptionBackHide) != 0u;
+    found = intersect(eye, d, 0.0f, 1e30f, hideBack ? 1.0f : 0.0f, hideBack, 0.0f,
+                      (P.options.x & kOptionRequests) != 0u, hit);
+    if (found)
+      slot = atomicAdd(groupHits, 1u);
+    else
+      pixels[xy.y * P.image.x + xy.x] = packPixel(background(d));
+  }
+  barrier();
+  if (gl_LocalInvocationIndex == 0u && groupHits > 0u) {
+    groupFirst = atomicAdd(queue[0], groupHits);
+    atomicMax(queue[1], (groupFirst + groupHits + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x);
+  }
+  barrier();
+  if (found) {
+    uint at = 3u * (groupFirst + slot);
+    hits[at] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(xy.y * P.image.x + xy.x));
+    hits[at + 1u] = vec4(hit.normal, 0.0f);
+    hits[at + 2u] = vec4(hit.color, 0.0f);
+  }
+  if (inside) atomicAdd(feedback[kFeedbackPrimaryRays], 1u);
+}
+
+// Pass 2: the queued hits, shaded as the one kernel shades a camera ray's hit.
+void shadeHits() {
+  uint index = gl_GlobalInvocationID.x;
+  if (index >= queue[0]) return;
+  vec4 a = hits[3u * index];
+  uint pixel = floatBitsToUint(a.w);
+  uint x = pixel % P.image.x, y = pixel / P.image.x;
+  Hit hit;
+  hit.t = a.x;
+  hit.from = a.y;
+  hit.occlusion = a.z;
+  hit.normal = hits[3u * index + 1u].xyz;
+  hit.color = hits[3u * index + 2u].xyz;
+  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
+  vec3 d = cameraDirection(x, y, 0.5f, 0.5f);
+  vec3 p = eye + d * hit.t;
+  hit.normal = hit.from * hit.normal;  // facing the ray
+  uint rng = pixelSeed(x, y);
+  uvec3 rays = uvec3(0u);
+  pixels[pixel] = packPixel(localFraction() * shadeOutside(p, d, hit, hit.t, rng, rays));
+  countRays(rays);
+}
+
+void main() {
+  if (kPass == 1u) {
+    traceCameraRays();
+    return;
+  }
+  if (kPass == 2u) {
+    shadeHits();
+    return;
+  }
+  uvec2 xy = tilePixel();
+  if (xy.x >= P.image.x || xy.y >= P.image.y) return;
+  uvec3 rays = uvec3(0u);
+  pixels[xy.y * P.image.x + xy.x] = renderPixel(xy.x, xy.y, rays);
+  countRays(rays);
 }

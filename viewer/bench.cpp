@@ -185,6 +185,7 @@ json benchJson(const GpuView& view, const ViewOptions& o, const Orbit& orbit, co
             {"frames", o.benchFrames},
             {"frames_in_flight", view.renderer.framesInFlight()},
             {"vram", o.vram},
+            {"two_passes", last.twoPasses},
             {"first_view",
              {{"frames", orbit.firstFrames},
               {"converged", orbit.firstConverged},
@@ -283,10 +284,11 @@ void printBench(const GpuView& view, const ViewOptions& o, const Orbit& orbit, c
   const FrameStats& s = view.renderer.stats();
   fmt::print(
       "bench {}: {}x{} on {}, {} frames orbiting, {} in flight, samples {}, shadows {}, "
-      "reflections {}, --vram {}\n",
+      "reflections {}, --vram {}, {}\n",
       o.file.filename().string(), o.width, o.height, view.gpu.properties.deviceName, o.benchFrames,
       view.renderer.framesInFlight(), base.samples, base.shadows ? "on" : "off",
-      base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(o.vram));
+      base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(o.vram),
+      s.twoPasses ? "two passes (--wavefront)" : "one kernel");
   printTimes(orbit, n);
   printCpu(orbit, cpu, n);
   fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", byteSize(s.vramInUse),

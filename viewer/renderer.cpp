@@ -55,6 +55,12 @@ constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 // vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
 constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
 
+// The wavefront's queue: the count of hits, then the second pass's indirect dispatch (x, y, z).
+constexpr uint64_t kQueueBytes = 16;
+constexpr auto kQueueUsage = kStorage | kTransferDst | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
+constexpr uint64_t kHitBytes = 48;  // three vec4s a camera-ray hit
+enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits };
+
 uint64_t feedbackBytes(uint32_t chunkCount) {
   return (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4;
 }
@@ -62,7 +68,7 @@ uint64_t feedbackBytes(uint32_t chunkCount) {
 // Device memory of everything but the pool: per frame slot its parameters, chunk table, feedback
 // and staging region; the output and the environment map once.
 uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stagingRegion,
-                    uint64_t pixelsBytes, uint64_t envBytes) {
+                    uint64_t pixelsBytes, uint64_t envBytes, uint64_t hitsBytes) {
   const uint64_t perSlot =
       bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
       bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
@@ -70,7 +76,8 @@ uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stag
       (gpu.timestampValidBits > 0 ? bufferFootprint(gpu, kTimestampBytes, kTransferDst) : 0);
   return slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
          bufferFootprint(gpu, envBytes, kStorage) +
-         bufferFootprint(gpu, slots * stagingRegion, kTransferSrc);
+         bufferFootprint(gpu, slots * stagingRegion, kTransferSrc) +
+         bufferFootprint(gpu, hitsBytes, kStorage) + bufferFootprint(gpu, kQueueBytes, kQueueUsage);
 }
 
 // Pool pages under the budget: what the rest leaves, less a page a buffer for alignment, in
@@ -111,8 +118,9 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
   const BlobSizes sizes = blobSizes(asset, options.uploadBytes);
+  const uint64_t hitsBytes = options.wavefront ? pixelsBytes / 4 * kHitBytes : 16;
   const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
-                                    pixelsBytes, envBytes);
+                                    pixelsBytes, envBytes, hitsBytes);
   const uint64_t poolPages =
       poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
@@ -125,6 +133,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   output_ = createBuffer(gpu, pixelsBytes, kStorage | kTransferSrc, true);
   environment_ = createBuffer(gpu, envBytes, kStorage, true);
   staging_ = createBuffer(gpu, options.framesInFlight * sizes.stagingRegion, kTransferSrc, true);
+  hits_ = createBuffer(gpu, hitsBytes, kStorage, false);
+  queue_ = createBuffer(gpu, kQueueBytes, kQueueUsage, false);
   for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
     const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
     pool_.push_back(createBuffer(gpu, pages * kPageBytes,
@@ -138,13 +148,17 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   for (uint32_t i = 0; i < chunkCount; ++i)
     table_[i].state = {gpu::kNotResident, chunks[i].level,
                        glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
-  const uint32_t counts[] = {1, 1, 1, 1};
+  const uint32_t counts[] = {1, 1, 1, 1, 1, 1};
   ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
             options.workgroupSize <= 1024);
-  // kFloatDistances, kFlatTraversal, the workgroup size (trace.comp.glsl).
-  const uint32_t constants[] = {asset.blob.floatDistances ? 1u : 0u,
-                                options.flatTraversal ? 1u : 0u, options.workgroupSize};
-  pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, constants, options.framesInFlight);
+  // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
+  // by Variant.
+  std::vector<std::vector<uint32_t>> variants;
+  for (const uint32_t pass : {kOneKernel, kCameraRays, kShadeHits})
+    variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
+                        options.workgroupSize, pass});
+  if (!options.wavefront) variants.resize(1);
+  pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);
   setup_.width = options.width;
   setup_.height = options.height;
@@ -189,13 +203,16 @@ void Renderer::createSlots(uint64_t stagingRegion) {
 }
 
 void Renderer::writeDescriptors(const Slot& slot) {
-  const VkDescriptorBufferInfo infos[5] = {{slot.params.buffer, 0, VK_WHOLE_SIZE},
-                                           {slot.table.buffer, 0, VK_WHOLE_SIZE},
-                                           {slot.feedback.buffer, 0, VK_WHOLE_SIZE},
-                                           {output_.buffer, 0, VK_WHOLE_SIZE},
-                                           {environment_.buffer, 0, VK_WHOLE_SIZE}};
-  std::vector<VkWriteDescriptorSet> writes(5, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
-  for (uint32_t i = 0; i < 5; ++i) {
+  const VkDescriptorBufferInfo infos[] = {{slot.params.buffer, 0, VK_WHOLE_SIZE},
+                                          {slot.table.buffer, 0, VK_WHOLE_SIZE},
+                                          {slot.feedback.buffer, 0, VK_WHOLE_SIZE},
+                                          {output_.buffer, 0, VK_WHOLE_SIZE},
+                                          {environment_.buffer, 0, VK_WHOLE_SIZE},
+                                          {hits_.buffer, 0, VK_WHOLE_SIZE},
+                                          {queue_.buffer, 0, VK_WHOLE_SIZE}};
+  constexpr uint32_t kBindings = std::size(infos);
+  std::vector<VkWriteDescriptorSet> writes(kBindings, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
+  for (uint32_t i = 0; i < kBindings; ++i) {
     writes[i].dstSet = slot.set;
     writes[i].dstBinding = i;
     writes[i].descriptorCount = 1;
@@ -252,6 +269,9 @@ void Renderer::prepare(gpu::FrameParams params) {
   else
     params.options.x &= ~gpu::kOptionRequests;
   std::memcpy(slot.params.mapped, &params, sizeof params);
+  // Two passes for frames whose pixels are one camera ray and its hit's shading.
+  slot.wavefront = options_.wavefront && params.image.z <= 1 && params.options.y == 0;
+  slot.stats.twoPasses = slot.wavefront;
   for (uint32_t kind :
        {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
     static_cast<uint32_t*>(slot.feedback.mapped)[kind] = 0;
@@ -318,7 +338,6 @@ VkCommandBuffer Renderer::record() {
                        nullptr);
   if (hasTimestamps())
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 1);
-  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipeline);
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
                           nullptr);
   // Tiles of the workgroup's size, as the shader lays them out.
@@ -326,7 +345,12 @@ VkCommandBuffer Renderer::record() {
   const uint32_t tileHeight = options_.workgroupSize / tileWidth;
   const uint32_t tiles = ((options_.width + tileWidth - 1) / tileWidth) *
                          ((options_.height + tileHeight - 1) / tileHeight);
-  vkCmdDispatch(cb, tiles, 1, 1);
+  if (slot.wavefront) {
+    recordWavefront(cb, tiles);
+  } else {
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kOneKernel]);
+    vkCmdDispatch(cb, tiles, 1, 1);
+  }
   if (hasTimestamps()) {
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 2);
     vkCmdCopyQueryPoolResults(cb, queries_, query, 3, slot.timestamps.buffer, 0, sizeof(uint64_t),
@@ -339,6 +363,32 @@ VkCommandBuffer Renderer::record() {
                        VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
                        nullptr, 0, nullptr);
   return cb;
+}
+
+// The two passes of a wavefront frame: the queue emptied (after the previous frame's second pass
+// read it), the camera rays filling it, then the second pass dispatched from it.
+void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
+  const auto barrier = [&](VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
+                           VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
+    VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    b.srcAccessMask = srcAccess;
+    b.dstAccessMask = dstAccess;
+    vkCmdPipelineBarrier(cb, srcStage, dstStage, 0, 1, &b, 0, nullptr, 0, nullptr);
+  };
+  constexpr auto kCompute = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+  constexpr auto kIndirect = VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
+  constexpr auto kShaderAccess = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+  barrier(kCompute | kIndirect, kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT,
+          VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+  const uint32_t empty[4] = {0, 0, 1, 1};  // no hits; a dispatch of 0 × 1 × 1 workgroups
+  vkCmdUpdateBuffer(cb, queue_.buffer, 0, sizeof empty, empty);
+  barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute, kShaderAccess);
+  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCameraRays]);
+  vkCmdDispatch(cb, tiles, 1, 1);
+  barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect,
+          kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT);
+  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kShadeHits]);
+  vkCmdDispatchIndirect(cb, queue_.buffer, 4);
 }
 
 void Renderer::submit(VkSemaphore wait, VkPipelineStageFlags waitStage, VkSemaphore signal) {

@@ -351,7 +351,8 @@ void Buffer::release() {
 
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts,
-                                      std::span<const uint32_t> constants, uint32_t setCount) {
+                                      std::span<const std::vector<uint32_t>> variants,
+                                      uint32_t setCount) {
   ComputePipeline p;  // destroyed if a step below throws
   p.gpu = &gpu;
   std::vector<VkDescriptorSetLayoutBinding> bindings;
@@ -376,19 +377,24 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
   moduleInfo.pCode = spirv.data();
   VkShaderModule module;
   ISO_VK(vkCreateShaderModule(gpu.device, &moduleInfo, nullptr, &module));
-  VkComputePipelineCreateInfo info{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
-  info.stage = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO};
-  info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-  info.stage.module = module;
-  info.stage.pName = "main";
-  std::vector<VkSpecializationMapEntry> entries(constants.size());
-  for (uint32_t i = 0; i < constants.size(); ++i) entries[i] = {i, 4 * i, 4};
-  VkSpecializationInfo specialization{uint32_t(entries.size()), entries.data(),
-                                      constants.size_bytes(), constants.data()};
-  if (!constants.empty()) info.stage.pSpecializationInfo = &specialization;
-  info.layout = p.layout;
-  const VkResult made =
-      vkCreateComputePipelines(gpu.device, VK_NULL_HANDLE, 1, &info, nullptr, &p.pipeline);
+  VkResult made = VK_SUCCESS;
+  for (const std::vector<uint32_t>& constants : variants) {
+    VkComputePipelineCreateInfo info{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+    info.stage = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO};
+    info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    info.stage.module = module;
+    info.stage.pName = "main";
+    std::vector<VkSpecializationMapEntry> entries(constants.size());
+    for (uint32_t i = 0; i < constants.size(); ++i) entries[i] = {i, 4 * i, 4};
+    VkSpecializationInfo specialization{uint32_t(entries.size()), entries.data(),
+                                        constants.size() * sizeof(uint32_t), constants.data()};
+    if (!constants.empty()) info.stage.pSpecializationInfo = &specialization;
+    info.layout = p.layout;
+    VkPipeline pipeline = VK_NULL_HANDLE;
+    made = vkCreateComputePipelines(gpu.device, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline);
+    if (made != VK_SUCCESS) break;
+    p.pipelines.push_back(pipeline);
+  }
   vkDestroyShaderModule(gpu.device, module, nullptr);
   ISO_VK(made);
   VkDescriptorPoolSize sizes[2] = {{VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, setCount},
@@ -414,7 +420,7 @@ ComputePipeline& ComputePipeline::operator=(ComputePipeline&& o) noexcept {
     gpu = std::exchange(o.gpu, nullptr);
     setLayout = std::exchange(o.setLayout, VK_NULL_HANDLE);
     layout = std::exchange(o.layout, VK_NULL_HANDLE);
-    pipeline = std::exchange(o.pipeline, VK_NULL_HANDLE);
+    pipelines = std::exchange(o.pipelines, {});
     descriptorPool = std::exchange(o.descriptorPool, VK_NULL_HANDLE);
     sets = std::exchange(o.sets, {});
   }
@@ -425,13 +431,13 @@ void ComputePipeline::release() {
   if (!gpu) return;
   VkDevice device = gpu->device;
   if (descriptorPool) vkDestroyDescriptorPool(device, descriptorPool, nullptr);
-  if (pipeline) vkDestroyPipeline(device, pipeline, nullptr);
+  for (VkPipeline pipeline : pipelines) vkDestroyPipeline(device, pipeline, nullptr);
+  pipelines.clear();
   if (layout) vkDestroyPipelineLayout(device, layout, nullptr);
   if (setLayout) vkDestroyDescriptorSetLayout(device, setLayout, nullptr);
   gpu = nullptr;
   setLayout = VK_NULL_HANDLE;
   layout = VK_NULL_HANDLE;
-  pipeline = VK_NULL_HANDLE;
   descriptorPool = VK_NULL_HANDLE;
   sets.clear();
 }

@@ -125,18 +125,18 @@ struct ComputePipeline {
   Gpu* gpu = nullptr;
   VkDescriptorSetLayout setLayout = VK_NULL_HANDLE;
   VkPipelineLayout layout = VK_NULL_HANDLE;
-  VkPipeline pipeline = VK_NULL_HANDLE;
+  std::vector<VkPipeline> pipelines;  // one a variant, all of the one layout
   VkDescriptorPool descriptorPool = VK_NULL_HANDLE;
   std::vector<VkDescriptorSet> sets;  // of the one layout (a set a frame in flight)
 };
 
-// A compute pipeline whose descriptor set layout has a uniform buffer at binding 0 and storage
-// buffers at bindings 1 to storageBindings (each binding an array of `counts[i]` buffers), with
-// the 32-bit specialization constants `constants` (constant_id i is constants[i]), and `setCount`
-// descriptor sets of that layout.
+// Compute pipelines of one shader whose descriptor set layout has a uniform buffer at binding 0
+// and storage buffers at bindings 1 to storageBindings (each binding an array of `counts[i]`
+// buffers), one a variant of the 32-bit specialization constants (constant_id i is variant[i]),
+// and `setCount` descriptor sets of that layout.
 ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const uint32_t> storageCounts,
-                                      std::span<const uint32_t> constants = {},
+                                      std::span<const std::vector<uint32_t>> variants,
                                       uint32_t setCount = 1);
 
 // From the Gpu's command pool (freed with it, or by vkFreeCommandBuffers).

@@ -118,7 +118,8 @@ void renderUntilConverged(Renderer& renderer, const Asset& asset, const Scene& s
 
 GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h, uint64_t vram,
                  const Environment* env = nullptr, uint32_t maxFrames = 200,
-                 uint32_t framesInFlight = 1, bool flat = false, uint32_t workgroup = 64) {
+                 uint32_t framesInFlight = 1, bool flat = false, uint32_t workgroup = 64,
+                 bool wavefront = false) {
   Gpu& g = gpu();
   const uint64_t before = g.memoryInUse;
   g.memoryPeak = before;
@@ -127,6 +128,7 @@ GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h,
     RendererOptions o = rendererOptions(w, h, vram, framesInFlight);
     o.flatTraversal = flat;
     o.workgroupSize = workgroup;
+    o.wavefront = wavefront;
     Renderer renderer(g, asset, env, o);
     renderUntilConverged(renderer, asset, scene, maxFrames, run);
   }
@@ -383,6 +385,56 @@ TEST(ViewerGolden, everyLoopShapeAndWorkgroupSizeDrawsTheSamePicture) {
       renderCpu(pool, frameParams(scene, header.frame, header.maxLevel, setup), nullptr).pixels,
       nested);
   EXPECT_LE(differing(reference, nested), 0.005);
+}
+
+TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
+  // A wavefront frame traces the camera rays, then shades the hits from a queue with the same
+  // statements: the same bytes and the same rays. Here with back faces tinted, an area light's
+  // jittered shadow rays and a reflectivity that only scales the local shading (no bounces), in
+  // tiles that do not divide the picture; and a frame with bounces, which runs as one kernel.
+  TempDir dir;
+  const ShapeParams plane = turnedShape("plane");
+  const std::unique_ptr<Shape> shape = makeShape(plane);
+  convertToIso(scanOf(plane, 20000), dir / "plane.iso", BuildOptions{});
+  const glm::dvec3 n = shape->closest(glm::dvec3(0.0, 0.0, 1.0)).normal;
+  const uint32_t w = 100, h = 70;
+  for (const auto& file : {dir / "plane.iso", files().torus}) {
+    const auto asset = Asset::open(file);
+    Scene scene = sceneFor(*asset);
+    if (file == dir / "plane.iso") {  // from behind, half of the picture sky
+      scene.camera = Camera{-3.0 * n + glm::dvec3(0.3, 0.2, 0.0), {0, 0, 0}, {0, 1, 0}, 50.0};
+      scene.backFaces = BackFaces::Tint;
+    }
+    LightSpec area = defaultLight(*scene.camera, asset->bounds);
+    area.area = true;
+    area.samples = 4;
+    area.u = {0.5, 0, 0};
+    area.v = {0, 0, 0.5};
+    scene.lights = {area};
+    scene.material.reflectivity = 0.3f;
+    for (const int bounces : {0, 2}) {
+      SCOPED_TRACE(file.filename().string() + ", bounces " + std::to_string(bounces));
+      scene.bounces = bounces;
+      const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, false, 32);
+      const GpuRun two =
+          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, false, 32, true);
+      EXPECT_TRUE(two.converged);
+      EXPECT_EQ(two.pixels, one.pixels);
+      EXPECT_EQ(two.stats.rays.primary, uint64_t(w) * h);
+      EXPECT_EQ(two.stats.rays.primary, one.stats.rays.primary);
+      EXPECT_EQ(two.stats.rays.shadow, one.stats.rays.shadow);
+      EXPECT_EQ(two.stats.rays.secondary, one.stats.rays.secondary);
+      EXPECT_GT(one.stats.rays.shadow, 0u);
+    }
+    // Surface and sky both in the picture: the queue held some of the pixels.
+    const auto header = asset->reader.header();
+    const std::vector<float> t = hitDistances(
+        buildCpuPool(asset->reader),
+        frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(*asset, w, h, nullptr)));
+    const size_t sky = size_t(std::count_if(t.begin(), t.end(), [](float d) { return d < 0.0f; }));
+    EXPECT_GT(sky, t.size() / 20);
+    EXPECT_LT(sky, t.size() * 19 / 20);
+  }
 }
 
 TEST(ViewerLod, nodesDrawnInPlaceOfTheirChildrenLeaveNoCracksBesideFinerOnes) {
