@@ -19,8 +19,8 @@ layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
 layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
 layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
 // The two passes of a wavefront frame (kPass 1 and 2): the camera rays' hits, three vec4s each
-// (t, side, occlusion, pixel index; normal; color), and their count followed by the indirect
-// dispatch of the second pass (x, y, z workgroups).
+// (t, side, occlusion, pixel index; normal; color), and the queue's words: the count of hits, the
+// indirect dispatch of the second pass (x, y, z workgroups), and the wave's first tile.
 layout(std430, binding = 5) buffer Hits { vec4 hits[]; };
 layout(std430, binding = 6) buffer Queue { uint queue[]; };
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
@@ -74,19 +74,19 @@ bool floatDistances() { return kFloatDistances; }
 layout(constant_id = 1) const bool kFlatTraversal = false;
 bool flatTraversal() { return kFlatTraversal; }
 // 0: each invocation draws its pixel whole (one kernel). A wavefront frame (one sample a pixel,
-// no secondary rays) runs two: 1 traces the camera rays and appends their hits to a queue, 2
-// shades the queued hits with their shadow rays, the hits side by side in the SIMD lanes.
+// no secondary rays) runs two, a wave of tiles at a time: 1 traces the camera rays and appends
+// their hits to a queue, 2 shades the queued hits with their shadow rays, the hits side by side in
+// the SIMD lanes.
 layout(constant_id = 3) const uint kPass = 0u;
 
 #include "trace.h"
 
 // The pixel of this invocation: a tile of tileWidth × tileHeight pixels (as wide as high, or twice
 // as wide), tiles row by row, Z-order inside the tile.
-uvec2 tilePixel() {
+uvec2 tilePixel(uint tile) {
   uint tileWidth = 1u << uint((findMSB(gl_WorkGroupSize.x) + 1) / 2);
   uint tileHeight = gl_WorkGroupSize.x / tileWidth;
   uint tilesX = (P.image.x + tileWidth - 1u) / tileWidth;
-  uint tile = gl_WorkGroupID.x;
   uint i = gl_LocalInvocationIndex;  // x from even bits, y from odd
   uint lx = 0u, ly = 0u;
   for (uint b = 0u; b < 5u; ++b) {
@@ -108,7 +108,7 @@ shared uint groupFirst;
 // Pass 1: the camera ray of each pixel; a miss writes the background, a hit is appended to the
 // queue (one global atomic a workgroup) for pass 2.
 void traceCameraRays() {
-  uvec2 xy = tilePixel();
+  uvec2 xy = tilePixel(queue[4] + gl_WorkGroupID.x);
   bool inside = xy.x < P.image.x && xy.y < P.image.y;
   if (gl_LocalInvocationIndex == 0u) groupHits = 0u;
   barrier();
@@ -173,7 +173,7 @@ void main() {
     shadeHits();
     return;
   }
-  uvec2 xy = tilePixel();
+  uvec2 xy = tilePixel(gl_WorkGroupID.x);
   if (xy.x >= P.image.x || xy.y >= P.image.y) return;
   uvec3 rays = uvec3(0u);
   pixels[xy.y * P.image.x + xy.x] = renderPixel(xy.x, xy.y, rays);

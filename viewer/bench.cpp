@@ -288,7 +288,7 @@ void printBench(const GpuView& view, const ViewOptions& o, const Orbit& orbit, c
       o.file.filename().string(), o.width, o.height, view.gpu.properties.deviceName, o.benchFrames,
       view.renderer.framesInFlight(), base.samples, base.shadows ? "on" : "off",
       base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(o.vram),
-      s.twoPasses ? "two passes (--wavefront)" : "one kernel");
+      s.twoPasses ? "two passes (camera rays, then shading)" : "one kernel");
   printTimes(orbit, n);
   printCpu(orbit, cpu, n);
   fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", byteSize(s.vramInUse),

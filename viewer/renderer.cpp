@@ -55,10 +55,13 @@ constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 // vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
 constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
 
-// The wavefront's queue: the count of hits, then the second pass's indirect dispatch (x, y, z).
-constexpr uint64_t kQueueBytes = 16;
+// The wavefront's queue: the count of hits, the second pass's indirect dispatch (x, y, z), the
+// wave's first tile.
+constexpr uint64_t kQueueBytes = 32;
 constexpr auto kQueueUsage = kStorage | kTransferDst | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
 constexpr uint64_t kHitBytes = 48;  // three vec4s a camera-ray hit
+// Pixels a wave of a wavefront frame (its hits: 12 MiB), so that large pictures fit small budgets.
+constexpr uint64_t kWavePixels = uint64_t(1) << 18;
 enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits };
 
 uint64_t feedbackBytes(uint32_t chunkCount) {
@@ -118,7 +121,11 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
   const BlobSizes sizes = blobSizes(asset, options.uploadBytes);
-  const uint64_t hitsBytes = options.wavefront ? pixelsBytes / 4 * kHitBytes : 16;
+  const uint64_t wavePixels =
+      std::min<uint64_t>(pixelsBytes / 4 + options.workgroupSize, kWavePixels);
+  waveTiles_ = uint32_t(std::max<uint64_t>(wavePixels / options.workgroupSize, 1));
+  const uint64_t hitsBytes =
+      options.oneKernel ? 16 : uint64_t(waveTiles_) * options.workgroupSize * kHitBytes;
   const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
                                     pixelsBytes, envBytes, hitsBytes);
   const uint64_t poolPages =
@@ -157,7 +164,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   for (const uint32_t pass : {kOneKernel, kCameraRays, kShadeHits})
     variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
                         options.workgroupSize, pass});
-  if (!options.wavefront) variants.resize(1);
+  if (options.oneKernel) variants.resize(1);
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);
   setup_.width = options.width;
@@ -270,7 +277,7 @@ void Renderer::prepare(gpu::FrameParams params) {
     params.options.x &= ~gpu::kOptionRequests;
   std::memcpy(slot.params.mapped, &params, sizeof params);
   // Two passes for frames whose pixels are one camera ray and its hit's shading.
-  slot.wavefront = options_.wavefront && params.image.z <= 1 && params.options.y == 0;
+  slot.wavefront = !options_.oneKernel && params.image.z <= 1 && !secondaryRays(params);
   slot.stats.twoPasses = slot.wavefront;
   for (uint32_t kind :
        {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
@@ -365,8 +372,8 @@ VkCommandBuffer Renderer::record() {
   return cb;
 }
 
-// The two passes of a wavefront frame: the queue emptied (after the previous frame's second pass
-// read it), the camera rays filling it, then the second pass dispatched from it.
+// The two passes of a wavefront frame, a wave of tiles at a time: the queue emptied, the camera
+// rays filling it, then the second pass dispatched from it.
 void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
   const auto barrier = [&](VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
                            VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
@@ -378,17 +385,21 @@ void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
   constexpr auto kCompute = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   constexpr auto kIndirect = VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
   constexpr auto kShaderAccess = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
-  barrier(kCompute | kIndirect, kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT,
-          VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
-  const uint32_t empty[4] = {0, 0, 1, 1};  // no hits; a dispatch of 0 × 1 × 1 workgroups
-  vkCmdUpdateBuffer(cb, queue_.buffer, 0, sizeof empty, empty);
-  barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute, kShaderAccess);
-  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCameraRays]);
-  vkCmdDispatch(cb, tiles, 1, 1);
-  barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect,
-          kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT);
-  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kShadeHits]);
-  vkCmdDispatchIndirect(cb, queue_.buffer, 4);
+  for (uint32_t first = 0; first < tiles; first += waveTiles_) {
+    // The queue emptied once the previous wave's (or frame's) second pass has read it.
+    barrier(kCompute | kIndirect, kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT,
+            VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+    const uint32_t empty[8] = {0, 0, 1, 1, first, 0, 0, 0};  // no hits; 0 × 1 × 1 workgroups
+    vkCmdUpdateBuffer(cb, queue_.buffer, 0, sizeof empty, empty);
+    barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute,
+            kShaderAccess);
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCameraRays]);
+    vkCmdDispatch(cb, std::min(waveTiles_, tiles - first), 1, 1);
+    barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect,
+            kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT);
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kShadeHits]);
+    vkCmdDispatchIndirect(cb, queue_.buffer, 4);
+  }
 }
 
 void Renderer::submit(VkSemaphore wait, VkPipelineStageFlags waitStage, VkSemaphore signal) {

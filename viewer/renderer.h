@@ -39,9 +39,11 @@ struct RendererOptions {
   bool swapRedBlue = false;                        // BGRA output (swapchains)
   bool streaming = true;                           // rays request chunks; off: the top chunk alone
   bool flatTraversal = false;                      // the tracer's loop shape (shaders/rays.h)
-  // Frames of one sample a pixel without secondary rays in two passes (camera rays, then the
-  // hits' shading and shadow rays, compacted: trace.comp.glsl) instead of one; for measurements.
-  bool wavefront = false;
+  // Frames of one sample a pixel whose camera rays leave no secondary rays run as a wavefront, in
+  // two passes (the camera rays, then the hits' shading and shadow rays side by side:
+  // trace.comp.glsl); others as one kernel. With oneKernel every frame runs as one kernel (for
+  // measurements).
+  bool oneKernel = false;
   uint32_t workgroupSize = 64;  // invocations a workgroup: a power of two, 8 to 1024
 };
 
@@ -55,7 +57,7 @@ struct FrameStats {
   uint64_t streamedBytes = 0;  // since the start, up to this frame
   uint32_t evicted = 0;
   uint32_t resident = 0;  // now, when collected
-  bool twoPasses = false;  // drawn as a wavefront (RendererOptions::wavefront)
+  bool twoPasses = false;  // drawn as a wavefront (RendererOptions::oneKernel)
   uint32_t pending = 0;   // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
   double gpuSeconds = 0;            // copies and dispatch, from timestamps (0 without them)
@@ -130,6 +132,7 @@ class Renderer {
   void createSlots(uint64_t stagingRegion);
   void writeDescriptors(const Slot& slot);
   void recordWavefront(VkCommandBuffer cb, uint32_t tiles);
+  uint32_t waveTiles_ = 0;  // tiles a wave of a wavefront frame (its hits fit hits_)
   void stage(Slot& slot);
   void collect(Slot& slot);
   void readTimestamps(const Slot& slot, FrameStats& stats) const;
@@ -140,7 +143,7 @@ class Renderer {
   FrameSetup setup_;
   ComputePipeline pipeline_;
   Buffer output_, environment_, staging_;
-  Buffer hits_, queue_;  // the wavefront's queue of camera-ray hits (16 bytes each without it)
+  Buffer hits_, queue_;  // the wavefront's camera-ray hits and queue (16 bytes each without it)
   std::vector<Buffer> pool_;
   uint32_t pagesPerBuffer_ = 0;
   std::unique_ptr<ChunkCache> cache_;

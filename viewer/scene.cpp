@@ -280,6 +280,12 @@ LightSpec defaultLight(const Camera& c, const Bounds& b) {
   return light;
 }
 
+bool secondaryRays(const gpu::FrameParams& p) {
+  const float reflectivity = (p.options.x & gpu::kOptionReflections) != 0u ? p.material.z : 0.0f;
+  const float transparency = (p.options.x & gpu::kOptionRefractions) != 0u ? p.material.w : 0.0f;
+  return p.options.y > 0u && (reflectivity > 0.0f || transparency > 0.0f);
+}
+
 gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
                              const FrameSetup& s) {
   using glm::vec4;

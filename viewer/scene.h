@@ -109,5 +109,8 @@ struct FrameSetup {
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.
 gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
                              const FrameSetup& setup);
+// Whether a frame's camera rays may leave reflected or refracted rays at their hits (the tracer's
+// radiance(), shaders/shade.h: bounces left and a reflectivity or transparency that is on).
+bool secondaryRays(const gpu::FrameParams& params);
 
 }  // namespace iso::viewer

@@ -39,7 +39,7 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
   r.uploadBytes = o.uploadBytes;
   r.flatTraversal = o.flatTraversal;
   r.workgroupSize = o.workgroupSize;
-  r.wavefront = o.wavefront;
+  r.oneKernel = o.oneKernel;
   r.framesInFlight = framesInFlight;
   return r;
 }

@@ -31,7 +31,7 @@ struct ViewOptions {
   // The tracer's loop shape and workgroup size (measured in specs/viewer.md).
   bool flatTraversal = false;
   uint32_t workgroupSize = 64;
-  bool wavefront = false;  // RendererOptions::wavefront
+  bool oneKernel = false;  // RendererOptions::oneKernel
   bool cpuCompare = true;  // also trace the first view with the CPU reference tracer
   bool benchJson = false;  // print the numbers as one JSON object instead of text
 };

@@ -116,19 +116,25 @@ void renderUntilConverged(Renderer& renderer, const Asset& asset, const Scene& s
   run.stats = renderer.stats();
 }
 
+// The renderer's choices of kernel (RendererOptions).
+struct Kernel {
+  bool flat = false;
+  uint32_t workgroup = 64;
+  bool oneKernel = false;
+};
+
 GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h, uint64_t vram,
                  const Environment* env = nullptr, uint32_t maxFrames = 200,
-                 uint32_t framesInFlight = 1, bool flat = false, uint32_t workgroup = 64,
-                 bool wavefront = false) {
+                 uint32_t framesInFlight = 1, const Kernel& kernel = {}) {
   Gpu& g = gpu();
   const uint64_t before = g.memoryInUse;
   g.memoryPeak = before;
   GpuRun run;
   {
     RendererOptions o = rendererOptions(w, h, vram, framesInFlight);
-    o.flatTraversal = flat;
-    o.workgroupSize = workgroup;
-    o.wavefront = wavefront;
+    o.flatTraversal = kernel.flat;
+    o.workgroupSize = kernel.workgroup;
+    o.oneKernel = kernel.oneKernel;
     Renderer renderer(g, asset, env, o);
     renderUntilConverged(renderer, asset, scene, maxFrames, run);
   }
@@ -371,7 +377,7 @@ TEST(ViewerGolden, everyLoopShapeAndWorkgroupSizeDrawsTheSamePicture) {
     for (const uint32_t workgroup : {8u, 32u, 64u, 256u}) {
       if (!flat && workgroup == 64) continue;
       const GpuRun run =
-          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, flat, workgroup);
+          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, {flat, workgroup});
       EXPECT_TRUE(run.converged);
       EXPECT_EQ(run.pixels, reference) << (flat ? "flat" : "nested") << ", workgroup " << workgroup;
     }
@@ -388,10 +394,13 @@ TEST(ViewerGolden, everyLoopShapeAndWorkgroupSizeDrawsTheSamePicture) {
 }
 
 TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
-  // A wavefront frame traces the camera rays, then shades the hits from a queue with the same
-  // statements: the same bytes and the same rays. Here with back faces tinted, an area light's
-  // jittered shadow rays and a reflectivity that only scales the local shading (no bounces), in
-  // tiles that do not divide the picture; and a frame with bounces, which runs as one kernel.
+  // A frame of one sample a pixel whose camera rays leave no secondary rays runs in two passes:
+  // the camera rays, then the queued hits' shading, with the one kernel's statements: the same
+  // bytes and the same rays as one kernel (--one-kernel). Here with back faces tinted, an area
+  // light's jittered shadow rays and a reflectivity that only scales the local shading (no
+  // bounces), in tiles that do not divide the picture; bounces without a reflectivity (no
+  // secondary rays: two passes); and frames that run as one kernel either way (reflection rays,
+  // two samples a pixel).
   TempDir dir;
   const ShapeParams plane = turnedShape("plane");
   const std::unique_ptr<Shape> shape = makeShape(plane);
@@ -400,41 +409,69 @@ TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
   const uint32_t w = 100, h = 70;
   for (const auto& file : {dir / "plane.iso", files().torus}) {
     const auto asset = Asset::open(file);
-    Scene scene = sceneFor(*asset);
+    Scene base = sceneFor(*asset);
     if (file == dir / "plane.iso") {  // from behind, half of the picture sky
-      scene.camera = Camera{-3.0 * n + glm::dvec3(0.3, 0.2, 0.0), {0, 0, 0}, {0, 1, 0}, 50.0};
-      scene.backFaces = BackFaces::Tint;
+      base.camera = Camera{-3.0 * n + glm::dvec3(0.3, 0.2, 0.0), {0, 0, 0}, {0, 1, 0}, 50.0};
+      base.backFaces = BackFaces::Tint;
     }
-    LightSpec area = defaultLight(*scene.camera, asset->bounds);
+    LightSpec area = defaultLight(*base.camera, asset->bounds);
     area.area = true;
     area.samples = 4;
     area.u = {0.5, 0, 0};
     area.v = {0, 0, 0.5};
-    scene.lights = {area};
-    scene.material.reflectivity = 0.3f;
-    for (const int bounces : {0, 2}) {
-      SCOPED_TRACE(file.filename().string() + ", bounces " + std::to_string(bounces));
-      scene.bounces = bounces;
-      const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, false, 32);
+    base.lights = {area};
+    struct Case {
+      float reflectivity;
+      int bounces, samples;
+      bool twoPasses;
+    };
+    for (const Case c : {Case{0.3f, 0, 1, true}, Case{0.0f, 2, 1, true}, Case{0.3f, 2, 1, false},
+                         Case{0.0f, 0, 2, false}}) {
+      SCOPED_TRACE(file.filename().string() + ", reflectivity " + std::to_string(c.reflectivity) +
+                   ", bounces " + std::to_string(c.bounces) + ", samples " +
+                   std::to_string(c.samples));
+      Scene scene = base;
+      scene.material.reflectivity = c.reflectivity;
+      scene.bounces = c.bounces;
+      scene.samples = c.samples;
+      const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1,
+                                   {.workgroup = 32, .oneKernel = true});
       const GpuRun two =
-          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, false, 32, true);
+          renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, {.workgroup = 32});
+      EXPECT_FALSE(one.stats.twoPasses);
+      EXPECT_EQ(two.stats.twoPasses, c.twoPasses);
       EXPECT_TRUE(two.converged);
       EXPECT_EQ(two.pixels, one.pixels);
-      EXPECT_EQ(two.stats.rays.primary, uint64_t(w) * h);
+      EXPECT_EQ(two.stats.rays.primary, uint64_t(w) * h * uint64_t(c.samples));
       EXPECT_EQ(two.stats.rays.primary, one.stats.rays.primary);
       EXPECT_EQ(two.stats.rays.shadow, one.stats.rays.shadow);
       EXPECT_EQ(two.stats.rays.secondary, one.stats.rays.secondary);
       EXPECT_GT(one.stats.rays.shadow, 0u);
+      EXPECT_EQ(one.stats.rays.secondary > 0, !c.twoPasses && c.bounces > 0);
     }
     // Surface and sky both in the picture: the queue held some of the pixels.
     const auto header = asset->reader.header();
     const std::vector<float> t = hitDistances(
         buildCpuPool(asset->reader),
-        frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(*asset, w, h, nullptr)));
+        frameParams(base, header.frame, header.maxLevel, cpuFrameSetup(*asset, w, h, nullptr)));
     const size_t sky = size_t(std::count_if(t.begin(), t.end(), [](float d) { return d < 0.0f; }));
     EXPECT_GT(sky, t.size() / 20);
     EXPECT_LT(sky, t.size() * 19 / 20);
   }
+}
+
+TEST(ViewerGolden, aWavefrontFrameLargerThanAWaveRunsInWaves) {
+  // 640×480 in tiles of 8 invocations: 38,400 tiles, more than a wave (2^18 pixels) holds, so the
+  // frame runs as two waves of both passes; the same bytes as one kernel.
+  const auto asset = Asset::open(files().torus);
+  const Scene scene = sceneFor(*asset);
+  const uint32_t w = 640, h = 480;
+  const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1,
+                               {.workgroup = 8, .oneKernel = true});
+  const GpuRun two = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, {.workgroup = 8});
+  EXPECT_TRUE(two.stats.twoPasses);
+  EXPECT_EQ(two.pixels, one.pixels);
+  EXPECT_EQ(two.stats.rays.shadow, one.stats.rays.shadow);
 }
 
 TEST(ViewerLod, nodesDrawnInPlaceOfTheirChildrenLeaveNoCracksBesideFinerOnes) {

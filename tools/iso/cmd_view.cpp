@@ -191,10 +191,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "measurements")
       ->capture_default_str()
       ->check(CLI::IsMember({8u, 16u, 32u, 64u, 128u, 256u, 512u, 1024u}));
-  c->add_flag("--wavefront", a->view.wavefront,
-              "GPU: draw frames of one sample a pixel without reflections or refractions in two "
-              "passes (camera rays, then the hits' shading and shadow rays side by side) instead "
-              "of one kernel; for measurements");
+  c->add_flag("--one-kernel", a->view.oneKernel,
+              "GPU: draw every frame with one kernel (by default frames of one sample a pixel "
+              "without reflection or refraction rays run in two passes: the camera rays, then the "
+              "hits' shading and shadow rays side by side); for measurements");
   c->add_flag("!--no-cpu-compare", a->view.cpuCompare,
               "--bench: skip tracing the first view on the CPU reference tracer (it decodes the "
               "whole file into memory)");
