@@ -32,9 +32,14 @@ DistanceStats pointsToZeroSet(const SurfaceModel& surface, const Frame& frame,
 // widened by 1/16 of it; a point whose projection leaves that box is measured again with the
 // margin doubled, and so on. So about a region's leaves are decoded at once, and every distance
 // is the one the whole model gives.
+// A region's decoded surface takes about kDecodedLeafBytes a leaf at its peak (the model's nodes,
+// leaves, corners and index as they grow, and a chunk's decoded layout while it is linked:
+// measured on the 20M dragon).
+inline constexpr uint64_t kRegionLeaves = 2000000;
+inline constexpr uint64_t kDecodedLeafBytes = 600;
 DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
                               std::span<const glm::dvec3> points, bool keepValues = false,
-                              uint64_t regionLeaves = 2000000);
+                              uint64_t regionLeaves = kRegionLeaves);
 
 // Every step-th point, at most `limit` of them, spread over the whole cloud.
 std::vector<glm::dvec3> samplePoints(const PointCloud& cloud, size_t limit);

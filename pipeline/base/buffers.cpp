@@ -121,13 +121,49 @@ void releaseLocked(SpillState& s) {
 }
 
 constexpr uint64_t kMinFilePages = uint64_t{64} << 20;
+constexpr size_t kDropSlice = size_t{32} << 20;
+
+// Drop spilled pages a slice of 32 MiB at a time, going on from where the last drop stopped, until
+// the process is at or below `target`; returns the most it was seen at meanwhile. While a drop
+// runs, the stages go on mapping pages, and a read fault maps its cached neighbours too (fault-
+// around: 12 pages a random read here), so a whole drop of a large resident set let the process
+// grow past the limit before the drop took effect; slices are looked between, and stop early.
+uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resumeOffset) {
+  uint64_t most = 0;
+  auto it = s.mappings.lower_bound(resume);
+  size_t offset = it != s.mappings.end() && it->first == resume ? resumeOffset : 0;
+  for (size_t visited = 0; visited <= s.mappings.size(); ++visited, offset = 0) {
+    if (it == s.mappings.end()) it = s.mappings.begin();
+    const size_t length = roundToPages(it->second);
+    for (; offset < length; offset += kDropSlice) {
+      madvise(static_cast<char*>(it->first) + offset, std::min(kDropSlice, length - offset),
+              MADV_DONTNEED);
+      const uint64_t all = currentRssBytes();
+      most = std::max(most, all);
+      if (all <= target) {
+        resume = it->first;
+        resumeOffset = offset + kDropSlice;
+        ++s.stats.releases;
+        return most;
+      }
+    }
+    ++it;
+  }
+  resume = nullptr;
+  ++s.stats.releases;
+  return most;
+}
 
 void pagerLoop() {
   SpillState& s = state();
   std::unique_lock lock(s.mutex);
-  // The most the process grew between two looks, decaying by half in about 3 s.
-  double burst = 0.0;
+  // The most the process grew between two looks, and the most it went past the limit while a
+  // drop ran, both decaying by half in about 3 s.
+  double burst = 0.0, overshoot = 0.0;
   uint64_t last = 0;
+  void* resume = nullptr;  // where the next drop starts
+  size_t resumeOffset = 0;
+  const uint64_t limit = s.residentLimit;
   while (!s.stopping) {
     s.wake.wait_for(lock, std::chrono::milliseconds(2));
     if (s.stopping || s.mappings.empty()) continue;
@@ -135,17 +171,21 @@ void pagerLoop() {
     uint64_t files = 0;
     const uint64_t all = currentRssBytes(&files);
     lock.lock();
-    // Mapping cached pages again is fast (a page a fault, about 2.5 GB/s a thread), and a drop
-    // of a large resident set takes tens of milliseconds. So it acts early, by twice the largest
-    // growth seen between two looks lately (at least a sixteenth of the limit, at most seven
-    // eighths), when more than a sixteenth of the limit (64 MiB at least: below that, a drop
-    // saves less than the faults cost) is file pages.
+    // Mapping cached pages again is fast, and the stages map them at up to 5 GB/s (fault-
+    // around), so the pager acts early: by twice the largest growth seen between two looks
+    // lately plus twice the most the process went past the limit during a drop lately (at least
+    // a sixteenth of the limit, at most seven eighths), when more than a sixteenth of the limit
+    // (64 MiB at least: below that, a drop saves less than the faults cost) is file pages. It
+    // drops to three margins below the limit.
     burst = std::max(burst * 0.9995, all > last ? double(all - last) : 0.0);
+    overshoot *= 0.9995;
     last = all;
     const uint64_t margin =
-        std::clamp<uint64_t>(uint64_t(2.0 * burst), s.residentLimit / 16, s.residentLimit / 8 * 7);
-    if (all > s.residentLimit - margin && files > std::max(s.residentLimit / 16, kMinFilePages)) {
-      releaseLocked(s);
+        std::clamp<uint64_t>(uint64_t(2.0 * (burst + overshoot)), limit / 16, limit / 8 * 7);
+    if (all > limit - margin && files > std::max(limit / 16, kMinFilePages)) {
+      const uint64_t target = limit > 3 * margin ? limit - 3 * margin : 0;
+      const uint64_t most = dropUntil(s, target, resume, resumeOffset);
+      if (most > limit) overshoot = std::max(overshoot, double(most - limit));
       last = currentRssBytes();
     }
   }
@@ -214,6 +254,12 @@ SpillArea::Stats SpillArea::stats() {
   SpillState& s = state();
   std::lock_guard lock(s.mutex);
   return s.stats;
+}
+
+uint64_t SpillArea::residentLimit() {
+  SpillState& s = state();
+  std::lock_guard lock(s.mutex);
+  return s.active ? s.residentLimit : 0;
 }
 
 void SpillArea::release() {

@@ -70,6 +70,8 @@ class SpillArea {
     uint64_t releases = 0;   // times the pager dropped the resident pages
   };
   static Stats stats();
+  // The active area's resident limit (the memory a conversion is held to); 0 when none is.
+  static uint64_t residentLimit();
   // Drop every spilled array's pages from the process now (what the pager does).
   static void release();
 };

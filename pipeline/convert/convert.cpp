@@ -419,7 +419,13 @@ void reportWritten(const std::filesystem::path& written, const WriteStats& stats
        double(stats.fileBytesWithoutMetadata) / double(std::max<uint64_t>(leaves, 1))},
       {"bytes_per_point", double(stats.fileBytesWithoutMetadata) / double(inputPoints)}};
   const Reader writtenReader = Reader::open(written);
-  const DistanceStats d = pointsToZeroSet(writtenReader, frame, sample);
+  // Regions of about a quarter of the memory a conversion is held to (--memory), at the measure's
+  // kDecodedLeafBytes a leaf; the distances do not depend on it.
+  const uint64_t limit = SpillArea::residentLimit();
+  const uint64_t regionLeaves =
+      limit > 0 ? std::clamp<uint64_t>(limit / 4 / kDecodedLeafBytes, 50000, kRegionLeaves)
+                : kRegionLeaves;
+  const DistanceStats d = pointsToZeroSet(writtenReader, frame, sample, false, regionLeaves);
   report["accuracy"] = {{"samples", d.samples},
                         {"unprojected", d.unprojected},
                         {"rms", d.rms},
