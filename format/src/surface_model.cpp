@@ -139,31 +139,37 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
         source ? source(info.id)
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
     const SurfaceChunk& chunk = *decoded;
-    // Corner values appended to the model's; returns where they start.
-    const auto append = [&](const CornerValues& v) {
-      const uint32_t base = uint32_t(model.corners_.distance.size());
+    // A corner's values appended to the model's the first time one of its leaves is kept:
+    // corner c of values v, through remap (the model's number of each of v's corners, or
+    // kNoNode).
+    const auto cornerOf = [&](const CornerValues& v, std::vector<uint32_t>& remap, uint32_t c) {
+      if (remap[c] != kNoNode) return remap[c];
       CornerValues& to = model.corners_;
-      to.distance.insert(to.distance.end(), v.distance.begin(), v.distance.end());
-      to.normal.insert(to.normal.end(), v.normal.begin(), v.normal.end());
-      to.color.insert(to.color.end(), v.color.begin(), v.color.end());
-      to.occlusion.insert(to.occlusion.end(), v.occlusion.begin(), v.occlusion.end());
-      return base;
+      remap[c] = uint32_t(to.distance.size());
+      to.distance.push_back(v.distance[c]);
+      if (!v.normal.empty()) to.normal.push_back(v.normal[c]);
+      if (!v.color.empty()) to.color.push_back(v.color[c]);
+      if (!v.occlusion.empty()) to.occlusion.push_back(v.occlusion[c]);
+      return remap[c];
     };
-    const uint32_t cornerBase = append(chunk.leafValues);
-    // The internal nodes at the cut level become leaves with their level-of-detail corners.
-    const bool cutsHere =
-        std::any_of(chunk.layout.nodes.begin(), chunk.layout.nodes.end(),
-                    [&](const SurfaceNode& n) { return n.level == cutLevel && !n.isLeaf(); });
-    const uint32_t lodBase = cutsHere ? append(chunk.lodValues) : kNoNode;
+    std::vector<uint32_t> leafRemap(chunk.leafValues.size(), kNoNode), lodRemap;
+    const auto leafOf = [&](const SurfaceNode& node, const CornerValues& values,
+                            std::vector<uint32_t>& remap) {
+      Leaf leaf{node.key, node.level, {}};
+      for (int c = 0; c < kCorners; ++c)
+        leaf.corners[size_t(c)] = cornerOf(values, remap, node.corners[size_t(c)]);
+      return leaf;
+    };
     for (const SurfaceNode& node : chunk.layout.nodes) {
       if (node.level > cutLevel) continue;
+      // A node outside the region (and so everything below it) is never reached by a query.
+      if (region && !region->meetsCell(node.level, node.key)) continue;
       const uint32_t id = ensureNode(node.level, node.key, ensureNode);
       if (node.level == cutLevel && !node.isLeaf()) {
-        Leaf leaf{node.key, node.level, {}};
-        for (int c = 0; c < kCorners; ++c)
-          leaf.corners[size_t(c)] = lodBase + node.corners[size_t(c)];
+        // The internal nodes at the cut level become leaves with their level-of-detail corners.
+        if (lodRemap.empty()) lodRemap.assign(chunk.lodValues.size(), kNoNode);
         model.nodes_[id].leaf = uint32_t(model.leaves_.size());
-        model.leaves_.push_back(leaf);
+        model.leaves_.push_back(leafOf(node, chunk.lodValues, lodRemap));
         continue;
       }
       if (node.isLeaf()) {
@@ -171,11 +177,8 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
           throw FileError(
               reader.name(), info.offset,
               "chunk " + std::to_string(info.id) + ": a leaf overlaps another chunk's leaf");
-        Leaf leaf{node.key, node.level, {}};
-        for (int c = 0; c < kCorners; ++c)
-          leaf.corners[size_t(c)] = cornerBase + node.corners[size_t(c)];
         model.nodes_[id].leaf = uint32_t(model.leaves_.size());
-        model.leaves_.push_back(leaf);
+        model.leaves_.push_back(leafOf(node, chunk.leafValues, leafRemap));
       } else if (node.firstChild == kNoNode) {
         cuts.push_back({info.id, id, node.childMask, node.level, node.key});
       }

@@ -2,6 +2,8 @@
 // (specs/pipeline.md; iso eval's metric): 200k-point scans of a sphere and a torus.
 #include <gtest/gtest.h>
 
+#include <set>
+
 #include "pipeline/analysis/measure.h"
 #include "pipeline/base/options.h"
 #include "tests/pipeline/pipeline_support.h"
@@ -107,10 +109,18 @@ TEST(Accuracy, theRegionalMeasureGivesTheWholeModelsDistances) {
     EXPECT_EQ(regional.rms, whole.rms) << regionLeaves;
     EXPECT_EQ(regional.max, whole.max) << regionLeaves;
   }
-  // A region loads only the chunks that meet it, and answers inside it as the whole model does.
+  // A region loads only the chunks that meet it, keeps of them only the leaves that meet it (and
+  // their corners), and answers inside it as the whole model does.
   SurfaceModel::Region region{{0.25, 0.25, 0.25}, {0.5, 0.5, 0.75}};
   const SurfaceModel part = SurfaceModel::load(reader, region);
   EXPECT_LT(part.leaves().size(), converted.surface.leaves().size() / 2);
+  std::set<uint32_t> used;
+  for (const SurfaceModel::Leaf& leaf : part.leaves()) {
+    EXPECT_TRUE(region.meetsCell(leaf.level, leaf.key));
+    used.insert(leaf.corners.begin(), leaf.corners.end());
+  }
+  EXPECT_EQ(used.size(), part.corners().size());
+  EXPECT_EQ(part.corners().normal.size(), part.corners().size());
   size_t inside = 0;
   for (const SurfaceModel::Leaf& leaf : converted.surface.leaves()) {
     if (!region.meetsCell(leaf.level, leaf.key)) continue;
@@ -124,6 +134,7 @@ TEST(Accuracy, theRegionalMeasureGivesTheWholeModelsDistances) {
     EXPECT_EQ(part.leaves()[found].level, leaf.level);
   }
   EXPECT_GT(inside, 100u);
+  EXPECT_EQ(inside, part.leaves().size());
 }
 
 TEST(Accuracy, hundredThousandRaysAtAClosedShapeNeverLeak) {
