@@ -64,6 +64,13 @@ constexpr uint64_t kHitBytes = 48;  // three vec4s a camera-ray hit
 constexpr uint64_t kWavePixels = uint64_t(1) << 18;
 enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits };
 
+// The workgroups of a frame: tiles of the workgroup's size, as the shader lays them out.
+uint32_t tileCount(uint32_t width, uint32_t height, uint32_t workgroupSize) {
+  const uint32_t tileWidth = 1u << ((std::countr_zero(workgroupSize) + 1) / 2);
+  const uint32_t tileHeight = workgroupSize / tileWidth;
+  return ((width + tileWidth - 1) / tileWidth) * ((height + tileHeight - 1) / tileHeight);
+}
+
 uint64_t feedbackBytes(uint32_t chunkCount) {
   return (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4;
 }
@@ -114,6 +121,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                    RendererOptions options)
     : gpu_(gpu), asset_(asset), options_(options) {
   ISO_CHECK(options.framesInFlight >= 1 && options.framesInFlight <= kMaxFramesInFlight);
+  ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
+            options.workgroupSize <= 1024);
   const auto chunks = asset.reader.chunks();
   const uint32_t chunkCount = uint32_t(chunks.size());
   options_.capacityWidth = std::max(options.capacityWidth, options.width);
@@ -121,9 +130,9 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
   const BlobSizes sizes = blobSizes(asset, options.uploadBytes);
-  const uint64_t wavePixels =
-      std::min<uint64_t>(pixelsBytes / 4 + options.workgroupSize, kWavePixels);
-  waveTiles_ = uint32_t(std::max<uint64_t>(wavePixels / options.workgroupSize, 1));
+  waveTiles_ = uint32_t(std::min<uint64_t>(
+      tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize),
+      kWavePixels / options.workgroupSize));
   const uint64_t hitsBytes =
       options.oneKernel ? 16 : uint64_t(waveTiles_) * options.workgroupSize * kHitBytes;
   const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
@@ -156,8 +165,6 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
     table_[i].state = {gpu::kNotResident, chunks[i].level,
                        glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
   const uint32_t counts[] = {1, 1, 1, 1, 1, 1};
-  ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
-            options.workgroupSize <= 1024);
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
   // by Variant.
   std::vector<std::vector<uint32_t>> variants;
@@ -347,11 +354,7 @@ VkCommandBuffer Renderer::record() {
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 1);
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
                           nullptr);
-  // Tiles of the workgroup's size, as the shader lays them out.
-  const uint32_t tileWidth = 1u << ((std::countr_zero(options_.workgroupSize) + 1) / 2);
-  const uint32_t tileHeight = options_.workgroupSize / tileWidth;
-  const uint32_t tiles = ((options_.width + tileWidth - 1) / tileWidth) *
-                         ((options_.height + tileHeight - 1) / tileHeight);
+  const uint32_t tiles = tileCount(options_.width, options_.height, options_.workgroupSize);
   if (slot.wavefront) {
     recordWavefront(cb, tiles);
   } else {
