@@ -100,14 +100,18 @@ struct Walk {
   uint known;
 };
 
-// The level-of-detail rule at the walk's distance, kept until the distance grows by an eighth of
-// an octave (the error codes' step): a little finer than needed in between, never coarser.
-void updateLod(ISO_INOUT(Walk) w) {
+// The level-of-detail rule at the walk's distance: the rule of the near end of its distance's
+// bucket (the distance with its mantissa cut to 3 bits: steps of at most 12.5 %), a little finer
+// than needed inside the bucket, never coarser. The rule depends on the distance alone, not on
+// where the ray started. Returns true when the rule changed.
+bool updateLod(ISO_INOUT(Walk) w) {
   float at = w.distance + w.t;
-  if (at <= w.lodDistance) return;
-  float pixel = P.eye.w * at;  // a pixel's width at the ray's distance
+  if (at < w.lodDistance) return false;
+  uint bucket = floatBitsToUint(max(at, 0.0f)) & 0xFFF00000u;
+  float pixel = P.eye.w * uintBitsToFloat(bucket);  // a pixel's width at the bucket's near end
   w.lod = lodRule(pixel, P.lod.x * pixel);
-  w.lodDistance = at * 1.0905077f;
+  w.lodDistance = uintBitsToFloat(bucket + 0x00100000u);
+  return true;
 }
 
 // One level down from the walk's node toward the cell that holds w.g. Returns true when that
@@ -165,7 +169,7 @@ bool descend(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
 // cells' common ancestor when it keeps it, else at the root of its chunk when that chunk holds
 // both cells, else at the top. Returns false when the ray
 // leaves the cube or its segment first.
-bool visit(ISO_INOUT(Walk) w, Cell cell) {
+bool visit(ISO_INOUT(Walk) w, ISO_INOUT(Cell) cell) {
   cell.level = w.level;
   cell.coord = w.g >> (kGridLevels - w.level);
   cell.base = w.chunk.base;
@@ -232,15 +236,19 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
   uvec3 first = cell.coord << shift;
   uvec3 g = clamp(uvec3(clamp(p * kGridSize, vec3(0.0f), vec3(float(kGridMax)))), first,
                   first + uvec3((1u << shift) - 1u));
-  uint lower = first[axis];
-  uint upper = (cell.coord[axis] + 1u) << shift;
-  if (w.dir[axis] > 0.0f) {
+  // (Components picked by selects, not by a variable index: that goes through memory on CPUs.)
+  bool onX = axis == 0u, onY = axis == 1u;
+  uint lower = onX ? first.x : (onY ? first.y : first.z);
+  uint upper = lower + (1u << shift);
+  uint next;
+  if ((onX ? w.dir.x : (onY ? w.dir.y : w.dir.z)) > 0.0f) {
     if (upper > kGridMax) return false;
-    g[axis] = upper;
+    next = upper;
   } else {
     if (lower == 0u) return false;
-    g[axis] = lower - 1u;
+    next = lower - 1u;
   }
+  g = uvec3(onX ? next : g.x, onY ? next : g.y, !onX && !onY ? next : g.z);
   w.g = g;
   // The deepest common ancestor of this cell and the next (the cells of a level are the same for
   // two grid points until their highest differing bit): when it is in this chunk, the next cell
@@ -249,7 +257,11 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
   uint ancestor = kGridLevels - 1u - uint(findMSB(differ));
   uint nodeLevel = cell.filled ? cell.level : cell.level - 1u;  // an empty cell's node: its parent
   uint up = nodeLevel - ancestor;
-  if (ancestor >= w.rootLevel && up <= w.known) {
+  // A new level-of-detail rule may draw a node above the ancestor in place of its children: the
+  // descent then starts at the top, so that the cell a ray visits depends on its grid point and
+  // its distance alone (the same cells wherever the ray started; coneStart relies on it).
+  bool newRule = updateLod(w);
+  if (!newRule && ancestor >= w.rootLevel && up <= w.known) {
     // The ancestor is the node, or one of the three kept above it.
     uint a1 = w.up1, a2 = w.up2, a3 = w.up3;
     w.node = up == 0u ? w.node : (up == 1u ? a1 : (up == 2u ? a2 : a3));
@@ -258,7 +270,7 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
     w.known -= up;
     w.level = ancestor;
   } else {
-    if (ancestor < w.rootLevel) {
+    if (newRule || ancestor < w.rootLevel) {
       w.chunk = chunkView(P.options.z);
       w.rootLevel = 0u;
       w.rootNode = 0u;
@@ -267,7 +279,6 @@ bool visit(ISO_INOUT(Walk) w, Cell cell) {
     w.node = w.rootNode;
     w.known = 0u;
   }
-  updateLod(w);
   return true;
 }
 

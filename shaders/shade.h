@@ -115,8 +115,9 @@ float packRayState(float side, bool inMedium) { return side + 1.0f + (inMedium ?
 // flipped normal, tinted (kOptionBackTint) or passed through (kOptionBackHide). Every hit is shaded
 // with the normal facing the ray; the rays that leave it keep the side they leave on.
 // Pending rays wait on a small stack of vec4s: origin and path length before it, direction and
-// bounce count, weight and the ray's state (packRayState).
-vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
+// bounce count, weight and the ray's state (packRayState). The camera ray starts at `start`
+// (its tile's, cone.h: empty space before it).
+vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
   vec4 stackOrigin[kRayStack];
   vec4 stackDirection[kRayStack];
   vec4 stackWeight[kRayStack];
@@ -143,7 +144,7 @@ vec3 radiance(vec3 o, vec3 d, ISO_INOUT(uint) rng, ISO_INOUT(uvec3) rays) {
       rays.x += 1u;
     else
       rays.z += 1u;
-    if (!intersect(origin, direction, 0.0f, 1e30f, side, primary && hideBack, before,
+    if (!intersect(origin, direction, primary ? start : 0.0f, 1e30f, side, primary && hideBack, before,
                    primary && (P.options.x & kOptionRequests) != 0u, hit)) {
       color += weight * background(direction);
     } else {
@@ -235,8 +236,9 @@ uint packPixel(vec3 c) {
   return r | (gc << 8u) | (b << 16u) | (255u << 24u);
 }
 
-// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples.
-uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
+// The packed 8-bit color of pixel (x, y): the mean of P.image.z jittered samples, whose camera
+// rays start at `start`.
+uint renderPixel(uint x, uint y, float start, ISO_INOUT(uvec3) rays) {
   uint samples = max(P.image.z, 1u);
   uint rng = pixelSeed(x, y);
   vec3 sum = vec3(0.0f);
@@ -244,7 +246,7 @@ uint renderPixel(uint x, uint y, ISO_INOUT(uvec3) rays) {
   for (uint s = 0u; s < samples; ++s) {
     float jx = samples > 1u ? randomUnit(rng) : 0.5f;
     float jy = samples > 1u ? randomUnit(rng) : 0.5f;
-    sum += radiance(eye, cameraDirection(x, y, jx, jy), rng, rays);
+    sum += radiance(eye, cameraDirection(x, y, jx, jy), start, rng, rays);
   }
   return packPixel(sum / float(samples));
 }

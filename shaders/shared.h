@@ -28,10 +28,10 @@ ISO_CONST uint kPoolBuffers = 8u;
 ISO_CONST uint kNotResident = 0xFFFFFFFFu;
 
 // A chunk on the GPU ("blob"), in 32-bit words from its first word.
-ISO_CONST uint kBlobNodeCount = 0u;    // nodes of the chunk
-ISO_CONST uint kBlobWords = 1u;        // words of the blob
-ISO_CONST uint kBlobNodes = 2u;        // holds the word of node 0 (even); node i is the 2 words 2i on
-ISO_CONST uint kBlobData = 3u;         // holds the word of corner record 0 (even)
+ISO_CONST uint kBlobNodeCount = 0u;  // nodes of the chunk
+ISO_CONST uint kBlobWords = 1u;      // words of the blob
+ISO_CONST uint kBlobNodes = 2u;      // holds the word of node 0 (even); node i is the 2 words 2i on
+ISO_CONST uint kBlobData = 3u;       // holds the word of corner record 0 (even)
 ISO_CONST uint kBlobHeaderWords = 4u;  // the node records follow
 // Node records, read as one uvec2: word 0 = childMask (bits 0-7; 0 for a filled leaf) | kNodeCut
 // | the node's geometric error code << kNodeErrorShift; word 1 = the first child's node index
@@ -74,6 +74,9 @@ ISO_CONST uint kMaxLights = 4u;
 ISO_CONST uint kRayStack = 8u;        // pending reflection/refraction rays per sample
 ISO_CONST uint kMaxSteps = 4096u;     // cells one ray may visit (a guard, never a visible limit)
 ISO_CONST uint kWorkgroupSize = 64u;  // one 8×8 tile of pixels, visited in Z-order
+// A tile's cone of camera rays (cone.h): nodes it may look at, and nodes waiting on its stack.
+ISO_CONST uint kConeNodes = 128u;
+ISO_CONST uint kConeStack = 24u;
 // A node is drawn in place of its children only when it spans at most this many pixels (its
 // colors and normals are interpolated across it), besides its error being small enough.
 ISO_CONST float kLodNodePixels = 2.0f;
@@ -92,6 +95,8 @@ ISO_CONST uint kOptionBackTint = 512u;   // back faces seen by camera rays take 
 ISO_CONST uint kOptionBackHide = 1024u;  // camera rays pass through back faces
 ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
 ISO_CONST uint kOptionFlatTraversal = 4096u;   // one loop of turns, not a loop of cells (rays.h)
+ISO_CONST uint kOptionTileCones =
+    8192u;  // camera rays start where their tile's cone meets a node (cone.h)
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;

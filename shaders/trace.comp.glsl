@@ -23,6 +23,9 @@ layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
 // indirect dispatch of the second pass (x, y, z workgroups), and the wave's first tile.
 layout(std430, binding = 5) buffer Hits { vec4 hits[]; };
 layout(std430, binding = 6) buffer Queue { uint queue[]; };
+// Where each tile's camera rays start (cone.h), written by the cone pass (kPass 3) before the
+// frame's other passes, when tile cones are on.
+layout(std430, binding = 7) buffer Starts { float starts[]; };
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
 // lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
@@ -76,24 +79,45 @@ bool flatTraversal() { return kFlatTraversal; }
 // 0: each invocation draws its pixel whole (one kernel). A wavefront frame (one sample a pixel,
 // no secondary rays) runs two, a wave of tiles at a time: 1 traces the camera rays and appends
 // their hits to a queue, 2 shades the queued hits with their shadow rays, the hits side by side in
-// the SIMD lanes.
+// the SIMD lanes. 3 traces the tiles' cones first, a tile an invocation.
 layout(constant_id = 3) const uint kPass = 0u;
 
 #include "trace.h"
 
-// The pixel of this invocation: a tile of tileWidth × tileHeight pixels (as wide as high, or twice
-// as wide), tiles row by row, Z-order inside the tile.
-uvec2 tilePixel(uint tile) {
+// The workgroup's tile: tileWidth × tileHeight pixels (as wide as high, or twice as wide), tiles
+// row by row. Returns the tile's first pixel; `size` is its width and height.
+uvec2 tileOrigin(uint tile, out uvec2 size) {
   uint tileWidth = 1u << uint((findMSB(gl_WorkGroupSize.x) + 1) / 2);
   uint tileHeight = gl_WorkGroupSize.x / tileWidth;
   uint tilesX = (P.image.x + tileWidth - 1u) / tileWidth;
-  uint i = gl_LocalInvocationIndex;  // x from even bits, y from odd
+  size = uvec2(tileWidth, tileHeight);
+  return uvec2((tile % tilesX) * tileWidth, (tile / tilesX) * tileHeight);
+}
+
+// The pixel of this invocation in the tile: Z-order, x from the even bits of its index, y from
+// the odd.
+uvec2 tilePixel(uvec2 origin) {
+  uint i = gl_LocalInvocationIndex;
   uint lx = 0u, ly = 0u;
   for (uint b = 0u; b < 5u; ++b) {
     lx |= ((i >> (2u * b)) & 1u) << b;
     ly |= ((i >> (2u * b + 1u)) & 1u) << b;
   }
-  return uvec2((tile % tilesX) * tileWidth + lx, (tile / tilesX) * tileHeight + ly);
+  return origin + uvec2(lx, ly);
+}
+
+// Pass 3: the cone of this invocation's tile.
+void traceCones() {
+  uvec2 size;
+  uvec2 origin = tileOrigin(gl_GlobalInvocationID.x, size);
+  if (origin.y >= P.image.y) return;
+  uvec2 end = min(origin + size, uvec2(P.image.x, P.image.y));
+  starts[gl_GlobalInvocationID.x] = tileStart(origin.x, origin.y, end.x, end.y);
+}
+
+// Where the camera rays of a tile start.
+float tileRaysStart(uint tile) {
+  return (P.options.x & kOptionTileCones) != 0u ? starts[tile] : 0.0f;
 }
 
 void countRays(uvec3 rays) {
@@ -108,7 +132,11 @@ shared uint groupFirst;
 // Pass 1: the camera ray of each pixel; a miss writes the background, a hit is appended to the
 // queue (one global atomic a workgroup) for pass 2.
 void traceCameraRays() {
-  uvec2 xy = tilePixel(queue[4] + gl_WorkGroupID.x);
+  uvec2 size;
+  uint tile = queue[4] + gl_WorkGroupID.x;
+  uvec2 origin = tileOrigin(tile, size);
+  uvec2 xy = tilePixel(origin);
+  float start = tileRaysStart(tile);
   bool inside = xy.x < P.image.x && xy.y < P.image.y;
   if (gl_LocalInvocationIndex == 0u) groupHits = 0u;
   barrier();
@@ -119,7 +147,7 @@ void traceCameraRays() {
     vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
     vec3 d = cameraDirection(xy.x, xy.y, 0.5f, 0.5f);
     bool hideBack = (P.options.x & kOptionBackHide) != 0u;
-    found = intersect(eye, d, 0.0f, 1e30f, hideBack ? 1.0f : 0.0f, hideBack, 0.0f,
+    found = intersect(eye, d, start, 1e30f, hideBack ? 1.0f : 0.0f, hideBack, 0.0f,
                       (P.options.x & kOptionRequests) != 0u, hit);
     if (found)
       slot = atomicAdd(groupHits, 1u);
@@ -173,9 +201,16 @@ void main() {
     shadeHits();
     return;
   }
-  uvec2 xy = tilePixel(gl_WorkGroupID.x);
+  if (kPass == 3u) {
+    traceCones();
+    return;
+  }
+  uvec2 size;
+  uvec2 origin = tileOrigin(gl_WorkGroupID.x, size);
+  uvec2 xy = tilePixel(origin);
+  float start = tileRaysStart(gl_WorkGroupID.x);
   if (xy.x >= P.image.x || xy.y >= P.image.y) return;
   uvec3 rays = uvec3(0u);
-  pixels[xy.y * P.image.x + xy.x] = renderPixel(xy.x, xy.y, rays);
+  pixels[xy.y * P.image.x + xy.x] = renderPixel(xy.x, xy.y, start, rays);
   countRays(rays);
 }

@@ -27,8 +27,10 @@
 //   cell.h     the surface inside one cell: the cubic along the ray and its first root
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
 //   shade.h    shading, shadows, reflections, refractions, one pixel
+//   cone.h     camera rays a tile at a time: where the tile's rays start
 
 #include "records.h"
 #include "cell.h"
 #include "rays.h"
 #include "shade.h"
+#include "cone.h"

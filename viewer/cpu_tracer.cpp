@@ -4,6 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <glm/glm.hpp>
@@ -102,17 +103,31 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
   const uint32_t width = params.image.x, height = params.image.y;
   frame.pixels.resize(size_t(width) * height);
   std::atomic<uint64_t> primary{0}, shadow{0}, secondary{0};
-  tbb::parallel_for(uint32_t(0), height, [&](uint32_t y) {
+  // Tiles of 8×8 pixels, as the GPU's workgroups of kWorkgroupSize draw them.
+  constexpr uint32_t kTile = 8;
+  static_assert(kTile * kTile == gpu::kWorkgroupSize);
+  const uint32_t tilesX = (width + kTile - 1) / kTile, tilesY = (height + kTile - 1) / kTile;
+  tbb::parallel_for(uint32_t(0), tilesX * tilesY, [&](uint32_t tile) {
     shader::Tracer tracer(pool, params, environment);
+    const uint32_t x0 = tile % tilesX * kTile, y0 = tile / tilesX * kTile;
+    const uint32_t x1 = std::min(x0 + kTile, width), y1 = std::min(y0 + kTile, height);
+    const float start = tracer.tileStart(x0, y0, x1, y1);
     glm::uvec3 count(0u);
-    for (uint32_t x = 0; x < width; ++x)
-      frame.pixels[size_t(y) * width + x] = tracer.renderPixel(x, y, count);
+    for (uint32_t y = y0; y < y1; ++y)
+      for (uint32_t x = x0; x < x1; ++x)
+        frame.pixels[size_t(y) * width + x] = tracer.renderPixel(x, y, start, count);
     primary += count.x;
     shadow += count.y;
     secondary += count.z;
   });
   frame.rays = {primary, shadow, secondary};
   return frame;
+}
+
+float tileStartCpu(const CpuPool& pool, const gpu::FrameParams& params, uint32_t x0, uint32_t y0,
+                   uint32_t x1, uint32_t y1) {
+  ISO_CHECK(x0 < x1 && y0 < y1);
+  return shader::Tracer(pool, params, nullptr).tileStart(x0, y0, x1, y1);
 }
 
 gpu::FrameParams finestFrameParams(const CpuPool& pool) {

@@ -55,6 +55,11 @@ struct CpuFrame {
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment);
 
+// Where the camera rays of the pixels [x0, x1) × [y0, y1) start in renderCpu: the start of the
+// tile's cone (shaders/cone.h), 1e30 where it meets nothing, 0 with tile cones off.
+float tileStartCpu(const CpuPool& pool, const gpu::FrameParams& params, uint32_t x0, uint32_t y0,
+                   uint32_t x1, uint32_t y1);
+
 // Parameters under which rays see the finest leaves everywhere (no coarser level of detail is
 // drawn) and nothing is shaded: for tracing single rays.
 gpu::FrameParams finestFrameParams(const CpuPool& pool);

@@ -62,7 +62,7 @@ constexpr auto kQueueUsage = kStorage | kTransferDst | VK_BUFFER_USAGE_INDIRECT_
 constexpr uint64_t kHitBytes = 48;  // three vec4s a camera-ray hit
 // Pixels a wave of a wavefront frame (its hits: 12 MiB), so that large pictures fit small budgets.
 constexpr uint64_t kWavePixels = uint64_t(1) << 18;
-enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits };
+enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits, kCones };
 
 // The workgroups of a frame: tiles of the workgroup's size, as the shader lays them out.
 uint32_t tileCount(uint32_t width, uint32_t height, uint32_t workgroupSize) {
@@ -78,7 +78,8 @@ uint64_t feedbackBytes(uint32_t chunkCount) {
 // Device memory of everything but the pool: per frame slot its parameters, chunk table, feedback
 // and staging region; the output and the environment map once.
 uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stagingRegion,
-                    uint64_t pixelsBytes, uint64_t envBytes, uint64_t hitsBytes) {
+                    uint64_t pixelsBytes, uint64_t envBytes, uint64_t hitsBytes,
+                    uint64_t startsBytes) {
   const uint64_t perSlot =
       bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
       bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
@@ -87,7 +88,9 @@ uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stag
   return slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
          bufferFootprint(gpu, envBytes, kStorage) +
          bufferFootprint(gpu, slots * stagingRegion, kTransferSrc) +
-         bufferFootprint(gpu, hitsBytes, kStorage) + bufferFootprint(gpu, kQueueBytes, kQueueUsage);
+         bufferFootprint(gpu, hitsBytes, kStorage) +
+         bufferFootprint(gpu, kQueueBytes, kQueueUsage) +
+         bufferFootprint(gpu, startsBytes, kStorage);
 }
 
 // Pool pages under the budget: what the rest leaves, less a page a buffer for alignment, in
@@ -135,8 +138,11 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
       kWavePixels / options.workgroupSize));
   const uint64_t hitsBytes =
       options.oneKernel ? 16 : uint64_t(waveTiles_) * options.workgroupSize * kHitBytes;
+  const uint64_t startsBytes =
+      uint64_t(tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize)) *
+      4;
   const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
-                                    pixelsBytes, envBytes, hitsBytes);
+                                    pixelsBytes, envBytes, hitsBytes, startsBytes);
   const uint64_t poolPages =
       poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
@@ -151,6 +157,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   staging_ = createBuffer(gpu, options.framesInFlight * sizes.stagingRegion, kTransferSrc, true);
   hits_ = createBuffer(gpu, hitsBytes, kStorage, false);
   queue_ = createBuffer(gpu, kQueueBytes, kQueueUsage, false);
+  starts_ = createBuffer(gpu, startsBytes, kStorage, false);
   for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
     const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
     pool_.push_back(createBuffer(gpu, pages * kPageBytes,
@@ -164,14 +171,13 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   for (uint32_t i = 0; i < chunkCount; ++i)
     table_[i].state = {gpu::kNotResident, chunks[i].level,
                        glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
-  const uint32_t counts[] = {1, 1, 1, 1, 1, 1};
+  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1};
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
   // by Variant.
   std::vector<std::vector<uint32_t>> variants;
-  for (const uint32_t pass : {kOneKernel, kCameraRays, kShadeHits})
+  for (const uint32_t pass : {kOneKernel, kCameraRays, kShadeHits, kCones})
     variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
-                        options.workgroupSize, pass});
-  if (options.oneKernel) variants.resize(1);
+                        options.workgroupSize, pass == kCones ? 3u : pass});
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);
   setup_.width = options.width;
@@ -186,6 +192,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
   setup_.flatTraversal = options.flatTraversal;
+  setup_.tileCones = options.tileCones;
   stats_.poolBytes = poolPages * kPageBytes;
 }
 
@@ -217,13 +224,11 @@ void Renderer::createSlots(uint64_t stagingRegion) {
 }
 
 void Renderer::writeDescriptors(const Slot& slot) {
-  const VkDescriptorBufferInfo infos[] = {{slot.params.buffer, 0, VK_WHOLE_SIZE},
-                                          {slot.table.buffer, 0, VK_WHOLE_SIZE},
-                                          {slot.feedback.buffer, 0, VK_WHOLE_SIZE},
-                                          {output_.buffer, 0, VK_WHOLE_SIZE},
-                                          {environment_.buffer, 0, VK_WHOLE_SIZE},
-                                          {hits_.buffer, 0, VK_WHOLE_SIZE},
-                                          {queue_.buffer, 0, VK_WHOLE_SIZE}};
+  const VkDescriptorBufferInfo infos[] = {
+      {slot.params.buffer, 0, VK_WHOLE_SIZE},   {slot.table.buffer, 0, VK_WHOLE_SIZE},
+      {slot.feedback.buffer, 0, VK_WHOLE_SIZE}, {output_.buffer, 0, VK_WHOLE_SIZE},
+      {environment_.buffer, 0, VK_WHOLE_SIZE},  {hits_.buffer, 0, VK_WHOLE_SIZE},
+      {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE}};
   constexpr uint32_t kBindings = std::size(infos);
   std::vector<VkWriteDescriptorSet> writes(kBindings, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
   for (uint32_t i = 0; i < kBindings; ++i) {
@@ -355,6 +360,7 @@ VkCommandBuffer Renderer::record() {
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
                           nullptr);
   const uint32_t tiles = tileCount(options_.width, options_.height, options_.workgroupSize);
+  if (setup_.tileCones) recordCones(cb, tiles);
   if (slot.wavefront) {
     recordWavefront(cb, tiles);
   } else {
@@ -373,6 +379,17 @@ VkCommandBuffer Renderer::record() {
                        VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
                        nullptr, 0, nullptr);
   return cb;
+}
+
+// The cones of the frame's tiles (cone.h), a tile an invocation, before the passes that read them.
+void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
+  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCones]);
+  vkCmdDispatch(cb, (tiles + options_.workgroupSize - 1) / options_.workgroupSize, 1, 1);
+  VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  b.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &b, 0, nullptr, 0, nullptr);
 }
 
 // The two passes of a wavefront frame, a wave of tiles at a time: the queue emptied, the camera
@@ -394,8 +411,7 @@ void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
             VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
     const uint32_t empty[8] = {0, 0, 1, 1, first, 0, 0, 0};  // no hits; 0 × 1 × 1 workgroups
     vkCmdUpdateBuffer(cb, queue_.buffer, 0, sizeof empty, empty);
-    barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute,
-            kShaderAccess);
+    barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute, kShaderAccess);
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCameraRays]);
     vkCmdDispatch(cb, std::min(waveTiles_, tiles - first), 1, 1);
     barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect,

@@ -39,6 +39,7 @@ struct RendererOptions {
   bool swapRedBlue = false;                        // BGRA output (swapchains)
   bool streaming = true;                           // rays request chunks; off: the top chunk alone
   bool flatTraversal = false;                      // the tracer's loop shape (shaders/rays.h)
+  bool tileCones = true;  // camera rays start where their tile's cone meets a node (cone.h)
   // Frames of one sample a pixel whose camera rays leave no secondary rays run as a wavefront, in
   // two passes (the camera rays, then the hits' shading and shadow rays side by side:
   // trace.comp.glsl); others as one kernel. With oneKernel every frame runs as one kernel (for
@@ -56,9 +57,9 @@ struct FrameStats {
   uint64_t uploadedBytes = 0;
   uint64_t streamedBytes = 0;  // since the start, up to this frame
   uint32_t evicted = 0;
-  uint32_t resident = 0;  // now, when collected
+  uint32_t resident = 0;   // now, when collected
   bool twoPasses = false;  // drawn as a wavefront (RendererOptions::oneKernel)
-  uint32_t pending = 0;   // asked for, not resident yet
+  uint32_t pending = 0;    // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
   double gpuSeconds = 0;            // copies and dispatch, from timestamps (0 without them)
   double dispatchSeconds = 0;       // the dispatch alone, from timestamps (0 without them)
@@ -132,6 +133,7 @@ class Renderer {
   void createSlots(uint64_t stagingRegion);
   void writeDescriptors(const Slot& slot);
   void recordWavefront(VkCommandBuffer cb, uint32_t tiles);
+  void recordCones(VkCommandBuffer cb, uint32_t tiles);
   uint32_t waveTiles_ = 0;  // tiles a wave of a wavefront frame (its hits fit hits_)
   void stage(Slot& slot);
   void collect(Slot& slot);
@@ -144,6 +146,7 @@ class Renderer {
   ComputePipeline pipeline_;
   Buffer output_, environment_, staging_;
   Buffer hits_, queue_;  // the wavefront's camera-ray hits and queue (16 bytes each without it)
+  Buffer starts_;        // where each tile's camera rays start (shaders/cone.h)
   std::vector<Buffer> pool_;
   uint32_t pagesPerBuffer_ = 0;
   std::unique_ptr<ChunkCache> cache_;

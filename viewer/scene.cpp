@@ -324,6 +324,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;
   if (s.flatTraversal) options |= gpu::kOptionFlatTraversal;
+  if (s.tileCones) options |= gpu::kOptionTileCones;
   if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
   if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};

@@ -104,6 +104,7 @@ struct FrameSetup {
   BlobOptions blob;  // what the corner records carry
   bool swapRedBlue = false, requests = true;
   bool flatTraversal = false;  // the loop shape of the tracer (shaders/rays.h)
+  bool tileCones = true;       // camera rays start where their tile's cone meets a node (cone.h)
 };
 
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.

@@ -38,6 +38,7 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
   r.vram = o.vram;
   r.uploadBytes = o.uploadBytes;
   r.flatTraversal = o.flatTraversal;
+  r.tileCones = o.tileCones;
   r.workgroupSize = o.workgroupSize;
   r.oneKernel = o.oneKernel;
   r.framesInFlight = framesInFlight;
@@ -126,6 +127,7 @@ int viewCpu(const ViewOptions& options) {
   const double load = seconds(Clock::now() - t0);
   FrameSetup setup = cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr);
   setup.flatTraversal = options.flatTraversal;
+  setup.tileCones = options.tileCones;
   const auto params =
       frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel, setup);
   const auto t1 = Clock::now();

@@ -30,6 +30,7 @@ struct ViewOptions {
   uint32_t benchFrames = 120;
   // The tracer's loop shape and workgroup size (measured in specs/viewer.md).
   bool flatTraversal = false;
+  bool tileCones = true;  // camera rays start where their tile's cone meets a node (cone.h)
   uint32_t workgroupSize = 64;
   bool oneKernel = false;  // RendererOptions::oneKernel
   bool cpuCompare = true;  // also trace the first view with the CPU reference tracer

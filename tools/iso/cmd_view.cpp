@@ -195,6 +195,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
               "GPU: draw every frame with one kernel (by default frames of one sample a pixel "
               "without reflection or refraction rays run in two passes: the camera rays, then the "
               "hits' shading and shadow rays side by side); for measurements");
+  c->add_flag("!--no-tile-cones", a->view.tileCones,
+              "Start every camera ray at the eye (by default the rays of a tile of pixels start "
+              "where a cone around them first meets the octree, traced once a tile; the "
+              "pictures are the same); for measurements");
   c->add_flag("!--no-cpu-compare", a->view.cpuCompare,
               "--bench: skip tracing the first view on the CPU reference tracer (it decodes the "
               "whole file into memory)");
