@@ -205,9 +205,15 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
   return color;
 }
 
-float linearToSrgb(float c) {
-  c = clamp(c, 0.0f, 1.0f);
-  return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+// The 8-bit sRGB code of a linear value, clamped to [0, 1]: how many of the bounds where the code
+// rises it reaches (FrameParams.srgbBounds), by a binary search of 8 steps.
+uint srgbCode(float c) {
+  uint code = 0u;
+  for (uint step = 128u; step > 0u; step >>= 1u) {
+    uint k = code + step - 1u;
+    if (c >= P.srgbBounds[k >> 2u][k & 3u]) code += step;
+  }
+  return code;
 }
 
 // The direction of the camera ray through pixel (x, y) at offset (jx, jy) in it.
@@ -225,9 +231,9 @@ uint pixelSeed(uint x, uint y) { return hashUint(x * 1973u + y * 9277u + P.image
 
 // A linear color as the packed 8-bit sRGB pixel (BGRA with kOptionSwapRB).
 uint packPixel(vec3 c) {
-  uint r = uint(linearToSrgb(c.x) * 255.0f + 0.5f);
-  uint gc = uint(linearToSrgb(c.y) * 255.0f + 0.5f);
-  uint b = uint(linearToSrgb(c.z) * 255.0f + 0.5f);
+  uint r = srgbCode(c.x);
+  uint gc = srgbCode(c.y);
+  uint b = srgbCode(c.z);
   if ((P.options.x & kOptionSwapRB) != 0u) {
     uint swap = r;
     r = b;

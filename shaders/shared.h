@@ -136,6 +136,10 @@ struct FrameParams {
   // The linear value of each 8-bit sRGB code i of the corner records' colors, at [i / 4][i % 4]
   // (a table: 24 powers a hit cost the CPU tracer 8 % of its time; setColorTable in blob.h).
   vec4 srgbToLinear[64];
+  // Where the 8-bit sRGB code of a pixel's linear value rises: at [k / 4][k % 4] the least value
+  // whose code is above k (k < 255; the last entry is unused), so that the GPU and the CPU encode
+  // pixels alike, as the format's linearToSrgb8 does, without powers (setColorTable).
+  vec4 srgbBounds[64];
 };
 
 // One chunk in the chunk table (binding 1).

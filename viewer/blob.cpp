@@ -2,6 +2,7 @@
 #include "viewer/blob.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <glm/glm.hpp>
@@ -149,7 +150,25 @@ uint32_t recordWords(const BlobOptions& options) {
 }
 
 void setColorTable(gpu::FrameParams& params) {
-  for (uint32_t i = 0; i < 256; ++i) params.srgbToLinear[i / 4][i % 4] = srgb8ToLinear(uint8_t(i));
+  // Bound k: the least float whose code is above k, by bisection on the bits of the floats in
+  // [0, 1] (ordered as their bits are); the encoder is monotonic.
+  static const std::array<float, 256> bounds = [] {
+    std::array<float, 256> b{};
+    for (uint32_t k = 0; k < 255; ++k) {
+      uint32_t lo = 0, hi = std::bit_cast<uint32_t>(1.0f);  // code(lo) <= k < code(hi)
+      while (hi - lo > 1) {
+        const uint32_t mid = lo + (hi - lo) / 2;
+        (linearToSrgb8(std::bit_cast<float>(mid)) > k ? hi : lo) = mid;
+      }
+      b[k] = std::bit_cast<float>(hi);
+    }
+    b[255] = 2.0f;
+    return b;
+  }();
+  for (uint32_t i = 0; i < 256; ++i) {
+    params.srgbToLinear[i / 4][i % 4] = srgb8ToLinear(uint8_t(i));
+    params.srgbBounds[i / 4][i % 4] = bounds[i];
+  }
 }
 
 namespace {

@@ -47,7 +47,8 @@ uint32_t recordWords(const BlobOptions& options);
 // The option bits of FrameParams.options.x that say what records carry (kOptionNormals, ...).
 uint32_t recordOptionBits(const BlobOptions& options);
 
-// Fills FrameParams.srgbToLinear, the table that decodes the records' sRGB colors.
+// Fills FrameParams.srgbToLinear, the table that decodes the records' sRGB colors, and
+// FrameParams.srgbBounds, where the code of a pixel's linear value rises.
 void setColorTable(gpu::FrameParams& params);
 
 // The blob of a decoded chunk: header, node records, cut nodes' links, a corner record per node

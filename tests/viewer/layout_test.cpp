@@ -86,7 +86,8 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"surface", offsetof(FrameParams, surface)},
       {"lights", offsetof(FrameParams, lights)},
       {"poolAddress", offsetof(FrameParams, poolAddress)},
-      {"srgbToLinear", offsetof(FrameParams, srgbToLinear)}};
+      {"srgbToLinear", offsetof(FrameParams, srgbToLinear)},
+      {"srgbBounds", offsetof(FrameParams, srgbBounds)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},
