@@ -144,8 +144,8 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
       rays.x += 1u;
     else
       rays.z += 1u;
-    if (!intersect(origin, direction, primary ? start : 0.0f, 1e30f, side, primary && hideBack, before,
-                   primary && (P.options.x & kOptionRequests) != 0u, hit)) {
+    if (!intersect(origin, direction, primary ? start : 0.0f, 1e30f, side, primary && hideBack,
+                   before, primary && (P.options.x & kOptionRequests) != 0u, hit)) {
       color += weight * background(direction);
     } else {
       vec3 p = origin + direction * hit.t;

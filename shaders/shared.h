@@ -28,10 +28,10 @@ ISO_CONST uint kPoolBuffers = 8u;
 ISO_CONST uint kNotResident = 0xFFFFFFFFu;
 
 // A chunk on the GPU ("blob"), in 32-bit words from its first word.
-ISO_CONST uint kBlobNodeCount = 0u;  // nodes of the chunk
-ISO_CONST uint kBlobWords = 1u;      // words of the blob
-ISO_CONST uint kBlobNodes = 2u;      // holds the word of node 0 (even); node i is the 2 words 2i on
-ISO_CONST uint kBlobData = 3u;       // holds the word of corner record 0 (even)
+ISO_CONST uint kBlobNodeCount = 0u;    // nodes of the chunk
+ISO_CONST uint kBlobWords = 1u;        // words of the blob
+ISO_CONST uint kBlobNodes = 2u;        // holds the word of node 0 (even); node i is the 2 words 2i on
+ISO_CONST uint kBlobData = 3u;         // holds the word of corner record 0 (even)
 ISO_CONST uint kBlobHeaderWords = 4u;  // the node records follow
 // Node records, read as one uvec2: word 0 = childMask (bits 0-7; 0 for a filled leaf) | kNodeCut
 // | the node's geometric error code << kNodeErrorShift; word 1 = the first child's node index
@@ -95,8 +95,7 @@ ISO_CONST uint kOptionBackTint = 512u;   // back faces seen by camera rays take 
 ISO_CONST uint kOptionBackHide = 1024u;  // camera rays pass through back faces
 ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
 ISO_CONST uint kOptionFlatTraversal = 4096u;   // one loop of turns, not a loop of cells (rays.h)
-ISO_CONST uint kOptionTileCones =
-    8192u;  // camera rays start where their tile's cone meets a node (cone.h)
+ISO_CONST uint kOptionTileCones = 8192u;       // camera rays start where their tile's cone does
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;

@@ -18,14 +18,22 @@ layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
 layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
 layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
 layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
-// The two passes of a wavefront frame (kPass 1 and 2): the camera rays' hits, three vec4s each
-// (t, side, occlusion, pixel index; normal; color), and the queue's words: the count of hits, the
-// indirect dispatch of the second pass (x, y, z workgroups), and the wave's first tile.
+// The passes of a wavefront frame (kPass 1, 2 and 4): the hits to shade, three vec4s each (t,
+// side, occlusion, pixel index; normal, path index; color, depth: 0 for a camera ray's hit), and
+// the queue's words: 0 the count of hits, 1-3 the indirect dispatch of the shading pass (x, y, z
+// workgroups), 4 the wave's first tile, 5 the count of pending mirror rays, 8-10 the indirect
+// dispatch of the pass that traces them.
 layout(std430, binding = 5) buffer Hits { vec4 hits[]; };
 layout(std430, binding = 6) buffer Queue { uint queue[]; };
 // Where each tile's camera rays start (cone.h), written by the cone pass (kPass 3) before the
 // frame's other passes, when tile cones are on.
 layout(std430, binding = 7) buffer Starts { float starts[]; };
+// The paths of a wave's pixels whose hits reflect a mirror ray (binding 8), four vec4s each: the
+// color so far, the random state; the ray's weight, the path length before it; its origin, its
+// side and depth (side + 1 | depth << 2, as bits); its direction, the pixel's index. Binding 9:
+// the paths whose mirror ray waits to be traced.
+layout(std430, binding = 8) buffer Paths { vec4 paths[]; };
+layout(std430, binding = 9) buffer Pending { uint pending[]; };
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
 // lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
@@ -79,7 +87,9 @@ bool flatTraversal() { return kFlatTraversal; }
 // 0: each invocation draws its pixel whole (one kernel). A wavefront frame (one sample a pixel,
 // no secondary rays) runs two, a wave of tiles at a time: 1 traces the camera rays and appends
 // their hits to a queue, 2 shades the queued hits with their shadow rays, the hits side by side in
-// the SIMD lanes. 3 traces the tiles' cones first, a tile an invocation.
+// the SIMD lanes. 3 traces the tiles' cones first, a tile an invocation. In a frame whose hits
+// reflect mirror rays (and nothing refracts), 2 also queues those rays, 4 traces them and queues
+// their hits for 2, bounce after bounce.
 layout(constant_id = 3) const uint kPass = 0u;
 
 #include "trace.h"
@@ -162,34 +172,98 @@ void traceCameraRays() {
   barrier();
   if (found) {
     uint at = 3u * (groupFirst + slot);
+    uint path = (tile - queue[4]) * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     hits[at] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(xy.y * P.image.x + xy.x));
-    hits[at + 1u] = vec4(hit.normal, 0.0f);
+    hits[at + 1u] = vec4(hit.normal, uintBitsToFloat(path));
     hits[at + 2u] = vec4(hit.color, 0.0f);
   }
   if (inside) atomicAdd(feedback[kFeedbackPrimaryRays], 1u);
 }
 
-// Pass 2: the queued hits, shaded as the one kernel shades a camera ray's hit.
+// Pass 2: the queued hits, shaded as the one kernel shades a hit outside transparent objects
+// (radiance in shade.h, the same statements in the same order): a camera ray's from its pixel, a
+// mirror ray's from its path. A hit that reflects a mirror ray keeps its path and queues the ray;
+// the others write their pixel.
 void shadeHits() {
   uint index = gl_GlobalInvocationID.x;
   if (index >= queue[0]) return;
   vec4 a = hits[3u * index];
+  vec4 b = hits[3u * index + 1u];
+  vec4 c = hits[3u * index + 2u];
   uint pixel = floatBitsToUint(a.w);
-  uint x = pixel % P.image.x, y = pixel / P.image.x;
+  uint path = floatBitsToUint(b.w);
+  uint depth = floatBitsToUint(c.w);
   Hit hit;
   hit.t = a.x;
   hit.from = a.y;
   hit.occlusion = a.z;
-  hit.normal = hits[3u * index + 1u].xyz;
-  hit.color = hits[3u * index + 2u].xyz;
-  vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
-  vec3 d = cameraDirection(x, y, 0.5f, 0.5f);
-  vec3 p = eye + d * hit.t;
-  hit.normal = hit.from * hit.normal;  // facing the ray
-  uint rng = pixelSeed(x, y);
+  hit.normal = b.xyz;
+  hit.color = c.xyz;
+  vec3 origin = vec3(P.eye.x, P.eye.y, P.eye.z);
+  vec3 direction;
+  vec3 weight = vec3(1.0f);
+  vec3 color = vec3(0.0f);
+  float before = 0.0f;
+  uint rng;
+  if (depth == 0u) {
+    uint x = pixel % P.image.x, y = pixel / P.image.x;
+    direction = cameraDirection(x, y, 0.5f, 0.5f);
+    rng = pixelSeed(x, y);
+  } else {
+    vec4 p0 = paths[4u * path];
+    vec4 p1 = paths[4u * path + 1u];
+    color = p0.xyz;
+    rng = floatBitsToUint(p0.w);
+    weight = p1.xyz;
+    before = p1.w;
+    origin = paths[4u * path + 2u].xyz;
+    direction = paths[4u * path + 3u].xyz;
+  }
+  vec3 p = origin + direction * hit.t;
+  vec3 n = hit.from * hit.normal;  // facing the ray
+  hit.normal = n;
+  float distance = before + hit.t;
   uvec3 rays = uvec3(0u);
-  pixels[pixel] = packPixel(localFraction() * shadeOutside(p, d, hit, hit.t, rng, rays));
+  color += weight * localFraction() * shadeOutside(p, direction, hit, distance, rng, rays);
+  float mirror = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
+  if (depth < P.options.y && mirror > 0.0f) {
+    paths[4u * path] = vec4(color, uintBitsToFloat(rng));
+    paths[4u * path + 1u] = vec4(weight * mirror, distance);
+    uint state = uint(hit.from + 1.0f) | ((depth + 1u) << 2u);
+    paths[4u * path + 2u] = vec4(p + n * P.lod.y, uintBitsToFloat(state));
+    paths[4u * path + 3u] = vec4(reflect(direction, n), uintBitsToFloat(pixel));
+    uint k = atomicAdd(queue[5], 1u);
+    atomicMax(queue[8], (k + gl_WorkGroupSize.x) / gl_WorkGroupSize.x);
+    pending[k] = path;
+  } else {
+    pixels[pixel] = packPixel(color);
+  }
   countRays(rays);
+}
+
+// Pass 4: the pending mirror rays; a miss adds the background and writes the pixel, a hit is
+// queued for pass 2.
+void traceMirrorRays() {
+  uint index = gl_GlobalInvocationID.x;
+  if (index >= queue[5]) return;
+  uint path = pending[index];
+  vec4 p1 = paths[4u * path + 1u];
+  vec4 p2 = paths[4u * path + 2u];
+  vec4 p3 = paths[4u * path + 3u];
+  uint state = floatBitsToUint(p2.w);
+  uint pixel = floatBitsToUint(p3.w);
+  atomicAdd(feedback[kFeedbackSecondaryRays], 1u);
+  Hit hit;
+  if (!intersect(p2.xyz, p3.xyz, 0.0f, 1e30f, float(state & 3u) - 1.0f, false, p1.w, false,
+                 hit)) {
+    pixels[pixel] = packPixel(paths[4u * path].xyz + p1.xyz * background(p3.xyz));
+    return;
+  }
+  uint slot = atomicAdd(queue[0], 1u);
+  atomicMax(queue[1], (slot + gl_WorkGroupSize.x) / gl_WorkGroupSize.x);
+  hits[3u * slot] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(pixel));
+  hits[3u * slot + 1u] = vec4(hit.normal, uintBitsToFloat(path));
+  hits[3u * slot + 2u] = vec4(hit.color, uintBitsToFloat(state >> 2u));
 }
 
 void main() {
@@ -203,6 +277,10 @@ void main() {
   }
   if (kPass == 3u) {
     traceCones();
+    return;
+  }
+  if (kPass == 4u) {
+    traceMirrorRays();
     return;
   }
   uvec2 size;

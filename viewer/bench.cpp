@@ -195,6 +195,7 @@ json benchJson(const GpuView& view, const ViewOptions& o, const Orbit& orbit, co
             {"frames_in_flight", view.renderer.framesInFlight()},
             {"vram", o.vram},
             {"two_passes", last.twoPasses},
+            {"mirror_bounces", last.mirrorBounces},
             {"first_view",
              {{"frames", orbit.firstFrames},
               {"converged", orbit.firstConverged},
@@ -300,7 +301,12 @@ void printBench(const GpuView& view, const ViewOptions& o, const Orbit& orbit, c
       o.file.filename().string(), o.width, o.height, view.gpu.properties.deviceName, o.benchFrames,
       view.renderer.framesInFlight(), base.samples, base.shadows ? "on" : "off",
       base.reflections && base.material.reflectivity > 0 ? "on" : "off", byteSize(o.vram),
-      s.twoPasses ? "two passes (camera rays, then shading)" : "one kernel");
+      !s.twoPasses ? std::string("one kernel")
+      : s.mirrorBounces == 0
+          ? std::string("two passes (camera rays, then shading)")
+          : fmt::format("a wavefront (camera rays, shading, then {} bounce{} of mirror rays and "
+                        "their shading)",
+                        s.mirrorBounces, s.mirrorBounces == 1 ? "" : "s"));
   printTimes(orbit, n);
   printCpu(orbit, cpu, n);
   fmt::print("  GPU memory  {} in use, {} at most; pool {} of {}\n", byteSize(s.vramInUse),

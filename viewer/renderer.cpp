@@ -6,6 +6,7 @@
 #include <bit>
 #include <chrono>
 #include <cstring>
+#include <span>
 
 #include "iso/check.h"
 
@@ -55,14 +56,21 @@ constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 // vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
 constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
 
-// The wavefront's queue: the count of hits, the second pass's indirect dispatch (x, y, z), the
-// wave's first tile.
-constexpr uint64_t kQueueBytes = 32;
+// The wavefront's queue (trace.comp.glsl): the count of hits, the shading pass's indirect
+// dispatch (x, y, z), the wave's first tile, the count of mirror rays, two unused words, the
+// mirror pass's indirect dispatch (x, y, z), one unused word.
+constexpr uint64_t kQueueBytes = 48;
+constexpr uint32_t kQueueMirrorCount = 5, kQueueMirrorDispatch = 8;
 constexpr auto kQueueUsage = kStorage | kTransferDst | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
-constexpr uint64_t kHitBytes = 48;  // three vec4s a camera-ray hit
-// Pixels a wave of a wavefront frame (its hits: 12 MiB), so that large pictures fit small budgets.
-constexpr uint64_t kWavePixels = uint64_t(1) << 18;
-enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits, kCones };
+constexpr uint64_t kHitBytes = 48;     // three vec4s a hit
+constexpr uint64_t kPathBytes = 64;    // four vec4s a path that reflects a mirror ray, and
+constexpr uint64_t kPendingBytes = 4;  // its index while its ray waits
+// Pixels a wave of a wavefront frame (its hits, paths and pending rays: 14.5 MiB), so that large
+// pictures fit small budgets.
+constexpr uint64_t kWavePixels = uint64_t(1) << 17;
+// The pipelines, by the shader's kPass (trace.comp.glsl): one kernel, the camera rays, the
+// shading of hits, the cones, the mirror rays.
+enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits, kCones, kMirrorRays };
 
 // The workgroups of a frame: tiles of the workgroup's size, as the shader lays them out.
 uint32_t tileCount(uint32_t width, uint32_t height, uint32_t workgroupSize) {
@@ -136,13 +144,15 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   waveTiles_ = uint32_t(std::min<uint64_t>(
       tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize),
       kWavePixels / options.workgroupSize));
-  const uint64_t hitsBytes =
-      options.oneKernel ? 16 : uint64_t(waveTiles_) * options.workgroupSize * kHitBytes;
+  const uint64_t wavePixels = options.oneKernel ? 1 : uint64_t(waveTiles_) * options.workgroupSize;
+  const uint64_t hitsBytes = wavePixels * kHitBytes;
+  const uint64_t pathsBytes = wavePixels * kPathBytes, pendingBytes = wavePixels * kPendingBytes;
   const uint64_t startsBytes =
       uint64_t(tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize)) *
       4;
-  const uint64_t fixed = fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion,
-                                    pixelsBytes, envBytes, hitsBytes, startsBytes);
+  const uint64_t fixed =
+      fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion, pixelsBytes,
+                 envBytes, hitsBytes + pathsBytes + pendingBytes, startsBytes);
   const uint64_t poolPages =
       poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
@@ -158,6 +168,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   hits_ = createBuffer(gpu, hitsBytes, kStorage, false);
   queue_ = createBuffer(gpu, kQueueBytes, kQueueUsage, false);
   starts_ = createBuffer(gpu, startsBytes, kStorage, false);
+  paths_ = createBuffer(gpu, pathsBytes, kStorage, false);
+  pending_ = createBuffer(gpu, pendingBytes, kStorage, false);
   for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
     const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
     pool_.push_back(createBuffer(gpu, pages * kPageBytes,
@@ -171,13 +183,16 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   for (uint32_t i = 0; i < chunkCount; ++i)
     table_[i].state = {gpu::kNotResident, chunks[i].level,
                        glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
-  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1};
+  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1, 1, 1};
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
-  // by Variant.
+  // the options use (with oneKernel, one kernel and the cones).
   std::vector<std::vector<uint32_t>> variants;
-  for (const uint32_t pass : {kOneKernel, kCameraRays, kShadeHits, kCones})
+  for (const Variant pass : {kOneKernel, kCones, kCameraRays, kShadeHits, kMirrorRays}) {
+    if (options.oneKernel && pass != kOneKernel && pass != kCones) continue;
+    pipelineIndex_[pass] = uint32_t(variants.size());
     variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
-                        options.workgroupSize, pass == kCones ? 3u : pass});
+                        options.workgroupSize, pass});
+  }
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);
   setup_.width = options.width;
@@ -228,7 +243,8 @@ void Renderer::writeDescriptors(const Slot& slot) {
       {slot.params.buffer, 0, VK_WHOLE_SIZE},   {slot.table.buffer, 0, VK_WHOLE_SIZE},
       {slot.feedback.buffer, 0, VK_WHOLE_SIZE}, {output_.buffer, 0, VK_WHOLE_SIZE},
       {environment_.buffer, 0, VK_WHOLE_SIZE},  {hits_.buffer, 0, VK_WHOLE_SIZE},
-      {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE}};
+      {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE},
+      {paths_.buffer, 0, VK_WHOLE_SIZE},        {pending_.buffer, 0, VK_WHOLE_SIZE}};
   constexpr uint32_t kBindings = std::size(infos);
   std::vector<VkWriteDescriptorSet> writes(kBindings, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
   for (uint32_t i = 0; i < kBindings; ++i) {
@@ -288,9 +304,10 @@ void Renderer::prepare(gpu::FrameParams params) {
   else
     params.options.x &= ~gpu::kOptionRequests;
   std::memcpy(slot.params.mapped, &params, sizeof params);
-  // Two passes for frames whose pixels are one camera ray and its hit's shading.
-  slot.wavefront = !options_.oneKernel && params.image.z <= 1 && !secondaryRays(params);
+  // A wavefront for frames of one sample a pixel whose hits leave one mirror ray at most.
+  slot.wavefront = !options_.oneKernel && params.image.z <= 1 && !refractionRays(params);
   slot.stats.twoPasses = slot.wavefront;
+  slot.stats.mirrorBounces = slot.wavefront && secondaryRays(params) ? params.options.y : 0;
   for (uint32_t kind :
        {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
     static_cast<uint32_t*>(slot.feedback.mapped)[kind] = 0;
@@ -362,9 +379,9 @@ VkCommandBuffer Renderer::record() {
   const uint32_t tiles = tileCount(options_.width, options_.height, options_.workgroupSize);
   if (setup_.tileCones) recordCones(cb, tiles);
   if (slot.wavefront) {
-    recordWavefront(cb, tiles);
+    recordWavefront(cb, tiles, slot.stats.mirrorBounces);
   } else {
-    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kOneKernel]);
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(kOneKernel));
     vkCmdDispatch(cb, tiles, 1, 1);
   }
   if (hasTimestamps()) {
@@ -383,7 +400,7 @@ VkCommandBuffer Renderer::record() {
 
 // The cones of the frame's tiles (cone.h), a tile an invocation, before the passes that read them.
 void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
-  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCones]);
+  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(kCones));
   vkCmdDispatch(cb, (tiles + options_.workgroupSize - 1) / options_.workgroupSize, 1, 1);
   VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
   b.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
@@ -392,9 +409,10 @@ void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
                        VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &b, 0, nullptr, 0, nullptr);
 }
 
-// The two passes of a wavefront frame, a wave of tiles at a time: the queue emptied, the camera
-// rays filling it, then the second pass dispatched from it.
-void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
+// The passes of a wavefront frame, a wave of tiles at a time: the queue emptied, the camera rays
+// filling it, the shading of their hits dispatched from it; then, per bounce, the mirror rays
+// that shading queued and the shading of their hits.
+void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles, uint32_t bounces) {
   const auto barrier = [&](VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
                            VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
     VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
@@ -404,20 +422,42 @@ void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles) {
   };
   constexpr auto kCompute = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   constexpr auto kIndirect = VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
+  constexpr auto kTransfer = VK_PIPELINE_STAGE_TRANSFER_BIT;
   constexpr auto kShaderAccess = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+  constexpr auto kAfterPass = kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT;
+  // Queue words written once the passes before have read them, and read by the next.
+  const auto setQueue = [&](uint32_t word, std::span<const uint32_t> values) {
+    barrier(kCompute | kIndirect, kAfterPass, kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT);
+    vkCmdUpdateBuffer(cb, queue_.buffer, word * 4, values.size_bytes(), values.data());
+    barrier(kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
+  };
+  const auto pass = [&](Variant v) {
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(v));
+  };
+  const auto passDone = [&] {
+    barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
+  };
   for (uint32_t first = 0; first < tiles; first += waveTiles_) {
-    // The queue emptied once the previous wave's (or frame's) second pass has read it.
-    barrier(kCompute | kIndirect, kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT,
-            VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
-    const uint32_t empty[8] = {0, 0, 1, 1, first, 0, 0, 0};  // no hits; 0 × 1 × 1 workgroups
-    vkCmdUpdateBuffer(cb, queue_.buffer, 0, sizeof empty, empty);
-    barrier(VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute, kShaderAccess);
-    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kCameraRays]);
+    // No hits, no mirror rays; 0 × 1 × 1 workgroups for both dispatches.
+    const uint32_t empty[12] = {0, 0, 1, 1, first, 0, 0, 0, 0, 1, 1, 0};
+    setQueue(0, empty);
+    pass(kCameraRays);
     vkCmdDispatch(cb, std::min(waveTiles_, tiles - first), 1, 1);
-    barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect,
-            kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT);
-    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[kShadeHits]);
+    passDone();
+    pass(kShadeHits);
     vkCmdDispatchIndirect(cb, queue_.buffer, 4);
+    for (uint32_t bounce = 0; bounce < bounces; ++bounce) {
+      passDone();
+      const uint32_t none[2] = {0, 0};  // the hits shaded: their count and dispatch
+      setQueue(0, none);
+      pass(kMirrorRays);
+      vkCmdDispatchIndirect(cb, queue_.buffer, kQueueMirrorDispatch * 4);
+      passDone();
+      const uint32_t noRays[4] = {0, 0, 0, 0};  // the rays traced: their count, and dispatch x
+      setQueue(kQueueMirrorCount, noRays);
+      pass(kShadeHits);
+      vkCmdDispatchIndirect(cb, queue_.buffer, 4);
+    }
   }
 }
 

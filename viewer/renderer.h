@@ -14,6 +14,7 @@
 // Threading: one thread calls everything here.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -40,10 +41,10 @@ struct RendererOptions {
   bool streaming = true;                           // rays request chunks; off: the top chunk alone
   bool flatTraversal = false;                      // the tracer's loop shape (shaders/rays.h)
   bool tileCones = true;  // camera rays start where their tile's cone meets a node (cone.h)
-  // Frames of one sample a pixel whose camera rays leave no secondary rays run as a wavefront, in
-  // two passes (the camera rays, then the hits' shading and shadow rays side by side:
-  // trace.comp.glsl); others as one kernel. With oneKernel every frame runs as one kernel (for
-  // measurements).
+  // Frames of one sample a pixel whose hits leave no refracted rays run as a wavefront: the camera
+  // rays, then the hits' shading and shadow rays side by side, then, bounce after bounce, the
+  // mirror rays and their hits' shading (trace.comp.glsl); others as one kernel. With oneKernel
+  // every frame runs as one kernel (for measurements).
   bool oneKernel = false;
   uint32_t workgroupSize = 64;  // invocations a workgroup: a power of two, 8 to 1024
 };
@@ -57,9 +58,10 @@ struct FrameStats {
   uint64_t uploadedBytes = 0;
   uint64_t streamedBytes = 0;  // since the start, up to this frame
   uint32_t evicted = 0;
-  uint32_t resident = 0;   // now, when collected
-  bool twoPasses = false;  // drawn as a wavefront (RendererOptions::oneKernel)
-  uint32_t pending = 0;    // asked for, not resident yet
+  uint32_t resident = 0;       // now, when collected
+  bool twoPasses = false;      // drawn as a wavefront (RendererOptions::oneKernel)
+  uint32_t mirrorBounces = 0;  // of the wavefront: passes of mirror rays
+  uint32_t pending = 0;        // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
   double gpuSeconds = 0;            // copies and dispatch, from timestamps (0 without them)
   double dispatchSeconds = 0;       // the dispatch alone, from timestamps (0 without them)
@@ -125,14 +127,14 @@ class Renderer {
     Owned<VkFence> fence;
     Buffer params, table, feedback, timestamps;
     VkDescriptorSet set = VK_NULL_HANDLE;
-    bool wavefront = false;  // the prepared frame runs in two passes
+    bool wavefront = false;  // the prepared frame runs as a wavefront
     uint64_t stagingOffset = 0;
     std::vector<Copy> copies;
     FrameStats stats;  // what prepare() knows of the slot's frame
   };
   void createSlots(uint64_t stagingRegion);
   void writeDescriptors(const Slot& slot);
-  void recordWavefront(VkCommandBuffer cb, uint32_t tiles);
+  void recordWavefront(VkCommandBuffer cb, uint32_t tiles, uint32_t bounces);
   void recordCones(VkCommandBuffer cb, uint32_t tiles);
   uint32_t waveTiles_ = 0;  // tiles a wave of a wavefront frame (its hits fit hits_)
   void stage(Slot& slot);
@@ -144,9 +146,12 @@ class Renderer {
   RendererOptions options_;
   FrameSetup setup_;
   ComputePipeline pipeline_;
+  std::array<uint32_t, 5> pipelineIndex_{};  // by the shader's kPass: its pipeline in pipeline_
+  VkPipeline pipelineOf(uint32_t pass) const { return pipeline_.pipelines[pipelineIndex_[pass]]; }
   Buffer output_, environment_, staging_;
-  Buffer hits_, queue_;  // the wavefront's camera-ray hits and queue (16 bytes each without it)
-  Buffer starts_;        // where each tile's camera rays start (shaders/cone.h)
+  Buffer hits_, queue_;     // the wavefront's camera-ray hits and queue (16 bytes each without it)
+  Buffer starts_;           // where each tile's camera rays start (shaders/cone.h)
+  Buffer paths_, pending_;  // the wave's paths that reflect mirror rays, and the rays waiting
   std::vector<Buffer> pool_;
   uint32_t pagesPerBuffer_ = 0;
   std::unique_ptr<ChunkCache> cache_;

@@ -280,6 +280,10 @@ LightSpec defaultLight(const Camera& c, const Bounds& b) {
   return light;
 }
 
+bool refractionRays(const gpu::FrameParams& p) {
+  return p.options.y > 0u && (p.options.x & gpu::kOptionRefractions) != 0u && p.material.w > 0.0f;
+}
+
 bool secondaryRays(const gpu::FrameParams& p) {
   const float reflectivity = (p.options.x & gpu::kOptionReflections) != 0u ? p.material.z : 0.0f;
   const float transparency = (p.options.x & gpu::kOptionRefractions) != 0u ? p.material.w : 0.0f;

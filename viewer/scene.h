@@ -113,5 +113,8 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
 // Whether a frame's camera rays may leave reflected or refracted rays at their hits (the tracer's
 // radiance(), shaders/shade.h: bounces left and a reflectivity or transparency that is on).
 bool secondaryRays(const gpu::FrameParams& params);
+// Whether its hits may leave refracted rays (bounces left and a transparency that is on): then a
+// hit may leave two rays, which the wavefront does not follow.
+bool refractionRays(const gpu::FrameParams& params);
 
 }  // namespace iso::viewer

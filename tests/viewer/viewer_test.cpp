@@ -395,14 +395,15 @@ TEST(ViewerGolden, everyLoopShapeAndWorkgroupSizeDrawsTheSamePicture) {
   EXPECT_LE(differing(reference, nested), 0.005);
 }
 
-TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
-  // A frame of one sample a pixel whose camera rays leave no secondary rays runs in two passes:
-  // the camera rays, then the queued hits' shading, with the one kernel's statements: the same
+TEST(ViewerGolden, theWavefrontDrawsWhatTheOneKernelDraws) {
+  // A frame of one sample a pixel whose hits leave no refracted rays runs as a wavefront: the
+  // camera rays, then the queued hits' shading, then, bounce after bounce, the mirror rays those
+  // hits queued and their hits' shading, with the one kernel's statements in its order: the same
   // bytes and the same rays as one kernel (--one-kernel). Here with back faces tinted, an area
-  // light's jittered shadow rays and a reflectivity that only scales the local shading (no
-  // bounces), in tiles that do not divide the picture; bounces without a reflectivity (no
-  // secondary rays: two passes); and frames that run as one kernel either way (reflection rays,
-  // two samples a pixel).
+  // light's jittered shadow rays (the random state goes on from hit to hit) and tiles that do not
+  // divide the picture: a reflectivity that only scales the local shading (no bounces), bounces
+  // without a reflectivity, mirror rays of one and of three bounces; and frames that run as one
+  // kernel either way (refracted rays, two samples a pixel).
   TempDir dir;
   const ShapeParams plane = turnedShape("plane");
   const std::unique_ptr<Shape> shape = makeShape(plane);
@@ -423,17 +424,19 @@ TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
     area.v = {0, 0, 0.5};
     base.lights = {area};
     struct Case {
-      float reflectivity;
+      float reflectivity, transparency;
       int bounces, samples;
-      bool twoPasses;
+      bool wavefront;
     };
-    for (const Case c : {Case{0.3f, 0, 1, true}, Case{0.0f, 2, 1, true}, Case{0.3f, 2, 1, false},
-                         Case{0.0f, 0, 2, false}}) {
+    for (const Case c : {Case{0.3f, 0.0f, 0, 1, true}, Case{0.0f, 0.0f, 2, 1, true},
+                         Case{0.3f, 0.0f, 1, 1, true}, Case{0.6f, 0.0f, 3, 1, true},
+                         Case{0.3f, 0.3f, 2, 1, false}, Case{0.0f, 0.0f, 0, 2, false}}) {
       SCOPED_TRACE(file.filename().string() + ", reflectivity " + std::to_string(c.reflectivity) +
-                   ", bounces " + std::to_string(c.bounces) + ", samples " +
-                   std::to_string(c.samples));
+                   ", transparency " + std::to_string(c.transparency) + ", bounces " +
+                   std::to_string(c.bounces) + ", samples " + std::to_string(c.samples));
       Scene scene = base;
       scene.material.reflectivity = c.reflectivity;
+      scene.material.transparency = c.transparency;
       scene.bounces = c.bounces;
       scene.samples = c.samples;
       const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1,
@@ -441,15 +444,21 @@ TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
       const GpuRun two =
           renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, {.workgroup = 32});
       EXPECT_FALSE(one.stats.twoPasses);
-      EXPECT_EQ(two.stats.twoPasses, c.twoPasses);
+      EXPECT_EQ(two.stats.twoPasses, c.wavefront);
+      const bool mirrors = c.reflectivity > 0.0f && c.bounces > 0;
+      EXPECT_EQ(two.stats.mirrorBounces, c.wavefront && mirrors ? uint32_t(c.bounces) : 0u);
       EXPECT_TRUE(two.converged);
-      EXPECT_EQ(two.pixels, one.pixels);
+      EXPECT_EQ(differing(two.pixels, one.pixels, 0), 0.0);
       EXPECT_EQ(two.stats.rays.primary, uint64_t(w) * h * uint64_t(c.samples));
       EXPECT_EQ(two.stats.rays.primary, one.stats.rays.primary);
       EXPECT_EQ(two.stats.rays.shadow, one.stats.rays.shadow);
       EXPECT_EQ(two.stats.rays.secondary, one.stats.rays.secondary);
       EXPECT_GT(one.stats.rays.shadow, 0u);
-      EXPECT_EQ(one.stats.rays.secondary > 0, !c.twoPasses && c.bounces > 0);
+      EXPECT_EQ(one.stats.rays.secondary > 0, mirrors || (c.transparency > 0 && c.bounces > 0));
+      // Three bounces: some mirror rays hit the surface again (the torus sees itself).
+      if (c.bounces == 3 && file == files().torus) {
+        EXPECT_GT(one.stats.rays.secondary, 2 * uint64_t(w) * h / 20);
+      }
     }
     // Surface and sky both in the picture: the queue held some of the pixels.
     const auto header = asset->reader.header();
@@ -463,18 +472,22 @@ TEST(ViewerGolden, theTwoPassWavefrontDrawsWhatTheOneKernelDraws) {
 }
 
 TEST(ViewerGolden, aWavefrontFrameLargerThanAWaveRunsInWaves) {
-  // 640×480 in tiles of 8 invocations: 38,400 tiles, more than a wave (2^18 pixels) holds, so the
-  // frame runs as two waves of both passes; the same bytes as one kernel.
+  // 640×480 in tiles of 8 invocations: 38,400 tiles, more than a wave (2^17 pixels) holds, so the
+  // frame runs as three waves of all passes, mirror rays included; the same bytes as one kernel.
   const auto asset = Asset::open(files().torus);
-  const Scene scene = sceneFor(*asset);
+  Scene scene = sceneFor(*asset);
+  scene.material.reflectivity = 0.3f;
+  scene.bounces = 1;
   const uint32_t w = 640, h = 480;
   const GpuRun one = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1,
                                {.workgroup = 8, .oneKernel = true});
   const GpuRun two =
       renderGpu(*asset, scene, w, h, uint64_t(1) << 30, nullptr, 200, 1, {.workgroup = 8});
   EXPECT_TRUE(two.stats.twoPasses);
-  EXPECT_EQ(two.pixels, one.pixels);
+  EXPECT_EQ(two.stats.mirrorBounces, 1u);
+  EXPECT_EQ(differing(two.pixels, one.pixels, 0), 0.0);
   EXPECT_EQ(two.stats.rays.shadow, one.stats.rays.shadow);
+  EXPECT_EQ(two.stats.rays.secondary, one.stats.rays.secondary);
 }
 
 TEST(ViewerLod, nodesDrawnInPlaceOfTheirChildrenLeaveNoCracksBesideFinerOnes) {
