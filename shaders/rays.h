@@ -315,13 +315,24 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   if (abs(w.dir.y) < 1e-12f) w.dir.y = 1e-12f;
   if (abs(w.dir.z) < 1e-12f) w.dir.z = 1e-12f;
   w.inv = vec3(1.0f) / w.dir;
-  // Clip to the root cube.
+  // Clip to the root cube, then to the box of the nodes that are not empty grown by the widest
+  // node the ray's level of detail may draw (kLodNodePixels pixels at its farthest distance) and a
+  // margin: outside it every cell is empty, so the walk is the same from the first cell in it.
   vec3 ta = (vec3(0.0f) - o) * w.inv;
   vec3 tb = (vec3(1.0f) - o) * w.inv;
   vec3 tNear = min(ta, tb);
   vec3 tFar = max(ta, tb);
   w.t = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
   w.tEnd = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
+  if (w.t > w.tEnd) return false;
+  float grow = (P.lod.x > 0.0f ? kLodNodePixels * P.eye.w * (distance + w.tEnd) : 0.0f) +
+               4.0f / kGridSize;
+  ta = (vec3(P.contentLo.x, P.contentLo.y, P.contentLo.z) - vec3(grow) - o) * w.inv;
+  tb = (vec3(P.contentHi.x, P.contentHi.y, P.contentHi.z) + vec3(grow) - o) * w.inv;
+  tNear = min(ta, tb);
+  tFar = max(ta, tb);
+  w.t = max(w.t, max(tNear.x, max(tNear.y, tNear.z)));
+  w.tEnd = min(w.tEnd, min(tFar.x, min(tFar.y, tFar.z)));
   if (w.t > w.tEnd) return false;
   w.g = uvec3(clamp((o + d * w.t) * kGridSize, vec3(0.0f), vec3(float(kGridMax))));
   w.side = side;

@@ -139,6 +139,11 @@ struct FrameParams {
   // whose code is above k (k < 255; the last entry is unused), so that the GPU and the CPU encode
   // pixels alike, as the format's linearToSrgb8 does, without powers (setColorTable).
   vec4 srgbBounds[64];
+  // The box that holds every node that is not empty, in frame units (xyz; the top chunk's leaves
+  // and cut nodes and its deepest level's nodes): rays are clipped to it, grown by the widest node
+  // their level of detail may draw (rays.h, intersect). The root cube when not known.
+  vec4 contentLo;
+  vec4 contentHi;
 };
 
 // One chunk in the chunk table (binding 1).

@@ -31,6 +31,8 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
       hi[k] = std::max(hi[k], (cell[k] + 1) * size);
     }
   }
+  a->contentLo = glm::vec3(float(lo[0]), float(lo[1]), float(lo[2]));
+  a->contentHi = glm::vec3(float(hi[0]), float(hi[1]), float(hi[2]));
   const Frame& f = header.frame;
   for (int k = 0; k < 3; ++k) {
     a->bounds.lo[k] = f.origin[k] + lo[k] * f.size;
@@ -52,6 +54,8 @@ FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
   setup.topChunk = asset.tree.topChunk();
   setup.chunkCount = uint32_t(asset.reader.chunks().size());
   setup.blob = asset.blob;
+  setup.contentLo = asset.contentLo;
+  setup.contentHi = asset.contentHi;
   setup.requests = false;
   setup.environmentWidth = environment ? environment->width : 0;
   setup.environmentHeight = environment ? environment->height : 0;

@@ -16,7 +16,8 @@ struct Asset {
   Reader reader;
   ChunkTree tree;
   BlobOptions blob;
-  Bounds bounds;  // world units: the cells of the coarsest chunk's deepest nodes
+  Bounds bounds;  // world units: the cells of the coarsest chunk's deepest nodes and leaves
+  glm::vec3 contentLo{0.0f}, contentHi{1.0f};  // the same box in frame units (exact)
   Vec3d up{0, 1, 0};
 
   // Throws iso::FileError for files that are not valid or hold no surface.

@@ -137,6 +137,8 @@ gpu::FrameParams finestFrameParams(const CpuPool& pool) {
   p.surface = glm::vec4(pool.blob.distanceUnit, 0.0f, 0.0f, 0.0f);
   p.lod = glm::vec4(-1.0f, 0.0f, 0.0f, 0.0f);  // no chunk's error is below a negative bound
   p.eye.w = 1.0f;
+  p.contentLo = glm::vec4(0.0f);  // the root cube
+  p.contentHi = glm::vec4(1.0f);
   setColorTable(p);
   return p;
 }

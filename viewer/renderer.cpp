@@ -204,6 +204,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.environmentWidth = environment ? environment->width : 0;
   setup_.environmentHeight = environment ? environment->height : 0;
   setup_.blob = asset.blob;
+  setup_.contentLo = asset.contentLo;
+  setup_.contentHi = asset.contentHi;
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
   setup_.flatTraversal = options.flatTraversal;

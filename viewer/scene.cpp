@@ -350,6 +350,8 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   p.worldUp = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]), 0);
   p.backface = rgb(scene.backTint);
   p.surface = vec4(s.blob.distanceUnit, 0, 0, 0);
+  p.contentLo = vec4(s.contentLo, 0);
+  p.contentHi = vec4(s.contentHi, 0);
   for (size_t i = 0; i < scene.lights.size() && i < gpu::kMaxLights; ++i) {
     const LightSpec& l = scene.lights[i];
     gpu::Light& g = p.lights[i];

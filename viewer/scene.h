@@ -101,7 +101,8 @@ struct FrameSetup {
   uint32_t topChunk = 0, chunkCount = 0;
   uint32_t poolWordsLog2 = 0, poolWords = 0;  // per pool buffer; all of them
   uint32_t environmentWidth = 0, environmentHeight = 0;
-  BlobOptions blob;  // what the corner records carry
+  BlobOptions blob;                            // what the corner records carry
+  glm::vec3 contentLo{0.0f}, contentHi{1.0f};  // Asset::contentLo, contentHi
   bool swapRedBlue = false, requests = true;
   bool flatTraversal = false;  // the loop shape of the tracer (shaders/rays.h)
   bool tileCones = true;       // camera rays start where their tile's cone meets a node (cone.h)

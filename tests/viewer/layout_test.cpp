@@ -87,7 +87,9 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"lights", offsetof(FrameParams, lights)},
       {"poolAddress", offsetof(FrameParams, poolAddress)},
       {"srgbToLinear", offsetof(FrameParams, srgbToLinear)},
-      {"srgbBounds", offsetof(FrameParams, srgbBounds)}};
+      {"srgbBounds", offsetof(FrameParams, srgbBounds)},
+      {"contentLo", offsetof(FrameParams, contentLo)},
+      {"contentHi", offsetof(FrameParams, contentHi)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},
