@@ -6,6 +6,7 @@
 #include <bit>
 #include <chrono>
 #include <cstring>
+#include <initializer_list>
 #include <span>
 
 #include "iso/check.h"
@@ -84,21 +85,20 @@ uint64_t feedbackBytes(uint32_t chunkCount) {
 }
 
 // Device memory of everything but the pool: per frame slot its parameters, chunk table, feedback
-// and staging region; the output and the environment map once.
+// and staging region; the output, the queue and the other storage buffers (the environment map,
+// the wavefront's hits, paths and pending rays, the tiles' starts) once.
 uint64_t fixedBytes(Gpu& gpu, uint32_t chunkCount, uint32_t slots, uint64_t stagingRegion,
-                    uint64_t pixelsBytes, uint64_t envBytes, uint64_t hitsBytes,
-                    uint64_t startsBytes) {
+                    uint64_t pixelsBytes, std::initializer_list<uint64_t> storageBytes) {
   const uint64_t perSlot =
       bufferFootprint(gpu, sizeof(gpu::FrameParams), kUniform) +
       bufferFootprint(gpu, uint64_t(chunkCount) * 16, kStorage) +
       bufferFootprint(gpu, feedbackBytes(chunkCount), kStorage) +
       (gpu.timestampValidBits > 0 ? bufferFootprint(gpu, kTimestampBytes, kTransferDst) : 0);
-  return slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
-         bufferFootprint(gpu, envBytes, kStorage) +
-         bufferFootprint(gpu, slots * stagingRegion, kTransferSrc) +
-         bufferFootprint(gpu, hitsBytes, kStorage) +
-         bufferFootprint(gpu, kQueueBytes, kQueueUsage) +
-         bufferFootprint(gpu, startsBytes, kStorage);
+  uint64_t bytes = slots * perSlot + bufferFootprint(gpu, pixelsBytes, kStorage | kTransferSrc) +
+                   bufferFootprint(gpu, slots * stagingRegion, kTransferSrc) +
+                   bufferFootprint(gpu, kQueueBytes, kQueueUsage);
+  for (const uint64_t b : storageBytes) bytes += bufferFootprint(gpu, b, kStorage);
+  return bytes;
 }
 
 // Pool pages under the budget: what the rest leaves, less a page a buffer for alignment, in
@@ -152,7 +152,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
       4;
   const uint64_t fixed =
       fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion, pixelsBytes,
-                 envBytes, hitsBytes + pathsBytes + pendingBytes, startsBytes);
+                 {envBytes, hitsBytes, pathsBytes, pendingBytes, startsBytes});
   const uint64_t poolPages =
       poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
