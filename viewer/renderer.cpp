@@ -80,6 +80,15 @@ uint32_t tileCount(uint32_t width, uint32_t height, uint32_t workgroupSize) {
   return ((width + tileWidth - 1) / tileWidth) * ((height + tileHeight - 1) / tileHeight);
 }
 
+// A memory barrier: what the commands before wrote in srcStage, made visible to dstStage.
+void memoryBarrier(VkCommandBuffer cb, VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
+                   VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
+  VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  b.srcAccessMask = srcAccess;
+  b.dstAccessMask = dstAccess;
+  vkCmdPipelineBarrier(cb, srcStage, dstStage, 0, 1, &b, 0, nullptr, 0, nullptr);
+}
+
 uint64_t feedbackBytes(uint32_t chunkCount) {
   return (gpu::kFeedbackHeaderWords + 2 * uint64_t(chunkCount)) * 4;
 }
@@ -141,15 +150,13 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
   const uint64_t envBytes = environment ? environment->texels.size() * 4 : 16;
   const BlobSizes sizes = blobSizes(asset, options.uploadBytes);
-  waveTiles_ = uint32_t(std::min<uint64_t>(
-      tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize),
-      kWavePixels / options.workgroupSize));
+  const uint32_t capacityTiles =
+      tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize);
+  waveTiles_ = std::min<uint32_t>(capacityTiles, uint32_t(kWavePixels / options.workgroupSize));
   const uint64_t wavePixels = options.oneKernel ? 1 : uint64_t(waveTiles_) * options.workgroupSize;
   const uint64_t hitsBytes = wavePixels * kHitBytes;
   const uint64_t pathsBytes = wavePixels * kPathBytes, pendingBytes = wavePixels * kPendingBytes;
-  const uint64_t startsBytes =
-      uint64_t(tileCount(options_.capacityWidth, options_.capacityHeight, options.workgroupSize)) *
-      4;
+  const uint64_t startsBytes = uint64_t(capacityTiles) * 4;  // a float a tile
   const uint64_t fixed =
       fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion, pixelsBytes,
                  {envBytes, hitsBytes, pathsBytes, pendingBytes, startsBytes});
@@ -364,16 +371,13 @@ VkCommandBuffer Renderer::record() {
     vkCmdCopyBuffer(cb, staging_.buffer, pool_[c.buffer].buffer, 1, &c.region);
   // Before the dispatch: this frame's copies, and earlier frames' use of the one output buffer
   // (their dispatches write it; a window copies it into a swapchain image).
-  VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  barrier.srcAccessMask =
-      VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_SHADER_WRITE_BIT;
-  barrier.dstAccessMask =
-      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_UNIFORM_READ_BIT;
-  vkCmdPipelineBarrier(cb,
-                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
-                           VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
-                       nullptr);
+  memoryBarrier(
+      cb,
+      VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
+          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+      VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+      VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_UNIFORM_READ_BIT);
   if (hasTimestamps())
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 1);
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
@@ -391,12 +395,10 @@ VkCommandBuffer Renderer::record() {
     vkCmdCopyQueryPoolResults(cb, queries_, query, 3, slot.timestamps.buffer, 0, sizeof(uint64_t),
                               VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
   }
-  VkMemoryBarrier after{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  after.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
-  after.dstAccessMask = VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
-                       VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &after, 0,
-                       nullptr, 0, nullptr);
+  memoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT);
   return cb;
 }
 
@@ -404,11 +406,8 @@ VkCommandBuffer Renderer::record() {
 void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
   vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(kCones));
   vkCmdDispatch(cb, (tiles + options_.workgroupSize - 1) / options_.workgroupSize, 1, 1);
-  VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-  b.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
-  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &b, 0, nullptr, 0, nullptr);
+  memoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
 }
 
 // The passes of a wavefront frame, a wave of tiles at a time: the queue emptied, the camera rays
@@ -417,10 +416,7 @@ void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
 void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles, uint32_t bounces) {
   const auto barrier = [&](VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
                            VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
-    VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
-    b.srcAccessMask = srcAccess;
-    b.dstAccessMask = dstAccess;
-    vkCmdPipelineBarrier(cb, srcStage, dstStage, 0, 1, &b, 0, nullptr, 0, nullptr);
+    memoryBarrier(cb, srcStage, srcAccess, dstStage, dstAccess);
   };
   constexpr auto kCompute = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   constexpr auto kIndirect = VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;

@@ -149,7 +149,7 @@ class Renderer {
   std::array<uint32_t, 5> pipelineIndex_{};  // by the shader's kPass: its pipeline in pipeline_
   VkPipeline pipelineOf(uint32_t pass) const { return pipeline_.pipelines[pipelineIndex_[pass]]; }
   Buffer output_, environment_, staging_;
-  Buffer hits_, queue_;     // the wavefront's camera-ray hits and queue (16 bytes each without it)
+  Buffer hits_, queue_;     // the wavefront's hits to shade and its queue
   Buffer starts_;           // where each tile's camera rays start (shaders/cone.h)
   Buffer paths_, pending_;  // the wave's paths that reflect mirror rays, and the rays waiting
   std::vector<Buffer> pool_;

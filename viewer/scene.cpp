@@ -285,9 +285,9 @@ bool refractionRays(const gpu::FrameParams& p) {
 }
 
 bool secondaryRays(const gpu::FrameParams& p) {
-  const float reflectivity = (p.options.x & gpu::kOptionReflections) != 0u ? p.material.z : 0.0f;
-  const float transparency = (p.options.x & gpu::kOptionRefractions) != 0u ? p.material.w : 0.0f;
-  return p.options.y > 0u && (reflectivity > 0.0f || transparency > 0.0f);
+  const bool mirrors =
+      p.options.y > 0u && (p.options.x & gpu::kOptionReflections) != 0u && p.material.z > 0.0f;
+  return mirrors || refractionRays(p);
 }
 
 gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
