@@ -23,11 +23,6 @@ using detail::storeLE;
 
 namespace {
 
-Key128 leafCornerKey(const GridPoint& p) { return {p.x | uint64_t(p.y) << 32, p.z}; }
-Key128 lodCornerKey(const GridPoint& p, uint8_t level) {
-  return {p.x | uint64_t(p.y) << 32, p.z | uint64_t(level) << 32};
-}
-
 // A rule of the format a topology breaks (layoutSurface's checks, caught by its two entries).
 struct BrokenRule {
   std::string reason;
@@ -76,14 +71,54 @@ std::vector<SurfaceNode> expandNodes(const SurfaceTopology& t) {
   return nodes;
 }
 
-uint32_t numberCorner(FlatMap<Key128, uint32_t>& map, std::vector<CornerKey>& corners,
-                      const Key128& key, const GridPoint& point, uint8_t level) {
-  const auto [index, inserted] = map.insert(key, uint32_t(corners.size()));
-  if (inserted) corners.push_back({point, level});
-  CornerKey& corner = corners[*index];
-  corner.level = std::min(corner.level, level);  // leaf corners: the coarsest leaf
-  return *index;
-}
+// Corners numbered in the order nodes first use them, found through an open-addressed table of
+// 4-byte numbers (0: empty, else number + 1) that compares the corners' own points: a chunk's
+// table stays in cache where one of (key, number) pairs would not.
+class CornerNumbers {
+ public:
+  // Leaf corners are one per point, at the coarsest level that uses them; LOD corners (byLevel)
+  // one per point and level.
+  CornerNumbers(std::vector<CornerKey>& corners, size_t expected, bool byLevel)
+      : corners_(corners),
+        slots_(tableCapacity(expected), 0),
+        mask_(slots_.size() - 1),
+        byLevel_(byLevel) {}
+
+  uint32_t number(const GridPoint& point, uint8_t level) {
+    if ((corners_.size() + 1) * 2 > slots_.size()) grow();
+    size_t i = slotOf(point, level);
+    for (; slots_[i] != 0; i = (i + 1) & mask_) {
+      CornerKey& corner = corners_[slots_[i] - 1];
+      if (corner.point == point && (!byLevel_ || corner.level == level)) {
+        corner.level = std::min(corner.level, level);
+        return slots_[i] - 1;
+      }
+    }
+    corners_.push_back({point, level});
+    slots_[i] = uint32_t(corners_.size());
+    return slots_[i] - 1;
+  }
+
+ private:
+  size_t slotOf(const GridPoint& p, uint8_t level) const {
+    const uint64_t l = byLevel_ ? level : 0;
+    return hashBits(uint64_t(p.x) ^ uint64_t(p.y) << 22 ^ uint64_t(p.z) << 44 ^ l << 58) & mask_;
+  }
+  void grow() {
+    slots_.assign(slots_.size() * 2, 0);
+    mask_ = slots_.size() - 1;
+    for (uint32_t n = 0; n < corners_.size(); ++n) {
+      size_t i = slotOf(corners_[n].point, corners_[n].level);
+      while (slots_[i] != 0) i = (i + 1) & mask_;
+      slots_[i] = n + 1;
+    }
+  }
+
+  std::vector<CornerKey>& corners_;
+  std::vector<uint32_t> slots_;
+  size_t mask_;
+  bool byLevel_;
+};
 
 // Byte sizes of the payload's parts.
 struct PayloadLayout {
@@ -242,12 +277,19 @@ std::array<std::array<double, 8>, 3> trilinearWeightGradients(const std::array<d
   return g;
 }
 
+namespace {
+
+// Corner c of the cell at `cell` (a level's coordinates), on the finest grid (shift: kMaxLevel
+// minus the level).
+GridPoint cellCorner(const std::array<uint32_t, 3>& cell, int shift, int c) {
+  return {(cell[0] + uint32_t(c & 1)) << shift, (cell[1] + uint32_t((c >> 1) & 1)) << shift,
+          (cell[2] + uint32_t((c >> 2) & 1)) << shift};
+}
+
+}  // namespace
+
 GridPoint cornerPoint(uint8_t level, uint64_t key, int corner) {
-  const auto cell = mortonDecode(key);
-  const int shift = kMaxLevel - level;
-  return {(cell[0] + uint32_t(corner & 1)) << shift,
-          (cell[1] + uint32_t((corner >> 1) & 1)) << shift,
-          (cell[2] + uint32_t((corner >> 2) & 1)) << shift};
+  return cellCorner(mortonDecode(key), kMaxLevel - level, corner);
 }
 
 namespace {
@@ -257,15 +299,16 @@ CornerLayout layoutOf(const SurfaceTopology& topology, uint8_t chunkLevel, uint6
   checkRoots(topology, chunkLevel, chunkKey, maxLevel);
   CornerLayout layout;
   layout.nodes = expandNodes(topology);
-  FlatMap<Key128, uint32_t> leafMap(layout.nodes.size() * 4), lodMap(layout.nodes.size() * 2);
-  for (SurfaceNode& node : layout.nodes)
-    for (int c = 0; c < kCorners; ++c) {
-      const GridPoint p = cornerPoint(node.level, node.key, c);
-      node.corners[c] =
-          node.isLeaf()
-              ? numberCorner(leafMap, layout.leafCorners, leafCornerKey(p), p, node.level)
-              : numberCorner(lodMap, layout.lodCorners, lodCornerKey(p, node.level), p, node.level);
-    }
+  // About 1.8 leaf corners and 0.6 LOD corners a node in scans; the tables grow when needed.
+  CornerNumbers leaf(layout.leafCorners, layout.nodes.size() * 2, false);
+  CornerNumbers lod(layout.lodCorners, layout.nodes.size(), true);
+  for (SurfaceNode& node : layout.nodes) {
+    const auto cell = mortonDecode(node.key);
+    CornerNumbers& numbers = node.isLeaf() ? leaf : lod;
+    for (int c = 0; c < kCorners; ++c)
+      node.corners[size_t(c)] =
+          numbers.number(cellCorner(cell, kMaxLevel - node.level, c), node.level);
+  }
   return layout;
 }
 

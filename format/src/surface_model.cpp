@@ -131,10 +131,8 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
     uint64_t key;
   };
   std::vector<Cut> cuts;
-  for (const ChunkInfo& info : reader.chunks()) {
-    if (info.kind != kSurfaceKind) continue;
-    if (region && !region->meetsCell(info.level, info.key)) continue;
-    if (info.level > cutLevel) continue;  // every node of the chunk is below the cut
+  for (const uint32_t id : chunksFor(reader, region, cutLevel)) {
+    const ChunkInfo& info = reader.chunk(id);
     const std::shared_ptr<const SurfaceChunk> decoded =
         source ? source(info.id)
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
@@ -197,6 +195,17 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
             reader.name(), reader.chunk(cut.chunk).offset,
             "chunk " + std::to_string(cut.chunk) + ": a node's children are in no chunk");
   return model;
+}
+
+std::vector<uint32_t> SurfaceModel::chunksFor(const Reader& reader,
+                                              const std::optional<Region>& region,
+                                              uint8_t cutLevel) {
+  std::vector<uint32_t> ids;
+  for (const ChunkInfo& info : reader.chunks())
+    if (info.kind == kSurfaceKind && (!region || region->meetsCell(info.level, info.key)) &&
+        info.level <= cutLevel)  // deeper chunks: every node below the cut
+      ids.push_back(info.id);
+  return ids;
 }
 
 uint32_t SurfaceModel::findLeaf(const Vec3& p) const {

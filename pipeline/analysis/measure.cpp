@@ -7,6 +7,7 @@
 #include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
+#include <unordered_map>
 
 #include "iso/reader.h"
 #include "pipeline/points/knn.h"
@@ -38,6 +39,82 @@ void project(const SurfaceModel& surface, const Frame& frame, std::span<const gl
         }
       });
 }
+
+// Decoded surface chunks kept for reuse: pinned ones for good, the others while their bytes fit
+// in a budget, the least recently used dropped first.
+class DecodedChunks {
+ public:
+  DecodedChunks(const Reader& reader, uint64_t budget) : reader_(reader), budget_(budget) {}
+
+  // Decode those of `ids` not held yet, in parallel, while they fit (all when pinned).
+  void decode(std::span<const uint32_t> ids, bool pin) {
+    std::vector<uint32_t> missing;
+    uint64_t room = budget_ > bytes_ ? budget_ - bytes_ : 0;
+    for (const uint32_t id : ids) {
+      if (held_.contains(id)) continue;
+      const uint64_t estimate = uint64_t(reader_.chunk(id).nodeCount) * kBytesPerNode;
+      if (!pin && estimate > room) break;
+      room -= std::min(room, estimate);
+      missing.push_back(id);
+    }
+    std::vector<std::shared_ptr<const SurfaceChunk>> chunks(missing.size());
+    tbb::parallel_for(size_t{0}, missing.size(), [&](size_t j) {
+      chunks[j] = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader_, missing[j]));
+    });
+    for (size_t j = 0; j < missing.size(); ++j) keep(missing[j], std::move(chunks[j]), pin);
+  }
+
+  std::shared_ptr<const SurfaceChunk> get(uint32_t id) {
+    const auto found = held_.find(id);
+    if (found != held_.end()) {
+      found->second.used = ++clock_;
+      return found->second.chunk;
+    }
+    auto chunk = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader_, id));
+    keep(id, chunk, false);
+    return chunk;
+  }
+
+ private:
+  // Decoded bytes a node takes, about (the node, and its share of corner keys and values): for
+  // the estimate before decoding.
+  static constexpr uint64_t kBytesPerNode = 160;
+  struct Held {
+    std::shared_ptr<const SurfaceChunk> chunk;
+    uint64_t bytes = 0, used = 0;
+    bool pinned = false;
+  };
+
+  void keep(uint32_t id, std::shared_ptr<const SurfaceChunk> chunk, bool pin) {
+    const uint64_t bytes = bytesOf(*chunk);
+    held_[id] = {std::move(chunk), bytes, ++clock_, pin};
+    bytes_ += bytes;
+    while (bytes_ > budget_) {
+      auto oldest = held_.end();
+      for (auto it = held_.begin(); it != held_.end(); ++it)
+        if (!it->second.pinned && (oldest == held_.end() || it->second.used < oldest->second.used))
+          oldest = it;
+      if (oldest == held_.end()) break;
+      bytes_ -= oldest->second.bytes;
+      held_.erase(oldest);
+    }
+  }
+
+  static uint64_t bytesOf(const SurfaceChunk& c) {
+    const auto values = [](const CornerValues& v) {
+      return v.distance.size() * sizeof(float) + v.normal.size() * sizeof(v.normal[0]) +
+             v.color.size() * sizeof(v.color[0]) + v.occlusion.size() * sizeof(float);
+    };
+    return c.topology.childMasks.size() + c.topology.rootKeys.size() * sizeof(uint64_t) +
+           c.layout.nodes.size() * sizeof(SurfaceNode) +
+           (c.layout.leafCorners.size() + c.layout.lodCorners.size()) * sizeof(CornerKey) +
+           values(c.leafValues) + values(c.lodValues);
+  }
+
+  const Reader& reader_;
+  uint64_t budget_, bytes_ = 0, clock_ = 0;
+  std::unordered_map<uint32_t, Held> held_;
+};
 
 DistanceStats statsOf(const std::vector<double>& distance, bool keepValues) {
   DistanceStats stats;
@@ -88,22 +165,15 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
     const glm::vec3 p(toFrame(points[i], frame));
     cells[keyOf(p) >> (3 * (kMaxLevel - level))].push_back(i);
   }
-  // Chunks of cells coarser than the regions' meet many of them: decoded once, up front.
-  std::vector<uint32_t> coarseIds;
+  // Chunks of cells coarser than the regions' meet many of them: decoded once, up front, and kept.
+  // The others are kept while they fit in half a region's budget, for the next regions (in key
+  // order, neighbours) and the wider boxes of the same region, which meet most of them again.
+  std::vector<uint32_t> coarse;
   for (const ChunkInfo& info : reader.chunks())
-    if (info.kind == kSurfaceKind && info.level < level) coarseIds.push_back(info.id);
-  std::vector<std::shared_ptr<const SurfaceChunk>> coarseChunks(coarseIds.size());
-  tbb::parallel_for(size_t{0}, coarseIds.size(), [&](size_t j) {
-    coarseChunks[j] =
-        std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, coarseIds[j]));
-  });
-  std::map<uint32_t, std::shared_ptr<const SurfaceChunk>> coarse;
-  for (size_t j = 0; j < coarseIds.size(); ++j) coarse[coarseIds[j]] = coarseChunks[j];
-  const SurfaceModel::ChunkSource source = [&](uint32_t id) {
-    const auto cached = coarse.find(id);
-    if (cached != coarse.end()) return cached->second;
-    return std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
-  };
+    if (info.kind == kSurfaceKind && info.level < level) coarse.push_back(info.id);
+  DecodedChunks decoded(reader, regionLeaves * kDecodedLeafBytes / 2);
+  decoded.decode(coarse, true);
+  const SurfaceModel::ChunkSource source = [&](uint32_t id) { return decoded.get(id); };
   // One region at a time: a region's surface is what the measure holds besides the file (two at
   // once took the 100M dragon's conversion to 1.3 GiB under --memory 1G).
   std::vector<double> distance(points.size(), -1.0);
@@ -118,8 +188,9 @@ DistanceStats pointsToZeroSet(const Reader& reader, const Frame& frame,
       }
       bool whole = true;  // the box holds the frame's cube: the whole model, without checks
       for (size_t a = 0; a < 3; ++a) whole = whole && region.lo[a] <= 0.0 && region.hi[a] >= 1.0;
-      const SurfaceModel surface =
-          SurfaceModel::load(reader, whole ? std::nullopt : std::optional(region), source);
+      const std::optional<SurfaceModel::Region> box = whole ? std::nullopt : std::optional(region);
+      decoded.decode(SurfaceModel::chunksFor(reader, box), false);
+      const SurfaceModel surface = SurfaceModel::load(reader, box, source);
       project(surface, frame, points, which, distance, &escaped, nullptr);
       std::erase_if(which, [&](uint32_t i) { return !escaped[i]; });
       for (const uint32_t i : which) escaped[i] = 0;

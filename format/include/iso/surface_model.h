@@ -68,6 +68,9 @@ class SurfaceModel {
   using ChunkSource = std::function<std::shared_ptr<const SurfaceChunk>(uint32_t id)>;
   static SurfaceModel load(const Reader& reader, const std::optional<Region>& region = {},
                            const ChunkSource& source = {}, uint8_t cutLevel = kMaxLevel);
+  // The surface chunks load() decodes for a region and cut level, in file order.
+  static std::vector<uint32_t> chunksFor(const Reader& reader, const std::optional<Region>& region,
+                                         uint8_t cutLevel = kMaxLevel);
 
   const FileHeader& header() const { return header_; }
   std::span<const Leaf> leaves() const { return leaves_; }
