@@ -21,8 +21,8 @@
 namespace iso {
 namespace {
 
-constexpr int kCoverageLines = 4;            // zero-set samples per patch edge for coverage
-constexpr double kNoiseFactor = 3.0;         // tolerance floor in RMS roughness
+constexpr int kCoverageLines = 4;     // zero-set samples per patch edge for coverage
+constexpr double kNoiseFactor = 3.0;  // tolerance floor in RMS roughness
 
 double cellSize(uint8_t level) { return std::ldexp(1.0, -level); }
 
@@ -231,10 +231,31 @@ bool Octree::anyPointNear(const glm::dvec3& lo, const glm::dvec3& hi, const Poin
     const glm::dvec3 d = glm::max(glm::max(lo - b, a - hi), glm::dvec3(0.0));
     return glm::length(d);
   };
+  // Every point whose disk may touch the box lies within the largest radius of it: the search
+  // starts at the deepest internal node whose cell holds the box grown by that much (a point
+  // exactly on a cell's middle belongs to the upper child, as its key says).
+  const double reach = double(nodes[0].maxRadius) * (1.0 + 1e-9) + 1e-12;
+  const glm::dvec3 grownLo = lo - reach, grownHi = hi + reach;
+  uint32_t start = 0;
+  for (;;) {
+    const OctreeNode& node = nodes[start];
+    if (node.kind != NodeKind::Internal) break;
+    const glm::dvec3 middle = cellOrigin(node.level, node.key) + 0.5 * cellSize(node.level);
+    uint32_t octant = 0;
+    bool inOne = true;
+    for (int a = 0; a < 3 && inOne; ++a) {
+      if (grownLo[a] >= middle[a])
+        octant |= 1u << a;
+      else
+        inOne = grownHi[a] < middle[a];
+    }
+    if (!inOne) break;
+    start = node.firstChild + octant;
+  }
   // Depth first: at most 7 waiting siblings per level besides the path.
   std::array<uint32_t, 8 * (kMaxLevel + 2)> stack;
   size_t top = 0;
-  stack[top++] = 0;
+  stack[top++] = start;
   while (top > 0) {
     const OctreeNode& node = nodes[stack[--top]];
     if (node.pointCount() == 0) continue;
