@@ -4,7 +4,10 @@
 #define XXH_INLINE_ALL
 #include <xxhash.h>
 
+#include <bit>
+#include <map>
 #include <random>
+#include <tuple>
 
 #include <cmath>
 #include <cstring>
@@ -38,6 +41,58 @@ TEST(SurfaceLayout, sharedCornersAreNumberedOnce) {
   for (int c : {0, 1, 4, 5})
     EXPECT_EQ(layout.nodes[2].corners[size_t(c)], layout.nodes[1].corners[size_t(c + 2)]);
   for (const CornerKey& k : layout.leafCorners) EXPECT_EQ(k.level, 2);
+}
+
+// Random topologies of many levels, from nodes whose corners are mostly shared to leaves that
+// share none (so that the numbering's table grows), against a numbering by a std::map: corners in
+// the order nodes first use them, a leaf corner at the coarsest leaf using it, LOD corners one per
+// point and level.
+TEST(SurfaceLayout, cornersAreNumberedInFirstUseOrderAsAMapNumbersThem) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 40; ++trial) {
+    SurfaceTopology t;
+    t.startLevel = 2;
+    t.depth = 6;
+    t.rootKeys = {9, 10, 13};
+    const double childOdds = trial % 2 ? 0.9 : 0.25;  // dense: shared corners; sparse: few
+    std::bernoulli_distribution child(childOdds);
+    size_t levelBegin = 0, levelEnd = t.rootKeys.size();
+    for (int d = 0; d < t.depth; ++d) {
+      size_t next = levelEnd;
+      for (size_t i = levelBegin; i < levelEnd; ++i) {
+        uint8_t mask = 0;
+        if (d + 1 < t.depth)
+          for (int o = 0; o < 8; ++o) mask |= uint8_t(child(rng) ? 1 << o : 0);
+        t.childMasks.push_back(mask);
+        next += size_t(std::popcount(mask));
+      }
+      levelBegin = levelEnd;
+      levelEnd = next;
+    }
+    const CornerLayout layout = layoutSurface(t, 1, 1, 7);
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, uint32_t> leafNumber, lodNumber;
+    std::vector<uint8_t> leafLevel;
+    for (const SurfaceNode& node : layout.nodes)
+      for (int c = 0; c < kCorners; ++c) {
+        const GridPoint p = cornerPoint(node.level, node.key, c);
+        auto& numbers = node.isLeaf() ? leafNumber : lodNumber;
+        const auto key = std::make_tuple(p.x, p.y, p.z, node.isLeaf() ? -1 : int(node.level));
+        const auto [at, added] = numbers.try_emplace(key, uint32_t(numbers.size()));
+        ASSERT_EQ(node.corners[size_t(c)], at->second) << trial;
+        const std::vector<CornerKey>& keys = node.isLeaf() ? layout.leafCorners : layout.lodCorners;
+        ASSERT_EQ(keys[at->second].point, p) << trial;
+        if (node.isLeaf()) {
+          if (added) leafLevel.push_back(node.level);
+          leafLevel[at->second] = std::min(leafLevel[at->second], node.level);
+        } else {
+          EXPECT_EQ(keys[at->second].level, node.level);
+        }
+      }
+    ASSERT_EQ(layout.leafCorners.size(), leafNumber.size());
+    ASSERT_EQ(layout.lodCorners.size(), lodNumber.size());
+    for (size_t i = 0; i < leafLevel.size(); ++i)
+      EXPECT_EQ(layout.leafCorners[i].level, leafLevel[i]) << trial;
+  }
 }
 
 TEST(SurfaceLayout, rejectsTopologiesThatBreakTheRules) {
