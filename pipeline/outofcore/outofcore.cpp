@@ -183,6 +183,22 @@ class ChunkRunner {
         hops_(inputNormals ? 4 : 1),
         keep_(keep) {}
 
+  // While strays are looked for in an input of one chunk (every point loaded at once): the chunk
+  // stops after what finding them needs (its neighbours and their groups) and keeps its state;
+  // finish() does the rest when none was found. When some were, the chunk runs again without
+  // them anyway, and the normals, orientation and roughness of the first run are never made.
+  void deferRest() { defer_ = true; }
+  bool pending() const { return pending_ != nullptr; }
+  // The i-th own point of the pending chunk (its place in the results), frame units.
+  const glm::vec3& pendingPosition(size_t i) const {
+    return pending_->points.position[pending_->ownBegin + i];
+  }
+  void finish(Accumulated& out) {
+    const std::unique_ptr<Pending> p = std::move(pending_);
+    finishChunk(*p, out);
+  }
+  void dropPending() { pending_.reset(); }
+
   void run(const SpillChunk& chunk, Accumulated& out) {
     LoadedPoints own = distribution_.load(chunk);
     dropExcluded(own, keep_);
@@ -271,6 +287,31 @@ class ChunkRunner {
       for (uint32_t i = ownBegin; i < ownEnd; ++i)
         out.kth.push_back(neighbors.distance[size_t(i) * k + k - 1]);
     }
+    auto pending = std::make_unique<Pending>(
+        Pending{std::move(points), std::move(neighbors), record, ownBegin, ownEnd, chunk.level});
+    if (defer_ && everything)
+      pending_ = std::move(pending);
+    else
+      finishChunk(*pending, out);
+    return true;
+  }
+
+  // A chunk's points and neighbours, between finding its strays' groups and the rest.
+  struct Pending {
+    PointSet points;
+    Neighbors neighbors;
+    ChunkRecord record;
+    uint32_t ownBegin = 0, ownEnd = 0;
+    uint8_t level = 0;
+  };
+
+  // Radii, normals, orientation and roughness of a chunk's own points, into the results.
+  void finishChunk(Pending& chunk, Accumulated& out) {
+    PointSet& points = chunk.points;
+    const Neighbors& neighbors = chunk.neighbors;
+    ChunkRecord& record = chunk.record;
+    const uint32_t ownBegin = chunk.ownBegin, ownEnd = chunk.ownEnd;
+    const size_t k = size_t(neighbors.k);
     estimateRadii(points, neighbors);
     for (uint32_t i = ownBegin; i < ownEnd; ++i)
       out.firstDistance.push_back(neighbors.distance[i * k]);
@@ -324,7 +365,6 @@ class ChunkRunner {
     record.pointEnd = out.points.size();
     record.componentEnd = uint32_t(out.components.anchored.size());
     out.chunks.push_back(record);
-    return true;
   }
 
   // Whether every point within hops_ k-NN hops of the own points has its k-NN ball in the box.
@@ -362,6 +402,8 @@ class ChunkRunner {
   const BuildOptions& options_;
   int hops_;
   const std::vector<uint8_t>* keep_;
+  bool defer_ = false;
+  std::unique_ptr<Pending> pending_;
 };
 
 // After outliers were removed: the chunks whose boxes held one run again (the others would load
@@ -401,6 +443,22 @@ size_t prepareTouchedAgain(const Distribution& distribution, const Frame& frame,
   done.widenings += again.widenings;
   done.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
   return preparedAgain;
+}
+
+// After outliers were removed from an input of one chunk that stopped before its normals: the
+// chunk runs again, as prepareTouchedAgain would run it, into new results. Returns 1.
+size_t prepareWholeAgain(const Distribution& distribution, const Frame& frame,
+                         const BuildOptions& options, const PointLayout& layout,
+                         const std::vector<uint8_t>& keep, Accumulated& done) {
+  Accumulated again;
+  reserveFor(again, distribution.size(), layout);
+  ChunkRunner rerun(distribution, frame, options, layout.normals, &keep);
+  rerun.run(distribution.chunks().front(), again);
+  again.haloPoints += done.haloPoints;
+  again.widenings += done.widenings;
+  again.maxLoaded = std::max(again.maxLoaded, done.maxLoaded);
+  done = std::move(again);
+  return 1;
 }
 
 // The chunks' points as one set: the boundary points and their neighbours become indices into
@@ -479,19 +537,25 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     reserveFor(done, distribution.size(), raw.layout());
     if (findingOutliers) done.groups = std::make_unique<PointGroups>(distribution.size());
     ChunkRunner runner(distribution, ready.frame, options, raw.layout().normals);
+    if (findingOutliers && distribution.chunks().size() == 1) runner.deferRest();
     for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (!findingOutliers) break;
     joinEdgesOut(done, raw.size());
     const Strays found = flagStrays(done.kth, *done.groups, options.strayGroupPoints);
     done.groups.reset();
     done.kth = {};
-    if (found.sparse + found.grouped == 0) break;
+    if (found.sparse + found.grouped == 0) {
+      if (runner.pending()) runner.finish(done);
+      break;
+    }
     // Without the strays the points are prepared again, as in core: with a new frame when they
     // held the bounds (far strays waste its precision), else only the chunks whose boxes held
     // one (the others would load the same points and give the same results).
     StrayPositions positions;
     for (size_t i = 0; i < found.flagged.size(); ++i)
-      if (found.flagged[i]) positions.add(done.points.position[i]);
+      if (found.flagged[i])
+        positions.add(runner.pending() ? runner.pendingPosition(i) : done.points.position[i]);
+    runner.dropPending();
     positions.seal();
     keep.assign(raw.size(), 1);
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
@@ -517,8 +581,11 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       continue;
     }
     stage("points again", distribution.size());  // the chunks that held strays, without them
-    preparedAgain = prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals,
-                                        keep, strays, done);
+    preparedAgain =
+        done.chunks.empty()  // the one chunk, which held them all, stopped early
+            ? prepareWholeAgain(distribution, ready.frame, options, raw.layout(), keep, done)
+            : prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals, keep,
+                                  strays, done);
     break;
   }
   size_t blocks = 0;

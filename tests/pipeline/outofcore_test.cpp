@@ -217,6 +217,25 @@ TEST(OutOfCore, upOrientationAndASingleChunkMatchToo) {
   expectSameFiles(test::scanOf("cube", 20000, false), defaults, 1u << 30, 1);
 }
 
+// An input of one chunk stops after its neighbours while strays are looked for: with none found
+// it finishes, with strays inside the bounds it runs again without them; the in-core file both
+// times.
+TEST(OutOfCore, aSingleChunkWithAndWithoutStraysMatches) {
+  BuildOptions options;
+  options.orientBlockPoints = 128;
+  PointCloud cloud = test::scanOf("sphere", 20000, false, 0.0, 11);
+  nlohmann::json streamed = expectSameFiles(cloud, options, 1u << 30, 1);
+  EXPECT_EQ(streamed["out_of_core"]["chunks"], 1);
+  EXPECT_EQ(streamed["points"]["outliers_removed"], 0);
+  EXPECT_EQ(streamed["out_of_core"]["chunks_prepared_again"], 0);
+  cloud.positions.push_back(glm::dvec3(0.01, 0.0, 0.0));
+  cloud.positions.push_back(glm::dvec3(-0.2, 0.3, 0.1));
+  streamed = expectSameFiles(cloud, options, 1u << 30, 1);
+  EXPECT_EQ(streamed["out_of_core"]["chunks"], 1);
+  EXPECT_EQ(streamed["points"]["outliers_removed"], 2);
+  EXPECT_EQ(streamed["out_of_core"]["chunks_prepared_again"], 1);
+}
+
 // The inputs' coordinate system is part of the file: the same in core and out of core.
 TEST(OutOfCore, theCoordinateSystemIsTheSameInBothFiles) {
   ConvertSource source;
