@@ -130,6 +130,9 @@ constexpr size_t kDropSlice = size_t{32} << 20;
 // grow past the limit before the drop took effect; slices are looked between, and stop early.
 uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resumeOffset) {
   uint64_t most = 0;
+  // The last arrays may have been freed since the pager looked (it reads the process's memory
+  // without the lock); with no mapping, begin() is end(), and stepping past it never ends.
+  if (s.mappings.empty()) return most;
   auto it = s.mappings.lower_bound(resume);
   size_t offset = it != s.mappings.end() && it->first == resume ? resumeOffset : 0;
   for (size_t visited = 0; visited <= s.mappings.size(); ++visited, offset = 0) {

@@ -1,10 +1,13 @@
 // Spilled arrays (pipeline/buffers.h): file-backed while an area exists, the same values after
 // their pages are dropped, nothing left in the directory, and a clear error when the file
 // cannot be made.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <numeric>
@@ -72,6 +75,40 @@ TEST(SpillArea, thePagerKeepsTheProcessNearItsLimit) {
   EXPECT_GT(SpillArea::stats().releases, 0u);
   EXPECT_LT(residentFileBytes(), before + (uint64_t{64} << 20)) << "the array is still resident";
   for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], uint32_t(i));
+}
+
+// The pager reads the process's memory without its lock; an array freed meanwhile may have been
+// the last one, and the drop that follows finds none. File pages of a file of its own keep every
+// look dropping while a small spilled array comes and goes; the area still ends (a drop over no
+// mapping once stepped past the map's end for ever, and the area's end waited for it).
+TEST(SpillArea, thePagerSurvivesTheLastArrayFreedWhileItLooks) {
+  test::TempDir dir;
+  const std::filesystem::path held = dir / "held";
+  constexpr size_t kHeld = size_t{96} << 20;  // over the 64 MiB of file pages the pager leaves
+  test::writeFile(held, std::vector<std::byte>(1));
+  std::filesystem::resize_file(held, kHeld);
+  const int fd = open(held.c_str(), O_RDWR);
+  ASSERT_GE(fd, 0);
+  auto* pages =
+      static_cast<uint8_t*>(mmap(nullptr, kHeld, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0));
+  close(fd);
+  ASSERT_NE(pages, MAP_FAILED);
+  {
+    SpillArea area(dir.path(), 1, 4096);
+    const auto start = std::chrono::steady_clock::now();
+    uint64_t rounds = 0;
+    while (std::chrono::steady_clock::now() - start < std::chrono::seconds(2)) {
+      for (size_t i = 0; i < kHeld; i += 4096) pages[i] = uint8_t(i);  // resident again
+      for (int j = 0; j < 200; ++j, ++rounds) {
+        SpillVector<uint32_t> small(2048);  // 8 KiB: a spilled file of its own
+        small[7] = 7;
+        ASSERT_EQ(small[7], 7u);
+      }
+    }
+    EXPECT_GT(SpillArea::stats().releases, 0u) << "the pager never dropped pages";
+    EXPECT_GT(rounds, 1000u);
+  }
+  munmap(pages, kHeld);
 }
 
 TEST(SpillArea, aDirectoryThatCannotHoldTheFileIsAClearError) {
