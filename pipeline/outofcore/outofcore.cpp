@@ -195,6 +195,7 @@ class ChunkRunner {
   }
   void finish(Accumulated& out) {
     const std::unique_ptr<Pending> p = std::move(pending_);
+    const ProgressMute mute;  // the stage counted the chunk whole already
     finishChunk(*p, out);
   }
   void dropPending() { pending_.reset(); }
