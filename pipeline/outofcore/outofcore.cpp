@@ -553,9 +553,10 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     // held the bounds (far strays waste its precision), else only the chunks whose boxes held
     // one (the others would load the same points and give the same results).
     StrayPositions positions;
+    const bool stoppedEarly = runner.pending();  // the one chunk, which holds them all
     for (size_t i = 0; i < found.flagged.size(); ++i)
       if (found.flagged[i])
-        positions.add(runner.pending() ? runner.pendingPosition(i) : done.points.position[i]);
+        positions.add(stoppedEarly ? runner.pendingPosition(i) : done.points.position[i]);
     runner.dropPending();
     positions.seal();
     keep.assign(raw.size(), 1);
@@ -582,11 +583,10 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       continue;
     }
     stage("points again", distribution.size());  // the chunks that held strays, without them
-    preparedAgain =
-        done.chunks.empty()  // the one chunk, which held them all, stopped early
-            ? prepareWholeAgain(distribution, ready.frame, options, raw.layout(), keep, done)
-            : prepareTouchedAgain(distribution, ready.frame, options, raw.layout().normals, keep,
-                                  strays, done);
+    preparedAgain = stoppedEarly ? prepareWholeAgain(distribution, ready.frame, options,
+                                                     raw.layout(), keep, done)
+                                 : prepareTouchedAgain(distribution, ready.frame, options,
+                                                       raw.layout().normals, keep, strays, done);
     break;
   }
   size_t blocks = 0;
