@@ -414,10 +414,6 @@ void Renderer::recordCones(VkCommandBuffer cb, uint32_t tiles) {
 // filling it, the shading of their hits dispatched from it; then, per bounce, the mirror rays
 // that shading queued and the shading of their hits.
 void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles, uint32_t bounces) {
-  const auto barrier = [&](VkPipelineStageFlags srcStage, VkAccessFlags srcAccess,
-                           VkPipelineStageFlags dstStage, VkAccessFlags dstAccess) {
-    memoryBarrier(cb, srcStage, srcAccess, dstStage, dstAccess);
-  };
   constexpr auto kCompute = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   constexpr auto kIndirect = VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
   constexpr auto kTransfer = VK_PIPELINE_STAGE_TRANSFER_BIT;
@@ -425,15 +421,15 @@ void Renderer::recordWavefront(VkCommandBuffer cb, uint32_t tiles, uint32_t boun
   constexpr auto kAfterPass = kShaderAccess | VK_ACCESS_INDIRECT_COMMAND_READ_BIT;
   // Queue words written once the passes before have read them, and read by the next.
   const auto setQueue = [&](uint32_t word, std::span<const uint32_t> values) {
-    barrier(kCompute | kIndirect, kAfterPass, kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT);
+    memoryBarrier(cb, kCompute | kIndirect, kAfterPass, kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT);
     vkCmdUpdateBuffer(cb, queue_.buffer, word * 4, values.size_bytes(), values.data());
-    barrier(kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
+    memoryBarrier(cb, kTransfer, VK_ACCESS_TRANSFER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
   };
   const auto pass = [&](Variant v) {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(v));
   };
   const auto passDone = [&] {
-    barrier(kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
+    memoryBarrier(cb, kCompute, VK_ACCESS_SHADER_WRITE_BIT, kCompute | kIndirect, kAfterPass);
   };
   for (uint32_t first = 0; first < tiles; first += waveTiles_) {
     // No hits, no mirror rays; 0 × 1 × 1 workgroups for both dispatches.
