@@ -98,6 +98,11 @@ struct SpillState {
   std::thread pager;
   std::condition_variable wake;
   bool stopping = false;
+  // Set while the pager drops pages with the process past the limit (spillPause waits on it).
+  std::atomic<bool> pause{false};
+  std::atomic<uint64_t> pauses{0};
+  std::mutex pauseMutex;
+  std::condition_variable resumed;
 };
 
 SpillState& state() {
@@ -128,7 +133,22 @@ constexpr size_t kDropSlice = size_t{32} << 20;
 // runs, the stages go on mapping pages, and a read fault maps its cached neighbours too (fault-
 // around: 12 pages a random read here), so a whole drop of a large resident set let the process
 // grow past the limit before the drop took effect; slices are looked between, and stop early.
+// Sets or clears SpillState::pause, waking the threads that wait in spillPause when cleared.
+void setPause(SpillState& s, bool on) {
+  if (s.pause.load() == on) return;
+  {
+    std::lock_guard lock(s.pauseMutex);
+    s.pause = on;
+  }
+  if (!on) s.resumed.notify_all();
+}
+
 uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resumeOffset) {
+  // However it returns, the threads paused while it ran go on.
+  struct Resume {
+    SpillState& s;
+    ~Resume() { setPause(s, false); }
+  } resumeAtEnd{s};
   uint64_t most = 0;
   // The last arrays may have been freed since the pager looked (it reads the process's memory
   // without the lock); with no mapping, begin() is end(), and stepping past it never ends.
@@ -143,6 +163,7 @@ uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resume
               MADV_DONTNEED);
       const uint64_t all = currentRssBytes();
       most = std::max(most, all);
+      if (all > s.residentLimit) setPause(s, true);
       if (all <= target) {
         resume = it->first;
         resumeOffset = offset + kDropSlice;
@@ -187,12 +208,26 @@ void pagerLoop() {
         std::clamp<uint64_t>(uint64_t(2.0 * (burst + overshoot)), limit / 16, limit / 8 * 7);
     if (all > limit - margin && files > std::max(limit / 16, kMinFilePages)) {
       const uint64_t target = limit > 3 * margin ? limit - 3 * margin : 0;
+      if (all > limit) setPause(s, true);
       const uint64_t most = dropUntil(s, target, resume, resumeOffset);
       if (most > limit) overshoot = std::max(overshoot, double(most - limit));
       last = currentRssBytes();
     }
   }
 }
+
+}  // namespace
+
+void spillPause() {
+  SpillState& s = state();
+  if (!s.pause.load(std::memory_order_relaxed)) return;
+  s.pauses.fetch_add(1, std::memory_order_relaxed);
+  std::unique_lock lock(s.pauseMutex);
+  // (A bound on the wait: a drop of every array ends well within it.)
+  s.resumed.wait_for(lock, std::chrono::milliseconds(200), [&] { return !s.pause.load(); });
+}
+
+namespace {
 
 // A file of `bytes` in the directory, mapped shared.
 void* mapSpillFile(const std::filesystem::path& directory, size_t bytes) {
@@ -236,6 +271,7 @@ SpillArea::SpillArea(const std::filesystem::path& directory, uint64_t residentLi
   s.residentLimit = residentLimit;
   s.minBytes = std::max<uint64_t>(minBytes, 1);
   s.stats = Stats{};
+  s.pauses = 0;
   for (const auto& [p, bytes] : s.mappings) s.stats.bytes += bytes;
   s.stats.peakBytes = s.stats.bytes;
   s.stopping = false;
@@ -256,7 +292,9 @@ SpillArea::~SpillArea() {
 SpillArea::Stats SpillArea::stats() {
   SpillState& s = state();
   std::lock_guard lock(s.mutex);
-  return s.stats;
+  Stats stats = s.stats;
+  stats.pauses = s.pauses.load();
+  return stats;
 }
 
 uint64_t SpillArea::residentLimit() {

@@ -68,6 +68,7 @@ class SpillArea {
     uint64_t peakBytes = 0;  // the most at once since the area was made (temporary disk)
     uint64_t arrays = 0;     // spilled arrays made
     uint64_t releases = 0;   // times the pager dropped the resident pages
+    uint64_t pauses = 0;     // times a thread waited in spillPause
   };
   static Stats stats();
   // The active area's resident limit (the memory a conversion is held to); 0 when none is.
@@ -75,6 +76,12 @@ class SpillArea {
   // Drop every spilled array's pages from the process now (what the pager does).
   static void release();
 };
+
+// Where a stage's parallel loops let the pager catch up: returns at once (one relaxed load)
+// unless the process is past the resident limit while the pager drops pages; then waits until
+// that drop ends. Between two looks of the pager the stages' threads can map cached pages faster
+// than one thread unmaps them; a thread that waits maps none.
+void spillPause();
 
 // ---- Temporary disk (specs/pipeline.md §15).
 // Every temporary file of a conversion (the points' record files, the spilled arrays) is charged

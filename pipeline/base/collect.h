@@ -9,12 +9,15 @@
 #include <cstddef>
 #include <vector>
 
+#include "pipeline/base/buffers.h"
+
 namespace iso {
 
 template <typename T, typename Out = std::vector<T>, typename F>
 Out collectInParallel(size_t count, size_t block, const F& f) {
   std::vector<std::vector<T>> parts((count + block - 1) / block);
   tbb::parallel_for(size_t{0}, parts.size(), [&](size_t p) {
+    spillPause();
     const size_t end = std::min(count, (p + 1) * block);
     for (size_t i = p * block; i < end; ++i) f(i, parts[p]);
   });

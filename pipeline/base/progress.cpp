@@ -6,6 +6,7 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/process.h"
 #include "pipeline/base/text.h"
 
@@ -30,6 +31,7 @@ std::string clock(double seconds) {
 }  // namespace
 
 void progressAdvance(uint64_t amount) {
+  spillPause();
   if (gMuted.load(std::memory_order_relaxed) == 0)
     gDone.fetch_add(amount, std::memory_order_relaxed);
 }

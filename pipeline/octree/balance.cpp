@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <array>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/collect.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/points/points.h"
@@ -45,8 +46,7 @@ void requestsOf(const Octree& tree, uint32_t id, std::vector<Request>& out) {
       continue;
     const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
     const OctreeNode& other = tree.nodes[tree.find(level, key)];
-    if (other.isFilled() && other.level + 1 < level)
-      out.push_back({uint8_t(level - 1), key >> 3});
+    if (other.isFilled() && other.level + 1 < level) out.push_back({uint8_t(level - 1), key >> 3});
   }
 }
 
@@ -64,9 +64,8 @@ std::vector<Request> requestsOf(const Octree& tree, const std::vector<uint32_t>&
   for (size_t begin = 0; begin < work.size(); begin += kBatch) {
     const size_t count = std::min(kBatch, work.size() - begin);
     std::vector<Request> batch = collectInParallel<Request>(
-        count, 4096, [&](size_t i, std::vector<Request>& out) {
-          requestsOf(tree, work[begin + i], out);
-        });
+        count, 4096,
+        [&](size_t i, std::vector<Request>& out) { requestsOf(tree, work[begin + i], out); });
     std::sort(batch.begin(), batch.end());
     unique(batch);
     std::vector<Request> merged(all.size() + batch.size());
@@ -96,6 +95,7 @@ void splitFilled(Octree& tree, const PointSet& points, const std::vector<uint32_
   std::vector<uint8_t> covered(empty.size(), 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, empty.size(), 16),
                     [&](const tbb::blocked_range<size_t>& r) {
+                      spillPause();
                       for (size_t i = r.begin(); i < r.end(); ++i)
                         covered[i] = isCoveredByDisk(tree, points, empty[i]);
                     });

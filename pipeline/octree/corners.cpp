@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cmath>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
@@ -69,20 +70,22 @@ void evaluateCorners(CornerField& field, std::span<const uint32_t> entries,
 
 size_t refreshCornerLevels(CornerField& field, const Octree& tree) {
   std::fill(field.coarsestLevel.begin(), field.coarsestLevel.end(), kUnusedCorner);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, tree.nodes.size(), 4096),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const OctreeNode& node = tree.nodes[i];
-                        if (!node.isFilled()) continue;
-                        for (int c = 0; c < kCorners; ++c) {
-                          std::atomic_ref<uint8_t> level(
-                              field.coarsestLevel[field.find(cornerPoint(node.level, node.key, c))]);
-                          uint8_t seen = level.load(std::memory_order_relaxed);
-                          while (node.level < seen && !level.compare_exchange_weak(seen, node.level))
-                            ;
-                        }
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, tree.nodes.size(), 4096),
+      [&](const tbb::blocked_range<size_t>& r) {
+        spillPause();
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const OctreeNode& node = tree.nodes[i];
+          if (!node.isFilled()) continue;
+          for (int c = 0; c < kCorners; ++c) {
+            std::atomic_ref<uint8_t> level(
+                field.coarsestLevel[field.find(cornerPoint(node.level, node.key, c))]);
+            uint8_t seen = level.load(std::memory_order_relaxed);
+            while (node.level < seen && !level.compare_exchange_weak(seen, node.level))
+              ;
+          }
+        }
+      });
   return size_t(std::count_if(field.coarsestLevel.begin(), field.coarsestLevel.end(),
                               [](uint8_t l) { return l != kUnusedCorner; }));
 }

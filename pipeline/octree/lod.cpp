@@ -17,6 +17,7 @@
 #include <map>
 #include <memory>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/options.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
@@ -56,7 +57,10 @@ PointSet proxiesAt(const PointSet& points, int level) {
     size_t lo = at, hi = count;  // the first index in [at, count) past `cell`
     while (lo < hi) {
       const size_t mid = lo + (hi - lo) / 2;
-      if ((keyAt(mid) >> shift) == cell) lo = mid + 1; else hi = mid;
+      if ((keyAt(mid) >> shift) == cell)
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     cut[p] = std::max(lo, cut[p - 1]);
   }
@@ -69,9 +73,8 @@ PointSet proxiesAt(const PointSet& points, int level) {
     }
   };
   std::vector<size_t> offset(parts + 1, 0);
-  tbb::parallel_for(size_t{0}, parts, [&](size_t p) {
-    forEachCell(p, [&](size_t, size_t) { ++offset[p + 1]; });
-  });
+  tbb::parallel_for(size_t{0}, parts,
+                    [&](size_t p) { forEachCell(p, [&](size_t, size_t) { ++offset[p + 1]; }); });
   for (size_t p = 0; p < parts; ++p) offset[p + 1] += offset[p];
   const size_t m = offset[parts];
   const bool colors = points.hasColors();
@@ -110,13 +113,14 @@ PointSet proxiesAt(const PointSet& points, int level) {
 std::array<size_t, kMaxLevel + 1> occupiedCells(const PointSet& points) {
   const size_t n = points.size();
   const auto partAt = tbb::parallel_reduce(
-      tbb::blocked_range<size_t>(1, std::max<size_t>(n, 1), 1 << 16), std::array<size_t, kMaxLevel + 1>{},
+      tbb::blocked_range<size_t>(1, std::max<size_t>(n, 1), 1 << 16),
+      std::array<size_t, kMaxLevel + 1>{},
       [&](const tbb::blocked_range<size_t>& r, std::array<size_t, kMaxLevel + 1> c) {
         for (size_t i = r.begin(); i < r.end(); ++i) {
           const uint64_t differ = points.key[i] ^ points.key[i - 1];
           if (differ == 0) continue;
           const int bit = 63 - std::countl_zero(differ);  // highest differing bit
-          ++c[size_t(kMaxLevel - bit / 3)];                // the level where they part
+          ++c[size_t(kMaxLevel - bit / 3)];               // the level where they part
         }
         return c;
       },
@@ -146,8 +150,7 @@ GridPoint LodField::point(uint32_t entry) const {
 }
 
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
-                          const BuildOptions& options,
-                          const std::function<void()>& pointsSdfDone) {
+                          const BuildOptions& options, const std::function<void()>& pointsSdfDone) {
   LodField field;
   std::map<int, SpillVector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
   for (const OctreeNode& node : tree.nodes) {
@@ -174,6 +177,7 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
     const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
                       [&](const tbb::blocked_range<size_t>& r) {
+                        spillPause();
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           const GridPoint& p = corners[i].second;
                           field.value[corners[i].first] = sdf.evaluate(

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/options.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/octree/field.h"
@@ -290,6 +291,7 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
     std::vector<Verdict> verdict(frontier.size());
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 64),
                       [&](const tbb::blocked_range<size_t>& r) {
+                        spillPause();
                         for (size_t i = r.begin(); i < r.end(); ++i)
                           verdict[i] =
                               quickVerdict(tree.nodes[frontier[i]], points, options, maxEdge);
@@ -297,6 +299,7 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
     evaluateTestedCorners(tree, frontier, verdict, sdf, corners);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, frontier.size(), 16),
                       [&](const tbb::blocked_range<size_t>& r) {
+                        spillPause();
                         for (size_t i = r.begin(); i < r.end(); ++i) {
                           if (verdict[i] != Verdict::Test) continue;
                           verdict[i] =

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
+#include "pipeline/base/buffers.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/points/points.h"
 
@@ -90,6 +91,7 @@ size_t markPassiveLeaves(Octree& tree, const PointSet& points) {
   std::vector<uint8_t> covered(empty.size(), 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, empty.size(), 64),
                     [&](const tbb::blocked_range<size_t>& r) {
+                      spillPause();
                       for (size_t i = r.begin(); i < r.end(); ++i)
                         covered[i] = isCoveredByDisk(tree, points, empty[i]);
                     });

@@ -13,6 +13,7 @@
 #include "iso/check.h"
 #include "iso/reader.h"
 #include "iso/writer.h"
+#include "pipeline/base/buffers.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/output/occlusion.h"
@@ -125,9 +126,8 @@ class ChunkPlanner {
 };
 
 CornerValues leafValues(const CornerLayout& layout, const CornerField& field,
-                        const SpillVector<uint32_t>& hangingOf,
-                        const HangingCorners& hanging, const AttributeDesc& distance,
-                        bool colors) {
+                        const SpillVector<uint32_t>& hangingOf, const HangingCorners& hanging,
+                        const AttributeDesc& distance, bool colors) {
   CornerValues v;
   const size_t n = layout.leafCorners.size();
   v.distance.resize(n);
@@ -140,6 +140,8 @@ CornerValues leafValues(const CornerLayout& layout, const CornerField& field,
     return i ? layout.leafCorners[*i].level : field.coarsestLevel[entry];
   };
   for (uint32_t i = 0; i < n; ++i) {
+    // A chunk's corners are scattered over the field's arrays: one chunk maps many pages.
+    if (i % 1024 == 0) spillPause();
     const uint32_t entry = field.find(layout.leafCorners[i].point);
     const CornerSample& s = field.value[entry];
     v.distance[i] = s.distance;
@@ -160,7 +162,9 @@ CornerValues leafValues(const CornerLayout& layout, const CornerField& field,
 
 CornerValues lodValues(const CornerLayout& layout, const LodField& lod, bool colors) {
   CornerValues v;
-  for (const CornerKey& k : layout.lodCorners) {
+  for (size_t i = 0; i < layout.lodCorners.size(); ++i) {
+    if (i % 1024 == 0) spillPause();
+    const CornerKey& k = layout.lodCorners[i];
     const CornerSample& s = lod.value[lod.find(k.level, k.point)];
     v.distance.push_back(s.distance);
     v.normal.push_back({s.normal.x, s.normal.y, s.normal.z});
@@ -197,7 +201,6 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   SpillVector<uint32_t> hangingOf(in.corners->size(), kNoNode);  // per corner entry
   for (uint32_t i = 0; i < in.hanging->size(); ++i) hangingOf[(*in.hanging)[i].corner] = i;
 
-
   Writer writer(output, header, {.zstdLevel = in.options.zstdLevel});
   WriteStats stats;
   // A file chunk: its description and payload, encoded from the plan.
@@ -211,7 +214,8 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     double inputPoints = 0.0;  // weights count merged duplicates: whole numbers, summed exactly
     for (uint64_t key : plan.topology.rootKeys) {
       const OctreeNode& root = tree.nodes[tree.find(plan.topology.startLevel, key)];
-      for (uint32_t i = root.pointBegin; i < root.pointEnd; ++i) inputPoints += in.points->weight[i];
+      for (uint32_t i = root.pointBegin; i < root.pointEnd; ++i)
+        inputPoints += in.points->weight[i];
     }
     plan.pointCount = uint64_t(std::llround(inputPoints));
     const CornerLayout layout =
@@ -243,7 +247,10 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   for (size_t first = 0; first < plans.size(); first += kBatch) {
     const size_t count = std::min(kBatch, plans.size() - first);
     std::vector<Encoded> batch(count);
-    tbb::parallel_for(size_t{0}, count, [&](size_t i) { batch[i] = encode(plans[first + i]); });
+    tbb::parallel_for(size_t{0}, count, [&](size_t i) {
+      spillPause();
+      batch[i] = encode(plans[first + i]);
+    });
     for (const Encoded& e : batch) {
       writer.addChunk(e.desc, e.payload);
       ++stats.chunks;

@@ -77,6 +77,39 @@ TEST(SpillArea, thePagerKeepsTheProcessNearItsLimit) {
   for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], uint32_t(i));
 }
 
+// Past the limit, the pager makes the threads that call spillPause wait while it drops pages;
+// under it, and with no area, spillPause returns at once. (With a limit of 1 byte every look drops,
+// and a thread that touches pages and pauses between them must meet some of those drops.)
+TEST(SpillArea, threadsPauseWhileThePagerDropsPastTheLimit) {
+  test::TempDir dir;
+  spillPause();                           // no area: nothing to wait for
+  constexpr size_t n = size_t{32} << 20;  // 128 MiB: more file pages than the pager leaves
+  {
+    SpillArea area(dir.path(), uint64_t{1} << 50, 4096);
+    SpillVector<uint32_t> values(n);
+    for (size_t i = 0; i < n; ++i) {
+      values[i] = uint32_t(i);
+      if (i % 4096 == 0) spillPause();
+    }
+    EXPECT_EQ(SpillArea::stats().pauses, 0u) << "paused under the limit";
+  }
+  SpillArea area(dir.path(), 1, 4096);
+  SpillVector<uint32_t> values(n);
+  const auto start = std::chrono::steady_clock::now();
+  uint64_t wrong = 0;
+  for (int round = 0; SpillArea::stats().pauses == 0 &&
+                      std::chrono::steady_clock::now() - start < std::chrono::seconds(20);
+       ++round)
+    for (size_t i = 0; i < n; ++i) {
+      if (round == 0) values[i] = uint32_t(i);
+      wrong += values[i] != uint32_t(i);
+      if (i % 1024 == 0) spillPause();  // every 4 KiB page
+    }
+  EXPECT_GT(SpillArea::stats().pauses, 0u) << "no thread ever waited for a drop";
+  EXPECT_GT(SpillArea::stats().releases, 0u);
+  EXPECT_EQ(wrong, 0u);
+}
+
 // The pager reads the process's memory without its lock; an array freed meanwhile may have been
 // the last one, and the drop that follows finds none. File pages of a file of its own keep every
 // look dropping while a small spilled array comes and goes; the area still ends (a drop over no
