@@ -128,11 +128,6 @@ void releaseLocked(SpillState& s) {
 constexpr uint64_t kMinFilePages = uint64_t{64} << 20;
 constexpr size_t kDropSlice = size_t{32} << 20;
 
-// Drop spilled pages a slice of 32 MiB at a time, going on from where the last drop stopped, until
-// the process is at or below `target`; returns the most it was seen at meanwhile. While a drop
-// runs, the stages go on mapping pages, and a read fault maps its cached neighbours too (fault-
-// around: 12 pages a random read here), so a whole drop of a large resident set let the process
-// grow past the limit before the drop took effect; slices are looked between, and stop early.
 // Sets or clears SpillState::pause, waking the threads that wait in spillPause when cleared.
 void setPause(SpillState& s, bool on) {
   if (s.pause.load() == on) return;
@@ -143,6 +138,11 @@ void setPause(SpillState& s, bool on) {
   if (!on) s.resumed.notify_all();
 }
 
+// Drop spilled pages a slice of 32 MiB at a time, going on from where the last drop stopped, until
+// the process is at or below `target`; returns the most it was seen at meanwhile. While a drop
+// runs, the stages go on mapping pages, and a read fault maps its cached neighbours too (fault-
+// around: 12 pages a random read here), so a whole drop of a large resident set let the process
+// grow past the limit before the drop took effect; slices are looked between, and stop early.
 uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resumeOffset) {
   // However it returns, the threads paused while it ran go on.
   struct Resume {
