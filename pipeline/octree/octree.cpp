@@ -164,6 +164,7 @@ double Patch::value(const glm::dvec3& p, glm::dvec3* gradient) const {
 double Patch::maxPointDistance(const PointSet& points, uint32_t begin, uint32_t end) const {
   double worst = 0.0;
   for (uint32_t i = begin; i < end; ++i) {
+    if ((i - begin) % 65536 == 0) spillPause();  // (a coarse node's points: up to all of them)
     glm::dvec3 gradient;
     const double f = value(glm::dvec3(points.position[i]), &gradient);
     const double g = glm::length(gradient);

@@ -214,8 +214,10 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
     double inputPoints = 0.0;  // weights count merged duplicates: whole numbers, summed exactly
     for (uint64_t key : plan.topology.rootKeys) {
       const OctreeNode& root = tree.nodes[tree.find(plan.topology.startLevel, key)];
-      for (uint32_t i = root.pointBegin; i < root.pointEnd; ++i)
+      for (uint32_t i = root.pointBegin; i < root.pointEnd; ++i) {
+        if ((i - root.pointBegin) % 65536 == 0) spillPause();  // (the top chunk: every point)
         inputPoints += in.points->weight[i];
+      }
     }
     plan.pointCount = uint64_t(std::llround(inputPoints));
     const CornerLayout layout =
