@@ -144,11 +144,6 @@ void setPause(SpillState& s, bool on) {
 // around: 12 pages a random read here), so a whole drop of a large resident set let the process
 // grow past the limit before the drop took effect; slices are looked between, and stop early.
 uint64_t dropUntil(SpillState& s, uint64_t target, void*& resume, size_t& resumeOffset) {
-  // However it returns, the threads paused while it ran go on.
-  struct Resume {
-    SpillState& s;
-    ~Resume() { setPause(s, false); }
-  } resumeAtEnd{s};
   uint64_t most = 0;
   // The last arrays may have been freed since the pager looked (it reads the process's memory
   // without the lock); with no mapping, begin() is end(), and stepping past it never ends.
@@ -210,6 +205,7 @@ void pagerLoop() {
       const uint64_t target = limit > 3 * margin ? limit - 3 * margin : 0;
       if (all > limit) setPause(s, true);
       const uint64_t most = dropUntil(s, target, resume, resumeOffset);
+      setPause(s, false);  // the threads paused while it ran go on
       if (most > limit) overshoot = std::max(overshoot, double(most - limit));
       last = currentRssBytes();
     }
