@@ -311,6 +311,58 @@ TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   EXPECT_FALSE(std::filesystem::exists(dir_ / "x.ply"));
 }
 
+TEST_F(CliPipeline, exportWritesGlbMeshesThatTheKhronosValidatorAccepts) {
+  ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"))
+                .exitCode,
+            0);
+  const std::string iso = quoted(dir_ / "s.iso");
+  auto run = runIso("export --json " + iso + " --mesh " + quoted(dir_ / "full.glb"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json full = nlohmann::json::parse(run.out)["mesh"];
+  EXPECT_EQ(full["format"], "glb");
+  EXPECT_TRUE(full["glb"]["quantized_positions"].get<bool>());
+  EXPECT_TRUE(full["glb"]["normals"].get<bool>());
+  EXPECT_EQ(full["glb"]["bytes"].get<uint64_t>(), std::filesystem::file_size(dir_ / "full.glb"));
+  run = runIso("export --json " + iso + " --mesh " + quoted(dir_ / "plain.glb") + " --no-meshopt");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_GT(std::filesystem::file_size(dir_ / "plain.glb"),
+            2 * std::filesystem::file_size(dir_ / "full.glb"));
+  // A coarser cut, simplified within 1 % of the radius: far fewer triangles, within the error.
+  run = runIso("export --json " + iso + " --mesh " + quoted(dir_ / "lod.glb") +
+               " --level 5 --max-error 0.01");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json lod = nlohmann::json::parse(run.out)["mesh"];
+  EXPECT_EQ(lod["level"], 5);
+  EXPECT_LT(lod["triangles"].get<uint64_t>(), full["triangles"].get<uint64_t>() / 4);
+  EXPECT_LE(lod["simplified"]["measured_error"].get<double>(), 0.01);
+  // The Khronos glTF validator (npm gltf-validator, installed by tools/run setup): no errors.
+  const std::filesystem::path web = ISO_WEB_TOOLS_DIR;
+  ASSERT_TRUE(std::filesystem::exists(web / "node_modules" / "gltf-validator"))
+      << "run tools/run setup (it installs " << web.string() << "'s npm packages)";
+  run = test::runCommand("node " + quoted(web / "validate.mjs") + " " +
+                         quoted(dir_ / "full.glb") + " " + quoted(dir_ / "plain.glb") + " " +
+                         quoted(dir_ / "lod.glb"));
+  EXPECT_EQ(run.exitCode, 0) << run.out << run.err;
+  size_t files = 0;
+  std::istringstream lines(run.out);
+  for (std::string line; std::getline(lines, line);) {
+    const nlohmann::json report = nlohmann::json::parse(line);
+    EXPECT_EQ(report["errors"], 0) << line;
+    EXPECT_EQ(report["warnings"], 0) << line;
+    ++files;
+  }
+  EXPECT_EQ(files, 3u);
+  // Impossible options: usage errors, nothing written.
+  for (const std::string options :
+       {"--mesh x.obj", "--max-error 0.01", "--mesh x.glb --max-error -1",
+        "--mesh x.glb --max-error nan", "--mesh x.glb --level 99", "--mesh x.ply --no-meshopt"}) {
+    run = runIso("export " + iso + " " + options);
+    EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists("x.glb"));
+  EXPECT_FALSE(std::filesystem::exists("x.obj"));
+}
+
 TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   // Real scans with normals (the kitten) and colors (the lion, 8-bit codes times 256, when
   // ../shared/data is there), and a sphere 5,000 km from the origin: every point back within the

@@ -26,10 +26,11 @@ inline std::string slurp(const std::filesystem::path& path) {
   return {reinterpret_cast<const char*>(bytes.data()), bytes.size()};
 }
 
-inline CommandResult runIso(const std::string& arguments) {
+// A shell command line, its output captured.
+inline CommandResult runCommand(const std::string& commandLine) {
   TempDir dir;
-  const std::string command = std::string(ISO_BINARY) + " " + arguments + " >" +
-                              (dir / "out").string() + " 2>" + (dir / "err").string();
+  const std::string command =
+      commandLine + " >" + (dir / "out").string() + " 2>" + (dir / "err").string();
   // The shell is waited for with wait4, which also gives the peak memory of what it ran.
   const char* argv[] = {"/bin/sh", "-c", command.c_str(), nullptr};
   CommandResult run;
@@ -45,6 +46,10 @@ inline CommandResult runIso(const std::string& arguments) {
   run.out = slurp(dir / "out");
   run.err = slurp(dir / "err");
   return run;
+}
+
+inline CommandResult runIso(const std::string& arguments) {
+  return runCommand(std::string(ISO_BINARY) + " " + arguments);
 }
 
 inline std::string quoted(const std::filesystem::path& path) { return "'" + path.string() + "'"; }

@@ -2,6 +2,8 @@
 // leaf.
 #include "pipeline/analysis/export.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -37,6 +39,7 @@ class Extractor {
   void leaf(uint32_t id);
   TriangleMesh mesh;
   MeshStats stats;
+  std::vector<uint32_t> vertexLeaf;  // the leaf whose tetrahedron made each vertex
 
  private:
   // The level of the filled leaf holding a frame position, or -1 (empty, outside).
@@ -65,6 +68,7 @@ class Extractor {
   FlatMap<Key128, Sample> samples_;
   FlatMap<Key128, uint32_t> vertexOf_;  // by the two samples' numbers
   uint32_t nextId_ = 0;
+  uint32_t current_ = kNoNode;  // the leaf being cut
 };
 
 // A value of exactly 0 counts as a tiny positive one.
@@ -83,6 +87,7 @@ uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
     const glm::dvec3 to{double(pb[0]), double(pb[1]), double(pb[2])};
     mesh.vertices.push_back(
         toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
+    vertexLeaf.push_back(current_);
   }
   return *slot;
 }
@@ -183,6 +188,7 @@ std::vector<FaceTriangle> faceTriangles(bool e0, bool e1, bool e2, bool e3,
 
 void Extractor::leaf(uint32_t id) {
   const SurfaceModel::Leaf& leaf = surface_.leaves()[id];
+  current_ = id;
   ++stats.leaves;
   const int level = leaf.level;
   const int64_t size = int64_t{1} << (kMaxLevel - level), half = size / 2;
@@ -260,7 +266,8 @@ std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
   return order;
 }
 
-TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
+TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
+                         std::vector<uint32_t>* vertexLeaves) {
   // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
   // one's value, which the finer ones' corners there only approximate (quantized).
   const std::vector<uint32_t> order = leavesCoarseFirst(surface);
@@ -272,7 +279,31 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats) {
   Extractor extractor(surface);
   for (uint32_t id : order) extractor.leaf(id);
   if (stats) *stats = extractor.stats;
+  if (vertexLeaves) *vertexLeaves = std::move(extractor.vertexLeaf);
   return std::move(extractor.mesh);
+}
+
+MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& mesh,
+                              std::span<const uint32_t> vertexLeaves) {
+  MeshAttributes out;
+  if (surface.hasNormals() || surface.hasColors()) {
+    out.normals.resize(mesh.vertices.size());
+    if (surface.hasColors()) out.colors.resize(mesh.vertices.size());
+  }
+  if (out.normals.empty()) return out;
+  const Frame& frame = surface.header().frame;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, mesh.vertices.size(), 4096),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t v = r.begin(); v < r.end(); ++v) {
+                        const glm::dvec3 p = toFrame(mesh.vertices[v], frame);
+                        const SurfaceEval e = surface.evaluate(vertexLeaves[v], {p.x, p.y, p.z});
+                        out.normals[v] = glm::vec3(e.normal[0], e.normal[1], e.normal[2]);
+                        if (!out.colors.empty())
+                          out.colors[v] = glm::vec3(e.color[0], e.color[1], e.color[2]);
+                      }
+                    });
+  if (!surface.hasNormals()) out.normals.clear();  // (evaluated only for the colors)
+  return out;
 }
 
 uint64_t openEdges(const TriangleMesh& mesh) {

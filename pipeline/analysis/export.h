@@ -33,7 +33,29 @@ struct MeshStats {
 // pipeline writes them). A value of exactly 0 counts as a tiny positive one: the mesh is that of a
 // field without zeros, edge-manifold, and closed where the file's zero set stays inside its filled
 // leaves. Throws std::runtime_error for leaves of level kMaxLevel (the pipeline makes none).
-TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr);
+// vertexLeaves, when given, receives the leaf whose tetrahedron made each vertex.
+TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr,
+                         std::vector<uint32_t>* vertexLeaves = nullptr);
+
+// A mesh's vertex attributes from the surface it was extracted from: at each vertex, its leaf's
+// interpolated stored normal and linear color. Each is empty when the file has none.
+struct MeshAttributes {
+  std::vector<glm::vec3> normals, colors;
+};
+MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& mesh,
+                              std::span<const uint32_t> vertexLeaves);
+
+// The mesh (and its attributes) simplified by edge collapses (meshoptimizer) within maxError
+// (world units): the largest distance between the two meshes, sampled both ways (every vertex of
+// the mesh to the result, a grid of 28 points on each of the result's triangles to the mesh), is
+// measured, and the collapses are redone with a smaller target until it is at most maxError (the
+// mesh stays as it was when six tries do not get there). Vertices on open borders stay; unused
+// vertices are removed. Returns the measured distance (world units). Deterministic.
+double simplifyMesh(TriangleMesh& mesh, MeshAttributes& attributes, double maxError);
+
+// Triangles reordered for the vertex cache and vertices renumbered in the order they are first
+// used (meshoptimizer), as compression and drawing like them; unused vertices removed.
+void optimizeMeshOrder(TriangleMesh& mesh, MeshAttributes& attributes);
 
 // The surface's leaves, coarsest first (stable): where leaves of several levels meet, the exports
 // take the first one's value.

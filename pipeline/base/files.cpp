@@ -85,6 +85,23 @@ bool namesSameFile(const fs::path& a, const fs::path& b) {
   return canonicalA == fs::weakly_canonical(b, error) && !error;
 }
 
+void writeFileBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) fail(path, std::string("cannot be written: ") + std::strerror(errno));
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int error = n < 0 ? errno : ENOSPC;
+      ::close(fd);
+      fail(path, std::string("could not be written in full: ") + std::strerror(error));
+    }
+    done += size_t(n);
+  }
+  if (::close(fd) != 0) fail(path, std::string("could not be written: ") + std::strerror(errno));
+}
+
 // ---- OutputGroup
 
 OutputGroup::~OutputGroup() {

@@ -5,6 +5,7 @@
 // Threading: an object is used by one thread at a time.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -25,6 +26,9 @@ void refuseOutputOverInput(const std::filesystem::path& output, const std::files
 // Whether two paths name one file: the same file when both exist (through links too), else the
 // same absolute path once "." and ".." and the links of the existing part are resolved.
 bool namesSameFile(const std::filesystem::path& a, const std::filesystem::path& b);
+
+// Write bytes to path (replacing it), checked to the end: a full disk is a FileError naming path.
+void writeFileBytes(const std::filesystem::path& path, const std::vector<uint8_t>& bytes);
 
 // Outputs written together, all or none. Each is written under a temporary name beside its final
 // path (stage()); commit() renames them all into place once every one is complete. If a rename

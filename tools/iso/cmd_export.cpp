@@ -1,15 +1,20 @@
-// `iso export FILE.iso [--mesh OUT.ply] [--vdb OUT.vdb] [--points OUT.ply]`: the surface of an
-// .iso file for other tools, and the original points it keeps.
+// `iso export FILE.iso [--mesh OUT.ply|OUT.glb [--level L] [--max-error E]] [--vdb OUT.vdb]
+// [--points OUT.ply]`: the surface of an .iso file for other tools, and the original points it
+// keeps.
 #include <fmt/core.h>
 
+#include <cctype>
 #include <chrono>
+#include <cmath>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
 #include "pipeline/analysis/export.h"
+#include "pipeline/analysis/gltf.h"
 #include "pipeline/base/files.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
@@ -23,8 +28,19 @@ namespace {
 struct Options {
   std::string file, mesh, vdb, points;
   double band = 3.0;
-  bool force = false, json = false;
+  std::optional<int> level;        // --level: the level-of-detail cut the mesh is made at
+  std::optional<double> maxError;  // --max-error: simplified within this (world units)
+  bool force = false, json = false, noMeshopt = false;
 };
+
+// The mesh's format, from its extension.
+bool isGlb(const std::string& path) {
+  std::string extension = std::filesystem::path(path).extension().string();
+  for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (extension == ".glb") return true;
+  if (extension == ".ply") return false;
+  throw UsageError("--mesh " + path + ": name a .ply or .glb file (the format is chosen by it)");
+}
 
 int print(const nlohmann::json& summary, const Options& o);
 
@@ -85,23 +101,56 @@ void writePoints(const Reader& reader, const Options& o, OutputGroup& outputs,
                        {"colors", kept.colors}, {"seconds", secondsSince(started)}};
 }
 
-void writeMesh(const SurfaceModel& surface, bool doubles, const Options& o, OutputGroup& outputs,
-               nlohmann::json& summary) {
+void writeMesh(const Reader& reader, const SurfaceModel& surface, bool doubles, const Options& o,
+               OutputGroup& outputs, nlohmann::json& summary) {
   say("writing the mesh");
   const auto started = std::chrono::steady_clock::now();
   MeshStats stats;
-  const TriangleMesh mesh = extractMesh(surface, &stats);
-  writeAs(outputs, o.mesh,
-          [&](const std::filesystem::path& staged) { writePlyMesh(staged, mesh, doubles); });
+  std::vector<uint32_t> vertexLeaves;
+  TriangleMesh mesh = extractMesh(surface, &stats, &vertexLeaves);
+  const uint64_t extracted = mesh.triangles.size();
+  const bool glb = isGlb(o.mesh);
+  MeshAttributes attributes;
+  if (glb) attributes = meshAttributes(surface, mesh, vertexLeaves);
+  vertexLeaves = {};
+  double measured = 0.0;
+  if (o.maxError) measured = simplifyMesh(mesh, attributes, *o.maxError);
+  GlbStats glbStats;
+  writeAs(outputs, o.mesh, [&](const std::filesystem::path& staged) {
+    if (!glb) {
+      writePlyMesh(staged, mesh, doubles);
+      return;
+    }
+    optimizeMeshOrder(mesh, attributes);
+    // 16-bit positions where their step is at most a hundredth of the finest leaf's edge.
+    uint8_t finest = 0;
+    for (const SurfaceModel::Leaf& leaf : surface.leaves()) finest = std::max(finest, leaf.level);
+    GlbOptions options;
+    options.compress = !o.noMeshopt;
+    options.maxPositionStep = 0.01 * std::ldexp(reader.header().frame.size, -int(finest));
+    writeFileBytes(staged, encodeGlb(mesh, attributes, options, &glbStats));
+  });
   summary["mesh"] = {{"path", o.mesh},
+                     {"format", glb ? "glb" : "ply"},
                      {"vertices", mesh.vertices.size()},
                      {"triangles", mesh.triangles.size()},
                      {"leaves", stats.leaves},
                      {"tetrahedra", stats.tetrahedra},
                      {"split_faces", stats.splitFaces},
                      {"open_edges", openEdges(mesh)},
-                     {"double_positions", doubles},
+                     {"double_positions", doubles && !glb},
                      {"seconds", secondsSince(started)}};
+  if (o.level) summary["mesh"]["level"] = *o.level;
+  if (o.maxError)
+    summary["mesh"]["simplified"] = {
+        {"max_error", *o.maxError}, {"triangles_before", extracted}, {"measured_error", measured}};
+  if (glb)
+    summary["mesh"]["glb"] = {{"bytes", glbStats.bytes},
+                              {"quantized_positions", glbStats.quantized},
+                              {"position_step", glbStats.positionStep},
+                              {"meshopt", !o.noMeshopt},
+                              {"normals", !attributes.normals.empty()},
+                              {"colors", !attributes.colors.empty()}};
 }
 
 void writeLevelSet(const SurfaceModel& surface, const Options& o, OutputGroup& outputs,
@@ -126,6 +175,14 @@ int run(const Options& o) {
   if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
     throw UsageError("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
+  if ((o.level || o.maxError || o.noMeshopt) && o.mesh.empty())
+    throw UsageError("--level, --max-error and --no-meshopt shape the --mesh output: give --mesh");
+  if (o.noMeshopt && !isGlb(o.mesh)) throw UsageError("--no-meshopt is for a .glb --mesh");
+  if (o.maxError && !(*o.maxError > 0.0 && std::isfinite(*o.maxError)))
+    throw UsageError("--max-error must be a positive length (world units)");
+  if (o.level && (*o.level < 0 || *o.level > int(kMaxLevel)))
+    throw UsageError("--level must be 0 to " + std::to_string(kMaxLevel));
+  if (!o.mesh.empty()) isGlb(o.mesh);
   if (!o.vdb.empty()) requireOpenVdb("--vdb");
   checkOutputs(o);
   say("reading " + o.file);
@@ -137,12 +194,17 @@ int run(const Options& o) {
   if (!o.points.empty()) writePoints(reader, o, outputs, summary);
   if (!o.mesh.empty() || !o.vdb.empty()) {
     say("reading the surface of " + o.file);
-    const SurfaceModel surface = SurfaceModel::load(reader);
+    const SurfaceModel surface = SurfaceModel::load(reader, {}, {});
+    // --level: the cut at that level (the leaves above it and the nodes at it), for the mesh.
+    const std::optional<SurfaceModel> cut =
+        o.level ? std::optional(SurfaceModel::load(reader, {}, {}, uint8_t(*o.level)))
+                : std::nullopt;
     // Far from the origin (UTM coordinates) float positions lose the surface's detail.
     const Frame& frame = reader.header().frame;
     double reach = frame.size;
     for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
-    if (!o.mesh.empty()) writeMesh(surface, reach > 65536.0, o, outputs, summary);
+    if (!o.mesh.empty())
+      writeMesh(reader, cut ? *cut : surface, reach > 65536.0, o, outputs, summary);
     if (!o.vdb.empty()) writeLevelSet(surface, o, outputs, summary);
   }
   {
@@ -167,6 +229,24 @@ int print(const nlohmann::json& summary, const Options& o) {
                withSeparators(m["leaves"].get<uint64_t>()), m["seconds"].get<double>());
     fmt::print("  open edges: {}{}\n", withSeparators(open),
                open > 0 ? " (where the surface is open or leaves the filled leaves)" : " (closed)");
+    if (m.contains("level"))
+      fmt::print("  level-of-detail cut at level {}\n", m["level"].get<int>());
+    if (m.contains("simplified")) {
+      const auto& s = m["simplified"];
+      fmt::print("  simplified from {} triangles within {:.6g} (measured: {:.6g})\n",
+                 withSeparators(s["triangles_before"].get<uint64_t>()),
+                 s["max_error"].get<double>(), s["measured_error"].get<double>());
+    }
+    if (m.contains("glb")) {
+      const auto& g = m["glb"];
+      fmt::print("  glTF binary, {}: {} positions{}{}{}\n", byteSize(g["bytes"].get<uint64_t>()),
+                 g["quantized_positions"].get<bool>()
+                     ? fmt::format("16-bit (step {:.3g})", g["position_step"].get<double>())
+                     : std::string("float"),
+                 g["normals"].get<bool>() ? ", normals" : "",
+                 g["colors"].get<bool>() ? ", colors" : "",
+                 g["meshopt"].get<bool>() ? ", meshopt-compressed" : ", uncompressed");
+    }
   }
   if (summary.contains("points")) {
     const auto& p = summary["points"];
@@ -196,8 +276,18 @@ void addExportCommand(CLI::App& app, int& exitCode) {
       "level set, or the original points it keeps; all the files asked for, or none");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
-                "Triangle mesh of the zero set (binary PLY), crack-free across levels: each leaf "
-                "cut into tetrahedra that match its neighbours' faces (marching tetrahedra)");
+                "Triangle mesh of the zero set, crack-free across levels (each leaf cut into "
+                "tetrahedra that match its neighbours' faces): binary PLY (.ply), or glTF binary "
+                "(.glb: 16-bit positions, normals and colors, meshopt-compressed)");
+  c->add_option("--level", o->level,
+                "Make the mesh from the level-of-detail cut at this octree level (the leaves "
+                "above it and the nodes at it) instead of the finest leaves");
+  c->add_option("--max-error", o->maxError,
+                "Simplify the mesh (meshoptimizer's edge collapses) within this distance of the "
+                "unsimplified one (world units, measured both ways); open borders stay");
+  c->add_flag("--no-meshopt", o->noMeshopt,
+              "Write the .glb mesh's buffers uncompressed, for tools that do not read "
+              "EXT_meshopt_compression");
   c->add_option("--vdb", o->vdb,
                 "OpenVDB narrow-band level set (float grid \"surface\"), voxels the finest "
                 "leaves' size (not in builds without OpenVDB)");

@@ -1,0 +1,239 @@
+// glTF 2.0 binary files of triangle meshes (pipeline/analysis/gltf.h). The JSON is written here:
+// Debian 12's tinygltf (2.7) cannot express EXT_meshopt_compression's fallback buffer (a
+// byteLength without data), and cgltf is not packaged. meshoptimizer encodes the streams.
+#include "pipeline/analysis/gltf.h"
+
+#include <meshoptimizer.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <glm/common.hpp>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace iso {
+namespace {
+
+// glTF's numbers for component types and buffer targets.
+constexpr int kByte = 5120, kUnsignedByte = 5121, kUnsignedShort = 5123, kUnsignedInt = 5125,
+              kFloat = 5126;
+constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
+
+size_t padded(size_t n) { return (n + 3) & ~size_t{3}; }
+
+// One stream of the file: its uncompressed bytes and how glTF describes them.
+struct Stream {
+  Stream(size_t stride_, size_t count_, bool indices_ = false)
+      : data(stride_ * count_), stride(stride_), count(count_), indices(indices_) {}
+  std::vector<uint8_t> data;
+  size_t stride, count;
+  bool indices;
+};
+
+template <class T>
+void put(std::vector<uint8_t>& out, size_t at, T value) {
+  std::memcpy(out.data() + at, &value, sizeof(T));
+}
+
+int8_t snorm8(float v) { return int8_t(std::lround(std::clamp(v, -1.0f, 1.0f) * 127.0f)); }
+uint8_t unorm8(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); }
+
+}  // namespace
+
+std::vector<uint8_t> encodeGlb(const TriangleMesh& mesh, const MeshAttributes& attributes,
+                               const GlbOptions& options, GlbStats* stats) {
+  const size_t n = mesh.vertices.size();
+  GlbStats s;
+  s.vertices = n;
+  s.triangles = mesh.triangles.size();
+  // Positions relative to the origin, their box, and the 16-bit step over its largest extent.
+  glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi(-lo);
+  for (const glm::dvec3& v : mesh.vertices) {
+    lo = glm::min(lo, v - options.origin);
+    hi = glm::max(hi, v - options.origin);
+  }
+  if (n == 0) lo = hi = glm::dvec3(0.0);
+  const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  const double step = extent > 0.0 ? extent / 65535.0 : 1.0;
+  s.quantized = options.maxPositionStep <= 0.0 || step <= options.maxPositionStep;
+  s.positionStep = s.quantized ? step : 0.0;
+
+  nlohmann::json accessors = nlohmann::json::array(), attributesJson = nlohmann::json::object();
+  std::vector<Stream> streams;
+  Stream position(s.quantized ? 8 : 12, n);
+  nlohmann::json qmin = nlohmann::json::array(), qmax = nlohmann::json::array();
+  if (s.quantized) {
+    std::array<uint16_t, 3> low{65535, 65535, 65535}, high{0, 0, 0};
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a) {
+        const double q = std::round((mesh.vertices[v][a] - options.origin[a] - lo[a]) / step);
+        const uint16_t value = uint16_t(std::clamp(q, 0.0, 65535.0));
+        put(position.data, v * 8 + size_t(a) * 2, value);
+        low[size_t(a)] = std::min(low[size_t(a)], value);
+        high[size_t(a)] = std::max(high[size_t(a)], value);
+      }
+    for (int a = 0; a < 3; ++a) {
+      qmin.push_back(n > 0 ? low[size_t(a)] : 0);
+      qmax.push_back(n > 0 ? high[size_t(a)] : 0);
+    }
+  } else {
+    std::array<float, 3> low{}, high{};
+    low.fill(std::numeric_limits<float>::infinity());
+    high.fill(-std::numeric_limits<float>::infinity());
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a) {
+        const float value = float(mesh.vertices[v][a] - options.origin[a] - lo[a]);
+        put(position.data, v * 12 + size_t(a) * 4, value);
+        low[size_t(a)] = std::min(low[size_t(a)], value);
+        high[size_t(a)] = std::max(high[size_t(a)], value);
+      }
+    for (int a = 0; a < 3; ++a) {
+      qmin.push_back(n > 0 ? low[size_t(a)] : 0.0f);
+      qmax.push_back(n > 0 ? high[size_t(a)] : 0.0f);
+    }
+  }
+  accessors.push_back({{"bufferView", streams.size()},
+                       {"componentType", s.quantized ? kUnsignedShort : kFloat},
+                       {"count", n},
+                       {"type", "VEC3"},
+                       {"min", qmin},
+                       {"max", qmax}});
+  attributesJson["POSITION"] = accessors.size() - 1;
+  streams.push_back(std::move(position));
+  if (!attributes.normals.empty()) {
+    Stream normal(4, n);
+    for (size_t v = 0; v < n; ++v) {
+      glm::vec3 d = attributes.normals[v];
+      const float length = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+      d = length > 0.0f ? d / length : glm::vec3(0.0f, 0.0f, 1.0f);
+      for (int a = 0; a < 3; ++a) put(normal.data, v * 4 + size_t(a), snorm8(d[a]));
+    }
+    accessors.push_back({{"bufferView", streams.size()},
+                         {"componentType", kByte},
+                         {"normalized", true},
+                         {"count", n},
+                         {"type", "VEC3"}});
+    attributesJson["NORMAL"] = accessors.size() - 1;
+    streams.push_back(std::move(normal));
+  }
+  if (!attributes.colors.empty()) {
+    Stream color(4, n);
+    for (size_t v = 0; v < n; ++v)
+      for (int a = 0; a < 3; ++a)
+        put(color.data, v * 4 + size_t(a), unorm8(attributes.colors[v][a]));
+    accessors.push_back({{"bufferView", streams.size()},
+                         {"componentType", kUnsignedByte},
+                         {"normalized", true},
+                         {"count", n},
+                         {"type", "VEC3"}});
+    attributesJson["COLOR_0"] = accessors.size() - 1;
+    streams.push_back(std::move(color));
+  }
+  const bool wide = n > 65535;
+  Stream index(wide ? 4 : 2, 3 * mesh.triangles.size(), true);
+  for (size_t t = 0; t < mesh.triangles.size(); ++t)
+    for (size_t c = 0; c < 3; ++c) {
+      const uint32_t i = mesh.triangles[t][c];
+      if (wide)
+        put(index.data, (3 * t + c) * 4, i);
+      else
+        put(index.data, (3 * t + c) * 2, uint16_t(i));
+    }
+  accessors.push_back({{"bufferView", streams.size()},
+                       {"componentType", wide ? kUnsignedInt : kUnsignedShort},
+                       {"count", index.count},
+                       {"type", "SCALAR"}});
+  const size_t indicesAccessor = accessors.size() - 1;
+  streams.push_back(std::move(index));
+
+  // The binary chunk: each stream compressed (or as it is), 4-byte aligned; with compression,
+  // the views' uncompressed layout lies in a second, fallback buffer that holds no bytes.
+  std::vector<uint8_t> bin;
+  nlohmann::json views = nlohmann::json::array();
+  size_t fallback = 0;
+  for (const Stream& stream : streams) {
+    nlohmann::json view = {{"buffer", options.compress ? 1 : 0},
+                           {"byteLength", stream.data.size()},
+                           {"target", stream.indices ? kElementArrayBuffer : kArrayBuffer}};
+    if (!stream.indices) view["byteStride"] = stream.stride;
+    if (options.compress) {
+      view["byteOffset"] = fallback;
+      fallback += padded(stream.data.size());
+      std::vector<uint8_t> encoded;
+      if (stream.indices) {
+        std::vector<uint32_t> flat(stream.count);
+        for (size_t i = 0; i < stream.count; ++i)
+          flat[i] = stream.stride == 4 ? mesh.triangles[i / 3][i % 3]
+                                       : uint32_t(mesh.triangles[i / 3][i % 3]);
+        encoded.resize(meshopt_encodeIndexBufferBound(stream.count, n));
+        encoded.resize(
+            meshopt_encodeIndexBuffer(encoded.data(), encoded.size(), flat.data(), flat.size()));
+      } else {
+        encoded.resize(meshopt_encodeVertexBufferBound(stream.count, stream.stride));
+        encoded.resize(meshopt_encodeVertexBuffer(encoded.data(), encoded.size(),
+                                                  stream.data.data(), stream.count, stream.stride));
+      }
+      view["extensions"]["EXT_meshopt_compression"] = {
+          {"buffer", 0},
+          {"byteOffset", bin.size()},
+          {"byteLength", encoded.size()},
+          {"byteStride", stream.stride},
+          {"count", stream.count},
+          {"mode", stream.indices ? "TRIANGLES" : "ATTRIBUTES"}};
+      bin.insert(bin.end(), encoded.begin(), encoded.end());
+    } else {
+      view["byteOffset"] = bin.size();
+      bin.insert(bin.end(), stream.data.begin(), stream.data.end());
+    }
+    bin.resize(padded(bin.size()), 0);
+    views.push_back(std::move(view));
+  }
+
+  nlohmann::json node = {{"mesh", 0}};
+  glm::dvec3 translation = lo;
+  if (options.translate) translation += options.origin;
+  node["translation"] = {translation.x, translation.y, translation.z};
+  if (s.quantized) node["scale"] = {step, step, step};
+  nlohmann::json buffers = nlohmann::json::array({{{"byteLength", bin.size()}}});
+  std::vector<std::string> extensions = {"KHR_mesh_quantization"};
+  if (options.compress) {
+    buffers.push_back({{"byteLength", fallback},
+                       {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
+    extensions.push_back("EXT_meshopt_compression");
+  }
+  const nlohmann::json gltf = {
+      {"asset", {{"version", "2.0"}, {"generator", "iso export"}}},
+      {"extensionsUsed", extensions},
+      {"extensionsRequired", extensions},
+      {"scene", 0},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"nodes", {node}},
+      {"meshes",
+       {{{"primitives",
+          {{{"attributes", attributesJson}, {"indices", indicesAccessor}, {"mode", 4}}}}}}},
+      {"accessors", accessors},
+      {"bufferViews", views},
+      {"buffers", buffers}};
+  std::string json = gltf.dump();
+  json.resize(padded(json.size()), ' ');
+
+  // The container: a 12-byte header, then the JSON and binary chunks (glTF 2.0 §4.4).
+  std::vector<uint8_t> out(12 + 8 + json.size() + 8 + bin.size());
+  put(out, 0, uint32_t(0x46546C67));  // "glTF"
+  put(out, 4, uint32_t(2));
+  put(out, 8, uint32_t(out.size()));
+  put(out, 12, uint32_t(json.size()));
+  put(out, 16, uint32_t(0x4E4F534A));  // "JSON"
+  std::memcpy(out.data() + 20, json.data(), json.size());
+  const size_t at = 20 + json.size();
+  put(out, at, uint32_t(bin.size()));
+  put(out, at + 4, uint32_t(0x004E4942));  // "BIN"
+  std::memcpy(out.data() + at + 8, bin.data(), bin.size());
+  s.bytes = out.size();
+  if (stats) *stats = s;
+  return out;
+}
+
+}  // namespace iso

@@ -1,0 +1,38 @@
+// glTF 2.0 binary files (.glb) of the exports' triangle meshes (specs/pipeline.md §17): positions
+// quantized to 16 bits (KHR_mesh_quantization) where that keeps them fine enough, normals and
+// linear colors in bytes, every stream compressed by meshoptimizer (EXT_meshopt_compression).
+#pragma once
+
+#include <cstdint>
+#include <glm/vec3.hpp>
+#include <vector>
+
+#include "pipeline/analysis/export.h"
+
+namespace iso {
+
+struct GlbOptions {
+  // Positions in 16 bits when their step (the largest extent / 65,535) is at most this (world
+  // units), else in float; 0: always 16 bits.
+  double maxPositionStep = 0.0;
+  bool compress = true;  // EXT_meshopt_compression (off: plain buffers, for comparison)
+  // Positions are stored relative to this point (world units), which the node's translation
+  // adds back (a tileset's root transform may carry it instead: see `translate`).
+  glm::dvec3 origin{0.0};
+  bool translate = true;  // the node adds `origin` back
+};
+
+struct GlbStats {
+  uint64_t bytes = 0;
+  uint64_t vertices = 0, triangles = 0;
+  bool quantized = false;   // 16-bit positions
+  double positionStep = 0;  // world units (0 for float positions)
+};
+
+// The mesh as a .glb file's bytes: one mesh, one node, one scene; positions in the mesh's world
+// axes (relative to options.origin); NORMAL and COLOR_0 when the attributes have them.
+// Deterministic.
+std::vector<uint8_t> encodeGlb(const TriangleMesh& mesh, const MeshAttributes& attributes,
+                               const GlbOptions& options = {}, GlbStats* stats = nullptr);
+
+}  // namespace iso

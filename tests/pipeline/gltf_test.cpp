@@ -1,0 +1,230 @@
+// The glTF binary export and the simplified meshes: the file decodes (meshoptimizer's decoders) to
+// the uncompressed file's streams, and those to the mesh within half a quantization step; the
+// simplified mesh stays within its error of the analytic sphere and keeps open borders.
+#include <gtest/gtest.h>
+#include <meshoptimizer.h>
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <glm/geometric.hpp>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+
+#include "pipeline/analysis/export.h"
+#include "pipeline/analysis/gltf.h"
+#include "tests/pipeline/pipeline_support.h"
+
+namespace iso {
+namespace {
+
+uint32_t word(const std::vector<uint8_t>& b, size_t at) {
+  uint32_t v = 0;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+struct Glb {
+  nlohmann::json json;
+  std::vector<uint8_t> bin;
+};
+
+// The two chunks of a .glb file, its header and chunk types checked.
+Glb parseGlb(const std::vector<uint8_t>& bytes) {
+  EXPECT_GE(bytes.size(), 28u);
+  EXPECT_EQ(word(bytes, 0), 0x46546C67u);  // "glTF"
+  EXPECT_EQ(word(bytes, 4), 2u);
+  EXPECT_EQ(word(bytes, 8), bytes.size());
+  const uint32_t jsonLength = word(bytes, 12);
+  EXPECT_EQ(word(bytes, 16), 0x4E4F534Au);  // "JSON"
+  EXPECT_EQ(jsonLength % 4, 0u);
+  Glb glb;
+  glb.json = nlohmann::json::parse(bytes.begin() + 20, bytes.begin() + 20 + jsonLength);
+  const size_t at = 20 + jsonLength;
+  const uint32_t binLength = word(bytes, at);
+  EXPECT_EQ(word(bytes, at + 4), 0x004E4942u);  // "BIN"
+  EXPECT_EQ(at + 8 + binLength, bytes.size());
+  glb.bin.assign(bytes.begin() + long(at) + 8, bytes.end());
+  return glb;
+}
+
+// The uncompressed bytes of a buffer view: decoded by meshoptimizer when compressed.
+std::vector<uint8_t> viewBytes(const Glb& glb, size_t view) {
+  const nlohmann::json& v = glb.json["bufferViews"][view];
+  std::vector<uint8_t> out(v["byteLength"].get<size_t>());
+  if (!v.contains("extensions")) {
+    const size_t offset = v["byteOffset"].get<size_t>();
+    std::memcpy(out.data(), glb.bin.data() + offset, out.size());
+    return out;
+  }
+  const nlohmann::json& c = v["extensions"]["EXT_meshopt_compression"];
+  const uint8_t* source = glb.bin.data() + c["byteOffset"].get<size_t>();
+  const size_t length = c["byteLength"].get<size_t>(), count = c["count"].get<size_t>(),
+               stride = c["byteStride"].get<size_t>();
+  int result = -1;
+  if (c["mode"] == "ATTRIBUTES")
+    result = meshopt_decodeVertexBuffer(out.data(), count, stride, source, length);
+  else if (c["mode"] == "TRIANGLES")
+    result = meshopt_decodeIndexBuffer(out.data(), count, stride, source, length);
+  EXPECT_EQ(result, 0) << c.dump();
+  return out;
+}
+
+test::Converted coloredSphere(const std::filesystem::path& path) {
+  PointCloud scan = test::scanOf("sphere", 30000);
+  for (const glm::dvec3& p : scan.positions)  // a color that varies smoothly over the sphere
+    scan.colors.push_back(glm::vec3(0.5 + 0.4 * p.x, 0.5 + 0.4 * p.y, 0.5 + 0.4 * p.z));
+  return test::convertAndLoad(scan, path);
+}
+
+TEST(GlbExport, decodesToTheMeshWithinHalfAStepAndToTheSameStreamsAsUncompressed) {
+  test::TempDir dir;
+  const test::Converted c = coloredSphere(dir / "s.iso");
+  std::vector<uint32_t> leaves;
+  TriangleMesh mesh = extractMesh(c.surface, nullptr, &leaves);
+  MeshAttributes attributes = meshAttributes(c.surface, mesh, leaves);
+  ASSERT_EQ(attributes.normals.size(), mesh.vertices.size());
+  ASSERT_EQ(attributes.colors.size(), mesh.vertices.size());
+  optimizeMeshOrder(mesh, attributes);
+  GlbStats stats;
+  const Glb packed = parseGlb(encodeGlb(mesh, attributes, {}, &stats));
+  const Glb plain = parseGlb(encodeGlb(mesh, attributes, {.compress = false}));
+  ASSERT_TRUE(stats.quantized);
+  EXPECT_EQ(packed.json["extensionsRequired"],
+            nlohmann::json({"KHR_mesh_quantization", "EXT_meshopt_compression"}));
+  // The compressed vertex streams are the uncompressed ones (the index codec may rotate a
+  // triangle's vertices: compared below).
+  ASSERT_EQ(packed.json["bufferViews"].size(), 4u);  // positions, normals, colors, indices
+  for (size_t v = 0; v < 3; ++v) EXPECT_TRUE(viewBytes(packed, v) == viewBytes(plain, v)) << v;
+  EXPECT_LT(packed.bin.size(), plain.bin.size() / 2);
+  std::printf("%zu vertices, %zu triangles: %zu bytes compressed, %zu not\n", mesh.vertices.size(),
+              mesh.triangles.size(), packed.bin.size(), plain.bin.size());
+
+  // Positions: translation + scale · q, within half a step of the mesh's (every axis).
+  const nlohmann::json& node = packed.json["nodes"][0];
+  const glm::dvec3 t(node["translation"][0], node["translation"][1], node["translation"][2]);
+  const double step = node["scale"][0].get<double>();
+  EXPECT_DOUBLE_EQ(step, stats.positionStep);
+  const std::vector<uint8_t> positions = viewBytes(packed, 0), normals = viewBytes(packed, 1),
+                             colors = viewBytes(packed, 2), indices = viewBytes(packed, 3);
+  double worst = 0.0, worstAngle = 0.0, worstColor = 0.0;
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    uint16_t q[3];
+    std::memcpy(q, positions.data() + 8 * i, 6);
+    for (int a = 0; a < 3; ++a)
+      worst = std::max(worst, std::abs(t[a] + step * q[a] - mesh.vertices[i][a]));
+    const glm::dvec3 n(int8_t(normals[4 * i]) / 127.0, int8_t(normals[4 * i + 1]) / 127.0,
+                       int8_t(normals[4 * i + 2]) / 127.0);
+    const double cosine =
+        glm::dot(glm::normalize(n), glm::normalize(glm::dvec3(attributes.normals[i])));
+    worstAngle = std::max(worstAngle, std::acos(std::min(1.0, cosine)));
+    // The surface's color is the points' (a smooth function of the position) near the vertex.
+    const glm::dvec3 p = mesh.vertices[i];
+    for (int a = 0; a < 3; ++a)
+      worstColor = std::max(worstColor, std::abs(colors[4 * i + size_t(a)] / 255.0 -
+                                                 (0.5 + 0.4 * p[a] / glm::length(p))));
+  }
+  EXPECT_LE(worst, 0.5 * step * (1 + 1e-9));
+  EXPECT_LT(worstAngle, 1.0 * M_PI / 180);  // 8-bit components: about half a degree
+  EXPECT_LT(worstColor, 0.02);
+  // The normals point out of the sphere.
+  for (size_t i = 0; i < mesh.vertices.size(); ++i)
+    ASSERT_GT(glm::dot(glm::dvec3(attributes.normals[i]), mesh.vertices[i]), 0.9);
+  // The mesh's triangles in its order, each maybe rotated (the same facing); 4-byte indices past
+  // 65,535 vertices. The uncompressed file has them as they are.
+  const bool wide = mesh.vertices.size() > 65535;
+  ASSERT_EQ(indices.size(), mesh.triangles.size() * 3 * (wide ? 4 : 2));
+  const auto indexAt = [&](const std::vector<uint8_t>& bytes, size_t i) {
+    uint32_t index = 0;
+    std::memcpy(&index, bytes.data() + (wide ? 4 : 2) * i, wide ? 4 : 2);
+    return index;
+  };
+  const std::vector<uint8_t> plainIndices = viewBytes(plain, 3);
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    const std::array<uint32_t, 3> got = {indexAt(indices, 3 * t), indexAt(indices, 3 * t + 1),
+                                         indexAt(indices, 3 * t + 2)};
+    const auto& want = mesh.triangles[t];
+    bool same = false;
+    for (size_t r = 0; r < 3; ++r)
+      same =
+          same || (got[r] == want[0] && got[(r + 1) % 3] == want[1] && got[(r + 2) % 3] == want[2]);
+    ASSERT_TRUE(same) << t;
+    for (size_t c = 0; c < 3; ++c) ASSERT_EQ(indexAt(plainIndices, 3 * t + c), want[c]);
+  }
+  // Positions the 16-bit step would blur are written as float.
+  GlbStats fine;
+  const Glb floats = parseGlb(encodeGlb(mesh, attributes, {.maxPositionStep = step / 2}, &fine));
+  EXPECT_FALSE(fine.quantized);
+  EXPECT_EQ(floats.json["accessors"][0]["componentType"], 5126);
+  const std::vector<uint8_t> exact = viewBytes(floats, 0);
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    float f[3];
+    std::memcpy(f, exact.data() + 12 * i, 12);
+    const nlohmann::json& fn = floats.json["nodes"][0];
+    for (int a = 0; a < 3; ++a)
+      ASSERT_NEAR(fn["translation"][a].get<double>() + f[a], mesh.vertices[i][a], 1e-6);
+  }
+}
+
+// The vertices on edges used by one triangle.
+std::set<std::tuple<double, double, double>> borderVertices(const TriangleMesh& mesh) {
+  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  for (const auto& t : mesh.triangles)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
+      ++uses[{std::min(a, b), std::max(a, b)}];
+    }
+  std::set<std::tuple<double, double, double>> out;
+  for (const auto& [edge, count] : uses)
+    if (count == 1)
+      for (uint32_t v : {edge.first, edge.second})
+        out.insert({mesh.vertices[v].x, mesh.vertices[v].y, mesh.vertices[v].z});
+  return out;
+}
+
+TEST(MeshSimplification, staysWithinItsErrorOfTheSphereAndKeepsOpenBorders) {
+  test::TempDir dir;
+  const test::Converted sphere = test::convertAndLoad(test::scanOf("sphere", 30000), dir / "s.iso");
+  TriangleMesh mesh = extractMesh(sphere.surface);
+  double original = 0.0;
+  for (const glm::dvec3& v : mesh.vertices)
+    original = std::max(original, std::abs(glm::length(v) - 1));
+  const size_t before = mesh.triangles.size();
+  for (const double limit : {0.002, 0.01}) {
+    TriangleMesh simplified = mesh;
+    MeshAttributes none;
+    const double measured = simplifyMesh(simplified, none, limit);
+    EXPECT_LE(measured, limit);
+    EXPECT_GT(measured, 0.3 * limit);  // simplified about as far as allowed
+    EXPECT_LT(simplified.triangles.size(), before / 4) << limit;
+    // Every point of every triangle (a 5×5 barycentric grid) within the limit of the unit sphere,
+    // beside the error the unsimplified mesh had.
+    double worst = 0.0;
+    for (const auto& t : simplified.triangles)
+      for (int i = 0; i <= 4; ++i)
+        for (int j = 0; i + j <= 4; ++j) {
+          const glm::dvec3 p =
+              (double(i) * simplified.vertices[t[0]] + double(j) * simplified.vertices[t[1]] +
+               double(4 - i - j) * simplified.vertices[t[2]]) /
+              4.0;
+          worst = std::max(worst, std::abs(glm::length(p) - 1.0));
+        }
+    std::printf(
+        "limit %.3f: %zu of %zu triangles, measured %.5f, largest distance to the "
+        "sphere %.5f (%.5f before)\n",
+        limit, simplified.triangles.size(), before, measured, worst, original);
+    EXPECT_LE(worst, limit + original);
+  }
+  // An open square: its border vertices all stay.
+  const test::Converted plane = test::convertAndLoad(test::scanOf("plane", 20000), dir / "p.iso");
+  TriangleMesh sheet = extractMesh(plane.surface);
+  const auto border = borderVertices(sheet);
+  ASSERT_GT(border.size(), 10u);
+  MeshAttributes none;
+  simplifyMesh(sheet, none, 0.01);
+  EXPECT_EQ(borderVertices(sheet), border);
+}
+
+}  // namespace
+}  // namespace iso
