@@ -363,6 +363,42 @@ TEST_F(CliPipeline, exportWritesGlbMeshesThatTheKhronosValidatorAccepts) {
   EXPECT_FALSE(std::filesystem::exists("x.obj"));
 }
 
+TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsTiles) {
+  ASSERT_EQ(runIso("convert -q --chunk-nodes 2000 " + quoted(dir_ / "sphere.ply") + " -o " +
+                   quoted(dir_ / "s.iso"))
+                .exitCode,
+            0);
+  const std::string iso = quoted(dir_ / "s.iso"), out = quoted(dir_ / "tiles");
+  auto run = runIso("export --json " + iso + " --tiles " + out);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json summary = nlohmann::json::parse(run.out)["tiles"];
+  EXPECT_GT(summary["tiles"].get<uint64_t>(), 1u);
+  std::vector<std::string> glbs;
+  for (const auto& entry : std::filesystem::directory_iterator(dir_ / "tiles"))
+    if (entry.path().extension() == ".glb") glbs.push_back(quoted(entry.path()));
+  EXPECT_GT(glbs.size(), 1u);
+  const std::filesystem::path web = ISO_WEB_TOOLS_DIR;
+  std::string command = "node " + quoted(web / "validate.mjs");
+  for (const std::string& glb : glbs) command += " " + glb;
+  run = test::runCommand(command);
+  EXPECT_EQ(run.exitCode, 0) << run.out << run.err;
+  // Not over an existing directory without --force (it stays as it was); with it, replaced.
+  std::filesystem::remove(dir_ / "tiles" / "tileset.json");
+  run = runIso("export " + iso + " --tiles " + out);
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("tiles"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "tiles" / "tileset.json"));
+  run = runIso("export -f " + iso + " --tiles " + out);
+  EXPECT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "tiles" / "tileset.json"));
+  // A file in the way: an error naming it. Nothing is left beside it.
+  run = runIso("export -f " + iso + " --tiles " + quoted(dir_ / "s.iso"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("not a directory"), std::string::npos) << run.err;
+  for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
+    EXPECT_EQ(entry.path().filename().string().find(".isotmp"), std::string::npos) << entry.path();
+}
+
 TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   // Real scans with normals (the kitten) and colors (the lion, 8-bit codes times 256, when
   // ../shared/data is there), and a sphere 5,000 km from the origin: every point back within the

@@ -36,7 +36,9 @@ class Extractor {
         samples_(surface.leaves().size() * 6),
         vertexOf_(surface.leaves().size() * 8) {}
 
-  void leaf(uint32_t id);
+  // Cut leaf `id` into tetrahedra; emit: add their triangles to the mesh (else only sample the
+  // points they use, so that leaves cut later read the same values there).
+  void leaf(uint32_t id, bool emit = true);
   TriangleMesh mesh;
   MeshStats stats;
   std::vector<uint32_t> vertexLeaf;  // the leaf whose tetrahedron made each vertex
@@ -69,6 +71,7 @@ class Extractor {
   FlatMap<Key128, uint32_t> vertexOf_;  // by the two samples' numbers
   uint32_t nextId_ = 0;
   uint32_t current_ = kNoNode;  // the leaf being cut
+  bool emit_ = true;            // whether its triangles go into the mesh
 };
 
 // A value of exactly 0 counts as a tiny positive one.
@@ -93,6 +96,7 @@ uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
 }
 
 void Extractor::tetrahedron(const std::array<Sample, 4>& s, const std::array<Point, 4>& p) {
+  if (!emit_) return;
   ++stats.tetrahedra;
   std::array<int, 4> in{}, out{};
   int ni = 0, no = 0;
@@ -186,10 +190,11 @@ std::vector<FaceTriangle> faceTriangles(bool e0, bool e1, bool e2, bool e3,
   return triangles;
 }
 
-void Extractor::leaf(uint32_t id) {
+void Extractor::leaf(uint32_t id, bool emit) {
   const SurfaceModel::Leaf& leaf = surface_.leaves()[id];
   current_ = id;
-  ++stats.leaves;
+  emit_ = emit;
+  stats.leaves += emit;
   const int level = leaf.level;
   const int64_t size = int64_t{1} << (kMaxLevel - level), half = size / 2;
   const auto cell = mortonDecode(leaf.key);
@@ -211,7 +216,7 @@ void Extractor::leaf(uint32_t id) {
       fineQuarter[size_t(face)][size_t(q)] = levelAt(p) > level;
     }
     const auto& f = fineQuarter[size_t(face)];
-    stats.splitFaces += f[0] || f[1] || f[2] || f[3];
+    stats.splitFaces += emit && (f[0] || f[1] || f[2] || f[3]);
   }
   // splitEdge[a][i][j]: the edge along axis a at offsets i, j of axes (a+1)%3 and (a+2)%3.
   bool splitEdge[3][2][2] = {};
@@ -267,7 +272,7 @@ std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
 }
 
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
-                         std::vector<uint32_t>* vertexLeaves) {
+                         std::vector<uint32_t>* vertexLeaves, const SurfaceModel::Region* within) {
   // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
   // one's value, which the finer ones' corners there only approximate (quantized).
   const std::vector<uint32_t> order = leavesCoarseFirst(surface);
@@ -277,7 +282,17 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
                              " are too fine for the mesh export (at most " +
                              std::to_string(kMaxLevel - 1) + ")");
   Extractor extractor(surface);
-  for (uint32_t id : order) extractor.leaf(id);
+  const auto inside = [&](const SurfaceModel::Leaf& leaf) {
+    if (!within) return true;
+    const double size = std::ldexp(1.0, -int(leaf.level));
+    const auto cell = mortonDecode(leaf.key);
+    for (int a = 0; a < 3; ++a) {
+      const double lo = double(cell[size_t(a)]) * size;
+      if (lo < within->lo[size_t(a)] || lo + size > within->hi[size_t(a)]) return false;
+    }
+    return true;
+  };
+  for (uint32_t id : order) extractor.leaf(id, inside(surface.leaves()[id]));
   if (stats) *stats = extractor.stats;
   if (vertexLeaves) *vertexLeaves = std::move(extractor.vertexLeaf);
   return std::move(extractor.mesh);

@@ -33,9 +33,13 @@ struct MeshStats {
 // pipeline writes them). A value of exactly 0 counts as a tiny positive one: the mesh is that of a
 // field without zeros, edge-manifold, and closed where the file's zero set stays inside its filled
 // leaves. Throws std::runtime_error for leaves of level kMaxLevel (the pipeline makes none).
-// vertexLeaves, when given, receives the leaf whose tetrahedron made each vertex.
+// vertexLeaves, when given, receives the leaf whose tetrahedron made each vertex. With `within`
+// (frame units), only the leaves whose cells lie inside it give triangles; the others are still
+// sampled where they are coarser, so that meshes of neighbouring regions of one model (a region
+// loaded with the leaves around it) agree on their shared faces.
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr,
-                         std::vector<uint32_t>* vertexLeaves = nullptr);
+                         std::vector<uint32_t>* vertexLeaves = nullptr,
+                         const SurfaceModel::Region* within = nullptr);
 
 // A mesh's vertex attributes from the surface it was extracted from: at each vertex, its leaf's
 // interpolated stored normal and linear color. Each is empty when the file has none.

@@ -42,8 +42,23 @@ uint8_t unorm8(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) *
 
 }  // namespace
 
-std::vector<uint8_t> encodeGlb(const TriangleMesh& mesh, const MeshAttributes& attributes,
+std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes& sourceAttributes,
                                const GlbOptions& options, GlbStats* stats) {
+  if (options.yUp) {  // the same mesh in glTF's axes, about the origin; then as any other
+    const auto turn = [](const glm::dvec3& v) { return glm::dvec3(v.x, v.z, -v.y); };
+    TriangleMesh turned{std::vector<glm::dvec3>(source.vertices.size()), source.triangles};
+    for (size_t v = 0; v < turned.vertices.size(); ++v)
+      turned.vertices[v] = turn(source.vertices[v] - options.origin);
+    MeshAttributes attributes = sourceAttributes;
+    for (glm::vec3& n : attributes.normals) n = glm::vec3(n.x, n.z, -n.y);
+    GlbOptions rest = options;
+    rest.yUp = false;
+    rest.origin = glm::dvec3(0.0);
+    std::vector<uint8_t> out = encodeGlb(turned, attributes, rest, stats);
+    return out;
+  }
+  const TriangleMesh& mesh = source;
+  const MeshAttributes& attributes = sourceAttributes;
   const size_t n = mesh.vertices.size();
   GlbStats s;
   s.vertices = n;

@@ -20,6 +20,10 @@ struct GlbOptions {
   // adds back (a tileset's root transform may carry it instead: see `translate`).
   glm::dvec3 origin{0.0};
   bool translate = true;  // the node adds `origin` back
+  // Z up (scans, 3D Tiles) to glTF's Y up: (x, y, z) - origin is stored as (x, z, -y), which a
+  // 3D Tiles client turns back; the node leaves `origin` out (the tileset's root transform
+  // carries it), whatever `translate` says.
+  bool yUp = false;
 };
 
 struct GlbStats {

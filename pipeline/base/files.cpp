@@ -102,6 +102,51 @@ void writeFileBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
   if (::close(fd) != 0) fail(path, std::string("could not be written: ") + std::strerror(errno));
 }
 
+// ---- OutputDirectory
+
+OutputDirectory::OutputDirectory(const fs::path& final, const std::string& role, bool replace)
+    : final_(final) {
+  std::error_code error;
+  const fs::file_status status = fs::symlink_status(final, error);
+  if (fs::exists(status)) {
+    if (!fs::is_directory(status)) fail(final, "exists and is not a directory (" + role + ")");
+    if (!replace) fail(final, "exists (use --force to replace it)");
+  }
+  const fs::path parent = directoryOf(final);
+  if (!fs::is_directory(parent, error))
+    fail(final, "cannot be made: " + parent.string() + " is not a directory");
+  staged_ = siblingName(final, "new");
+  if (::mkdir(staged_.c_str(), 0755) != 0)
+    fail(final, "cannot be made (" + role + "): " + std::strerror(errno));
+  registration_ = TemporaryRegistration(staged_);
+}
+
+OutputDirectory::~OutputDirectory() {
+  if (committed_) return;
+  std::error_code ignored;
+  fs::remove_all(staged_, ignored);
+}
+
+void OutputDirectory::commit() {
+  std::error_code error;
+  fs::path backup;
+  if (fs::exists(fs::symlink_status(final_, error))) {
+    backup = siblingName(final_, "old");
+    if (::rename(final_.c_str(), backup.c_str()) != 0)
+      fail(final_, std::string("cannot be moved aside to replace it: ") + std::strerror(errno));
+  }
+  if (::rename(staged_.c_str(), final_.c_str()) != 0) {
+    const int reason = errno;
+    if (!backup.empty()) ::rename(backup.c_str(), final_.c_str());
+    fail(final_, "cannot rename " + staged_.string() + " to it: " + std::strerror(reason) +
+                     "; no output was written");
+  }
+  committed_ = true;
+  registration_ = TemporaryRegistration();
+  if (!backup.empty()) fs::remove_all(backup, error);
+  syncDirectory(directoryOf(final_));
+}
+
 // ---- OutputGroup
 
 OutputGroup::~OutputGroup() {

@@ -60,6 +60,28 @@ class OutputGroup {
   bool committed_ = false;
 };
 
+// An output that is a directory of files (a tileset): written into a temporary directory beside
+// `final` (".NAME.new.PID-N.isotmp", which a later run removes if this one is killed), then
+// renamed into place by commit(), replacing an old directory only then. Destroyed without
+// commit(), the temporary directory and what it holds are removed.
+class OutputDirectory {
+ public:
+  // FileError when final's directory cannot take it, or final exists and `replace` is false, or
+  // exists and is not a directory. `role` names the option in messages.
+  OutputDirectory(const std::filesystem::path& final, const std::string& role, bool replace);
+  ~OutputDirectory();
+  OutputDirectory(const OutputDirectory&) = delete;
+  OutputDirectory& operator=(const OutputDirectory&) = delete;
+
+  const std::filesystem::path& path() const { return staged_; }  // where to write
+  void commit();
+
+ private:
+  std::filesystem::path final_, staged_;
+  TemporaryRegistration registration_;
+  bool committed_ = false;
+};
+
 // A directory and whichever of its parents did not exist, made; those made are removed again
 // (deepest first, each only if empty) when the object is destroyed or the process is interrupted.
 class MadeDirectories {

@@ -125,6 +125,8 @@ void prefetchVisit(const Bvh& bvh, const std::vector<Triangle>& triangles, const
   }
 }
 
+constexpr uint32_t kNoTriangle = 0xffffffffu;
+
 // The best triangle so far of a closest-point query.
 struct Nearest {
   double distance2 = kInfinity;
@@ -164,6 +166,8 @@ class MeshShape final : public Shape {
   }
 
   ClosestPoint closest(const glm::dvec3& query) const override;
+  std::optional<ClosestPoint> closestWithin(const glm::dvec3& query,
+                                            double maxDistance) const override;
   std::optional<double> intersect(const glm::dvec3& origin, const glm::dvec3& direction,
                                   double tMin, double tMax) const override;
 
@@ -199,7 +203,7 @@ void MeshShape::validate() const {
     for (uint32_t v : mesh_.triangles[i]) {
       if (v >= vertexCount)
         throw UsageError("mesh: triangle " + std::to_string(i) + " uses vertex " +
-                                    std::to_string(v) + " of " + std::to_string(vertexCount));
+                         std::to_string(v) + " of " + std::to_string(vertexCount));
       const glm::dvec3& p = mesh_.vertices[v];
       if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
         throw UsageError("mesh: vertex " + std::to_string(v) + " is not finite");
@@ -270,15 +274,26 @@ ClosestPoint MeshShape::closest(const glm::dvec3& query) const {
     const double nan = std::numeric_limits<double>::quiet_NaN();
     return {glm::dvec3(nan), glm::dvec3(nan), nan};
   }
+  return *closestWithin(query, kInfinity);
+}
+
+// closest() with the search's bound starting at maxDistance: boxes farther are never opened.
+std::optional<ClosestPoint> MeshShape::closestWithin(const glm::dvec3& query,
+                                                     double maxDistance) const {
+  if (!isFinite(query)) return std::nullopt;
   const glm::dvec3 local = query - bvh_.origin;
   Nearest best;
+  // (a triangle exactly maxDistance away counts: the bound is a little above its square)
+  best.distance2 = maxDistance < kInfinity ? maxDistance * maxDistance * (1.0 + 1e-12) : kInfinity;
+  best.triangle = kNoTriangle;
   depthFirst(
       bvh_, [&](const BvhNode& n) { closestInLeaf(query, n.first, n.count, best); },
       [&](const BvhNode& n, Stack& stack, int& top) {
         return nearerChild(local, n, best.distance2, stack, top);
       },
       [&](double bound) { return bound >= best.distance2; });
-  return {best.point, unitNormal(triangles_[best.triangle]), std::sqrt(best.distance2)};
+  if (best.triangle == kNoTriangle) return std::nullopt;
+  return ClosestPoint{best.point, unitNormal(triangles_[best.triangle]), std::sqrt(best.distance2)};
 }
 
 void MeshShape::closestInLeaf(const glm::dvec3& query, uint32_t first, uint32_t count,

@@ -39,6 +39,13 @@ class Shape {
   // A point distributed uniformly by area, with its normal.
   virtual SurfacePoint sample(std::mt19937_64& rng) const = 0;
   virtual ClosestPoint closest(const glm::dvec3& query) const = 0;
+  // The closest point when it is at most maxDistance away, else none (meshes prune by it).
+  virtual std::optional<ClosestPoint> closestWithin(const glm::dvec3& query,
+                                                    double maxDistance) const {
+    const ClosestPoint c = closest(query);
+    if (c.distance <= maxDistance) return c;
+    return std::nullopt;
+  }
   // The smallest t in (tMin, tMax) with origin + t·direction on the surface, if any.
   virtual std::optional<double> intersect(const glm::dvec3& origin, const glm::dvec3& direction,
                                           double tMin, double tMax) const = 0;

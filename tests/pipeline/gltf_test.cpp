@@ -7,13 +7,16 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <glm/geometric.hpp>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "iso/reader.h"
 #include "pipeline/analysis/export.h"
 #include "pipeline/analysis/gltf.h"
+#include "pipeline/analysis/tiles.h"
 #include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
@@ -224,6 +227,109 @@ TEST(MeshSimplification, staysWithinItsErrorOfTheSphereAndKeepsOpenBorders) {
   MeshAttributes none;
   simplifyMesh(sheet, none, 0.01);
   EXPECT_EQ(borderVertices(sheet), border);
+}
+
+}  // namespace
+}  // namespace iso
+
+namespace iso {
+namespace {
+
+// Every tile of a tileset, depth first, with its parent's index (none for the root).
+void collectTiles(const nlohmann::json& tile, int parent,
+                  std::vector<std::pair<nlohmann::json, int>>& out) {
+  const int self = int(out.size());
+  out.push_back({tile, parent});
+  if (tile.contains("children"))
+    for (const nlohmann::json& child : tile["children"]) collectTiles(child, self, out);
+}
+
+TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurface) {
+  test::TempDir dir;
+  BuildOptions options;
+  options.chunkNodes = 2000;  // many chunks, over several levels
+  const test::Converted c =
+      test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso", options);
+  const Reader reader = Reader::open(dir / "s.iso");
+  std::filesystem::create_directories(dir / "tiles");
+  size_t calls = 0;
+  const TilesStats stats = writeTiles(reader, dir / "tiles", {}, [&](size_t done, size_t total) {
+    ++calls;
+    EXPECT_LE(done, total);
+  });
+  size_t surfaceChunks = 0;
+  for (const ChunkInfo& info : reader.chunks())
+    surfaceChunks += info.kind == uint8_t(ChunkKind::Surface);
+  ASSERT_GT(surfaceChunks, 8u);
+  EXPECT_EQ(stats.tiles, surfaceChunks);
+  EXPECT_EQ(calls, surfaceChunks);
+  EXPECT_GE(stats.levels.size(), 2u);
+
+  const nlohmann::json tileset =
+      nlohmann::json::parse(std::ifstream(dir / "tiles" / "tileset.json"));
+  EXPECT_EQ(tileset["asset"]["version"], "1.1");
+  const Frame& frame = reader.header().frame;
+  const nlohmann::json& transform = tileset["root"]["transform"];
+  for (int a = 0; a < 3; ++a)
+    EXPECT_DOUBLE_EQ(transform[12 + a].get<double>(), frame.origin[size_t(a)]);
+  std::vector<std::pair<nlohmann::json, int>> tiles;
+  collectTiles(tileset["root"], -1, tiles);
+  EXPECT_EQ(tiles.size(), surfaceChunks);
+  const double spacing = c.report["spacing"].get<double>();
+  size_t finestTriangles = 0;
+  for (const auto& [tile, parent] : tiles) {
+    const nlohmann::json& box = tile["boundingVolume"]["box"];
+    ASSERT_EQ(box.size(), 12u);
+    const glm::dvec3 centre(box[0], box[1], box[2]);
+    const double half = box[3].get<double>();
+    EXPECT_EQ(tile["refine"], "REPLACE");
+    const double error = tile["geometricError"].get<double>();
+    if (parent >= 0) {  // inside the parent's box, with no larger an error
+      const nlohmann::json& outer = tiles[size_t(parent)].first;
+      const nlohmann::json& pbox = outer["boundingVolume"]["box"];
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_GE(centre[a] - half, pbox[a].get<double>() - pbox[3].get<double>() - 1e-12);
+        EXPECT_LE(centre[a] + half, pbox[a].get<double>() + pbox[3].get<double>() + 1e-12);
+      }
+      EXPECT_LE(error, outer["geometricError"].get<double>());
+    }
+    const bool finest = !tile.contains("children");
+    if (finest) {
+      EXPECT_EQ(error, 0.0);
+    }
+    if (!tile.contains("content")) continue;
+    // The content: y up in the file (x, z, -y), about the frame's origin; inside the box, and for
+    // the finest tiles within half a spacing of the unit sphere.
+    const std::filesystem::path path = dir / "tiles" / tile["content"]["uri"].get<std::string>();
+    const std::vector<std::byte> raw = test::readFile(path);
+    const Glb glb =
+        parseGlb(std::vector<uint8_t>(reinterpret_cast<const uint8_t*>(raw.data()),
+                                      reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()));
+    const nlohmann::json& node = glb.json["nodes"][0];
+    const glm::dvec3 t(node["translation"][0], node["translation"][1], node["translation"][2]);
+    const double step = node["scale"][0].get<double>();
+    const std::vector<uint8_t> positions = viewBytes(glb, 0);
+    const size_t count = glb.json["accessors"][0]["count"].get<size_t>();
+    for (size_t i = 0; i < count; ++i) {
+      uint16_t q[3];
+      std::memcpy(q, positions.data() + 8 * i, 6);
+      const glm::dvec3 up = t + step * glm::dvec3(q[0], q[1], q[2]);
+      const glm::dvec3 local(up.x, -up.z, up.y);  // back to z up
+      for (int a = 0; a < 3; ++a) {
+        ASSERT_GE(local[a], centre[a] - half - step);
+        ASSERT_LE(local[a], centre[a] + half + step);
+      }
+      if (finest) {
+        const glm::dvec3 world =
+            local + glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+        ASSERT_LT(std::abs(glm::length(world) - 1.0), 0.5 * spacing);
+      }
+    }
+    if (finest) finestTriangles += glb.json["accessors"].back()["count"].get<size_t>() / 3;
+  }
+  // The finest tiles together are the whole surface's mesh, cut by chunk.
+  const size_t whole = extractMesh(c.surface).triangles.size();
+  EXPECT_NEAR(double(finestTriangles), double(whole), 0.001 * double(whole));
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 // keeps.
 #include <fmt/core.h>
 
+#include <unistd.h>
+
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -15,6 +17,7 @@
 #include "iso/surface_model.h"
 #include "pipeline/analysis/export.h"
 #include "pipeline/analysis/gltf.h"
+#include "pipeline/analysis/tiles.h"
 #include "pipeline/base/files.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
@@ -26,7 +29,7 @@ namespace iso::cli {
 namespace {
 
 struct Options {
-  std::string file, mesh, vdb, points;
+  std::string file, mesh, vdb, points, tiles;
   double band = 3.0;
   std::optional<int> level;        // --level: the level-of-detail cut the mesh is made at
   std::optional<double> maxError;  // --max-error: simplified within this (world units)
@@ -171,9 +174,31 @@ void writeLevelSet(const SurfaceModel& surface, const Options& o, OutputGroup& o
                     {"seconds", secondsSince(started)}};
 }
 
+void writeTileset(const Reader& reader, const Options& o, OutputDirectory& out,
+                  nlohmann::json& summary) {
+  say("writing the tileset");
+  const auto started = std::chrono::steady_clock::now();
+  const bool terminal = ::isatty(STDERR_FILENO) == 1;
+  const TilesStats stats = writeTiles(reader, out.path(), {}, [&](size_t done, size_t total) {
+    if (terminal) fmt::print(stderr, "\rtiles: {} of {}", done, total);
+  });
+  if (terminal) fmt::print(stderr, "\n");
+  nlohmann::json levels = nlohmann::json::array();
+  for (const TilesLevel& l : stats.levels)
+    levels.push_back({{"level", l.level},
+                      {"tiles", l.tiles},
+                      {"triangles", l.triangles},
+                      {"bytes", l.bytes},
+                      {"geometric_error", l.geometricError},
+                      {"simplified", l.simplified}});
+  summary["tiles"] = {
+      {"path", o.tiles},      {"tiles", stats.tiles}, {"triangles", stats.triangles},
+      {"bytes", stats.bytes}, {"levels", levels},     {"seconds", secondsSince(started)}};
+}
+
 int run(const Options& o) {
-  if (o.mesh.empty() && o.vdb.empty() && o.points.empty())
-    throw UsageError("give --mesh OUT.ply, --vdb OUT.vdb or --points OUT.ply");
+  if (o.mesh.empty() && o.vdb.empty() && o.points.empty() && o.tiles.empty())
+    throw UsageError("give --mesh OUT.ply, --tiles OUT_DIR, --vdb OUT.vdb or --points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
   if ((o.level || o.maxError || o.noMeshopt) && o.mesh.empty())
     throw UsageError("--level, --max-error and --no-meshopt shape the --mesh output: give --mesh");
@@ -191,6 +216,11 @@ int run(const Options& o) {
   // Each output is written under a temporary name, and all are renamed into place once all are
   // complete: a failure (or Ctrl-C) leaves none of them, and every old file as it was.
   OutputGroup outputs;
+  std::optional<OutputDirectory> tiles;
+  if (!o.tiles.empty()) {
+    tiles.emplace(o.tiles, "--tiles", o.force);
+    writeTileset(reader, o, *tiles, summary);
+  }
   if (!o.points.empty()) writePoints(reader, o, outputs, summary);
   if (!o.mesh.empty() || !o.vdb.empty()) {
     say("reading the surface of " + o.file);
@@ -210,6 +240,7 @@ int run(const Options& o) {
   {
     const InterruptsDeferred deferred;  // all renamed into place, or none
     outputs.commit();
+    if (tiles) tiles->commit();
     setInterruptMessage("iso export: interrupted after writing its files");
   }
   return print(summary, o);
@@ -248,6 +279,20 @@ int print(const nlohmann::json& summary, const Options& o) {
                  g["meshopt"].get<bool>() ? ", meshopt-compressed" : ", uncompressed");
     }
   }
+  if (summary.contains("tiles")) {
+    const auto& t = summary["tiles"];
+    fmt::print("{}: 3D Tiles 1.1, {} tiles, {} triangles, {} in {:.2f} s\n", o.tiles,
+               withSeparators(t["tiles"].get<uint64_t>()),
+               withSeparators(t["triangles"].get<uint64_t>()), byteSize(t["bytes"].get<uint64_t>()),
+               t["seconds"].get<double>());
+    for (const auto& l : t["levels"])
+      fmt::print(
+          "  level {:>2}: {:>5} tiles, {:>10} triangles, {:>10}, geometric error {:.4g} "
+          "(simplified within {:.4g})\n",
+          l["level"].get<int>(), l["tiles"].get<uint64_t>(),
+          withSeparators(l["triangles"].get<uint64_t>()), byteSize(l["bytes"].get<uint64_t>()),
+          l["geometric_error"].get<double>(), l["simplified"].get<double>());
+  }
   if (summary.contains("points")) {
     const auto& p = summary["points"];
     fmt::print("{}: {} points from {} chunks{}{} in {:.2f} s\n", o.points,
@@ -279,6 +324,10 @@ void addExportCommand(CLI::App& app, int& exitCode) {
                 "Triangle mesh of the zero set, crack-free across levels (each leaf cut into "
                 "tetrahedra that match its neighbours' faces): binary PLY (.ply), or glTF binary "
                 "(.glb: 16-bit positions, normals and colors, meshopt-compressed)");
+  c->add_option("--tiles", o->tiles,
+                "3D Tiles 1.1 tileset (a directory: tileset.json and a .glb a tile): a tile for "
+                "each chunk of the file, its surface at the chunk's level of detail, simplified "
+                "within the chunk's geometric error");
   c->add_option("--level", o->level,
                 "Make the mesh from the level-of-detail cut at this octree level (the leaves "
                 "above it and the nodes at it) instead of the finest leaves");

@@ -1,0 +1,178 @@
+// 3D Tiles of an .iso file's surface (pipeline/analysis/tiles.h): a tile a surface chunk, its
+// content the chunk's surface at its own cut, extracted from the chunks around its cell.
+#include "pipeline/analysis/tiles.h"
+
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "iso/error.h"
+#include "iso/surface.h"
+#include "iso/surface_model.h"
+#include "pipeline/analysis/export.h"
+#include "pipeline/analysis/gltf.h"
+#include "pipeline/base/files.h"
+
+namespace iso {
+namespace {
+
+struct Tile {
+  uint32_t chunk = 0;
+  uint8_t level = 0;
+  uint64_t key = 0;
+  double chunkError = 0.0;  // the chunk's geometric error, world units
+  std::vector<uint32_t> children;
+  // Made:
+  uint64_t triangles = 0, bytes = 0;
+  double simplified = 0.0;      // measured distance of the simplified content, world units
+  double geometricError = 0.0;  // what the tileset says: see finishErrors
+};
+
+std::string contentName(const Tile& tile) { return "tile-" + std::to_string(tile.chunk) + ".glb"; }
+
+SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
+  const double size = std::ldexp(1.0, -int(level));
+  const auto cell = mortonDecode(key);
+  SurfaceModel::Region region;
+  for (size_t a = 0; a < 3; ++a) {
+    region.lo[a] = double(cell[a]) * size;
+    region.hi[a] = region.lo[a] + size;
+  }
+  return region;
+}
+
+// A tile's content: the chunk's surface at its last level (the cut a viewer draws when it stops
+// at this chunk), from the chunks around its cell so that neighbours agree on shared faces,
+// simplified within `budget`.
+std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget) {
+  const SurfaceChunk chunk = decodeSurfaceChunk(reader, tile.chunk);
+  const uint8_t cut = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
+  const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
+  const SurfaceModel model = SurfaceModel::load(reader, region, {}, cut);
+  std::vector<uint32_t> vertexLeaves;
+  TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region);
+  if (mesh.triangles.empty()) return {};
+  MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves);
+  tile.simplified = simplifyMesh(mesh, attributes, budget);
+  optimizeMeshOrder(mesh, attributes);
+  tile.triangles = mesh.triangles.size();
+  const Frame& frame = reader.header().frame;
+  GlbOptions options;
+  options.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+  options.yUp = true;
+  return encodeGlb(mesh, attributes, options);
+}
+
+// Geometric errors, children first: a leaf tile's is 0 (nothing refines it); another's is its
+// chunk's error plus its simplification, and never below a child's.
+double finishErrors(std::vector<Tile>& tiles, uint32_t i) {
+  Tile& tile = tiles[i];
+  double error = tile.children.empty() ? 0.0 : tile.chunkError + tile.simplified;
+  for (uint32_t child : tile.children) error = std::max(error, finishErrors(tiles, child));
+  tiles[i].geometricError = error;
+  return error;
+}
+
+nlohmann::json tileJson(const std::vector<Tile>& tiles, uint32_t i, const Frame& frame) {
+  const Tile& tile = tiles[i];
+  // The cell as a box in the tileset's frame (world units, about the frame's origin, z up).
+  const SurfaceModel::Region cell = cellRegion(tile.level, tile.key);
+  const double half = 0.5 * (cell.hi[0] - cell.lo[0]) * frame.size;
+  nlohmann::json box = nlohmann::json::array();
+  for (size_t a = 0; a < 3; ++a) box.push_back(0.5 * (cell.lo[a] + cell.hi[a]) * frame.size);
+  for (size_t a = 0; a < 3; ++a)
+    for (size_t b = 0; b < 3; ++b) box.push_back(a == b ? half : 0.0);
+  nlohmann::json out = {{"boundingVolume", {{"box", box}}},
+                        {"geometricError", tile.geometricError},
+                        {"refine", "REPLACE"}};
+  if (tile.bytes > 0) out["content"] = {{"uri", contentName(tile)}};
+  if (!tile.children.empty()) {
+    out["children"] = nlohmann::json::array();
+    for (uint32_t child : tile.children) out["children"].push_back(tileJson(tiles, child, frame));
+  }
+  return out;
+}
+
+}  // namespace
+
+TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directory,
+                      const TilesOptions& options,
+                      const std::function<void(size_t, size_t)>& progress) {
+  const Frame& frame = reader.header().frame;
+  std::vector<Tile> tiles;
+  std::map<uint32_t, uint32_t> tileOf;  // chunk id → tile
+  for (const ChunkInfo& info : reader.chunks())
+    if (info.kind == uint8_t(ChunkKind::Surface)) {
+      tileOf[info.id] = uint32_t(tiles.size());
+      Tile& tile = tiles.emplace_back();
+      tile.chunk = info.id;
+      tile.level = info.level;
+      tile.key = info.key;
+      tile.chunkError = double(info.geometricError) * frame.size;
+    }
+  uint32_t root = kNoNode;
+  for (uint32_t i = 0; i < tiles.size(); ++i) {
+    const uint32_t parent = reader.chunk(tiles[i].chunk).parent;
+    if (parent == kNoParent)
+      root = i;
+    else
+      tiles[tileOf.at(parent)].children.push_back(i);
+  }
+  if (root == kNoNode) throw FileError(reader.name(), std::nullopt, "has no surface");
+
+  std::mutex reporting;
+  size_t done = 0;
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, tiles.size(), 1), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          Tile& tile = tiles[i];
+          const double budget = tile.children.empty() ? options.finestError : tile.chunkError;
+          const std::vector<uint8_t> content = makeContent(reader, tile, budget);
+          if (!content.empty()) {
+            writeFileBytes(directory / contentName(tile), content);
+            tile.bytes = content.size();
+          }
+          const std::lock_guard lock(reporting);
+          ++done;
+          if (progress) progress(done, tiles.size());
+        }
+      });
+  finishErrors(tiles, root);
+
+  // The root's transform puts the frame's origin back: UTM or ECEF coordinates land where they
+  // are, and the tiles' own numbers stay small.
+  nlohmann::json rootJson = tileJson(tiles, root, frame);
+  rootJson["transform"] = {
+      1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, frame.origin[0], frame.origin[1], frame.origin[2], 1};
+  const nlohmann::json tileset = {
+      {"asset", {{"version", "1.1"}, {"generator", "iso export"}}},
+      {"geometricError", std::sqrt(3.0) * frame.size},  // nothing drawn: off by the frame at most
+      {"root", rootJson}};
+  const std::string text = tileset.dump(1);
+  writeFileBytes(directory / "tileset.json", std::vector<uint8_t>(text.begin(), text.end()));
+
+  TilesStats stats;
+  std::map<int, TilesLevel> levels;
+  for (const Tile& tile : tiles) {
+    TilesLevel& l = levels[tile.level];
+    l.level = tile.level;
+    ++l.tiles;
+    l.triangles += tile.triangles;
+    l.bytes += tile.bytes;
+    l.geometricError = std::max(l.geometricError, tile.geometricError);
+    l.simplified = std::max(l.simplified, tile.simplified);
+    stats.tiles += 1;
+    stats.triangles += tile.triangles;
+    stats.bytes += tile.bytes;
+  }
+  stats.bytes += text.size();
+  for (const auto& [level, l] : levels) stats.levels.push_back(l);
+  return stats;
+}
+
+}  // namespace iso
