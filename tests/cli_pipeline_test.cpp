@@ -339,9 +339,8 @@ TEST_F(CliPipeline, exportWritesGlbMeshesThatTheKhronosValidatorAccepts) {
   const std::filesystem::path web = ISO_WEB_TOOLS_DIR;
   ASSERT_TRUE(std::filesystem::exists(web / "node_modules" / "gltf-validator"))
       << "run tools/run setup (it installs " << web.string() << "'s npm packages)";
-  run = test::runCommand("node " + quoted(web / "validate.mjs") + " " +
-                         quoted(dir_ / "full.glb") + " " + quoted(dir_ / "plain.glb") + " " +
-                         quoted(dir_ / "lod.glb"));
+  run = test::runCommand("node " + quoted(web / "validate.mjs") + " " + quoted(dir_ / "full.glb") +
+                         " " + quoted(dir_ / "plain.glb") + " " + quoted(dir_ / "lod.glb"));
   EXPECT_EQ(run.exitCode, 0) << run.out << run.err;
   size_t files = 0;
   std::istringstream lines(run.out);
