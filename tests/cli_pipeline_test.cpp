@@ -353,13 +353,13 @@ TEST_F(CliPipeline, exportWritesGlbMeshesThatTheKhronosValidatorAccepts) {
   EXPECT_EQ(files, 3u);
   // Impossible options: usage errors, nothing written.
   for (const std::string options :
-       {"--mesh x.obj", "--max-error 0.01", "--mesh x.glb --max-error -1",
+       {"--max-error 0.01", "--mesh x.glb --max-error -1",
         "--mesh x.glb --max-error nan", "--mesh x.glb --level 99", "--mesh x.ply --no-meshopt"}) {
     run = runIso("export " + iso + " " + options);
     EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
   }
   EXPECT_FALSE(std::filesystem::exists("x.glb"));
-  EXPECT_FALSE(std::filesystem::exists("x.obj"));
+  EXPECT_FALSE(std::filesystem::exists("x.ply"));
 }
 
 TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsTiles) {

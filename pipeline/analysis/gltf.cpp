@@ -6,6 +6,7 @@
 #include <meshoptimizer.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <glm/common.hpp>
@@ -54,8 +55,7 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
     GlbOptions rest = options;
     rest.yUp = false;
     rest.origin = glm::dvec3(0.0);
-    std::vector<uint8_t> out = encodeGlb(turned, attributes, rest, stats);
-    return out;
+    return encodeGlb(turned, attributes, rest, stats);
   }
   const TriangleMesh& mesh = source;
   const MeshAttributes& attributes = sourceAttributes;

@@ -1,6 +1,6 @@
-// `iso export FILE.iso [--mesh OUT.ply|OUT.glb [--level L] [--max-error E]] [--vdb OUT.vdb]
-// [--points OUT.ply]`: the surface of an .iso file for other tools, and the original points it
-// keeps.
+// `iso export FILE.iso [--mesh OUT.ply|OUT.glb [--level L] [--max-error E]] [--tiles OUT_DIR]
+// [--vdb OUT.vdb] [--points OUT.ply]`: the surface of an .iso file for other tools, and the
+// original points it keeps.
 #include <fmt/core.h>
 
 #include <unistd.h>
@@ -36,13 +36,11 @@ struct Options {
   bool force = false, json = false, noMeshopt = false;
 };
 
-// The mesh's format, from its extension.
+// The mesh's format, from its extension: glTF binary for .glb, else PLY.
 bool isGlb(const std::string& path) {
   std::string extension = std::filesystem::path(path).extension().string();
   for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (extension == ".glb") return true;
-  if (extension == ".ply") return false;
-  throw UsageError("--mesh " + path + ": name a .ply or .glb file (the format is chosen by it)");
+  return extension == ".glb";
 }
 
 int print(const nlohmann::json& summary, const Options& o);
@@ -207,7 +205,6 @@ int run(const Options& o) {
     throw UsageError("--max-error must be a positive length (world units)");
   if (o.level && (*o.level < 0 || *o.level > int(kMaxLevel)))
     throw UsageError("--level must be 0 to " + std::to_string(kMaxLevel));
-  if (!o.mesh.empty()) isGlb(o.mesh);
   if (!o.vdb.empty()) requireOpenVdb("--vdb");
   checkOutputs(o);
   say("reading " + o.file);
@@ -317,13 +314,14 @@ void addExportCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
   CLI::App* c = app.add_subcommand(
       "export",
-      "Write the surface of an .iso file for other tools: a triangle mesh (PLY), an OpenVDB "
-      "level set, or the original points it keeps; all the files asked for, or none");
+      "Write the surface of an .iso file for other tools: a triangle mesh (PLY or glTF), a 3D "
+      "Tiles tileset, an OpenVDB level set, or the original points it keeps; all the outputs "
+      "asked for, or none");
   c->add_option("file", o->file, ".iso file")->required()->check(CLI::ExistingFile);
   c->add_option("--mesh", o->mesh,
                 "Triangle mesh of the zero set, crack-free across levels (each leaf cut into "
-                "tetrahedra that match its neighbours' faces): binary PLY (.ply), or glTF binary "
-                "(.glb: 16-bit positions, normals and colors, meshopt-compressed)");
+                "tetrahedra that match its neighbours' faces): glTF binary for a .glb name "
+                "(16-bit positions, normals and colors, meshopt-compressed), else binary PLY");
   c->add_option("--tiles", o->tiles,
                 "3D Tiles 1.1 tileset (a directory: tileset.json and a .glb a tile): a tile for "
                 "each chunk of the file, its surface at the chunk's level of detail, simplified "
