@@ -277,7 +277,10 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
   EXPECT_EQ(tiles.size(), surfaceChunks);
   const double spacing = c.report["spacing"].get<double>();
   size_t finestTriangles = 0;
-  for (const auto& [tile, parent] : tiles) {
+  std::vector<std::pair<glm::dvec3, size_t>> onFaces;  // (position, tile)
+  double largestStep = 0.0;
+  for (size_t k = 0; k < tiles.size(); ++k) {
+    const auto& [tile, parent] = tiles[k];
     const nlohmann::json& box = tile["boundingVolume"]["box"];
     ASSERT_EQ(box.size(), 12u);
     const glm::dvec3 centre(box[0], box[1], box[2]);
@@ -323,6 +326,12 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
         const glm::dvec3 world =
             local + glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
         ASSERT_LT(std::abs(glm::length(world) - 1.0), 0.5 * spacing);
+        for (int a = 0; a < 3; ++a)  // on a face of the tile's box: shared with a neighbour
+          if (std::abs(std::abs(local[a] - centre[a]) - half) <= step) {
+            onFaces.push_back({local, k});
+            break;
+          }
+        largestStep = std::max(largestStep, step);
       }
     }
     if (finest) finestTriangles += glb.json["accessors"].back()["count"].get<size_t>() / 3;
@@ -330,6 +339,27 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
   // The finest tiles together are the whole surface's mesh, cut by chunk.
   const size_t whole = extractMesh(c.surface).triangles.size();
   EXPECT_NEAR(double(finestTriangles), double(whole), 0.001 * double(whole));
+  // Where two finest tiles meet, every vertex on one's face is a vertex of another (within the
+  // two tiles' 16-bit steps): no cracks between them.
+  std::sort(onFaces.begin(), onFaces.end(),
+            [](const auto& a, const auto& b) { return a.first.x < b.first.x; });
+  size_t matched = 0;
+  for (size_t i = 0; i < onFaces.size(); ++i) {
+    bool found = false;
+    for (size_t j = i; j-- > 0 && onFaces[i].first.x - onFaces[j].first.x <= largestStep && !found;)
+      found = onFaces[j].second != onFaces[i].second &&
+              glm::length(onFaces[j].first - onFaces[i].first) <= 2.0 * largestStep;
+    for (size_t j = i + 1;
+         j < onFaces.size() && onFaces[j].first.x - onFaces[i].first.x <= largestStep && !found;
+         ++j)
+      found = onFaces[j].second != onFaces[i].second &&
+              glm::length(onFaces[j].first - onFaces[i].first) <= 2.0 * largestStep;
+    matched += found;
+  }
+  std::printf("%zu of %zu vertices on the finest tiles' faces have a partner in another tile\n",
+              matched, onFaces.size());
+  ASSERT_GT(onFaces.size(), 100u);
+  EXPECT_EQ(matched, onFaces.size());
 }
 
 }  // namespace
