@@ -1,5 +1,6 @@
 // Mesh simplification for the exports' levels of detail (pipeline/analysis/export.h): edge
-// collapses by meshoptimizer, bounded by its estimate of the deviation.
+// collapses by meshoptimizer, each result measured against the mesh and redone until it is
+// within the error asked for.
 #include <meshoptimizer.h>
 
 #include <tbb/parallel_for.h>
@@ -23,7 +24,7 @@ namespace {
 constexpr int kSimplifyAttempts = 6;  // measured results before the mesh is kept whole
 constexpr double kReach = 4.0;        // how far past maxError a failed result is measured
 
-// Keep the vertices `remap` maps (kUnused: dropped), in their new order.
+// Keep the vertices `remap` maps (~0: dropped), in their new order.
 template <class T>
 void remapColumn(std::vector<T>& column, const std::vector<uint32_t>& remap, size_t kept) {
   if (column.empty()) return;
