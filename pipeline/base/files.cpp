@@ -8,7 +8,9 @@
 #include <cerrno>
 #include <cstring>
 #include <optional>
+#include <span>
 
+#include "iso/atomic_file.h"
 #include "iso/error.h"
 
 namespace iso {
@@ -86,20 +88,9 @@ bool namesSameFile(const fs::path& a, const fs::path& b) {
 }
 
 void writeFileBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) fail(path, std::string("cannot be written: ") + std::strerror(errno));
-  size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const int error = n < 0 ? errno : ENOSPC;
-      ::close(fd);
-      fail(path, std::string("could not be written in full: ") + std::strerror(error));
-    }
-    done += size_t(n);
-  }
-  if (::close(fd) != 0) fail(path, std::string("could not be written: ") + std::strerror(errno));
+  AtomicFile file(path);
+  file.write(std::as_bytes(std::span(bytes)));
+  file.commit();
 }
 
 // ---- OutputDirectory

@@ -27,7 +27,8 @@ void refuseOutputOverInput(const std::filesystem::path& output, const std::files
 // same absolute path once "." and ".." and the links of the existing part are resolved.
 bool namesSameFile(const std::filesystem::path& a, const std::filesystem::path& b);
 
-// Write bytes to path (replacing it), checked to the end: a full disk is a FileError naming path.
+// Write bytes to path, replacing it only once all are written (iso::AtomicFile): a full disk is a
+// FileError naming path, and leaves what path held.
 void writeFileBytes(const std::filesystem::path& path, const std::vector<uint8_t>& bytes);
 
 // Outputs written together, all or none. Each is written under a temporary name beside its final

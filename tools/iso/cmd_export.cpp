@@ -221,18 +221,23 @@ int run(const Options& o) {
   if (!o.points.empty()) writePoints(reader, o, outputs, summary);
   if (!o.mesh.empty() || !o.vdb.empty()) {
     say("reading the surface of " + o.file);
-    const SurfaceModel surface = SurfaceModel::load(reader, {}, {});
-    // --level: the cut at that level (the leaves above it and the nodes at it), for the mesh.
+    // The finest surface, and for --level the cut at that level (the leaves above it and the
+    // nodes at it), each loaded only when an output reads it.
+    const auto load = [&](uint8_t cutLevel) {
+      return SurfaceModel::load(reader, {}, {}, cutLevel);
+    };
+    const std::optional<SurfaceModel> surface = !o.vdb.empty() || (!o.mesh.empty() && !o.level)
+                                                    ? std::optional(load(kMaxLevel))
+                                                    : std::nullopt;
     const std::optional<SurfaceModel> cut =
-        o.level ? std::optional(SurfaceModel::load(reader, {}, {}, uint8_t(*o.level)))
-                : std::nullopt;
+        o.level && !o.mesh.empty() ? std::optional(load(uint8_t(*o.level))) : std::nullopt;
     // Far from the origin (UTM coordinates) float positions lose the surface's detail.
     const Frame& frame = reader.header().frame;
     double reach = frame.size;
     for (double c : frame.origin) reach = std::max(reach, std::abs(c) + frame.size);
     if (!o.mesh.empty())
-      writeMesh(reader, cut ? *cut : surface, reach > 65536.0, o, outputs, summary);
-    if (!o.vdb.empty()) writeLevelSet(surface, o, outputs, summary);
+      writeMesh(reader, cut ? *cut : *surface, reach > 65536.0, o, outputs, summary);
+    if (!o.vdb.empty()) writeLevelSet(*surface, o, outputs, summary);
   }
   {
     const InterruptsDeferred deferred;  // all renamed into place, or none
