@@ -353,8 +353,8 @@ TEST_F(CliPipeline, exportWritesGlbMeshesThatTheKhronosValidatorAccepts) {
   EXPECT_EQ(files, 3u);
   // Impossible options: usage errors, nothing written.
   for (const std::string options :
-       {"--max-error 0.01", "--mesh x.glb --max-error -1",
-        "--mesh x.glb --max-error nan", "--mesh x.glb --level 99", "--mesh x.ply --no-meshopt"}) {
+       {"--max-error 0.01", "--mesh x.glb --max-error -1", "--mesh x.glb --max-error nan",
+        "--mesh x.glb --level 99", "--mesh x.ply --no-meshopt"}) {
     run = runIso("export " + iso + " " + options);
     EXPECT_EQ(run.exitCode, 2) << options << "\n" << run.err;
   }
@@ -381,6 +381,29 @@ TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsT
   for (const std::string& glb : glbs) command += " " + glb;
   run = test::runCommand(command);
   EXPECT_EQ(run.exitCode, 0) << run.out << run.err;
+  // iso eval measures what the tileset draws against the file: its finest tiles close to the
+  // zero set; its root within the geometric error it states (which is of the finest surface).
+  run = runIso("eval " + iso + " --tiles " + out);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json finest = nlohmann::json::parse(run.out);
+  EXPECT_EQ(finest["tiles"]["triangles"].get<uint64_t>() +
+                summary["levels"][0]["triangles"].get<uint64_t>(),
+            summary["triangles"].get<uint64_t>());
+  EXPECT_LT(finest["rms_over_spacing"].get<double>(), 0.1);
+  run = runIso("eval " + iso + " --tiles " + out + " --depth 0");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json top = nlohmann::json::parse(run.out);
+  EXPECT_EQ(top["tiles"]["tiles"], 1);
+  EXPECT_LE(top["max"].get<double>(), top["tiles"]["geometric_error"].get<double>());
+  std::printf("finest tiles: RMS %.3f spacings; root tile: max %.4g, stated %.4g\n",
+              finest["rms_over_spacing"].get<double>(), top["max"].get<double>(),
+              top["tiles"]["geometric_error"].get<double>());
+  run = runIso("eval " + iso + " --depth 0 --shape sphere");
+  EXPECT_EQ(run.exitCode, 2);
+  EXPECT_NE(run.err.find("--depth"), std::string::npos) << run.err;
+  run = runIso("eval " + iso + " --tiles " + quoted(dir_ / "nowhere"));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("tileset.json"), std::string::npos) << run.err;
   // Not over an existing directory without --force (it stays as it was); with it, replaced.
   std::filesystem::remove(dir_ / "tiles" / "tileset.json");
   run = runIso("export " + iso + " --tiles " + out);

@@ -63,6 +63,7 @@ class Extractor {
     return *slot;
   }
   uint32_t vertex(Sample a, Point pa, Sample b, Point pb);
+  uint32_t edgeLeaf(const Point& pa, const Point& pb) const;
   void tetrahedron(const std::array<Sample, 4>& s, const std::array<Point, 4>& p);
 
   const SurfaceModel& surface_;
@@ -74,8 +75,71 @@ class Extractor {
   bool emit_ = true;            // whether its triangles go into the mesh
 };
 
+// The zero of g on [0, 1], where g(0) = g0 and g(1) = g1 differ in sign: regula falsi with the
+// Illinois rule, from the linear zero.
+template <class F>
+double bracketedZero(const F& g, double g0, double g1) {
+  double lo = 0.0, hi = 1.0, t = g0 / (g0 - g1);
+  int kept = 0;  // which end stayed last: -1 low, 1 high
+  for (int i = 0; i < 16 && hi - lo > 1e-9; ++i) {
+    t = (lo * g1 - hi * g0) / (g1 - g0);
+    const double gt = g(t);
+    if (gt == 0.0) break;
+    if ((gt < 0.0) == (g0 < 0.0)) {
+      lo = t;
+      g0 = gt;
+      if (kept == 1) g1 *= 0.5;
+      kept = 1;
+    } else {
+      hi = t;
+      g1 = gt;
+      if (kept == -1) g0 *= 0.5;
+      kept = -1;
+    }
+  }
+  return t;
+}
+
 // A value of exactly 0 counts as a tiny positive one.
 float signedValue(float f) { return f == 0.0f ? 1e-30f : f; }
+
+// The leaf whose patch places the vertex of an edge of the current leaf: the current leaf for an
+// edge inside it; for one on its boundary, the coarsest leaf around the edge (the lowest key
+// among equals), which every leaf sharing the edge finds alike, in any region of the model.
+uint32_t Extractor::edgeLeaf(const Point& pa, const Point& pb) const {
+  const SurfaceModel::Leaf& leaf = surface_.leaves()[current_];
+  const int64_t size = int64_t{1} << (kMaxLevel - leaf.level);
+  const auto cell = mortonDecode(leaf.key);
+  // The midpoint, in half steps of the finest grid, and the sides of the cell it lies on.
+  std::array<int, 3> side{};  // -1 low face, 1 high face, 0 inside
+  glm::dvec3 mid;
+  for (size_t a = 0; a < 3; ++a) {
+    const int64_t m = pa[a] + pb[a], lo = 2 * int64_t(cell[a]) * size;
+    side[a] = m == lo ? -1 : m == lo + 2 * size ? 1 : 0;
+    mid[int(a)] = double(m) * std::ldexp(1.0, -kMaxLevel - 1);
+  }
+  if (side == std::array<int, 3>{0, 0, 0}) return current_;
+  uint32_t best = current_;
+  const double nudge = std::ldexp(1.0, -kMaxLevel - 2);
+  for (int across = 1; across < 8; ++across) {  // which boundary sides to step over
+    glm::dvec3 p = mid;
+    bool valid = true;
+    for (int a = 0; a < 3; ++a) {
+      if (!(across >> a & 1)) continue;
+      valid = valid && side[size_t(a)] != 0;
+      p[a] += side[size_t(a)] * nudge;
+    }
+    if (!valid) continue;
+    for (int a = 0; a < 3; ++a)
+      if (side[size_t(a)] != 0 && !(across >> a & 1)) p[a] -= side[size_t(a)] * nudge;
+    if (!(p.x >= 0.0 && p.x < 1.0 && p.y >= 0.0 && p.y < 1.0 && p.z >= 0.0 && p.z < 1.0)) continue;
+    const uint32_t other = surface_.findLeaf({p.x, p.y, p.z});
+    if (other == kNoNode) continue;
+    const SurfaceModel::Leaf &o = surface_.leaves()[other], &b = surface_.leaves()[best];
+    if (o.level < b.level || (o.level == b.level && o.key < b.key)) best = other;
+  }
+  return best;
+}
 
 uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
   if (b.id < a.id) {  // one order for every tetrahedron sharing the edge
@@ -85,11 +149,21 @@ uint32_t Extractor::vertex(Sample a, Point pa, Sample b, Point pb) {
   const auto [slot, added] = vertexOf_.insert({a.id, b.id}, uint32_t(mesh.vertices.size()));
   if (added) {
     const double fa = signedValue(a.value), fb = signedValue(b.value);
-    const double t = fa / (fa - fb);
-    const glm::dvec3 from{double(pa[0]), double(pa[1]), double(pa[2])};
-    const glm::dvec3 to{double(pb[0]), double(pb[1]), double(pb[2])};
-    mesh.vertices.push_back(
-        toWorld((from + t * (to - from)) * std::ldexp(1.0, -kMaxLevel), frame_));
+    const double unit = std::ldexp(1.0, -kMaxLevel);
+    const glm::dvec3 from = glm::dvec3(double(pa[0]), double(pa[1]), double(pa[2])) * unit;
+    const glm::dvec3 to = glm::dvec3(double(pb[0]), double(pb[1]), double(pb[2])) * unit;
+    // The zero of the leaf's patch along the edge, its ends moved to the samples' values (which a
+    // coarser leaf may have given, so the ends' signs bracket it): the vertex lies on the zero set
+    // the viewer draws, not on a chord of it.
+    const uint32_t leaf = edgeLeaf(pa, pb);
+    const auto patch = [&](double s) {
+      const glm::dvec3 q = from + s * (to - from);
+      return surface_.distanceAt(leaf, {q.x, q.y, q.z});
+    };
+    const double da = patch(0.0), db = patch(1.0);
+    const double t = bracketedZero(
+        [&](double s) { return patch(s) + (1.0 - s) * (fa - da) + s * (fb - db); }, fa, fb);
+    mesh.vertices.push_back(toWorld(from + t * (to - from), frame_));
     vertexLeaf.push_back(current_);
   }
   return *slot;
@@ -234,6 +308,28 @@ void Extractor::leaf(uint32_t id, bool emit) {
         }
         splitEdge[a][i][j] = split;
       }
+  bool plain = true;
+  for (int a = 0; a < 3; ++a)
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) plain = plain && !splitEdge[a][i][j];
+  for (const auto& f : fineQuarter) plain = plain && !(f[0] || f[1] || f[2] || f[3]);
+  if (plain) {
+    // Six tetrahedra around the diagonal from the lowest corner to the highest: each face is cut
+    // by the diagonal from its lowest corner, as the faces of the leaves around cut it.
+    const auto corner = [&](int bits) {
+      return Point{origin[0] + (bits & 1) * size, origin[1] + (bits >> 1 & 1) * size,
+                   origin[2] + (bits >> 2 & 1) * size};
+    };
+    const Sample low = sample(id, corner(0)), high = sample(id, corner(7));
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        if (a == b) continue;
+        const int first = 1 << a, second = first | 1 << b;
+        const std::array<Point, 4> p = {corner(0), corner(first), corner(second), corner(7)};
+        tetrahedron({low, sample(id, p[1]), sample(id, p[2]), high}, p);
+      }
+    return;
+  }
   // The centre, then a tetrahedron to every triangle of every face.
   const Point centre = {origin[0] + half, origin[1] + half, origin[2] + half};
   const Sample centreSample = sample(id, centre);

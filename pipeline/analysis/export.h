@@ -51,11 +51,18 @@ MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& m
 
 // The mesh (and its attributes) simplified by edge collapses (meshoptimizer) within maxError
 // (world units): the largest distance between the two meshes, sampled both ways (every vertex of
-// the mesh to the result, a grid of 28 points on each of the result's triangles to the mesh), is
-// measured, and the collapses are redone with a smaller target until it is at most maxError (the
-// mesh stays as it was when six tries do not get there). Vertices on open borders stay; unused
-// vertices are removed. Returns the measured distance (world units). Deterministic.
+// the mesh the result dropped, to the result; a grid of 25 points besides the corners on each of
+// the result's triangles, to the mesh), is measured; where a few samples are beyond maxError, the
+// triangles around them are kept as they were and the rest collapsed again, where many are, the
+// collapses are redone with half the target, until none is beyond (the mesh stays as it was when
+// six tries do not get there). Vertices on open borders stay; unused vertices are removed. Returns
+// the measured distance (world units). Deterministic.
 double simplifyMesh(TriangleMesh& mesh, MeshAttributes& attributes, double maxError);
+
+// meshoptimizer's collapses within its own estimate, `target` (world units: how far vertices move
+// from the planes around them), unmeasured: a needle's tip may go. For meshes whose distance to
+// the surface is measured as a whole afterwards. Open borders stay; unused vertices are removed.
+void collapseMesh(TriangleMesh& mesh, MeshAttributes& attributes, double target);
 
 // Triangles reordered for the vertex cache and vertices renumbered in the order they are first
 // used (meshoptimizer), as compression and drawing like them; unused vertices removed.

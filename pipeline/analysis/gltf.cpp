@@ -14,6 +14,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "iso/error.h"
+
 namespace iso {
 namespace {
 
@@ -24,11 +26,13 @@ constexpr int kArrayBuffer = 34962, kElementArrayBuffer = 34963;
 
 size_t padded(size_t n) { return (n + 3) & ~size_t{3}; }
 
-// One stream of the file: its uncompressed bytes and how glTF describes them.
+// One stream of the file: its uncompressed bytes and how glTF describes them; with a filter,
+// the bytes the filter decodes to `data` (EXT_meshopt_compression's filters).
 struct Stream {
   Stream(size_t stride_, size_t count_, bool indices_ = false)
       : data(stride_ * count_), stride(stride_), count(count_), indices(indices_) {}
-  std::vector<uint8_t> data;
+  std::vector<uint8_t> data, filtered;
+  std::string filter;
   size_t stride, count;
   bool indices;
 };
@@ -38,7 +42,6 @@ void put(std::vector<uint8_t>& out, size_t at, T value) {
   std::memcpy(out.data() + at, &value, sizeof(T));
 }
 
-int8_t snorm8(float v) { return int8_t(std::lround(std::clamp(v, -1.0f, 1.0f) * 127.0f)); }
 uint8_t unorm8(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); }
 
 }  // namespace
@@ -71,8 +74,9 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   }
   if (n == 0) lo = hi = glm::dvec3(0.0);
   const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-  const double step = extent > 0.0 ? extent / 65535.0 : 1.0;
-  s.quantized = options.maxPositionStep <= 0.0 || step <= options.maxPositionStep;
+  const double finest = extent > 0.0 ? extent / 65535.0 : 1.0;
+  const double step = std::max(finest, options.positionStep);
+  s.quantized = options.maxPositionStep <= 0.0 || finest <= options.maxPositionStep;
   s.positionStep = s.quantized ? step : 0.0;
 
   nlohmann::json accessors = nlohmann::json::array(), attributesJson = nlohmann::json::object();
@@ -118,13 +122,21 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   attributesJson["POSITION"] = accessors.size() - 1;
   streams.push_back(std::move(position));
   if (!attributes.normals.empty()) {
+    // Octahedral: two 8-bit numbers a normal, which the file's bytes are the decoding of (with
+    // compression, the decoder's filter makes them from the two).
     Stream normal(4, n);
+    std::vector<float> unit(4 * n, 0.0f);
     for (size_t v = 0; v < n; ++v) {
       glm::vec3 d = attributes.normals[v];
       const float length = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
       d = length > 0.0f ? d / length : glm::vec3(0.0f, 0.0f, 1.0f);
-      for (int a = 0; a < 3; ++a) put(normal.data, v * 4 + size_t(a), snorm8(d[a]));
+      for (int a = 0; a < 3; ++a) unit[4 * v + size_t(a)] = d[a];
     }
+    normal.filtered.resize(4 * n);
+    meshopt_encodeFilterOct(normal.filtered.data(), n, 4, 8, unit.data());
+    normal.data = normal.filtered;
+    meshopt_decodeFilterOct(normal.data.data(), n, 4);
+    normal.filter = "OCTAHEDRAL";
     accessors.push_back({{"bufferView", streams.size()},
                          {"componentType", kByte},
                          {"normalized", true},
@@ -186,9 +198,10 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
         encoded.resize(
             meshopt_encodeIndexBuffer(encoded.data(), encoded.size(), flat.data(), flat.size()));
       } else {
+        const std::vector<uint8_t>& bytes = stream.filter.empty() ? stream.data : stream.filtered;
         encoded.resize(meshopt_encodeVertexBufferBound(stream.count, stream.stride));
-        encoded.resize(meshopt_encodeVertexBuffer(encoded.data(), encoded.size(),
-                                                  stream.data.data(), stream.count, stream.stride));
+        encoded.resize(meshopt_encodeVertexBuffer(encoded.data(), encoded.size(), bytes.data(),
+                                                  stream.count, stream.stride));
       }
       view["extensions"]["EXT_meshopt_compression"] = {
           {"buffer", 0},
@@ -197,6 +210,8 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
           {"byteStride", stream.stride},
           {"count", stream.count},
           {"mode", stream.indices ? "TRIANGLES" : "ATTRIBUTES"}};
+      if (!stream.filter.empty())
+        view["extensions"]["EXT_meshopt_compression"]["filter"] = stream.filter;
       bin.insert(bin.end(), encoded.begin(), encoded.end());
     } else {
       view["byteOffset"] = bin.size();
@@ -249,6 +264,95 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   s.bytes = out.size();
   if (stats) *stats = s;
   return out;
+}
+
+TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name) {
+  const auto fail = [&](const std::string& why) {
+    return FileError(name, std::nullopt, "is not a glTF binary of one mesh: " + why);
+  };
+  const auto word = [&](size_t at) {
+    if (at + 4 > bytes.size()) throw fail("truncated");
+    uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return v;
+  };
+  if (word(0) != 0x46546C67 || word(4) != 2) throw fail("no glTF 2 header");
+  const size_t jsonLength = word(12);
+  if (word(16) != 0x4E4F534A || 20 + jsonLength + 8 > bytes.size()) throw fail("no JSON chunk");
+  const size_t binAt = 20 + jsonLength + 8, binLength = word(20 + jsonLength);
+  if (binAt + binLength > bytes.size()) throw fail("truncated binary chunk");
+  try {
+    const nlohmann::json gltf =
+        nlohmann::json::parse(bytes.begin() + 20, bytes.begin() + 20 + long(jsonLength));
+    // A buffer view's bytes, decoded by meshoptimizer when compressed.
+    const auto view = [&](size_t v) {
+      const nlohmann::json& b = gltf.at("bufferViews").at(v);
+      std::vector<uint8_t> out(b.at("byteLength").get<size_t>());
+      const nlohmann::json* c = nullptr;
+      if (b.contains("extensions")) c = &b["extensions"].at("EXT_meshopt_compression");
+      const size_t offset = (c ? *c : b).value("byteOffset", size_t{0});
+      const size_t length = c ? c->at("byteLength").get<size_t>() : out.size();
+      if (offset + length > binLength) throw fail("a buffer view past the binary chunk");
+      const uint8_t* source = bytes.data() + binAt + offset;
+      if (!c) {
+        std::memcpy(out.data(), source, out.size());
+        return out;
+      }
+      const size_t count = c->at("count"), stride = c->at("byteStride");
+      if (count * stride > out.size()) throw fail("a compressed view larger than its fallback");
+      const int result =
+          c->at("mode") == "TRIANGLES"
+              ? meshopt_decodeIndexBuffer(out.data(), count, stride, source, length)
+              : meshopt_decodeVertexBuffer(out.data(), count, stride, source, length);
+      if (result != 0) throw fail("a compressed view meshoptimizer cannot decode");
+      return out;
+    };
+    const nlohmann::json& primitive = gltf.at("meshes").at(0).at("primitives").at(0);
+    const nlohmann::json& node = gltf.at("nodes").at(0);
+    const nlohmann::json& positions =
+        gltf.at("accessors").at(primitive.at("attributes").at("POSITION").get<size_t>());
+    const nlohmann::json& indices = gltf.at("accessors").at(primitive.at("indices").get<size_t>());
+    glm::dvec3 translation(0.0), scale(1.0);
+    for (int a = 0; a < 3; ++a) {
+      if (node.contains("translation")) translation[a] = node["translation"].at(size_t(a));
+      if (node.contains("scale")) scale[a] = node["scale"].at(size_t(a));
+    }
+    TriangleMesh mesh;
+    const size_t n = positions.at("count");
+    const std::vector<uint8_t> p = view(positions.at("bufferView"));
+    const bool shorts = positions.at("componentType") == kUnsignedShort;
+    const size_t stride = shorts ? 8 : 12;
+    if (p.size() < n * stride) throw fail("positions past their view");
+    mesh.vertices.resize(n);
+    for (size_t v = 0; v < n; ++v)
+      for (size_t a = 0; a < 3; ++a) {
+        double value = 0.0;
+        if (shorts) {
+          uint16_t q = 0;
+          std::memcpy(&q, p.data() + v * stride + 2 * a, 2);
+          value = q;
+        } else {
+          float f = 0.0f;
+          std::memcpy(&f, p.data() + v * stride + 4 * a, 4);
+          value = f;
+        }
+        mesh.vertices[v][int(a)] = translation[int(a)] + scale[int(a)] * value;
+      }
+    const size_t count = indices.at("count");
+    const std::vector<uint8_t> i = view(indices.at("bufferView"));
+    const size_t width = indices.at("componentType") == kUnsignedInt ? 4 : 2;
+    if (i.size() < count * width || count % 3 != 0) throw fail("indices past their view");
+    mesh.triangles.resize(count / 3);
+    for (size_t k = 0; k < count; ++k) {
+      uint32_t index = 0;
+      std::memcpy(&index, i.data() + k * width, width);
+      if (index >= n) throw fail("an index past the vertices");
+      mesh.triangles[k / 3][k % 3] = index;
+    }
+    return mesh;
+  } catch (const nlohmann::json::exception& e) {
+    throw fail(e.what());
+  }
 }
 
 }  // namespace iso

@@ -1,10 +1,12 @@
 // glTF 2.0 binary files (.glb) of the exports' triangle meshes (specs/pipeline.md §17): positions
-// quantized to 16 bits (KHR_mesh_quantization) where that keeps them fine enough, normals and
-// linear colors in bytes, every stream compressed by meshoptimizer (EXT_meshopt_compression).
+// quantized to 16 bits (KHR_mesh_quantization) where that keeps them fine enough, normals
+// octahedral in two bytes, linear colors in bytes, every stream compressed by meshoptimizer
+// (EXT_meshopt_compression).
 #pragma once
 
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <string>
 #include <vector>
 
 #include "pipeline/analysis/export.h"
@@ -15,6 +17,9 @@ struct GlbOptions {
   // Positions in 16 bits when their step (the largest extent / 65,535) is at most this (world
   // units), else in float; 0: always 16 bits.
   double maxPositionStep = 0.0;
+  // The 16-bit positions' step (world units) when it is coarser than the finest 16 bits allow:
+  // a coarser grid compresses better (0: the finest).
+  double positionStep = 0.0;
   bool compress = true;  // EXT_meshopt_compression (off: plain buffers, for comparison)
   // Positions are stored relative to this point (world units), which the node's translation
   // adds back (a tileset's root transform may carry it instead: see `translate`).
@@ -38,5 +43,10 @@ struct GlbStats {
 // Deterministic.
 std::vector<uint8_t> encodeGlb(const TriangleMesh& mesh, const MeshAttributes& attributes,
                                const GlbOptions& options = {}, GlbStats* stats = nullptr);
+
+// The triangles of a .glb file that encodeGlb wrote (one mesh, one node; 16-bit or float
+// positions, meshopt-compressed or not), with the node's translation and scale applied: for
+// measuring what a tileset holds. Throws iso::FileError naming `name` for anything else.
+TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name);
 
 }  // namespace iso

@@ -5,6 +5,8 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -29,6 +31,7 @@ struct Tile {
   // Made:
   uint64_t triangles = 0, bytes = 0;
   double simplified = 0.0;      // measured distance of the simplified content, world units
+  double quantization = 0.0;    // how far the content's 16-bit positions may be from it
   double geometricError = 0.0;  // what the tileset says: see finishErrors
 };
 
@@ -46,9 +49,11 @@ SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
 }
 
 // A tile's content: the chunk's surface at its last level (the cut a viewer draws when it stops
-// at this chunk), from the chunks around its cell so that neighbours agree on shared faces,
-// simplified within `budget`.
-std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget) {
+// at this chunk), from the chunks around its cell so that neighbours agree on shared faces;
+// simplified within `budget` where it has one (the coarser tiles), else collapsed within the
+// options' share of its leaves' edge (the finest); positions on a grid of a share of that edge.
+std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget,
+                                 const TilesOptions& options) {
   const SurfaceChunk chunk = decodeSurfaceChunk(reader, tile.chunk);
   const uint8_t cut = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
   const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
@@ -57,21 +62,30 @@ std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget
   TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region);
   if (mesh.triangles.empty()) return {};
   MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves);
-  tile.simplified = simplifyMesh(mesh, attributes, budget);
+  const Frame& frame = reader.header().frame;
+  const double leaf = std::ldexp(frame.size, -int(cut));
+  if (budget > 0.0)
+    tile.simplified = simplifyMesh(mesh, attributes, budget);
+  else
+    collapseMesh(mesh, attributes, options.finestCollapse * leaf);
   optimizeMeshOrder(mesh, attributes);
   tile.triangles = mesh.triangles.size();
-  const Frame& frame = reader.header().frame;
-  GlbOptions options;
-  options.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
-  options.yUp = true;
-  return encodeGlb(mesh, attributes, options);
+  GlbOptions glb;
+  glb.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+  glb.yUp = true;
+  glb.positionStep = options.positionStep * leaf;
+  GlbStats stats;
+  std::vector<uint8_t> bytes = encodeGlb(mesh, attributes, glb, &stats);
+  tile.quantization = 0.5 * std::sqrt(3.0) * stats.positionStep;
+  return bytes;
 }
 
 // Geometric errors, children first: a leaf tile's is 0 (nothing refines it); another's is its
 // chunk's error plus its simplification, and never below a child's.
 double finishErrors(std::vector<Tile>& tiles, uint32_t i) {
   Tile& tile = tiles[i];
-  double error = tile.children.empty() ? 0.0 : tile.chunkError + tile.simplified;
+  double error =
+      tile.children.empty() ? 0.0 : tile.chunkError + tile.simplified + tile.quantization;
   for (uint32_t child : tile.children) error = std::max(error, finishErrors(tiles, child));
   tiles[i].geometricError = error;
   return error;
@@ -130,8 +144,8 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
       tbb::blocked_range<size_t>(0, tiles.size(), 1), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i < r.end(); ++i) {
           Tile& tile = tiles[i];
-          const double budget = tile.children.empty() ? options.finestError : tile.chunkError;
-          const std::vector<uint8_t> content = makeContent(reader, tile, budget);
+          const double budget = tile.children.empty() ? 0.0 : tile.chunkError;
+          const std::vector<uint8_t> content = makeContent(reader, tile, budget, options);
           if (!content.empty()) {
             writeFileBytes(directory / contentName(tile), content);
             tile.bytes = content.size();
@@ -172,6 +186,55 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
   stats.bytes += text.size();
   for (const auto& [level, l] : levels) stats.levels.push_back(l);
   return stats;
+}
+
+namespace {
+
+std::vector<uint8_t> readFileBytes(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path.string(), std::nullopt, "cannot be opened");
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
+  if (in.bad()) throw FileError(path.string(), std::nullopt, "cannot be read");
+  return bytes;
+}
+
+void addCut(const std::filesystem::path& directory, const nlohmann::json& tile, int depth, int at,
+            const glm::dvec3& offset, TilesetCut& cut) {
+  const bool leaf = !tile.contains("children") || tile["children"].empty();
+  if (leaf || at == depth) {
+    cut.geometricError = std::max(cut.geometricError, tile.at("geometricError").get<double>());
+    ++cut.tiles;
+    if (!tile.contains("content")) return;
+    const std::filesystem::path path = directory / tile["content"].at("uri").get<std::string>();
+    const TriangleMesh mesh = decodeGlb(readFileBytes(path), path.string());
+    const uint32_t base = uint32_t(cut.mesh.vertices.size());
+    for (const glm::dvec3& g : mesh.vertices)  // glTF's y up back to z up
+      cut.mesh.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
+    for (const auto& t : mesh.triangles)
+      cut.mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    return;
+  }
+  for (const nlohmann::json& child : tile["children"])
+    addCut(directory, child, depth, at + 1, offset, cut);
+}
+
+}  // namespace
+
+TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth) {
+  const std::filesystem::path path = directory / "tileset.json";
+  const std::vector<uint8_t> text = readFileBytes(path);
+  TilesetCut cut;
+  try {
+    const nlohmann::json tileset = nlohmann::json::parse(text.begin(), text.end());
+    const nlohmann::json& root = tileset.at("root");
+    glm::dvec3 offset(0.0);
+    if (root.contains("transform"))
+      for (int a = 0; a < 3; ++a) offset[a] = root["transform"].at(size_t(12 + a)).get<double>();
+    addCut(directory, root, depth, 0, offset, cut);
+  } catch (const nlohmann::json::exception& e) {
+    throw FileError(path.string(), std::nullopt, std::string("is not a tileset: ") + e.what());
+  }
+  return cut;
 }
 
 }  // namespace iso

@@ -9,14 +9,17 @@
 #include <vector>
 
 #include "iso/reader.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso {
 
 struct TilesOptions {
-  // How far (world units) the finest tiles may be simplified; 0: they are not (at a tenth of the
-  // finest leaf's edge the lion's lost 1 % of their triangles, and the tileset took 3 times as
-  // long).
-  double finestError = 0.0;
+  // The finest tiles (no children: nothing refines them, and their geometric error is 0) are
+  // collapsed within meshoptimizer's estimate of this share of their leaves' edge, unmeasured
+  // (iso eval --tiles measures them against the zero set); 0: not at all.
+  double finestCollapse = 1.0 / 32;
+  // Positions on a grid of this share of the tile's leaves' edge (16 bits where finer).
+  double positionStep = 1.0 / 16;
 };
 
 struct TilesLevel {  // the tiles whose chunks start at one octree level
@@ -38,5 +41,15 @@ struct TilesStats {
 TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directory,
                       const TilesOptions& options = {},
                       const std::function<void(size_t, size_t)>& progress = {});
+
+// What a viewer draws of a tileset that writeTiles wrote when it refines down to `depth` of the
+// tileset's tree (the root at 0): the tiles there and those above it without children; -1: every
+// tile without children (the finest). For measuring it against the file's surface.
+struct TilesetCut {
+  TriangleMesh mesh;  // world coordinates (z up, the root's transform applied)
+  uint64_t tiles = 0;
+  double geometricError = 0.0;  // the largest of those tiles' (world units)
+};
+TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth = -1);
 
 }  // namespace iso

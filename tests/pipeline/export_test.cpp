@@ -10,6 +10,7 @@
 
 #include "pipeline/analysis/export.h"
 #include "pipeline/base/options.h"
+#include "pipeline/points/points.h"
 #include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
@@ -89,8 +90,25 @@ TEST(MeshExport, theSphereIsCrackFreeAcrossLevelsOrientedAndRound) {
       test::convertAndLoad(test::scanOf("sphere", 50000), dir / "s.iso", options);
   ASSERT_GE(leafLevels(c.surface), 2u);  // the mesh crosses level transitions
   MeshStats stats;
-  const TriangleMesh mesh = extractMesh(c.surface, &stats);
+  std::vector<uint32_t> vertexLeaves;
+  const TriangleMesh mesh = extractMesh(c.surface, &stats, &vertexLeaves);
   EXPECT_EQ(stats.leaves, c.surface.leaves().size());
+  // The vertices lie on the file's zero set (the patch of the leaf that made them, or of a coarser
+  // one on its boundary, which its own patch there only approximates), not on chords of it.
+  const Frame& frame = c.surface.header().frame;
+  size_t onZero = 0;
+  double farthest = 0.0;
+  for (size_t v = 0; v < mesh.vertices.size(); ++v) {
+    const glm::dvec3 p = toFrame(mesh.vertices[v], frame);
+    const double f = std::abs(c.surface.distanceAt(vertexLeaves[v], {p.x, p.y, p.z}));
+    onZero += f <= 1e-9;
+    farthest = std::max(farthest, f * frame.size);
+  }
+  const double spacing = c.report["spacing"].get<double>();
+  std::printf("%zu of %zu vertices on their leaf's zero set; the farthest %.3f spacings\n", onZero,
+              mesh.vertices.size(), farthest / spacing);
+  EXPECT_GT(onZero, mesh.vertices.size() * 8 / 10);
+  EXPECT_LT(farthest, 0.1 * spacing);
   EXPECT_GT(stats.splitFaces, 0u);
   const MeshCheck m = check(mesh, c.surface);
   expectCrackFree(m, "sphere");
@@ -99,7 +117,6 @@ TEST(MeshExport, theSphereIsCrackFreeAcrossLevelsOrientedAndRound) {
   // The unit sphere: area 4π, volume 4π/3 (positive: facing outwards).
   EXPECT_NEAR(m.area / (4 * std::numbers::pi), 1.0, 0.005);
   EXPECT_NEAR(m.volume / (4 * std::numbers::pi / 3), 1.0, 0.005);
-  const double spacing = c.report["spacing"].get<double>();
   double worst = 0.0;
   for (const glm::dvec3& v : mesh.vertices) worst = std::max(worst, std::abs(glm::length(v) - 1));
   EXPECT_LT(worst, 0.5 * spacing);

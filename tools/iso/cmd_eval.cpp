@@ -1,4 +1,5 @@
-// `iso eval FILE.iso --shape NAME | --mesh FILE.ply | --points INPUT... | --against B.iso`, and
+// `iso eval FILE.iso --shape NAME | --mesh FILE.ply | --points INPUT... | --against B.iso |
+// --tiles DIR`, and
 // `--visibility`: accuracy, and what the viewer shows of the scan, as JSON.
 #include <fmt/core.h>
 
@@ -9,6 +10,7 @@
 #include "iso/surface_model.h"
 #include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/measure.h"
+#include "pipeline/analysis/tiles.h"
 #include "pipeline/analysis/visibility.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
@@ -28,6 +30,8 @@ struct Options {
   std::string shape;
   std::vector<std::string> points;
   std::string against;  // --against B.iso
+  std::string tiles;    // --tiles DIR
+  int depth = -1;       // --depth D
   bool perLevel = false;
   bool visibility = false;
   uint64_t visibilityPoints = 1000000;
@@ -112,12 +116,16 @@ nlohmann::json visibilityOf(const Reader& reader, std::span<const glm::dvec3> po
 
 int run(Options& o) {
   const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty()) +
-                     int(!o.against.empty());
+                     int(!o.against.empty()) + int(!o.tiles.empty());
   if (truths != 1 && !(o.visibility && truths == 0))
     throw UsageError(
-        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso "
+        "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso, "
+        "--tiles DIR "
         "(or --visibility alone, on the file's kept points)");
   if (o.perLevel && o.points.empty()) throw UsageError("--per-level measures against --points");
+  if (o.depth != -1 && o.tiles.empty()) throw UsageError("--depth picks a cut of --tiles");
+  if (o.visibility && !o.tiles.empty())
+    throw UsageError("--visibility measures --points or the file's kept points");
   if (o.visibility && !o.against.empty())
     throw UsageError("--visibility measures --points or the file's kept points");
   o.view.seed = o.eval.seed;
@@ -171,8 +179,21 @@ int run(Options& o) {
     if (!(spacing > 0.0))
       throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
     if (!o.shape.empty()) o.truth.params.name = o.shape;
-    o.eval.orientedNormals = o.truth.mesh.empty();
-    result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
+    o.eval.orientedNormals = o.truth.mesh.empty() && o.tiles.empty();
+    if (!o.tiles.empty()) {
+      TilesetCut cut = readTilesetCut(o.tiles, o.depth);
+      if (cut.mesh.triangles.empty())
+        throw FileError(o.tiles, std::nullopt, "has no triangles at that depth");
+      const nlohmann::json tiles = {{"directory", o.tiles},
+                                    {"depth", o.depth},
+                                    {"tiles", cut.tiles},
+                                    {"triangles", cut.mesh.triangles.size()},
+                                    {"geometric_error", cut.geometricError}};
+      result = evaluateAgainstShape(surface, *makeMeshShape(std::move(cut.mesh)), spacing, o.eval);
+      result["tiles"] = tiles;
+    } else {
+      result = evaluateAgainstShape(surface, *makeTruth(o.truth), spacing, o.eval);
+    }
     if (o.visibility)
       result["visibility"] =
           visibilityOf(reader, keptPoints(reader, o.visibilityPoints, o, result), spacing, o);
@@ -196,6 +217,14 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--against", o->against,
                 "Another .iso file: the distance between the two zero sets, both ways, and the "
                 "color PSNR between them");
+  c->add_option("--tiles", o->tiles,
+                "A tileset `iso export --tiles` wrote: the distance between what it draws and the "
+                "file's zero set, both ways (by default its finest tiles)");
+  c->add_option("--depth", o->depth,
+                "With --tiles: what the tileset draws when it refines to this depth of its tree "
+                "(the root is 0; -1: the finest), and the largest geometric error those tiles "
+                "state")
+      ->check(CLI::Range(-1, 64));
   c->add_flag("--per-level", o->perLevel,
               "With --points: the error of every level-of-detail cut, coarsest first");
   c->add_flag("--visibility", o->visibility,

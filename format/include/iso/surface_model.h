@@ -81,6 +81,9 @@ class SurfaceModel {
   // The filled leaf that contains p, or kNoNode in empty space and outside the frame.
   uint32_t findLeaf(const Vec3& p) const;
   SurfaceEval evaluate(uint32_t leaf, const Vec3& p) const;
+  // The trilinear signed distance in a leaf at p (clamped into it), and its gradient in frame
+  // units when asked: evaluate() without the normal and color.
+  double distanceAt(uint32_t leaf, const Vec3& p, std::array<double, 3>* gradient = nullptr) const;
 
   // The first hit of the ray origin + t·direction with t in [tMin, tMax]. A sign change between
   // the exit of one leaf and the entry of the next counts as a hit, so that no mismatch below the
@@ -110,9 +113,6 @@ class SurfaceModel {
                      double t1, Traversal& state) const;
   bool intersectLeaf(uint32_t leaf, double t0, double t1, Traversal& state) const;
   std::optional<Vec3> bisectSignChange(Vec3 a, Vec3 b) const;
-  // The distance in a leaf at p (clamped into it), and its gradient in frame units when asked.
-  double distanceAt(uint32_t leaf, const Vec3& p, std::array<double, 3>* gradient) const;
-
   FileHeader header_;
   std::optional<Region> region_;
   std::vector<Node> nodes_;  // node 0 is the root (level 0)
