@@ -25,10 +25,12 @@ struct MeshStats {
 // - each face of a leaf is triangulated: in quarters where a finer leaf lies across it, fanned
 //   from its centre where one of its edges touches a finer leaf, else by the diagonal from its
 //   lowest corner; both leaves sharing a face triangulate it alike;
-// - the leaf is cut into the tetrahedra joining its centre to those triangles, and each
+// - a leaf with no finer leaf around is cut into the six tetrahedra around its diagonal from the
+//   lowest corner; any other into the tetrahedra joining its centre to those triangles; each
 //   tetrahedron's zero set (the linear interpolation of its corners' values) is a triangle or two;
 // - the value at a point on leaf boundaries is the coarsest leaf's patch there, so every leaf that
-//   uses the point reads one number; vertices lie on tetrahedron edges and are shared by edge.
+//   uses the point reads one number; vertices lie on tetrahedron edges, at the zero of the patch
+//   along the edge (the coarsest leaf's on boundaries), and are shared by edge.
 // So the mesh has no cracks, also where leaves of different levels meet (2:1 balanced, as the
 // pipeline writes them). A value of exactly 0 counts as a tiny positive one: the mesh is that of a
 // field without zeros, edge-manifold, and closed where the file's zero set stays inside its filled
