@@ -368,7 +368,8 @@ std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
 }
 
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
-                         std::vector<uint32_t>* vertexLeaves, const SurfaceModel::Region* within) {
+                         std::vector<uint32_t>* vertexLeaves, const SurfaceModel::Region* within,
+                         std::span<const SurfaceModel::Region> without) {
   // Coarse leaves first: a point on the boundary of leaves of several levels takes the coarsest
   // one's value, which the finer ones' corners there only approximate (quantized).
   const std::vector<uint32_t> order = leavesCoarseFirst(surface);
@@ -379,15 +380,19 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
                              std::to_string(kMaxLevel - 1) + ")");
   Extractor extractor(surface);
   const auto inside = [&](const SurfaceModel::Leaf& leaf) {
-    if (!within) return true;
     const double size = std::ldexp(1.0, -int(leaf.level));
     const auto cell = mortonDecode(leaf.key);
-    for (int a = 0; a < 3; ++a) {
-      const double lo = double(cell[size_t(a)]) * size;
-      if (lo < within->lo[size_t(a)] || lo + size > within->hi[size_t(a)]) return false;
-    }
-    return true;
+    const auto in = [&](const SurfaceModel::Region& r) {
+      for (size_t a = 0; a < 3; ++a) {
+        const double lo = double(cell[a]) * size;
+        if (lo < r.lo[a] || lo + size > r.hi[a]) return false;
+      }
+      return true;
+    };
+    if (within && !in(*within)) return false;
+    return std::none_of(without.begin(), without.end(), in);
   };
+
   for (uint32_t id : order) extractor.leaf(id, inside(surface.leaves()[id]));
   if (stats) *stats = extractor.stats;
   if (vertexLeaves) *vertexLeaves = std::move(extractor.vertexLeaf);

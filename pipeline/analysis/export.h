@@ -38,10 +38,12 @@ struct MeshStats {
 // vertexLeaves, when given, receives the leaf whose tetrahedron made each vertex. With `within`
 // (frame units), only the leaves whose cells lie inside it give triangles; the others are still
 // sampled where they are coarser, so that meshes of neighbouring regions of one model (a region
-// loaded with the leaves around it) agree on their shared faces.
+// loaded with the leaves around it) agree on their shared faces. Leaves inside any of `without`
+// give no triangles either.
 TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr,
                          std::vector<uint32_t>* vertexLeaves = nullptr,
-                         const SurfaceModel::Region* within = nullptr);
+                         const SurfaceModel::Region* within = nullptr,
+                         std::span<const SurfaceModel::Region> without = {});
 
 // A mesh's vertex attributes from the surface it was extracted from: at each vertex, its leaf's
 // interpolated stored normal and linear color. Each is empty when the file has none.

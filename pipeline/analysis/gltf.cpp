@@ -35,6 +35,7 @@ struct Stream {
   std::string filter;
   size_t stride, count;
   bool indices;
+  size_t firstTriangle = 0;  // of an index stream
 };
 
 template <class T>
@@ -75,7 +76,16 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   if (n == 0) lo = hi = glm::dvec3(0.0);
   const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
   const double finest = extent > 0.0 ? extent / 65535.0 : 1.0;
-  const double step = std::max(finest, options.positionStep);
+  double step = finest;
+  if (options.positionStep > finest) {
+    // A grid of multiples of the step from the origin: meshes quantized with one step (tiles of
+    // one cut) put a vertex they share at one point.
+    const glm::dvec3 low = glm::floor(lo / options.positionStep) * options.positionStep;
+    if (std::max({hi.x - low.x, hi.y - low.y, hi.z - low.z}) / options.positionStep <= 65535.0) {
+      step = options.positionStep;
+      lo = low;
+    }
+  }
   s.quantized = options.maxPositionStep <= 0.0 || finest <= options.maxPositionStep;
   s.positionStep = s.quantized ? step : 0.0;
 
@@ -158,22 +168,31 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
     attributesJson["COLOR_0"] = accessors.size() - 1;
     streams.push_back(std::move(color));
   }
+  // The triangles, and the skirts' after them, each their own index stream and primitive.
   const bool wide = n > 65535;
-  Stream index(wide ? 4 : 2, 3 * mesh.triangles.size(), true);
-  for (size_t t = 0; t < mesh.triangles.size(); ++t)
-    for (size_t c = 0; c < 3; ++c) {
-      const uint32_t i = mesh.triangles[t][c];
-      if (wide)
-        put(index.data, (3 * t + c) * 4, i);
-      else
-        put(index.data, (3 * t + c) * 2, uint16_t(i));
-    }
-  accessors.push_back({{"bufferView", streams.size()},
-                       {"componentType", wide ? kUnsignedInt : kUnsignedShort},
-                       {"count", index.count},
-                       {"type", "SCALAR"}});
-  const size_t indicesAccessor = accessors.size() - 1;
-  streams.push_back(std::move(index));
+  const size_t skirts = std::min(options.skirtsFrom, mesh.triangles.size());
+  nlohmann::json primitives = nlohmann::json::array();
+  std::vector<std::pair<size_t, size_t>> parts = {{0, skirts}};
+  if (skirts < mesh.triangles.size()) parts.push_back({skirts, mesh.triangles.size()});
+  for (const auto& [first, last] : parts) {
+    Stream index(wide ? 4 : 2, 3 * (last - first), true);
+    index.firstTriangle = first;
+    for (size_t t = first; t < last; ++t)
+      for (size_t c = 0; c < 3; ++c) {
+        const uint32_t i = mesh.triangles[t][c];
+        if (wide)
+          put(index.data, (3 * (t - first) + c) * 4, i);
+        else
+          put(index.data, (3 * (t - first) + c) * 2, uint16_t(i));
+      }
+    accessors.push_back({{"bufferView", streams.size()},
+                         {"componentType", wide ? kUnsignedInt : kUnsignedShort},
+                         {"count", index.count},
+                         {"type", "SCALAR"}});
+    primitives.push_back(
+        {{"attributes", attributesJson}, {"indices", accessors.size() - 1}, {"mode", 4}});
+    streams.push_back(std::move(index));
+  }
 
   // The binary chunk: each stream compressed (or as it is), 4-byte aligned; with compression,
   // the views' uncompressed layout lies in a second, fallback buffer that holds no bytes.
@@ -192,8 +211,7 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
       if (stream.indices) {
         std::vector<uint32_t> flat(stream.count);
         for (size_t i = 0; i < stream.count; ++i)
-          flat[i] = stream.stride == 4 ? mesh.triangles[i / 3][i % 3]
-                                       : uint32_t(mesh.triangles[i / 3][i % 3]);
+          flat[i] = mesh.triangles[stream.firstTriangle + i / 3][i % 3];
         encoded.resize(meshopt_encodeIndexBufferBound(stream.count, n));
         encoded.resize(
             meshopt_encodeIndexBuffer(encoded.data(), encoded.size(), flat.data(), flat.size()));
@@ -233,19 +251,16 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
                        {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
     extensions.push_back("EXT_meshopt_compression");
   }
-  const nlohmann::json gltf = {
-      {"asset", {{"version", "2.0"}, {"generator", "iso export"}}},
-      {"extensionsUsed", extensions},
-      {"extensionsRequired", extensions},
-      {"scene", 0},
-      {"scenes", {{{"nodes", {0}}}}},
-      {"nodes", {node}},
-      {"meshes",
-       {{{"primitives",
-          {{{"attributes", attributesJson}, {"indices", indicesAccessor}, {"mode", 4}}}}}}},
-      {"accessors", accessors},
-      {"bufferViews", views},
-      {"buffers", buffers}};
+  const nlohmann::json gltf = {{"asset", {{"version", "2.0"}, {"generator", "iso export"}}},
+                               {"extensionsUsed", extensions},
+                               {"extensionsRequired", extensions},
+                               {"scene", 0},
+                               {"scenes", {{{"nodes", {0}}}}},
+                               {"nodes", {node}},
+                               {"meshes", {{{"primitives", primitives}}}},
+                               {"accessors", accessors},
+                               {"bufferViews", views},
+                               {"buffers", buffers}};
   std::string json = gltf.dump();
   json.resize(padded(json.size()), ' ');
 
@@ -266,7 +281,8 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   return out;
 }
 
-TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name) {
+TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name,
+                       bool surfaceOnly) {
   const auto fail = [&](const std::string& why) {
     return FileError(name, std::nullopt, "is not a glTF binary of one mesh: " + why);
   };
@@ -307,11 +323,11 @@ TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& nam
       if (result != 0) throw fail("a compressed view meshoptimizer cannot decode");
       return out;
     };
-    const nlohmann::json& primitive = gltf.at("meshes").at(0).at("primitives").at(0);
+    const nlohmann::json& primitives = gltf.at("meshes").at(0).at("primitives");
+    const nlohmann::json& primitive = primitives.at(0);
     const nlohmann::json& node = gltf.at("nodes").at(0);
     const nlohmann::json& positions =
         gltf.at("accessors").at(primitive.at("attributes").at("POSITION").get<size_t>());
-    const nlohmann::json& indices = gltf.at("accessors").at(primitive.at("indices").get<size_t>());
     glm::dvec3 translation(0.0), scale(1.0);
     for (int a = 0; a < 3; ++a) {
       if (node.contains("translation")) translation[a] = node["translation"].at(size_t(a));
@@ -338,16 +354,23 @@ TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& nam
         }
         mesh.vertices[v][int(a)] = translation[int(a)] + scale[int(a)] * value;
       }
-    const size_t count = indices.at("count");
-    const std::vector<uint8_t> i = view(indices.at("bufferView"));
-    const size_t width = indices.at("componentType") == kUnsignedInt ? 4 : 2;
-    if (i.size() < count * width || count % 3 != 0) throw fail("indices past their view");
-    mesh.triangles.resize(count / 3);
-    for (size_t k = 0; k < count; ++k) {
-      uint32_t index = 0;
-      std::memcpy(&index, i.data() + k * width, width);
-      if (index >= n) throw fail("an index past the vertices");
-      mesh.triangles[k / 3][k % 3] = index;
+    for (size_t k = 0; k < (surfaceOnly ? 1 : primitives.size()); ++k) {
+      if (primitives.at(k).at("attributes").at("POSITION") != primitive["attributes"]["POSITION"])
+        throw fail("primitives with their own positions");
+      const nlohmann::json& indices =
+          gltf.at("accessors").at(primitives[k].at("indices").get<size_t>());
+      const size_t count = indices.at("count");
+      const std::vector<uint8_t> i = view(indices.at("bufferView"));
+      const size_t width = indices.at("componentType") == kUnsignedInt ? 4 : 2;
+      if (i.size() < count * width || count % 3 != 0) throw fail("indices past their view");
+      const size_t base = mesh.triangles.size();
+      mesh.triangles.resize(base + count / 3);
+      for (size_t j = 0; j < count; ++j) {
+        uint32_t index = 0;
+        std::memcpy(&index, i.data() + j * width, width);
+        if (index >= n) throw fail("an index past the vertices");
+        mesh.triangles[base + j / 3][j % 3] = index;
+      }
     }
     return mesh;
   } catch (const nlohmann::json::exception& e) {

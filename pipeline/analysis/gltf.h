@@ -4,6 +4,7 @@
 // (EXT_meshopt_compression).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <glm/vec3.hpp>
 #include <string>
@@ -17,8 +18,9 @@ struct GlbOptions {
   // Positions in 16 bits when their step (the largest extent / 65,535) is at most this (world
   // units), else in float; 0: always 16 bits.
   double maxPositionStep = 0.0;
-  // The 16-bit positions' step (world units) when it is coarser than the finest 16 bits allow:
-  // a coarser grid compresses better (0: the finest).
+  // The 16-bit positions' step (world units) when it is coarser than the finest 16 bits allow
+  // and 16 bits reach over the mesh with it: a grid of its multiples from `origin`, which
+  // compresses better and which meshes written with one step share (0: the finest).
   double positionStep = 0.0;
   bool compress = true;  // EXT_meshopt_compression (off: plain buffers, for comparison)
   // Positions are stored relative to this point (world units), which the node's translation
@@ -29,6 +31,8 @@ struct GlbOptions {
   // 3D Tiles client turns back; the node leaves `origin` out (the tileset's root transform
   // carries it), whatever `translate` says.
   bool yUp = false;
+  // Triangles from this one on are skirts (3D Tiles), a second primitive over the same vertices.
+  size_t skirtsFrom = SIZE_MAX;
 };
 
 struct GlbStats {
@@ -46,7 +50,9 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& mesh, const MeshAttributes& a
 
 // The triangles of a .glb file that encodeGlb wrote (one mesh, one node; 16-bit or float
 // positions, meshopt-compressed or not), with the node's translation and scale applied: for
-// measuring what a tileset holds. Throws iso::FileError naming `name` for anything else.
-TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name);
+// measuring what a tileset holds. With surfaceOnly, the first primitive's (no skirts). Throws
+// iso::FileError naming `name` for anything else.
+TriangleMesh decodeGlb(const std::vector<uint8_t>& bytes, const std::string& name,
+                       bool surfaceOnly = false);
 
 }  // namespace iso

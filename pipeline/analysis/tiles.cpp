@@ -4,8 +4,12 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
 #include <iterator>
 #include <map>
 #include <mutex>
@@ -28,14 +32,21 @@ struct Tile {
   uint64_t key = 0;
   double chunkError = 0.0;  // the chunk's geometric error, world units
   std::vector<uint32_t> children;
+  uint32_t parent = kNoNode;
+  // The rest of a chunk with children: its own leaves outside its children's cells, at full
+  // detail, a child tile beside theirs (refinement replaces the chunk's tile by its children's).
+  bool rest = false;
   // Made:
   uint64_t triangles = 0, bytes = 0;
-  double simplified = 0.0;      // measured distance of the simplified content, world units
-  double quantization = 0.0;    // how far the content's 16-bit positions may be from it
+  double simplified = 0.0;    // measured distance of the simplified content, world units
+  double quantization = 0.0;  // how far the content's 16-bit positions may be from it
+  uint64_t skirtEdges = 0;
   double geometricError = 0.0;  // what the tileset says: see finishErrors
 };
 
-std::string contentName(const Tile& tile) { return "tile-" + std::to_string(tile.chunk) + ".glb"; }
+std::string contentName(const Tile& tile) {
+  return "tile-" + std::to_string(tile.chunk) + (tile.rest ? "-rest" : "") + ".glb";
+}
 
 SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
   const double size = std::ldexp(1.0, -int(level));
@@ -48,18 +59,103 @@ SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
   return region;
 }
 
+// Skirts: where the mesh's open border runs along one of `faces` of the tile's box (low and high
+// on each axis: those inside the frame, where a neighbour tile lies), a strip in that face hanging
+// from each border edge `height` into the surface (against the vertices' normals, along the face).
+// A neighbour drawn at another level of detail ends on the same face within the two tiles'
+// errors, so the outer of the two strips covers the gap between their borders. Returns the
+// border edges given one.
+size_t addSkirts(TriangleMesh& mesh, MeshAttributes& attributes, const glm::dvec3& lo,
+                 const glm::dvec3& hi, const std::array<std::array<bool, 2>, 3>& faces,
+                 double height) {
+  // The open edges, in their triangle's direction.
+  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  for (const auto& t : mesh.triangles)
+    for (size_t e = 0; e < 3; ++e) ++uses[{t[e], t[(e + 1) % 3]}];
+  const double tolerance = 1e-9 * std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+  // The face (2 axis + side) both ends lie on, or -1.
+  const auto faceOf = [&](const glm::dvec3& a, const glm::dvec3& b) {
+    for (int axis = 0; axis < 3; ++axis)
+      for (int side = 0; side < 2; ++side) {
+        const double plane = side ? hi[axis] : lo[axis];
+        if (faces[size_t(axis)][size_t(side)] && std::abs(a[axis] - plane) <= tolerance &&
+            std::abs(b[axis] - plane) <= tolerance)
+          return 2 * axis + side;
+      }
+    return -1;
+  };
+  // Vertex normals: the file's, else the triangles' by area.
+  std::vector<glm::dvec3> normals(mesh.vertices.size(), glm::dvec3(0.0));
+  if (!attributes.normals.empty()) {
+    for (size_t v = 0; v < normals.size(); ++v) normals[v] = glm::dvec3(attributes.normals[v]);
+  } else {
+    for (const auto& t : mesh.triangles) {
+      const glm::dvec3 n = glm::cross(mesh.vertices[t[1]] - mesh.vertices[t[0]],
+                                      mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+      for (uint32_t v : t) normals[v] += n;
+    }
+  }
+  std::map<std::pair<uint32_t, int>, uint32_t> hanging;  // (border vertex, face) → its copy
+  const auto below = [&](uint32_t v, int face) {
+    const auto [it, added] = hanging.insert({{v, face}, uint32_t(mesh.vertices.size())});
+    if (added) {
+      glm::dvec3 down = -normals[v];
+      down[face / 2] = 0.0;  // along the face
+      const double length = glm::length(down);
+      down = length > 0.0 ? down / length : glm::dvec3(0.0);
+      // (kept inside the box, which bounds the tile's content)
+      mesh.vertices.push_back(glm::clamp(mesh.vertices[v] + height * down, lo, hi));
+      if (!attributes.normals.empty()) attributes.normals.push_back(attributes.normals[v]);
+      if (!attributes.colors.empty()) attributes.colors.push_back(attributes.colors[v]);
+    }
+    return it->second;
+  };
+  size_t edges = 0;
+  for (const auto& [edge, count] : uses) {
+    const auto [a, b] = edge;
+    if (count != 1 || uses.count({b, a}) || a == b) continue;
+    const int face = faceOf(mesh.vertices[a], mesh.vertices[b]);
+    if (face < 0) continue;
+    // The strip runs b → a, as the triangle across it would.
+    const uint32_t a2 = below(a, face), b2 = below(b, face);
+    mesh.triangles.push_back({b, a, a2});
+    mesh.triangles.push_back({b, a2, b2});
+    ++edges;
+  }
+  return edges;
+}
+
+// How deep a tile's skirts hang: twice the largest chunk error (its simplification is within one
+// more) of the tiles that may be drawn unrefined beside it, the tile itself when it has children,
+// its siblings and its parent's siblings with children; 0 when none has (refinement replaces a
+// parent by all its children at once, so tiles of one parent that have none are drawn together).
+double skirtHeight(const std::vector<Tile>& tiles, uint32_t i) {
+  double error = tiles[i].children.empty() ? 0.0 : tiles[i].chunkError;
+  for (uint32_t up = i, generation = 0; generation < 2 && tiles[up].parent != kNoNode;
+       ++generation) {
+    up = tiles[up].parent;
+    for (uint32_t sibling : tiles[up].children)
+      if (!tiles[sibling].children.empty()) error = std::max(error, tiles[sibling].chunkError);
+  }
+  return 2.0 * error;
+}
+
 // A tile's content: the chunk's surface at its last level (the cut a viewer draws when it stops
 // at this chunk), from the chunks around its cell so that neighbours agree on shared faces;
 // simplified within `budget` where it has one (the coarser tiles), else collapsed within the
 // options' share of its leaves' edge (the finest); positions on a grid of a share of that edge.
-std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget,
+std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget, double skirt,
+                                 std::span<const SurfaceModel::Region> without,
                                  const TilesOptions& options) {
   const SurfaceChunk chunk = decodeSurfaceChunk(reader, tile.chunk);
   const uint8_t cut = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
   const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
-  const SurfaceModel model = SurfaceModel::load(reader, region, {}, cut);
+  // The finest tiles' neighbours at full detail too, whatever their chunks' depths, so that they
+  // agree on the faces they share.
+  const SurfaceModel model =
+      SurfaceModel::load(reader, region, {}, tile.children.empty() ? kMaxLevel : cut);
   std::vector<uint32_t> vertexLeaves;
-  TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region);
+  TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region, without);
   if (mesh.triangles.empty()) return {};
   MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves);
   const Frame& frame = reader.header().frame;
@@ -69,11 +165,25 @@ std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget
   else
     collapseMesh(mesh, attributes, options.finestCollapse * leaf);
   optimizeMeshOrder(mesh, attributes);
-  tile.triangles = mesh.triangles.size();
+  const size_t surface = mesh.triangles.size();
+  if (options.skirts && skirt > 0.0) {
+    glm::dvec3 lo, hi;
+    std::array<std::array<bool, 2>, 3> inside{};
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = frame.origin[size_t(a)] + region.lo[size_t(a)] * frame.size;
+      hi[a] = frame.origin[size_t(a)] + region.hi[size_t(a)] * frame.size;
+      inside[size_t(a)] = {region.lo[size_t(a)] > 0.0, region.hi[size_t(a)] < 1.0};
+    }
+    tile.skirtEdges = addSkirts(mesh, attributes, lo, hi, inside, skirt);
+  }
+  tile.triangles = surface;
   GlbOptions glb;
   glb.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
   glb.yUp = true;
-  glb.positionStep = options.positionStep * leaf;
+  // One grid for every tile (the finest leaves' share): a vertex tiles share lands on one point
+  // in each, whatever their cuts (16 bits over a coarse tile's box where it reaches too far).
+  glb.positionStep = options.positionStep * std::ldexp(frame.size, -int(reader.header().maxLevel));
+  glb.skirtsFrom = surface;
   GlbStats stats;
   std::vector<uint8_t> bytes = encodeGlb(mesh, attributes, glb, &stats);
   tile.quantization = 0.5 * std::sqrt(3.0) * stats.positionStep;
@@ -106,7 +216,9 @@ nlohmann::json tileJson(const std::vector<Tile>& tiles, uint32_t i, const Frame&
   if (tile.bytes > 0) out["content"] = {{"uri", contentName(tile)}};
   if (!tile.children.empty()) {
     out["children"] = nlohmann::json::array();
-    for (uint32_t child : tile.children) out["children"].push_back(tileJson(tiles, child, frame));
+    for (uint32_t child : tile.children)
+      if (!(tiles[child].rest && tiles[child].bytes == 0))  // (all in the other children)
+        out["children"].push_back(tileJson(tiles, child, frame));
   }
   return out;
 }
@@ -133,10 +245,22 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
     const uint32_t parent = reader.chunk(tiles[i].chunk).parent;
     if (parent == kNoParent)
       root = i;
-    else
+    else {
       tiles[tileOf.at(parent)].children.push_back(i);
+      tiles[i].parent = tileOf.at(parent);
+    }
   }
   if (root == kNoNode) throw FileError(reader.name(), std::nullopt, "has no surface");
+  for (uint32_t i = 0, chunks = uint32_t(tiles.size()); i < chunks; ++i) {
+    if (tiles[i].children.empty()) continue;
+    Tile rest = tiles[i];
+    rest.children.clear();
+    rest.parent = i;
+    rest.rest = true;
+    rest.chunkError = 0.0;
+    tiles[i].children.push_back(uint32_t(tiles.size()));
+    tiles.push_back(std::move(rest));
+  }
 
   std::mutex reporting;
   size_t done = 0;
@@ -145,7 +269,15 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
         for (size_t i = r.begin(); i < r.end(); ++i) {
           Tile& tile = tiles[i];
           const double budget = tile.children.empty() ? 0.0 : tile.chunkError;
-          const std::vector<uint8_t> content = makeContent(reader, tile, budget, options);
+          const double skirt = skirtHeight(tiles, uint32_t(i));
+          // A rest tile leaves out its siblings' cells.
+          std::vector<SurfaceModel::Region> without;
+          if (tile.rest)
+            for (uint32_t sibling : tiles[tile.parent].children)
+              if (!tiles[sibling].rest)
+                without.push_back(cellRegion(tiles[sibling].level, tiles[sibling].key));
+          const std::vector<uint8_t> content =
+              makeContent(reader, tile, budget, skirt, without, options);
           if (!content.empty()) {
             writeFileBytes(directory / contentName(tile), content);
             tile.bytes = content.size();
@@ -172,6 +304,8 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
   TilesStats stats;
   std::map<int, TilesLevel> levels;
   for (const Tile& tile : tiles) {
+    if (tile.rest && tile.bytes == 0) continue;  // (not in the tileset)
+    stats.restTiles += tile.rest;
     TilesLevel& l = levels[tile.level];
     l.level = tile.level;
     ++l.tiles;
@@ -180,6 +314,7 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
     l.geometricError = std::max(l.geometricError, tile.geometricError);
     l.simplified = std::max(l.simplified, tile.simplified);
     stats.tiles += 1;
+    stats.skirtEdges += tile.skirtEdges;
     stats.triangles += tile.triangles;
     stats.bytes += tile.bytes;
   }
@@ -199,14 +334,14 @@ std::vector<uint8_t> readFileBytes(const std::filesystem::path& path) {
 }
 
 void addCut(const std::filesystem::path& directory, const nlohmann::json& tile, int depth, int at,
-            const glm::dvec3& offset, TilesetCut& cut) {
+            const glm::dvec3& offset, bool skirts, TilesetCut& cut) {
   const bool leaf = !tile.contains("children") || tile["children"].empty();
   if (leaf || at == depth) {
     cut.geometricError = std::max(cut.geometricError, tile.at("geometricError").get<double>());
     ++cut.tiles;
     if (!tile.contains("content")) return;
     const std::filesystem::path path = directory / tile["content"].at("uri").get<std::string>();
-    const TriangleMesh mesh = decodeGlb(readFileBytes(path), path.string());
+    const TriangleMesh mesh = decodeGlb(readFileBytes(path), path.string(), !skirts);
     const uint32_t base = uint32_t(cut.mesh.vertices.size());
     for (const glm::dvec3& g : mesh.vertices)  // glTF's y up back to z up
       cut.mesh.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
@@ -215,12 +350,12 @@ void addCut(const std::filesystem::path& directory, const nlohmann::json& tile, 
     return;
   }
   for (const nlohmann::json& child : tile["children"])
-    addCut(directory, child, depth, at + 1, offset, cut);
+    addCut(directory, child, depth, at + 1, offset, skirts, cut);
 }
 
 }  // namespace
 
-TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth) {
+TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth, bool skirts) {
   const std::filesystem::path path = directory / "tileset.json";
   const std::vector<uint8_t> text = readFileBytes(path);
   TilesetCut cut;
@@ -230,7 +365,7 @@ TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth) {
     glm::dvec3 offset(0.0);
     if (root.contains("transform"))
       for (int a = 0; a < 3; ++a) offset[a] = root["transform"].at(size_t(12 + a)).get<double>();
-    addCut(directory, root, depth, 0, offset, cut);
+    addCut(directory, root, depth, 0, offset, skirts, cut);
   } catch (const nlohmann::json::exception& e) {
     throw FileError(path.string(), std::nullopt, std::string("is not a tileset: ") + e.what());
   }

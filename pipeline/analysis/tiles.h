@@ -18,8 +18,12 @@ struct TilesOptions {
   // collapsed within meshoptimizer's estimate of this share of their leaves' edge, unmeasured
   // (iso eval --tiles measures them against the zero set); 0: not at all.
   double finestCollapse = 1.0 / 32;
-  // Positions on a grid of this share of the tile's leaves' edge (16 bits where finer).
+  // Positions on a grid of this share of the finest leaves' edge, one grid for every tile (16
+  // bits over a tile's box where that grid would need more).
   double positionStep = 1.0 / 16;
+  // Skirts where a tile's surface meets a face of its box: strips hanging into the surface from
+  // its border, twice as deep as the parent's chunk error (specs/pipeline.md §17).
+  bool skirts = true;
 };
 
 struct TilesLevel {  // the tiles whose chunks start at one octree level
@@ -31,7 +35,9 @@ struct TilesLevel {  // the tiles whose chunks start at one octree level
 
 struct TilesStats {
   uint64_t tiles = 0, triangles = 0, bytes = 0;  // bytes: the .glb files and tileset.json
-  std::vector<TilesLevel> levels;                // coarsest first
+  uint64_t skirtEdges = 0;                       // border edges given a skirt
+  uint64_t restTiles = 0;  // tiles of a chunk's own leaves beside its children's (in `tiles`)
+  std::vector<TilesLevel> levels;  // coarsest first
 };
 
 // Write tileset.json and one .glb a tile with content into `directory` (which must exist and
@@ -44,12 +50,14 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
 
 // What a viewer draws of a tileset that writeTiles wrote when it refines down to `depth` of the
 // tileset's tree (the root at 0): the tiles there and those above it without children; -1: every
-// tile without children (the finest). For measuring it against the file's surface.
+// tile without children (the finest); their skirts too when asked. For measuring it against the
+// file's surface.
 struct TilesetCut {
   TriangleMesh mesh;  // world coordinates (z up, the root's transform applied)
   uint64_t tiles = 0;
   double geometricError = 0.0;  // the largest of those tiles' (world units)
 };
-TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth = -1);
+TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth = -1,
+                          bool skirts = false);
 
 }  // namespace iso

@@ -11,12 +11,16 @@
 #include <glm/geometric.hpp>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <set>
 
 #include "iso/reader.h"
+#include "iso/surface.h"
+#include "iso/surface_model.h"
 #include "pipeline/analysis/export.h"
 #include "pipeline/analysis/gltf.h"
 #include "pipeline/analysis/tiles.h"
+#include "pipeline/geom/shape.h"
 #include "tests/pipeline/pipeline_support.h"
 
 namespace iso {
@@ -264,8 +268,10 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
   for (const ChunkInfo& info : reader.chunks())
     surfaceChunks += info.kind == uint8_t(ChunkKind::Surface);
   ASSERT_GT(surfaceChunks, 8u);
-  EXPECT_EQ(stats.tiles, surfaceChunks);
-  EXPECT_EQ(calls, surfaceChunks);
+  // A tile a chunk, and one for the rest of each chunk with children that has leaves of its own
+  // outside theirs.
+  EXPECT_EQ(stats.tiles, surfaceChunks + stats.restTiles);
+  EXPECT_GE(calls, stats.tiles);
   EXPECT_GE(stats.levels.size(), 2u);
 
   const nlohmann::json tileset =
@@ -277,7 +283,7 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
     EXPECT_DOUBLE_EQ(transform[12 + a].get<double>(), frame.origin[size_t(a)]);
   std::vector<std::pair<nlohmann::json, int>> tiles;
   collectTiles(tileset["root"], -1, tiles);
-  EXPECT_EQ(tiles.size(), surfaceChunks);
+  EXPECT_EQ(tiles.size(), stats.tiles);
   const double spacing = c.report["spacing"].get<double>();
   size_t finestTriangles = 0;
   std::vector<std::pair<glm::dvec3, size_t>> onFaces;  // (position, tile)
@@ -337,7 +343,12 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
         largestStep = std::max(largestStep, step);
       }
     }
-    if (finest) finestTriangles += glb.json["accessors"].back()["count"].get<size_t>() / 3;
+    if (finest)  // the first primitive's (the second holds skirts)
+      finestTriangles +=
+          glb.json["accessors"][glb.json["meshes"][0]["primitives"][0]["indices"].get<size_t>()]
+                  ["count"]
+                      .get<size_t>() /
+          3;
   }
   // The finest tiles together are the whole surface's mesh, cut by chunk and collapsed; read back
   // as one mesh (world units), on the sphere. A coarser cut is within its stated error of the
@@ -381,6 +392,92 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
               matched, onFaces.size());
   ASSERT_GT(onFaces.size(), 100u);
   EXPECT_EQ(matched, onFaces.size());
+}
+
+// A cut that mixes levels: depth first, every other tile with children refined, the rest drawn
+// as they are; its tiles' triangles in world units (with their skirts when asked).
+void addMixedCut(const std::filesystem::path& directory, const nlohmann::json& tile,
+                 const glm::dvec3& offset, bool skirts, size_t& turn, TriangleMesh& out) {
+  const bool children = tile.contains("children") && !tile["children"].empty();
+  if (children && turn++ % 2 == 0) {
+    for (const nlohmann::json& child : tile["children"])
+      addMixedCut(directory, child, offset, skirts, turn, out);
+    return;
+  }
+  if (!tile.contains("content")) return;
+  const std::filesystem::path path = directory / tile["content"]["uri"].get<std::string>();
+  const std::vector<std::byte> raw = test::readFile(path);
+  const TriangleMesh mesh =
+      decodeGlb(std::vector<uint8_t>(reinterpret_cast<const uint8_t*>(raw.data()),
+                                     reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()),
+                path.string(), !skirts);
+  const uint32_t base = uint32_t(out.vertices.size());
+  for (const glm::dvec3& g : mesh.vertices)
+    out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
+  for (const auto& t : mesh.triangles)
+    out.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
+TEST(Tiles, skirtsCloseTheCracksWhereTilesOfDifferentCutsMeet) {
+  // The sphere is closed: a ray from outside aimed at its centre meets any cut of its tiles,
+  // unless it goes through a crack between tiles of different levels of detail.
+  test::TempDir dir;
+  BuildOptions options;
+  options.chunkNodes = 100;  // tiles over three levels of the chunk tree
+  const test::Converted c =
+      test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso", options);
+  const Reader reader = Reader::open(dir / "s.iso");
+  constexpr int kRays = 100000;
+  const auto raysThrough = [&](const TriangleMesh& mesh) {
+    const std::unique_ptr<Shape> shape = makeMeshShape(mesh);
+    std::mt19937_64 rng(7);
+    std::normal_distribution<double> normal;
+    size_t through = 0;
+    for (int r = 0; r < kRays; ++r) {
+      const glm::dvec3 d = glm::normalize(glm::dvec3(normal(rng), normal(rng), normal(rng)));
+      through += !shape->intersect(3.0 * d, -d, 0.0, 3.0).has_value();
+    }
+    return through;
+  };
+  std::map<bool, size_t> misses;
+  for (const bool skirts : {false, true}) {
+    const std::filesystem::path out = dir / (skirts ? "with" : "without");
+    std::filesystem::create_directories(out);
+    TilesOptions tiles;
+    tiles.skirts = skirts;
+    const TilesStats stats = writeTiles(reader, out, tiles);
+    EXPECT_EQ(stats.skirtEdges > 0, skirts);
+    if (!skirts) {
+      ASSERT_GE(stats.levels.size(), 3u);
+      size_t grandchildren = 0;
+      for (const ChunkInfo& info : reader.chunks())
+        grandchildren += info.kind == uint8_t(ChunkKind::Surface) && info.parent != kNoParent &&
+                         reader.chunk(info.parent).parent != kNoParent;
+      ASSERT_GT(grandchildren, 0u);
+    }
+    const nlohmann::json tileset = nlohmann::json::parse(std::ifstream(out / "tileset.json"));
+    const nlohmann::json& transform = tileset["root"]["transform"];
+    const glm::dvec3 offset(transform[12], transform[13], transform[14]);
+    TriangleMesh mixed;
+    size_t turn = 0;
+    addMixedCut(out, tileset["root"], offset, true, turn, mixed);
+    misses[skirts] = raysThrough(mixed);
+    // The finest tiles (and the rest of a chunk beside its children's) and the cut at depth 1:
+    // none through them either with skirts; the finest agree on their faces without any.
+    const size_t finest = raysThrough(readTilesetCut(out).mesh);
+    const size_t depth1 = raysThrough(readTilesetCut(out, 1, true).mesh);
+    std::printf(
+        "%s skirts (%llu border edges, %llu rest tiles): of %d rays, %zu through the "
+        "mixed cut, %zu through the finest, %zu through the cut at depth 1\n",
+        skirts ? "with" : "without", static_cast<unsigned long long>(stats.skirtEdges),
+        static_cast<unsigned long long>(stats.restTiles), kRays, misses[skirts], finest, depth1);
+    EXPECT_EQ(finest, 0u);
+    if (skirts) {
+      EXPECT_EQ(depth1, 0u);
+    }
+  }
+  EXPECT_GT(misses[false], 0u);  // there are cracks to close
+  EXPECT_EQ(misses[true], 0u);
 }
 
 }  // namespace
