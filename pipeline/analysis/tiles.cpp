@@ -11,6 +11,7 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <iterator>
+#include <list>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -25,6 +26,9 @@
 
 namespace iso {
 namespace {
+
+// Decoded chunks kept for the tiles around them (a dragon's chunk is about 2 MB decoded).
+constexpr size_t kCachedChunks = 128;
 
 struct Tile {
   uint32_t chunk = 0;
@@ -144,16 +148,41 @@ double skirtHeight(const std::vector<Tile>& tiles, uint32_t i) {
 // at this chunk), from the chunks around its cell so that neighbours agree on shared faces;
 // simplified within `budget` where it has one (the coarser tiles), else collapsed within the
 // options' share of its leaves' edge (the finest); positions on a grid of a share of that edge.
-std::vector<uint8_t> makeContent(const Reader& reader, Tile& tile, double budget, double skirt,
+std::vector<uint8_t> makeContent(const Reader& reader, const SurfaceModel::ChunkSource& source,
+                                 Tile& tile, double budget, double skirt,
                                  std::span<const SurfaceModel::Region> without,
                                  const TilesOptions& options) {
-  const SurfaceChunk chunk = decodeSurfaceChunk(reader, tile.chunk);
-  const uint8_t cut = uint8_t(chunk.topology.startLevel + chunk.topology.depth - 1);
+  const std::shared_ptr<const SurfaceChunk> chunk = source(tile.chunk);
+  const uint8_t cut = uint8_t(chunk->topology.startLevel + chunk->topology.depth - 1);
   const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
+  // What is loaded: the cell, or for a rest tile the box of the chunk's own leaves outside its
+  // children's cells (the leaves of its cut there; none: no content), so that a rest tile near
+  // the root does not load the whole file at full detail.
+  SurfaceModel::Region load = region;
+  if (tile.rest) {
+    const SurfaceModel own = SurfaceModel::load(reader, region, source, cut);
+    bool any = false;
+    for (const SurfaceModel::Leaf& leaf : own.leaves()) {
+      if (leaf.level >= kMaxLevel || leaf.level > cut) continue;
+      const SurfaceModel::Region cell = cellRegion(leaf.level, leaf.key);
+      const auto inside = [&](const SurfaceModel::Region& r) {
+        for (size_t a = 0; a < 3; ++a)
+          if (cell.lo[a] < r.lo[a] || cell.hi[a] > r.hi[a]) return false;
+        return true;
+      };
+      if (!inside(region) || std::any_of(without.begin(), without.end(), inside)) continue;
+      for (size_t a = 0; a < 3; ++a) {
+        load.lo[a] = any ? std::min(load.lo[a], cell.lo[a]) : cell.lo[a];
+        load.hi[a] = any ? std::max(load.hi[a], cell.hi[a]) : cell.hi[a];
+      }
+      any = true;
+    }
+    if (!any) return {};
+  }
   // The finest tiles' neighbours at full detail too, whatever their chunks' depths, so that they
   // agree on the faces they share.
   const SurfaceModel model =
-      SurfaceModel::load(reader, region, {}, tile.children.empty() ? kMaxLevel : cut);
+      SurfaceModel::load(reader, load, source, tile.children.empty() ? kMaxLevel : cut);
   std::vector<uint32_t> vertexLeaves;
   TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region, without);
   if (mesh.triangles.empty()) return {};
@@ -262,6 +291,32 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
     tiles.push_back(std::move(rest));
   }
 
+  // Decoded chunks, shared by the tiles around them (each loads the chunks around its cell): the
+  // last kCachedChunks used (tiles go in file order, which is spatial, a subrange a thread).
+  std::mutex caching;
+  std::list<std::pair<uint32_t, std::shared_ptr<const SurfaceChunk>>> recent;  // newest first
+  std::map<uint32_t, decltype(recent)::iterator> cached;
+  const SurfaceModel::ChunkSource source = [&](uint32_t id) {
+    {
+      const std::lock_guard lock(caching);
+      const auto found = cached.find(id);
+      if (found != cached.end()) {
+        recent.splice(recent.begin(), recent, found->second);
+        return found->second->second;
+      }
+    }
+    auto chunk = std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, id));
+    const std::lock_guard lock(caching);
+    if (!cached.count(id)) {
+      recent.emplace_front(id, chunk);
+      cached[id] = recent.begin();
+      if (recent.size() > kCachedChunks) {
+        cached.erase(recent.back().first);
+        recent.pop_back();
+      }
+    }
+    return std::shared_ptr<const SurfaceChunk>(std::move(chunk));
+  };
   std::mutex reporting;
   size_t done = 0;
   tbb::parallel_for(
@@ -277,7 +332,7 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
               if (!tiles[sibling].rest)
                 without.push_back(cellRegion(tiles[sibling].level, tiles[sibling].key));
           const std::vector<uint8_t> content =
-              makeContent(reader, tile, budget, skirt, without, options);
+              makeContent(reader, source, tile, budget, skirt, without, options);
           if (!content.empty()) {
             writeFileBytes(directory / contentName(tile), content);
             tile.bytes = content.size();

@@ -3,6 +3,7 @@
 // simplified mesh stays within its error of the analytic sphere and keeps open borders.
 #include <gtest/gtest.h>
 #include <meshoptimizer.h>
+#include <tbb/global_control.h>
 
 #include <array>
 #include <cmath>
@@ -478,6 +479,20 @@ TEST(Tiles, skirtsCloseTheCracksWhereTilesOfDifferentCutsMeet) {
   }
   EXPECT_GT(misses[false], 0u);  // there are cracks to close
   EXPECT_EQ(misses[true], 0u);
+  // On one thread the same files, byte for byte.
+  {
+    const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    std::filesystem::create_directories(dir / "one");
+    writeTiles(reader, dir / "one", {});
+  }
+  size_t files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir / "with")) {
+    ++files;
+    ASSERT_TRUE(test::readFile(entry.path()) ==
+                test::readFile(dir / "one" / entry.path().filename()))
+        << entry.path();
+  }
+  EXPECT_EQ(files, size_t(std::distance(std::filesystem::directory_iterator(dir / "one"), {})));
 }
 
 }  // namespace

@@ -189,9 +189,14 @@ void writeTileset(const Reader& reader, const Options& o, OutputDirectory& out,
                       {"bytes", l.bytes},
                       {"geometric_error", l.geometricError},
                       {"simplified", l.simplified}});
-  summary["tiles"] = {
-      {"path", o.tiles},      {"tiles", stats.tiles}, {"triangles", stats.triangles},
-      {"bytes", stats.bytes}, {"levels", levels},     {"seconds", secondsSince(started)}};
+  summary["tiles"] = {{"path", o.tiles},
+                      {"tiles", stats.tiles},
+                      {"rest_tiles", stats.restTiles},
+                      {"skirt_edges", stats.skirtEdges},
+                      {"triangles", stats.triangles},
+                      {"bytes", stats.bytes},
+                      {"levels", levels},
+                      {"seconds", secondsSince(started)}};
 }
 
 int run(const Options& o) {
@@ -283,10 +288,14 @@ int print(const nlohmann::json& summary, const Options& o) {
   }
   if (summary.contains("tiles")) {
     const auto& t = summary["tiles"];
-    fmt::print("{}: 3D Tiles 1.1, {} tiles, {} triangles, {} in {:.2f} s\n", o.tiles,
-               withSeparators(t["tiles"].get<uint64_t>()),
-               withSeparators(t["triangles"].get<uint64_t>()), byteSize(t["bytes"].get<uint64_t>()),
-               t["seconds"].get<double>());
+    fmt::print(
+        "{}: 3D Tiles 1.1, {} tiles ({} of them a chunk's rest beside its children), {} "
+        "triangles, skirts on {} border edges, {} in {:.2f} s\n",
+        o.tiles, withSeparators(t["tiles"].get<uint64_t>()),
+        withSeparators(t["rest_tiles"].get<uint64_t>()),
+        withSeparators(t["triangles"].get<uint64_t>()),
+        withSeparators(t["skirt_edges"].get<uint64_t>()), byteSize(t["bytes"].get<uint64_t>()),
+        t["seconds"].get<double>());
     for (const auto& l : t["levels"])
       fmt::print(
           "  level {:>2}: {:>5} tiles, {:>10} triangles, {:>10}, geometric error {:.4g} "
