@@ -1,5 +1,6 @@
-// 3D Tiles of an .iso file's surface (pipeline/analysis/tiles.h): a tile a surface chunk, its
-// content the chunk's surface at its own cut, extracted from the chunks around its cell.
+// 3D Tiles of an .iso file's surface (pipeline/analysis/tiles.h): a tile a surface chunk (and a
+// rest tile beside a chunk's children), its content the chunk's surface at its own cut, extracted
+// from the chunks around its cell.
 #include "pipeline/analysis/tiles.h"
 
 #include <tbb/parallel_for.h>

@@ -1,6 +1,8 @@
 // 3D Tiles 1.1 of an .iso file's surface (specs/pipeline.md §17): one tile a surface chunk,
-// following the file's chunk tree, each tile's content a glTF binary of the chunk's surface at
-// its own level of detail, simplified within the chunk's geometric error.
+// following the file's chunk tree (and one beside the children of a chunk with leaves of its own
+// outside their cells), each tile's content a glTF binary of the chunk's surface at its own level
+// of detail, simplified within the chunk's geometric error, with skirts where tiles of different
+// levels may meet.
 #pragma once
 
 #include <cstdint>
