@@ -86,7 +86,7 @@ Deviation measureDeviation(const Shape& original, const TriangleMesh& mesh,
     for (uint32_t v : t) kept[v] = 1;
   std::atomic<double> largest{0.0};
   std::atomic<size_t> found{0};
-  std::vector<uint8_t> beyond(mesh.vertices.size(), 0);  // flags, set from many threads
+  std::vector<std::atomic<uint8_t>> beyond(mesh.vertices.size());  // set from many threads
   const auto raise = [&](double d) {
     double seen = largest.load();
     while (d > seen && !largest.compare_exchange_weak(seen, d)) {
@@ -106,7 +106,7 @@ Deviation measureDeviation(const Shape& original, const TriangleMesh& mesh,
                         if (d >= 0.0) {
                           local = std::max(local, d);
                         } else {
-                          beyond[v] = 1;
+                          beyond[v].store(1, std::memory_order_relaxed);
                           ++found;
                         }
                       }
@@ -133,7 +133,7 @@ Deviation measureDeviation(const Shape& original, const TriangleMesh& mesh,
                               far = true;
                           }
                         if (far) {
-                          for (uint32_t v : tri) beyond[v] = 1;
+                          for (uint32_t v : tri) beyond[v].store(1, std::memory_order_relaxed);
                           ++found;
                         }
                       }
@@ -143,7 +143,7 @@ Deviation measureDeviation(const Shape& original, const TriangleMesh& mesh,
   out.largest = largest.load();
   out.tooMany = found > cap;
   for (uint32_t v = 0; v < beyond.size(); ++v)
-    if (beyond[v]) out.vertices.push_back(v);
+    if (beyond[v].load(std::memory_order_relaxed)) out.vertices.push_back(v);
   return out;
 }
 
