@@ -43,6 +43,27 @@ void put(std::vector<uint8_t>& out, size_t at, T value) {
   std::memcpy(out.data() + at, &value, sizeof(T));
 }
 
+// The mesh's positions as `T`s (value(x, axis) each coordinate), 4-byte aligned vertices, and
+// their smallest and largest on each axis (glTF's accessor min and max; 0 for no vertices).
+template <class T, class Value>
+void storePositions(const TriangleMesh& mesh, Stream& out, nlohmann::json& min, nlohmann::json& max,
+                    const Value& value) {
+  std::array<T, 3> low, high;
+  low.fill(std::numeric_limits<T>::max());
+  high.fill(std::numeric_limits<T>::lowest());
+  for (size_t v = 0; v < mesh.vertices.size(); ++v)
+    for (int a = 0; a < 3; ++a) {
+      const T x = value(mesh.vertices[v][a], a);
+      put(out.data, v * out.stride + size_t(a) * sizeof(T), x);
+      low[size_t(a)] = std::min(low[size_t(a)], x);
+      high[size_t(a)] = std::max(high[size_t(a)], x);
+    }
+  for (size_t a = 0; a < 3; ++a) {
+    min.push_back(mesh.vertices.empty() ? T(0) : low[a]);
+    max.push_back(mesh.vertices.empty() ? T(0) : high[a]);
+  }
+}
+
 uint8_t unorm8(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); }
 
 }  // namespace
@@ -93,36 +114,13 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
   std::vector<Stream> streams;
   Stream position(s.quantized ? 8 : 12, n);
   nlohmann::json qmin = nlohmann::json::array(), qmax = nlohmann::json::array();
-  if (s.quantized) {
-    std::array<uint16_t, 3> low{65535, 65535, 65535}, high{0, 0, 0};
-    for (size_t v = 0; v < n; ++v)
-      for (int a = 0; a < 3; ++a) {
-        const double q = std::round((mesh.vertices[v][a] - options.origin[a] - lo[a]) / step);
-        const uint16_t value = uint16_t(std::clamp(q, 0.0, 65535.0));
-        put(position.data, v * 8 + size_t(a) * 2, value);
-        low[size_t(a)] = std::min(low[size_t(a)], value);
-        high[size_t(a)] = std::max(high[size_t(a)], value);
-      }
-    for (int a = 0; a < 3; ++a) {
-      qmin.push_back(n > 0 ? low[size_t(a)] : 0);
-      qmax.push_back(n > 0 ? high[size_t(a)] : 0);
-    }
-  } else {
-    std::array<float, 3> low{}, high{};
-    low.fill(std::numeric_limits<float>::infinity());
-    high.fill(-std::numeric_limits<float>::infinity());
-    for (size_t v = 0; v < n; ++v)
-      for (int a = 0; a < 3; ++a) {
-        const float value = float(mesh.vertices[v][a] - options.origin[a] - lo[a]);
-        put(position.data, v * 12 + size_t(a) * 4, value);
-        low[size_t(a)] = std::min(low[size_t(a)], value);
-        high[size_t(a)] = std::max(high[size_t(a)], value);
-      }
-    for (int a = 0; a < 3; ++a) {
-      qmin.push_back(n > 0 ? low[size_t(a)] : 0.0f);
-      qmax.push_back(n > 0 ? high[size_t(a)] : 0.0f);
-    }
-  }
+  if (s.quantized)
+    storePositions<uint16_t>(mesh, position, qmin, qmax, [&](double x, int a) {
+      return uint16_t(std::clamp(std::round((x - options.origin[a] - lo[a]) / step), 0.0, 65535.0));
+    });
+  else
+    storePositions<float>(mesh, position, qmin, qmax,
+                          [&](double x, int a) { return float(x - options.origin[a] - lo[a]); });
   accessors.push_back({{"bufferView", streams.size()},
                        {"componentType", s.quantized ? kUnsignedShort : kFloat},
                        {"count", n},
