@@ -8,10 +8,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <fstream>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
-#include <iterator>
 #include <list>
 #include <map>
 #include <mutex>
@@ -380,14 +378,6 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
 }
 
 namespace {
-
-std::vector<uint8_t> readFileBytes(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FileError(path.string(), std::nullopt, "cannot be opened");
-  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
-  if (in.bad()) throw FileError(path.string(), std::nullopt, "cannot be read");
-  return bytes;
-}
 
 void addCut(const std::filesystem::path& directory, const nlohmann::json& tile, int depth, int at,
             const glm::dvec3& offset, bool skirts, TilesetCut& cut) {

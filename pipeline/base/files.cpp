@@ -7,6 +7,8 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <optional>
 #include <span>
 
@@ -91,6 +93,14 @@ void writeFileBytes(const fs::path& path, const std::vector<uint8_t>& bytes) {
   AtomicFile file(path);
   file.write(std::as_bytes(std::span(bytes)));
   file.commit();
+}
+
+std::vector<uint8_t> readFileBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path.string(), std::nullopt, "cannot be opened");
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), {});
+  if (in.bad()) throw FileError(path.string(), std::nullopt, "cannot be read");
+  return bytes;
 }
 
 // ---- OutputDirectory

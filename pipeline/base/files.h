@@ -30,6 +30,8 @@ bool namesSameFile(const std::filesystem::path& a, const std::filesystem::path& 
 // Write bytes to path, replacing it only once all are written (iso::AtomicFile): a full disk is a
 // FileError naming path, and leaves what path held.
 void writeFileBytes(const std::filesystem::path& path, const std::vector<uint8_t>& bytes);
+// A whole file's bytes; a FileError naming path when it cannot be opened or read.
+std::vector<uint8_t> readFileBytes(const std::filesystem::path& path);
 
 // Outputs written together, all or none. Each is written under a temporary name beside its final
 // path (stage()); commit() renames them all into place once every one is complete. If a rename
