@@ -36,18 +36,21 @@ constexpr AttributeRule kPosition{draco::GeometryAttribute::POSITION, draco::DT_
 constexpr AttributeRule kColor{draco::GeometryAttribute::COLOR, draco::DT_UINT16, "COLOR uint16"};
 constexpr AttributeRule kColor8{draco::GeometryAttribute::COLOR, draco::DT_UINT8, "COLOR uint8"};
 constexpr AttributeRule kNormal{draco::GeometryAttribute::NORMAL, draco::DT_INT16, "NORMAL int16"};
+constexpr AttributeRule kRadius{draco::GeometryAttribute::GENERIC, draco::DT_UINT16,
+                                "GENERIC uint16"};
 
 template <typename T>
 void addAttribute(draco::PointCloudBuilder& builder, const AttributeRule& rule,
-                  const std::vector<std::array<T, 3>>& values) {
-  const int id = builder.AddAttribute(rule.type, 3, rule.dataType);
+                  const std::vector<T>& values) {
+  const int id = builder.AddAttribute(rule.type, int8_t(sizeof(T) / sizeof(values[0][0])),
+                                      rule.dataType);
   builder.SetAttributeValuesForAllPoints(id, values.data(), sizeof(values[0]));
 }
 
 // The values of a decoded attribute, point by point (Draco may map points to shared values).
-template <typename T>
-std::vector<std::array<T, 3>> valuesOf(const draco::PointAttribute& attribute, uint32_t count) {
-  std::vector<std::array<T, 3>> out(count);
+template <typename T, size_t N = 3>
+std::vector<std::array<T, N>> valuesOf(const draco::PointAttribute& attribute, uint32_t count) {
+  std::vector<std::array<T, N>> out(count);
   for (uint32_t i = 0; i < count; ++i)
     attribute.GetMappedValue(draco::PointIndex(i), out[i].data());
   return out;
@@ -75,7 +78,8 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
     throw InternalError("a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
                         " points, not " + std::to_string(n));
   if ((!points.colors.empty() && points.colors.size() != n) ||
-      (!points.normals.empty() && points.normals.size() != n))
+      (!points.normals.empty() && points.normals.size() != n) ||
+      (!points.radii.empty() && points.radii.size() != n))
     throw InternalError("points chunk attributes are not one per point");
   if (points.stepBits > kMaxPointStepBits)
     throw InternalError("points chunk step bits above " + std::to_string(kMaxPointStepBits));
@@ -101,6 +105,11 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
     }
   }
   if (!points.normals.empty()) addAttribute(builder, kNormal, points.normals);
+  if (!points.radii.empty()) {
+    std::vector<std::array<uint16_t, 1>> radii(n);
+    for (size_t i = 0; i < n; ++i) radii[i][0] = points.radii[i];
+    addAttribute(builder, kRadius, radii);
+  }
   const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(false);
   draco::ExpertEncoder encoder(*cloud);
   encoder.SetEncodingMethod(draco::POINT_CLOUD_KD_TREE_ENCODING);
@@ -114,7 +123,8 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
   storeLE<uint32_t>(data.data(), uint32_t(n));
   storeLE<uint8_t>(data.data() + 4, points.stepBits);
   storeLE<uint8_t>(data.data() + 5, uint8_t((points.colors.empty() ? 0 : kPointsHaveColors) |
-                                            (points.normals.empty() ? 0 : kPointsHaveNormals)));
+                                            (points.normals.empty() ? 0 : kPointsHaveNormals) |
+                                            (points.radii.empty() ? 0 : kPointsHaveRadii)));
   storeLE<uint16_t>(data.data() + 6, 0);
   std::memcpy(data.data() + kPointsHeaderSize, buffer.data(), buffer.size());
   return data;
@@ -142,7 +152,7 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
   if (out.stepBits > kMaxPointStepBits)
     fail("step bits " + std::to_string(out.stepBits) + " above " +
          std::to_string(kMaxPointStepBits));
-  if ((attributes & ~(kPointsHaveColors | kPointsHaveNormals)) != 0 ||
+  if ((attributes & ~(kPointsHaveColors | kPointsHaveNormals | kPointsHaveRadii)) != 0 ||
       loadLE<uint16_t>(data.data() + 6) != 0)
     fail("reserved points header bits are not zero");
 
@@ -170,16 +180,19 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
   if (cloud.num_points() != count) fail("the Draco point cloud has another point count");
   const bool colors = (attributes & kPointsHaveColors) != 0;
   const bool normals = (attributes & kPointsHaveNormals) != 0;
-  if (cloud.num_attributes() != 1 + int(colors) + int(normals))
+  const bool radii = (attributes & kPointsHaveRadii) != 0;
+  const int expected = 1 + int(colors) + int(normals) + int(radii);
+  if (cloud.num_attributes() != expected)
     fail("the Draco point cloud has " + std::to_string(cloud.num_attributes()) +
-         " attributes, the header says " + std::to_string(1 + int(colors) + int(normals)));
-  const auto attribute = [&](const AttributeRule& rule) -> const draco::PointAttribute& {
+         " attributes, the header says " + std::to_string(expected));
+  const auto attribute = [&](const AttributeRule& rule,
+                             int components = 3) -> const draco::PointAttribute& {
     const draco::PointAttribute* a = cloud.GetNamedAttribute(rule.type);
     if (a == nullptr || cloud.NumNamedAttributes(rule.type) != 1 ||
-        a->data_type() != rule.dataType || a->num_components() != 3 ||
+        a->data_type() != rule.dataType || a->num_components() != components ||
         (!a->is_mapping_identity() && a->indices_map_size() < count))
-      fail(std::string("the Draco point cloud has no single 3-component ") + rule.name +
-           " attribute");
+      fail("the Draco point cloud has no single " + std::to_string(components) + "-component " +
+           rule.name + " attribute");
     return *a;
   };
   out.offsets = valuesOf<int32_t>(attribute(kPosition), count);
@@ -199,7 +212,28 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
       for (int16_t c : n)
         if (c == -32768) fail("a normal component is -32768, which snorm16 does not use");
   }
+  if (radii)
+    for (const std::array<uint16_t, 1>& r : valuesOf<uint16_t, 1>(attribute(kRadius, 1), count))
+      out.radii.push_back(r[0]);
   return out;
+}
+
+uint16_t encodePointRadius(double radius) {
+  if (!(radius < 1.0)) return 0;  // NaN too
+  if (!(radius > 0x1p-64)) return 65535;
+  // The largest code whose radius is at least `radius` (codes fall as radii grow).
+  double code = std::floor(-1024.0 * std::log2(radius));
+  while (code > 0 && decodePointRadius(uint16_t(code)) < radius) code -= 1;
+  return uint16_t(std::clamp(code, 0.0, 65535.0));
+}
+
+double decodePointRadius(uint16_t code) { return std::exp2(-double(code) / 1024.0); }
+
+std::vector<bool> subsampleChunks(const Reader& reader) {
+  std::vector<bool> parent(reader.chunks().size(), false);
+  for (const ChunkInfo& c : reader.chunks())
+    if (c.kind == kPointsKind && c.parent != kNoParent) parent[c.parent] = true;
+  return parent;
 }
 
 std::array<double, 3> pointFramePosition(uint8_t level, uint64_t key, uint8_t stepBits,

@@ -61,10 +61,11 @@ class Parser {
       fail(0, "not an .iso file (wrong magic bytes)");
     const uint16_t major = loadLE<uint16_t>(p + detail::hdr::kVersionMajor);
     const uint16_t minor = loadLE<uint16_t>(p + detail::hdr::kVersionMinor);
-    if (major != kFormatMajor)
+    if (major != kFormatMajor && major != kOldestFormatMajor)
       fail(detail::hdr::kVersionMajor, "format version " + std::to_string(major) + "." +
                                            std::to_string(minor) +
-                                           " is not supported (this reader reads version " +
+                                           " is not supported (this reader reads versions " +
+                                           std::to_string(kOldestFormatMajor) + ".x to " +
                                            std::to_string(kFormatMajor) + ".x)");
     const uint32_t headerSize = loadLE<uint32_t>(p + detail::hdr::kHeaderSize);
     if (headerSize != kHeaderSize)
@@ -164,10 +165,6 @@ class Parser {
                               " points, not " + std::to_string(c.pointCount)};
     if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, "a points chunk has nodes"};
     if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, "a points chunk has leaves"};
-    if (c.parent != kNoParent)
-      return detail::FieldProblem{e::kParent, "a points chunk has a parent"};
-    if (c.geometricError != 0.0f)
-      return detail::FieldProblem{e::kGeometricError, "a points chunk has a geometric error"};
     return std::nullopt;
   }
 
@@ -199,6 +196,8 @@ class Parser {
       const ChunkInfo& p = r_.chunks[c.parent];
       if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
         fail(at, who + " is not a coarser cell containing it");
+      if (c.kind == kPointsKind && p.kind != kPointsKind)
+        fail(at, who + " is not a points chunk (a points chunk's parent is its subsample)");
     }
     checkSurfacePointCounts(t.chunkTableOffset);
   }

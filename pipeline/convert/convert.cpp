@@ -224,7 +224,9 @@ nlohmann::json optionsJson(const BuildOptions& o) {
 namespace {
 
 // Writes the input points into points chunks (`--keep-points`), in the final frame.
-using KeepPoints = std::function<KeptPointsStats(Writer&, const FileHeader&)>;
+// `prepared`: the conversion's points, whose radii and normals the kept points take.
+using KeepPoints =
+    std::function<KeptPointsStats(Writer&, const FileHeader&, const PointSet& prepared)>;
 
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
@@ -331,8 +333,9 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
       [&](StageTimer& timer) {
         return prepareInCore(input, options, timer, bool(source.onStrays));
       },
-      [&](Writer& writer, const FileHeader& header) {
-        return keepPoints(writer, input, header, options.pointBits, options.keptPointsPerChunk);
+      [&](Writer& writer, const FileHeader& header, const PointSet& prepared) {
+        return keepPoints(writer, input, header, options.pointBits, options.keptPointsPerChunk,
+                          &prepared);
       });
 }
 
@@ -356,9 +359,9 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
         requireSurface(ready.points);  // known once every chunk's duplicates are merged
         return ready;
       },
-      [&](Writer& writer, const FileHeader& header) {
+      [&](Writer& writer, const FileHeader& header, const PointSet& prepared) {
         return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
-                          options.keptPointsPerChunk);
+                          options.keptPointsPerChunk, &prepared);
       });
 }
 
@@ -545,7 +548,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   if (options.keepPoints)
     write.moreChunks = [&](Writer& out, const FileHeader& header) {
       timer.next("keep points", inputPoints);
-      const KeptPointsStats kept = keep(out, header);
+      const KeptPointsStats kept = keep(out, header, points);
       report["kept_points"] = kept.json();
       report["kept_points"]["max_error_over_spacing"] = kept.maxError / spacing;
     };

@@ -35,6 +35,9 @@ struct EncodedChunk {
 nlohmann::json KeptPointsStats::json() const {
   return {{"chunks", chunks},
           {"points", points},
+          {"subsample_chunks", subsampleChunks},
+          {"subsample_points", subsamplePoints},
+          {"radii_from_conversion", radiiFromConversion},
           {"bytes", bytes},
           {"bytes_per_point", points > 0 ? double(bytes) / double(points) : 0.0},
           {"step_bits", stepBits},
@@ -43,44 +46,137 @@ nlohmann::json KeptPointsStats::json() const {
 }
 
 PointsChunkWriter::PointsChunkWriter(Writer& writer, const FileHeader& header, int stepBits,
-                                     bool colors, bool normals, uint32_t perChunk)
+                                     bool colors, bool normals, uint32_t perChunk,
+                                     const PointSet* prepared)
     : writer_(writer),
       frame_(header.frame),
       finest_(header.maxLevel),
       stepBits_(stepBits),
       colors_(colors),
-      normals_(normals),
-      perChunk_(std::clamp<uint32_t>(perChunk, 1, kMaxPointsPerChunk)) {
+      normals_(normals || (prepared != nullptr && !prepared->normal.empty())),
+      perChunk_(std::clamp<uint32_t>(perChunk, 1, kMaxPointsPerChunk)),
+      prepared_(prepared != nullptr && prepared->size() > 0 ? prepared : nullptr) {
   stats_.stepBits = stepBits;
 }
 
 PointsChunkWriter::~PointsChunkWriter() = default;
 
+float PointsChunkWriter::preparedMatch(uint64_t key, const glm::dvec3& world, glm::vec3& normal) {
+  if (prepared_ == nullptr) return 0.0f;
+  const SpillVector<uint64_t>& keys = prepared_->key;
+  const size_t n = keys.size();
+  if (cursor_ > 0 && cursor_ <= n && keys[cursor_ - 1] >= key) {  // not in key order: search
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+      const size_t mid = lo + (hi - lo) / 2;
+      if (keys[mid] < key)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    cursor_ = lo;
+  }
+  while (cursor_ < n && keys[cursor_] < key) ++cursor_;
+  // The prepared point of this key nearest to the point (merged duplicates: at it).
+  const glm::vec3 u(toFrame(world, frame_));
+  size_t best = n;
+  float nearest = std::numeric_limits<float>::max();
+  for (size_t j = cursor_; j < n && keys[j] == key; ++j) {
+    const glm::vec3 d = prepared_->position[j] - u;
+    if (glm::dot(d, d) < nearest) {
+      nearest = glm::dot(d, d);
+      best = j;
+    }
+  }
+  if (best == n) return 0.0f;
+  if (normal == glm::vec3(0.0f) && !prepared_->normal.empty()) normal = prepared_->normal[best];
+  ++stats_.radiiFromConversion;
+  return prepared_->radius[best];
+}
+
 void PointsChunkWriter::push(const glm::dvec3& world, uint64_t key, const glm::vec3& normal,
                              const glm::vec3& color) {
   const glm::dvec3 u = toFrame(world, frame_);
   if (!(u.x >= 0.0 && u.y >= 0.0 && u.z >= 0.0 && u.x < 1.0 && u.y < 1.0 && u.z < 1.0)) {
-    outside_.push_back({key, world, normal, color});  // written last, in chunks of their own
+    outside_.push_back({key, world, normal, color, 0.0f});  // last, in chunks of their own
     return;
   }
-  buffer_.push_back({key, world, normal, color});
+  glm::vec3 n = unitOrZero(normal);
+  float radius = preparedMatch(key, world, n);
+  if (radius > 0.0f)
+    lastRadius_ = radius;
+  else
+    radius = lastRadius_;
+  buffer_.push_back({key, world, n, color, radius});
   while (buffer_.size() - head_ > perChunk_) cutOne();
 }
 
 void PointsChunkWriter::finish() {
   while (head_ < buffer_.size()) cutOne();
+  closeGatherings(255, 0);
   // Points outside the frame (removed outliers): root cell chunks after all others, so that no
   // chunk of points inside needs a coarser step for them.
   for (size_t first = 0; first < outside_.size(); first += perChunk_) {
     const auto begin = outside_.begin() + ptrdiff_t(first);
-    pending_.push_back(
-        {0, 0,
-         std::vector<Point>(
-             begin, begin + ptrdiff_t(std::min<size_t>(perChunk_, outside_.size() - first)))});
-    if (pending_.size() >= kBatchChunks) flush();
+    queue({0, 0,
+           std::vector<Point>(
+               begin, begin + ptrdiff_t(std::min<size_t>(perChunk_, outside_.size() - first))),
+           0, {}});
   }
   outside_.clear();
   flush();
+}
+
+void PointsChunkWriter::queue(Pending chunk) {
+  chunk.sequence = sequence_++;
+  pending_.push_back(std::move(chunk));
+  if (pending_.size() >= kBatchChunks) flush();
+}
+
+void PointsChunkWriter::give(uint8_t level, uint64_t cell, const std::vector<Point>& points,
+                             std::vector<uint64_t> from, bool thinOut) {
+  if (level == 0) return;
+  const uint8_t up = uint8_t(level - 1);
+  const uint64_t parent = cell >> 3;
+  // The open gatherings contain the cell, so the innermost one is its parent or contains it.
+  if (gatherings_.empty() || gatherings_.back().level != up)
+    gatherings_.push_back({up, parent, {}, {}, 0});  // NOLINT
+  Gathering& g = gatherings_.back();
+  if (thinOut) {
+    for (size_t i = 0; i < points.size(); i += 8) {
+      g.points.push_back(points[i]);
+      g.points.back().radius *= std::sqrt(8.0f);
+    }
+  } else {
+    g.points.insert(g.points.end(), points.begin(), points.end());
+  }
+  // (Many chunks of one split finest cell could give more than a chunk holds: halve again.)
+  while (g.points.size() > perChunk_) {
+    size_t kept = 0;
+    for (size_t i = 0; i < g.points.size(); i += 2) {
+      g.points[kept] = g.points[i];
+      g.points[kept++].radius *= std::sqrt(2.0f);
+    }
+    g.points.resize(kept);
+  }
+  g.chunks.insert(g.chunks.end(), from.begin(), from.end());
+  ++g.gifts;
+}
+
+void PointsChunkWriter::closeGatherings(uint8_t level, uint64_t cell) {
+  while (!gatherings_.empty()) {
+    if (level != 255 && cellContains(gatherings_.back().level, gatherings_.back().cell, level, cell))
+      return;
+    Gathering done = std::move(gatherings_.back());
+    gatherings_.pop_back();
+    if (done.gifts >= 2) {
+      Pending subsample{done.level, done.cell, std::move(done.points), 0, std::move(done.chunks)};
+      give(done.level, done.cell, subsample.points, {sequence_}, true);
+      queue(std::move(subsample));
+    } else {
+      give(done.level, done.cell, done.points, std::move(done.chunks), false);
+    }
+  }
 }
 
 // Cut the next chunk from the buffer, which holds more than perChunk_ points (or all that are
@@ -114,13 +210,21 @@ void PointsChunkWriter::cutOne() {
   if (size_t(end - begin) > perChunk_) end = begin + perChunk_;  // a finest cell, split
   continues_ = level == finest_ && end != buffer_.end() && (end->key >> finestShift) == cell;
   floor_ = (cell + 1) << (3 * (kMaxLevel - level));
-  pending_.push_back({level, cell, std::vector<Point>(begin, end)});
+  Pending chunk{level, cell, std::vector<Point>(begin, end), 0, {}};
+  // Points without a radius: one from the chunk's density (a surface through the cell, its k-NN
+  // radius about twice the spacing).
+  const float densityRadius =
+      float(2.0 * std::ldexp(1.0, -int(level)) / std::sqrt(double(chunk.points.size())));
+  for (Point& p : chunk.points)
+    if (!(p.radius > 0.0f)) p.radius = densityRadius;
   head_ += size_t(end - begin);
   if (head_ > perChunk_) {  // drop what was cut, now and then
     buffer_.erase(buffer_.begin(), buffer_.begin() + ptrdiff_t(head_));
     head_ = 0;
   }
-  if (pending_.size() >= kBatchChunks) flush();
+  closeGatherings(level, cell);
+  give(level, cell, chunk.points, {sequence_}, true);
+  queue(std::move(chunk));
 }
 
 void PointsChunkWriter::flush() {
@@ -152,6 +256,9 @@ void PointsChunkWriter::flush() {
     PointsChunk chunk;
     chunk.stepBits = uint8_t(bits);
     chunk.offsets.resize(p.points.size());
+    chunk.radii.resize(p.points.size());
+    // (Points outside the frame have no radius: the largest the code holds.)
+    double largest = 0.0;
     if (colors_) chunk.colors.resize(p.points.size());
     if (normals_) chunk.normals.resize(p.points.size());
     for (size_t i = 0; i < p.points.size(); ++i) {
@@ -159,10 +266,14 @@ void PointsChunkWriter::flush() {
       const glm::dvec3 d = toFrame(point.world, frame_) - cellMin;
       for (int a = 0; a < 3; ++a)
         chunk.offsets[i][a] = int32_t(std::llround(std::ldexp(d[a], bits)));
+      chunk.radii[i] = encodePointRadius(point.radius > 0.0f ? double(point.radius) : 1.0);
       const std::array<double, 3> stored =
           pointFramePosition(p.level, p.key, chunk.stepBits, chunk.offsets[i]);
+      if (stored[0] >= 0.0 && stored[1] >= 0.0 && stored[2] >= 0.0 && stored[0] < 1.0 &&
+          stored[1] < 1.0 && stored[2] < 1.0)
+        largest = std::max(largest, decodePointRadius(chunk.radii[i]));
       const glm::dvec3 back = toWorld(glm::dvec3(stored[0], stored[1], stored[2]), frame_);
-      out.maxError = std::max(out.maxError, glm::length(back - point.world));
+      if (p.children.empty()) out.maxError = std::max(out.maxError, glm::length(back - point.world));
       if (colors_)
         for (int a = 0; a < 3; ++a)
           chunk.colors[i][a] = uint16_t(
@@ -177,13 +288,28 @@ void PointsChunkWriter::flush() {
     out.desc.level = p.level;
     out.desc.key = p.key;
     out.desc.pointCount = p.points.size();
+    // The largest radius inside the frame, rounded up to a float: how far the splats reach out of
+    // the cell.
+    out.desc.geometricError = float(largest);
+    if (double(out.desc.geometricError) < largest)
+      out.desc.geometricError = std::nextafter(out.desc.geometricError, 2.0f);
     out.desc.codec = Codec::Raw;  // Draco's bytes do not compress further
   });
-  for (const EncodedChunk& e : encoded) {
-    writer_.addChunk(e.desc, e.data);
+  for (size_t c = 0; c < encoded.size(); ++c) {
+    const EncodedChunk& e = encoded[c];
+    const Pending& p = pending_[c];
+    const uint32_t id = writer_.addChunk(e.desc, e.data);
+    if (idOf_.size() <= p.sequence) idOf_.resize(p.sequence + 1, 0);
+    idOf_[p.sequence] = id;
+    for (const uint64_t child : p.children) writer_.setParent(idOf_[child], id);
+    stats_.bytes += e.data.size();
+    if (!p.children.empty()) {
+      ++stats_.subsampleChunks;
+      stats_.subsamplePoints += e.desc.pointCount;
+      continue;
+    }
     ++stats_.chunks;
     stats_.points += e.desc.pointCount;
-    stats_.bytes += e.data.size();
     stats_.coarserChunks += e.coarser ? 1 : 0;
     stats_.maxError = std::max(stats_.maxError, e.maxError);
   }
@@ -191,14 +317,15 @@ void PointsChunkWriter::flush() {
 }
 
 KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHeader& header,
-                           int stepBits, uint32_t perChunk) {
+                           int stepBits, uint32_t perChunk, const PointSet* prepared) {
   const Frame& frame = header.frame;
   const size_t n = cloud.size();
   std::vector<uint64_t> keys(n);
   tbb::parallel_for(size_t{0}, n,
                     [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
   const std::vector<uint32_t> order = sortedOrder(keys);  // stable: input order within a key
-  PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk);
+  PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk,
+                        prepared);
   const glm::vec3 none(0.0f);
   for (size_t j = 0; j < n; ++j) {
     const uint32_t i = order[j];
@@ -213,11 +340,11 @@ KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHe
 
 KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& directory,
                            const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
-                           uint32_t perChunk) {
+                           uint32_t perChunk, const PointSet* prepared) {
   const Frame& frame = header.frame;
   const Distribution distribution(directory, raw, frame, maxLoadedPoints);
   PointsChunkWriter out(writer, header, stepBits, raw.layout().colors, raw.layout().normals,
-                        perChunk);
+                        perChunk, prepared);
   const glm::vec3 none(0.0f);
   for (const SpillChunk& chunk : distribution.chunks()) {
     const LoadedPoints loaded = distribution.load(chunk);
@@ -239,8 +366,9 @@ KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& 
 void forEachKeptPoints(const Reader& reader,
                        const std::function<void(const PointCloud& points)>& f) {
   const Frame& frame = reader.header().frame;
+  const std::vector<bool> subsample = subsampleChunks(reader);
   for (const ChunkInfo& info : reader.chunks()) {
-    if (info.kind != kPointsKind) continue;
+    if (info.kind != kPointsKind || subsample[info.id]) continue;
     const PointsChunk chunk = decodePointsChunk(reader, info.id);
     PointCloud points;
     points.positions.resize(chunk.size());
@@ -261,8 +389,9 @@ void forEachKeptPoints(const Reader& reader,
 
 KeptPointsInfo keptPointsInfo(const Reader& reader) {
   KeptPointsInfo info;
+  const std::vector<bool> subsample = subsampleChunks(reader);
   for (const ChunkInfo& c : reader.chunks()) {
-    if (c.kind != kPointsKind) continue;
+    if (c.kind != kPointsKind || subsample[c.id]) continue;
     if (info.chunks++ == 0) {
       const PointsChunk first = decodePointsChunk(reader, c.id);
       info.colors = !first.colors.empty();

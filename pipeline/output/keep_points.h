@@ -19,13 +19,16 @@ class Writer;
 class Reader;
 class RawSpill;
 class SpillDirectory;
+struct PointSet;
 
 // Points per chunk the writer aims at (fewer where a cell holds fewer; a cell of the finest grid
 // holding more is split into several chunks of that cell).
 inline constexpr uint32_t kPointsPerChunk = uint32_t{1} << 16;
 
 struct KeptPointsStats {
-  uint64_t chunks = 0, points = 0, bytes = 0;  // bytes: the chunks' data
+  uint64_t chunks = 0, points = 0, bytes = 0;  // bytes: the chunks' data (subsamples included)
+  uint64_t subsampleChunks = 0, subsamplePoints = 0;  // the subsample chunks (not in `chunks`)
+  uint64_t radiiFromConversion = 0;  // points whose radius and normal are a prepared point's
   int stepBits = 0;                            // asked for
   uint64_t coarserChunks =
       0;                  // chunks whose offsets needed a coarser step (points outside the frame)
@@ -41,10 +44,19 @@ struct KeptPointsStats {
 // chunks of `perChunk` points in order. Points outside the frame's cube (far outliers the
 // conversion removed) come last, in chunks of the root cell of their own. Chunks are encoded in
 // parallel, a batch at a time.
+//
+// Every point gets a splat radius: the k-NN radius of the conversion's point at its position
+// (`prepared`, sorted by key as the points come), else the radius of the point before it, else one
+// from its chunk's density. Points without an input normal take that prepared point's normal.
+// Subsample chunks are written as the Morton order leaves cells: every chunk gives every 8th of its
+// points (radius × √8) to the cell one level up; a cell that got them from two or more chunks
+// becomes a subsample chunk, the parent of those chunks, and gives on in turn; one that got them
+// from one chunk passes them on unchanged (specs/iso-format.md, "Points chunks").
 class PointsChunkWriter {
  public:
   PointsChunkWriter(Writer& writer, const FileHeader& header, int stepBits, bool colors,
-                    bool normals, uint32_t perChunk = kPointsPerChunk);
+                    bool normals, uint32_t perChunk = kPointsPerChunk,
+                    const PointSet* prepared = nullptr);
   ~PointsChunkWriter();
   // One point: world position, its key (keyOf of its frame position), normal and linear color
   // (ignored unless the writer keeps them).
@@ -58,14 +70,35 @@ class PointsChunkWriter {
     uint64_t key;
     glm::dvec3 world;
     glm::vec3 normal, color;
+    float radius;  // frame units; 0: not known (from the chunk's density)
   };
   struct Pending {
     uint8_t level;
     uint64_t key;
     std::vector<Point> points;
+    uint64_t sequence = 0;             // the chunk's place in the order of writing
+    std::vector<uint64_t> children;    // a subsample's: the chunks it is the parent of
+  };
+  // A cell collecting the subsamples of the chunks inside it (Morton order: at most one per level
+  // is open at a time, nested).
+  struct Gathering {
+    uint8_t level;
+    uint64_t cell;
+    std::vector<Point> points;
+    std::vector<uint64_t> chunks;  // the chunks (sequences) whose subsamples are here
+    int gifts = 0;                 // subsamples given (a passed-on one counts as one)
   };
   void cutOne();
   void flush();
+  void queue(Pending chunk);
+  // Close the gatherings that do not contain the cell (level, cell), innermost first (all with
+  // level 255).
+  void closeGatherings(uint8_t level, uint64_t cell);
+  // Give every 8th of the points (radius × √8) to the gathering of the cell one level above
+  // (level, cell), as the chunks `from`.
+  void give(uint8_t level, uint64_t cell, const std::vector<Point>& points,
+            std::vector<uint64_t> from, bool thinOut);
+  float preparedMatch(uint64_t key, const glm::dvec3& world, glm::vec3& normal);
 
   Writer& writer_;
   Frame frame_;
@@ -79,19 +112,26 @@ class PointsChunkWriter {
   uint64_t floor_ = 0;          // keys below belong to chunks already cut
   bool continues_ = false;      // the last chunk cut a finest cell that goes on
   std::vector<Pending> pending_;
+  std::vector<Gathering> gatherings_;  // open, coarsest first
+  uint64_t sequence_ = 0;               // chunks queued so far
+  std::vector<uint32_t> idOf_;          // the chunk id of each sequence written
+  const PointSet* prepared_;
+  size_t cursor_ = 0;       // in prepared_'s keys
+  float lastRadius_ = 0.0f;  // the radius of the last point pushed inside the frame
   KeptPointsStats stats_;
 };
 
 // The points of a cloud (in core), in Morton order, in the header's frame and levels.
 KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHeader& header,
-                           int stepBits, uint32_t perChunk = kPointsPerChunk);
+                           int stepBits, uint32_t perChunk = kPointsPerChunk,
+                           const PointSet* prepared = nullptr);
 // The points of a raw spill (out of core), counting-sorted by cell through a Distribution of at
 // most maxLoadedPoints points at a time; the same bytes as keepPoints on the same points.
 KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& directory,
                            const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
-                           uint32_t perChunk = kPointsPerChunk);
+                           uint32_t perChunk = kPointsPerChunk, const PointSet* prepared = nullptr);
 
-// Every points chunk of a file, decoded, in file order: world positions, unit normals and linear
+// Every points chunk of a file but its subsamples, decoded, in file order: world positions, unit normals and linear
 // colors (when kept). Calls f once per chunk.
 void forEachKeptPoints(const Reader& reader,
                        const std::function<void(const PointCloud& points)>& f);

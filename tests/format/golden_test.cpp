@@ -1,4 +1,4 @@
-// tests/data/golden-v1.iso pins the bytes of the current format (1.2): the current writer must
+// tests/data/golden-v2.iso pins the bytes of the current format (2.0): the current writer must
 // reproduce it exactly, the reader must read the expected values from it, and the byte offsets
 // asserted here are the ones of specs/iso-format.md, written independently of format/src/layout.h.
 #include <gtest/gtest.h>
@@ -16,7 +16,7 @@
 namespace iso {
 namespace {
 
-const std::filesystem::path kGolden = std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso";
+const std::filesystem::path kGolden = std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v2.iso";
 
 template <typename T>
 T at(const std::vector<std::byte>& bytes, size_t offset) {
@@ -44,8 +44,8 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const std::vector<std::byte> b = test::readFile(kGolden);
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
-  EXPECT_EQ(at<uint16_t>(b, 8), 1);      // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 2);     // versionMinor
+  EXPECT_EQ(at<uint16_t>(b, 8), 2);      // versionMajor
+  EXPECT_EQ(at<uint16_t>(b, 10), 0);     // versionMinor
   EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
   EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
   EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2
@@ -192,6 +192,27 @@ TEST(FormatGolden, readerReadsTheExpectedValues) {
   EXPECT_EQ(chunkKindName(reader.chunk(4).kind), "unknown");
   EXPECT_EQ(chunkKindName(reader.chunk(5).kind), "surface");
   EXPECT_TRUE(verifyFile(reader).ok());
+}
+
+// A file of version 1.2 (tests/data/golden-v1.iso, the golden file before 2.0): every 1.x file
+// is a valid 2.0 file, and this reader reads it as the same content.
+TEST(FormatGolden, aVersion1FileIsReadAsTheSameContent) {
+  const Reader old = Reader::open(std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso");
+  const Reader current = Reader::open(kGolden);
+  EXPECT_EQ(old.header().versionMajor, 1);
+  EXPECT_EQ(old.header().versionMinor, 2);
+  FileHeader header = old.header();
+  header.versionMajor = kFormatMajor;
+  header.versionMinor = kFormatMinor;
+  EXPECT_EQ(header, current.header());
+  ASSERT_EQ(old.chunks().size(), current.chunks().size());
+  for (uint32_t i = 0; i < old.chunks().size(); ++i) {
+    std::vector<std::byte> a(old.chunk(i).rawSize), b(current.chunk(i).rawSize);
+    old.decodePayload(i, a);
+    current.decodePayload(i, b);
+    EXPECT_EQ(a, b) << "chunk " << i;
+  }
+  EXPECT_TRUE(verifyFile(old).ok());
 }
 
 TEST(FormatGolden, checksumIsXxh3WithSeedZero) {

@@ -54,7 +54,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace iso {
 namespace {
 
-const std::filesystem::path kGolden = std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso";
+const std::filesystem::path kGolden = std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v2.iso";
 
 // Opening bytes either fails with a FileError or verification reports a problem.
 bool isRejectedOrCaught(const std::vector<std::byte>& bytes) {
@@ -191,7 +191,7 @@ TEST_F(Hostile, structuralRulesAreCheckedBehindValidChecksums) {
     std::function<uint64_t()> offset;
   };
   const std::vector<Case> cases = {
-      {"major version", [](auto& b) { put<uint16_t>(b, 8, 2); }, "not supported", [] { return 8; }},
+      {"major version", [](auto& b) { put<uint16_t>(b, 8, 3); }, "not supported", [] { return 8; }},
       {"header size", [](auto& b) { put<uint32_t>(b, 12, 512); }, "header size", [] { return 12; }},
       {"reserved flag", [](auto& b) { put<uint32_t>(b, 16, 1); }, "reserved flag",
        [] { return 16; }},

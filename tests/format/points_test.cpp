@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <random>
+#include <set>
 #include <tuple>
 
 #include "iso/check.h"
@@ -101,6 +103,61 @@ TEST(PointsChunk, everyAttributeComesBackExactlyThroughAFile) {
     EXPECT_EQ(out.normals.size(), normals ? 5000u : 0u);
     EXPECT_EQ(rowsOf(out), rowsOf(in));
     EXPECT_TRUE(verifyFile(reader).ok());
+  }
+}
+
+TEST(PointsChunk, radiiComeBackExactlyAndTheirCodeRoundsUp) {
+  test::TempDir dir;
+  PointsChunk in = randomPoints(5000, true, true, 9);
+  std::mt19937_64 rng(10);
+  for (size_t i = 0; i < in.size(); ++i) in.radii.push_back(uint16_t(rng()));
+  const std::vector<std::byte> data = encodePointsChunk(in);
+  EXPECT_EQ(uint8_t(data[5]), 1 | 2 | 4);
+  const Reader reader = Reader::open(fileWith(dir, "radii.iso", pointsDesc(5000), data));
+  const PointsChunk out = decodePointsChunk(reader, 0);
+  ASSERT_EQ(out.radii.size(), in.size());
+  // Draco reorders the points: match each point's radius by its offsets, colors and normals.
+  std::map<Row, std::multiset<uint16_t>> radiusOf;
+  for (size_t i = 0; i < in.size(); ++i)
+    radiusOf[Row(in.offsets[i], in.colors[i], in.normals[i])].insert(in.radii[i]);
+  for (size_t i = 0; i < out.size(); ++i) {
+    auto& left = radiusOf[Row(out.offsets[i], out.colors[i], out.normals[i])];
+    ASSERT_TRUE(left.contains(out.radii[i])) << "point " << i;
+    left.erase(left.find(out.radii[i]));
+  }
+  EXPECT_TRUE(verifyFile(reader).ok());
+  // The code: 2^(-code / 1024) frame units, the radius it stores never below the one given and
+  // less than one step (2^(1/1024)) above it.
+  for (const double r : {1.0, 0.5, 0.3, 1e-3, 7.77e-6, 0x1p-64}) {
+    const double stored = decodePointRadius(encodePointRadius(r));
+    EXPECT_GE(stored, r) << r;
+    EXPECT_LE(stored, r * std::exp2(1.0 / 1024.0)) << r;
+  }
+  EXPECT_EQ(encodePointRadius(2.0), 0);  // clamped to the frame
+  EXPECT_EQ(decodePointRadius(1024), 0.5);
+  EXPECT_EQ(encodePointRadius(1e-30), 65535);
+}
+
+TEST(PointsChunk, aPointsChunksParentMustBeAPointsChunk) {
+  test::TempDir dir;
+  const std::vector<std::byte> good = encodePointsChunk(randomPoints(300, false, false, 3));
+  const auto path = dir / "parent.iso";
+  {
+    Writer writer(path, pointsHeader());
+    ChunkDesc blob;
+    blob.level = 2;
+    blob.key = 0x1a5 >> 3;
+    const uint32_t parent = writer.addChunk(blob, good);
+    ChunkDesc child = pointsDesc(300);
+    child.parent = parent;
+    writer.addChunk(child, good);
+    writer.finish();
+  }
+  try {
+    Reader::open(path);
+    ADD_FAILURE() << "opened";
+  } catch (const FileError& error) {
+    EXPECT_NE(error.reason().find("is not a points chunk"), std::string::npos) << error.what();
   }
 }
 
@@ -200,10 +257,6 @@ TEST(PointsChunk, tableEntriesThatBreakTheRulesAreRefusedAtOpen) {
   withLeaves.leafCount = 1;
   expectRefusedAtOpen(fileWith(dir, "leaves.iso", withLeaves, good), "a points chunk has leaves",
                       60);
-  ChunkDesc withError = pointsDesc(300);
-  withError.geometricError = 0.5f;
-  expectRefusedAtOpen(fileWith(dir, "error.iso", withError, good),
-                      "a points chunk has a geometric error", 64);
 }
 
 TEST(PointsChunk, hostileChunksAreRejectedWithTheirReason) {
@@ -221,7 +274,7 @@ TEST(PointsChunk, hostileChunksAreRejectedWithTheirReason) {
   };
   expectRejected(fileWith(dir, "count.iso", pointsDesc(301), good), "the chunk table 301");
   expectRejected(fileWith(dir, "step.iso", pointsDesc(300), with(4, 53)), "step bits 53");
-  expectRejected(fileWith(dir, "flags.iso", pointsDesc(300), with(5, 7)), "reserved");
+  expectRejected(fileWith(dir, "flags.iso", pointsDesc(300), with(5, 8)), "reserved");
   expectRejected(fileWith(dir, "reserved.iso", pointsDesc(300), with(7, 1)), "reserved");
   // The header claims attributes the Draco cloud lacks, or lacks ones it has.
   expectRejected(fileWith(dir, "fewer.iso", pointsDesc(300), with(5, 1)), "3 attributes");

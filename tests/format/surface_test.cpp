@@ -166,7 +166,7 @@ TEST(SurfaceQuantization, distancesNeverFlipSign) {
 
 TEST(SurfacePayload, corruptPayloadsAreRejectedWithTheChunk) {
   const std::vector<std::byte> golden =
-      test::readFile(std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso");
+      test::readFile(std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v2.iso");
   const Reader reader = Reader::fromMemory(golden, "golden.iso");
   const uint64_t at = reader.chunk(5).offset;
   struct Case {

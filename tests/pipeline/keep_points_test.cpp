@@ -75,8 +75,9 @@ TEST(KeptPoints, cellsAreTheCoarsestThatHoldAtMostTheLimitAndEveryPointComesBack
   EXPECT_EQ(stats.coarserChunks, 0u);
   const Reader reader = Reader::open(dir / "points.iso");
   EXPECT_TRUE(verifyFile(reader).ok());
-  ASSERT_EQ(reader.chunks().size(), stats.chunks);
+  ASSERT_EQ(reader.chunks().size(), stats.chunks + stats.subsampleChunks);
   EXPECT_GT(stats.chunks, cloud.size() / kLimit);
+  const std::vector<bool> subsample = subsampleChunks(reader);
 
   // Brute force: the keys of all points, and for each cell how many points it holds.
   std::vector<uint64_t> keys;
@@ -90,6 +91,7 @@ TEST(KeptPoints, cellsAreTheCoarsestThatHoldAtMostTheLimitAndEveryPointComesBack
   uint64_t previousEnd = 0;  // key range covered so far, at kMaxLevel
   size_t splitChunks = 0;
   for (const ChunkInfo& c : reader.chunks()) {
+    if (subsample[c.id]) continue;
     const int shift = 3 * (kMaxLevel - c.level);
     const uint64_t begin = c.key << shift, end = (c.key + 1) << shift;
     EXPECT_LE(c.pointCount, kLimit);
@@ -125,6 +127,74 @@ TEST(KeptPoints, cellsAreTheCoarsestThatHoldAtMostTheLimitAndEveryPointComesBack
   EXPECT_LE(stats.maxError, bound);
   EXPECT_GT(stats.maxError, bound / 4.0);  // the precision is the one asked for, not finer
   expectSamePoints(cloud, keptPointsOf(reader), bound);
+}
+
+// The subsample chunks over those of the test above: one tree whose every inner chunk has two or
+// more children in its cell, whose subsamples hold at most the limit and only points of the scan,
+// each a radius at least √8 times its finer copy's; every table entry's geometric error is the
+// largest radius of its points.
+TEST(KeptPoints, subsampleChunksFormATreeOfThinnedPointsOverTheChunks) {
+  const PointCloud cloud = hardCloud();
+  const Frame frame = chooseFrame(cloud);
+  test::TempDir dir;
+  constexpr uint32_t kLimit = 250;
+  KeptPointsStats stats;
+  {
+    FileHeader header;
+    header.frame = frame;
+    header.maxLevel = kMaxLevel;
+    Writer writer(dir / "points.iso", header);
+    stats = keepPoints(writer, cloud, header, 20, kLimit);
+    writer.finish();
+  }
+  const Reader reader = Reader::open(dir / "points.iso");
+  const std::vector<bool> subsample = subsampleChunks(reader);
+  std::vector<int> children(reader.chunks().size(), 0);
+  size_t roots = 0;
+  for (const ChunkInfo& c : reader.chunks()) {
+    if (c.parent != kNoParent) {
+      ++children[c.parent];
+      EXPECT_TRUE(cellContains(reader.chunk(c.parent).level, reader.chunk(c.parent).key, c.level,
+                               c.key));
+    } else {
+      ++roots;
+    }
+  }
+  EXPECT_EQ(roots, 1u);
+  EXPECT_GT(stats.subsampleChunks, stats.chunks / 8);
+  // Every point of the scan, by its stored position (the same offsets in any chunk of a cell
+  // level: compare frame positions to a step).
+  std::map<std::array<int64_t, 3>, double> radiusAt;  // finest stored radius at a position
+  const auto cellOf = [](const std::array<double, 3>& u) {
+    return std::array<int64_t, 3>{std::llround(std::ldexp(u[0], 20)),
+                                  std::llround(std::ldexp(u[1], 20)),
+                                  std::llround(std::ldexp(u[2], 20))};
+  };
+  // Fine chunks first (they come before their subsamples in the file).
+  for (const ChunkInfo& c : reader.chunks()) {
+    const PointsChunk chunk = decodePointsChunk(reader, c.id);
+    ASSERT_EQ(chunk.radii.size(), chunk.size());
+    double largest = 0.0;
+    for (size_t i = 0; i < chunk.size(); ++i) {
+      const double r = decodePointRadius(chunk.radii[i]);
+      EXPECT_GT(r, 0.0);
+      largest = std::max(largest, r);
+      const auto at = cellOf(pointFramePosition(c.level, c.key, chunk.stepBits, chunk.offsets[i]));
+      if (!subsample[c.id]) {
+        double& known = radiusAt[at];
+        known = known == 0.0 ? r : std::min(known, r);
+      } else {
+        ASSERT_TRUE(radiusAt.contains(at)) << "chunk " << c.id << " point " << i;
+        EXPECT_GE(r, std::sqrt(8.0) * radiusAt[at] * 0.999) << "chunk " << c.id;
+      }
+    }
+    EXPECT_GE(double(c.geometricError), largest);
+    EXPECT_LT(double(c.geometricError), largest * (1.0 + 1e-6));
+    if (subsample[c.id]) {
+      EXPECT_GE(children[c.id], 2);
+      EXPECT_LE(c.pointCount, kLimit);
+    }
+  }
 }
 
 TEST(KeptPoints, aFarOutlierGetsACoarserStepInItsOwnChunkOnly) {

@@ -1,4 +1,4 @@
-// make_golden OUT: write tests/data/golden-v1.iso (only when the format changes on purpose).
+// make_golden OUT: write tests/data/golden-v2.iso (only when the format changes on purpose).
 // make_golden --points OUT: write a small file of points chunks (a seed for the fuzzer).
 #include <cstdio>
 #include <cstring>

@@ -55,7 +55,7 @@ void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& 
 // structural checks behind the checksums. Files too small to hold a header and trailer are left.
 void resealChecksums(std::vector<std::byte>& bytes);
 
-// The content of tests/data/golden-v1.iso: header, chunks and data, and metadata.
+// The content of tests/data/golden-v2.iso: header, chunks and data, and metadata.
 struct GoldenChunk {
   ChunkDesc desc;
   std::vector<std::byte> data;

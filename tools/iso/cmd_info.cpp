@@ -5,6 +5,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "iso/points.h"
 #include "iso/reader.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/text.h"
@@ -22,6 +23,7 @@ struct Summary {
   std::map<std::string, uint64_t> codecs;
   std::map<int, LevelSummary> levels;  // of the surface (and other non-points) chunks
   LevelSummary kept;                   // the points chunks: the original points
+  LevelSummary subsamples;             // the points chunks that are subsamples of others
 };
 
 // Point counts summed, stopping at 2^64 - 1: a file's surface and points chunks keep these sums
@@ -32,13 +34,15 @@ void addPoints(uint64_t& sum, uint64_t count) {
 
 Summary summarize(const Reader& reader) {
   Summary s;
+  const std::vector<bool> subsample = subsampleChunks(reader);
   for (const ChunkInfo& c : reader.chunks()) {
     s.storedBytes += c.storedSize;
     s.rawBytes += c.rawSize;
     ++s.codecs[std::string(codecName(c.codec))];
     const bool points = c.kind == static_cast<uint8_t>(ChunkKind::Points);
     if (c.parent == kNoParent && !points) addPoints(s.points, c.pointCount);  // roots: all once
-    LevelSummary& level = points ? s.kept : s.levels[c.level];
+    LevelSummary& level =
+        points ? (subsample[c.id] ? s.subsamples : s.kept) : s.levels[c.level];
     ++level.chunks;
     level.storedBytes += c.storedSize;
     level.rawBytes += c.rawSize;
@@ -98,7 +102,12 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
   j["point_count"] = s.points;
   j["codecs"] = s.codecs;
   j["kept_points"] = {
-      {"chunks", s.kept.chunks}, {"points", s.kept.points}, {"stored_bytes", s.kept.storedBytes}};
+      {"chunks", s.kept.chunks},
+      {"points", s.kept.points},
+      {"stored_bytes", s.kept.storedBytes},
+      {"subsample_chunks", s.subsamples.chunks},
+      {"subsample_points", s.subsamples.points},
+      {"subsample_stored_bytes", s.subsamples.storedBytes}};
   j["levels"] = nlohmann::json::array();
   for (const auto& [level, l] : s.levels)
     j["levels"].push_back({{"level", level},
@@ -167,6 +176,10 @@ void printInfo(const Reader& reader, bool withChunks) {
     fmt::print("{:<12}{} original points in {} chunk{}, {} stored\n", "kept",
                withSeparators(s.kept.points), withSeparators(s.kept.chunks),
                s.kept.chunks == 1 ? "" : "s", byteSize(s.kept.storedBytes));
+  if (s.subsamples.chunks > 0)
+    fmt::print("{:<12}{} of them again in {} subsample chunk{}, {} stored\n", "",
+               withSeparators(s.subsamples.points), withSeparators(s.subsamples.chunks),
+               s.subsamples.chunks == 1 ? "" : "s", byteSize(s.subsamples.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (const nlohmann::json crs = coordinateSystemIn(metadata); !crs.is_null())
     fmt::print("{:<12}{}\n", "crs", describeCoordinateSystem(crs));

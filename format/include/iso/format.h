@@ -11,9 +11,11 @@
 namespace iso {
 
 // Format version (specs/iso-format.md, "Change log"). Readers accept any minor version of their
-// major version; a change that older readers cannot ignore increases the major version.
-inline constexpr uint16_t kFormatMajor = 1;
-inline constexpr uint16_t kFormatMinor = 2;
+// major version; a change that older readers cannot ignore increases the major version. This
+// reader also reads every 1.x file: each is a valid 2.0 file.
+inline constexpr uint16_t kFormatMajor = 2;
+inline constexpr uint16_t kFormatMinor = 0;
+inline constexpr uint16_t kOldestFormatMajor = 1;
 
 inline constexpr std::array<uint8_t, 8> kHeaderMagic = {0x89, 'I',  'S',  'O',
                                                         0x0D, 0x0A, 0x1A, 0x0A};

@@ -22,6 +22,13 @@ inline constexpr uint32_t kMaxPointOffsetSpan = (uint32_t{1} << 31) - 1;
 // Bits of the header's `attributes` byte.
 inline constexpr uint8_t kPointsHaveColors = 1;
 inline constexpr uint8_t kPointsHaveNormals = 2;
+inline constexpr uint8_t kPointsHaveRadii = 4;  // since 2.0
+
+// A point's splat radius as its 16-bit code (specs/iso-format.md, "Points chunks"): the radius is
+// 2^(-code / 1024) frame units. Encoding rounds up (a stored radius is never smaller), clamped
+// to [2^-64, 1].
+uint16_t encodePointRadius(double radius);
+double decodePointRadius(uint16_t code);
 
 // The content of one points chunk. Point i lies at the chunk cell's minimum corner plus
 // offsets[i] · 2^-stepBits, in frame units.
@@ -31,6 +38,7 @@ struct PointsChunk {
   // sRGB, 65535 = 1; empty: the points have none. Stored as bytes when all are 257 · (0 to 255).
   std::vector<std::array<uint16_t, 3>> colors;
   std::vector<std::array<int16_t, 3>> normals;  // snorm16 (value / 32767); empty: none
+  std::vector<uint16_t> radii;  // splat radii (encodePointRadius); empty: none
 
   size_t size() const { return offsets.size(); }
 };
@@ -47,6 +55,10 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id);
 
 // A stored point's frame position: the cell (level, key)'s minimum corner plus offset ·
 // 2^-stepBits (exact in double for in-frame points).
+// The points chunks of a file that are subsamples (the parents of other points chunks: drawn from
+// afar in place of them, and not among the file's kept points), by chunk id.
+std::vector<bool> subsampleChunks(const Reader& reader);
+
 std::array<double, 3> pointFramePosition(uint8_t level, uint64_t key, uint8_t stepBits,
                                          const std::array<int32_t, 3>& offset);
 
