@@ -75,7 +75,7 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       if (lit && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
         rays.y += 1u;
-        lit = !intersect(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker);
+        lit = !traceScene(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker);
       }
       if (lit) {
         vec3 r = reflect(-l, n);
@@ -144,7 +144,7 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
       rays.x += 1u;
     else
       rays.z += 1u;
-    if (!intersect(origin, direction, primary ? start : 0.0f, 1e30f, side, primary && hideBack,
+    if (!traceScene(origin, direction, primary ? start : 0.0f, 1e30f, side, primary && hideBack,
                    before, primary && (P.options.x & kOptionRequests) != 0u, hit)) {
       color += weight * background(direction);
     } else {

@@ -96,6 +96,33 @@ ISO_CONST uint kOptionBackHide = 1024u;  // camera rays pass through back faces
 ISO_CONST uint kOptionFloatDistances = 2048u;  // records hold float32 distances, not codes
 ISO_CONST uint kOptionFlatTraversal = 4096u;   // one loop of turns, not a loop of cells (rays.h)
 ISO_CONST uint kOptionTileCones = 8192u;       // camera rays start where their tile's cone does
+ISO_CONST uint kOptionSplats = 16384u;         // rays also meet the kept points as splats
+ISO_CONST uint kOptionNoSurface = 32768u;      // rays do not meet the surface (splats alone)
+
+// Splats (shaders/splats.h, specs/viewer.md "Splats"). A points chunk on the GPU ("splat blob"):
+// word 0 the point count n, 1 the blob's words, 2 the levels of its box tree, 3 the word of point
+// record 0; words 4 + l: the word of level l's first box, 20 + l: level l's box count. Level 0
+// boxes bound the points 4i to 4i + 3 (in Morton order), level l > 0 boxes the boxes 4i to 4i + 3
+// of level l - 1; the last level has one box. A box is 6 floats (lo xyz, hi xyz); a point record
+// 6 words: center xyz and radius (floats, frame units), the normal (octahedral snorm16 pair), the
+// color (sRGB RGB8, and 255 in the top byte when the normal is known, else 0).
+ISO_CONST uint kSplatCount = 0u;
+ISO_CONST uint kSplatLevels = 2u;
+ISO_CONST uint kSplatPoints = 3u;
+ISO_CONST uint kSplatLevelFirst = 4u;
+ISO_CONST uint kSplatLevelCount = 20u;
+ISO_CONST uint kSplatHeaderWords = 36u;
+ISO_CONST uint kSplatMaxLevels = 16u;
+ISO_CONST uint kSplatBranch = 4u;
+ISO_CONST uint kSplatRecordWords = 6u;
+ISO_CONST uint kSplatBoxWords = 6u;
+// The splat index (one blob, the chunk FrameParams.splatIndex.x): word 0 its node count, 2 the
+// word of node 0. Nodes in preorder (a node's subtree follows it); a node: its box (6 floats), its
+// points chunk (kNotResident for a node that only groups others), `skip` (the node after its
+// subtree), the chunk of its parent (kNotResident for none), the chunk's largest radius (float
+// bits: the node is drawn in place of its children when that is below P.lod.x pixels).
+ISO_CONST uint kSplatIndexNodes = 2u;
+ISO_CONST uint kSplatNodeWords = 10u;
 
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;
@@ -144,6 +171,10 @@ struct FrameParams {
   // their level of detail may draw (rays.h, intersect). The root cube when not known.
   vec4 contentLo;
   vec4 contentHi;
+  // Splats: x the chunk of the splat index (kOptionSplats).
+  uvec4 splatIndex;
+  // x: the depth window of splat blending, in radii of the nearest splat.
+  vec4 splat;
 };
 
 // One chunk in the chunk table (binding 1).

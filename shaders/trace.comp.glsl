@@ -91,6 +91,10 @@ bool flatTraversal() { return kFlatTraversal; }
 // reflect mirror rays (and nothing refracts), 2 also queues those rays, 4 traces them and queues
 // their hits for 2, bounce after bounce.
 layout(constant_id = 3) const uint kPass = 0u;
+// Whether the kernel meets splats at all (kOptionSplats): the surface-only kernels are made
+// without the splat code (compiled in, it cost lavapipe a third of its speed on the surface).
+layout(constant_id = 4) const bool kSplats = false;
+bool splatsCompiled() { return kSplats; }
 
 #include "trace.h"
 
@@ -157,7 +161,7 @@ void traceCameraRays() {
     vec3 eye = vec3(P.eye.x, P.eye.y, P.eye.z);
     vec3 d = cameraDirection(xy.x, xy.y, 0.5f, 0.5f);
     bool hideBack = (P.options.x & kOptionBackHide) != 0u;
-    found = intersect(eye, d, start, 1e30f, hideBack ? 1.0f : 0.0f, hideBack, 0.0f,
+    found = traceScene(eye, d, start, 1e30f, hideBack ? 1.0f : 0.0f, hideBack, 0.0f,
                       (P.options.x & kOptionRequests) != 0u, hit);
     if (found)
       slot = atomicAdd(groupHits, 1u);
@@ -254,7 +258,7 @@ void traceMirrorRays() {
   uint pixel = floatBitsToUint(p3.w);
   atomicAdd(feedback[kFeedbackSecondaryRays], 1u);
   Hit hit;
-  if (!intersect(p2.xyz, p3.xyz, 0.0f, 1e30f, float(state & 3u) - 1.0f, false, p1.w, false,
+  if (!traceScene(p2.xyz, p3.xyz, 0.0f, 1e30f, float(state & 3u) - 1.0f, false, p1.w, false,
                  hit)) {
     pixels[pixel] = packPixel(paths[4u * path].xyz + p1.xyz * background(p3.xyz));
     return;

@@ -16,6 +16,9 @@
 //                                        on the GPU a specialization constant, so no branch runs)
 //   bool flatTraversal();                the loop shape of intersect (kOptionFlatTraversal; on
 //                                        the GPU a specialization constant)
+//   bool splatsCompiled();               whether the splat code may run (on the GPU a
+//                                        specialization constant; kOptionSplats says whether
+//                                        it does)
 // and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`) and ISO_PRECISE (GLSL `precise`: no
 // reassociation; C++ keeps the written order anyway).
 //
@@ -26,11 +29,13 @@
 //   records.h  chunks in the page pool, node records, corner records
 //   cell.h     the surface inside one cell: the cubic along the ray and its first root
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
+//   splats.h   the kept points as blended disks, and the first hit on surface or splats
 //   shade.h    shading, shadows, reflections, refractions, one pixel
 //   cone.h     camera rays a tile at a time: where the tile's rays start
 
 #include "records.h"
 #include "cell.h"
 #include "rays.h"
+#include "splats.h"
 #include "shade.h"
 #include "cone.h"

@@ -38,6 +38,7 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
     a->bounds.lo[k] = f.origin[k] + lo[k] * f.size;
     a->bounds.hi[k] = f.origin[k] + hi[k] * f.size;
   }
+  a->splats = buildSplatIndex(a->reader);
   // Airborne and terrestrial LiDAR (LAS) has z up; meshes and photogrammetry mostly y.
   const auto meta = nlohmann::json::parse(a->reader.metadata(), nullptr, false);
   if (meta.is_object() && meta.contains("inputs") && meta["inputs"].is_array())
@@ -53,6 +54,11 @@ FrameSetup cpuFrameSetup(const Asset& asset, uint32_t width, uint32_t height,
   setup.height = height;
   setup.topChunk = asset.tree.topChunk();
   setup.chunkCount = uint32_t(asset.reader.chunks().size());
+  if (asset.splats) {
+    setup.splatIndex = asset.splats->chunk;
+    setup.splatRadius = asset.splats->typicalRadius;
+    setup.chunkCount += 1;
+  }
   setup.blob = asset.blob;
   setup.contentLo = asset.contentLo;
   setup.contentHi = asset.contentHi;

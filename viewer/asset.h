@@ -4,9 +4,11 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "iso/reader.h"
 #include "viewer/blob.h"
+#include "viewer/splats.h"
 #include "viewer/image.h"
 #include "viewer/scene.h"
 
@@ -19,6 +21,7 @@ struct Asset {
   Bounds bounds;  // world units: the cells of the coarsest chunk's deepest nodes and leaves
   glm::vec3 contentLo{0.0f}, contentHi{1.0f};  // the same box in frame units (exact)
   Vec3d up{0, 1, 0};
+  std::optional<SplatIndex> splats;  // the kept points' splat index, when the file keeps points
 
   // Throws iso::FileError for files that are not valid or hold no surface.
   static std::unique_ptr<Asset> open(const std::filesystem::path& path);

@@ -117,6 +117,7 @@ struct CpuRun {
   RayCounts rays;
   double seconds = 0, loadSeconds = 0;  // the median of `runs` renders
   uint32_t runs = 0;
+  uint64_t splatPoints = 0, splatBytes = 0;  // CpuPool's
 };
 
 // The first view on the CPU reference tracer, with the whole file resident: rendered 3 times at
@@ -124,8 +125,10 @@ struct CpuRun {
 CpuRun runCpu(const GpuView& view, const gpu::FrameParams& params) {
   CpuRun run;
   const auto t0 = Clock::now();
-  const CpuPool pool = buildCpuPool(view.asset->reader);
+  const CpuPool pool = buildCpuPool(view.asset->reader, {}, view.scene.draw != Draw::Surface);
   run.loadSeconds = seconds(Clock::now() - t0);
+  run.splatPoints = pool.splatPoints;
+  run.splatBytes = pool.splatBytes;
   std::vector<double> times;
   double total = 0;
   while (times.size() < 20 && (times.size() < 3 || total < 0.5)) {
@@ -236,6 +239,8 @@ json benchJson(const GpuView& view, const ViewOptions& o, const Orbit& orbit, co
     j["cpu"] = {{"seconds", cpu.seconds},
                 {"renders", cpu.runs},
                 {"load_seconds", cpu.loadSeconds},
+                {"splat_points", cpu.splatPoints},
+                {"splat_blob_bytes", cpu.splatBytes},
                 {"rays", raysJson(cpu.rays)},
                 {"rays_per_second", ratesJson(n.cpuRates)},
                 {"gpu_over_cpu",
@@ -286,6 +291,9 @@ void printCpu(const Orbit& orbit, const CpuRun& cpu, const BenchNumbers& n) {
       "{:.2f} s); rays {}\n",
       cpu.seconds, cpu.runs, cpu.loadSeconds, raysText(cpu.rays));
   fmt::print("  CPU rays/s  {}\n", ratesText(n.cpuRates));
+  if (cpu.splatPoints > 0)
+    fmt::print("  splats      {} points in splat blobs (subsamples too), {:.2f} bytes a point\n",
+               cpu.splatPoints, double(cpu.splatBytes) / double(cpu.splatPoints));
   fmt::print("  GPU/CPU     primary rays/s {:.3f}, all rays/s {:.3f}\n",
              n.gpuRates.primary / std::max(n.cpuRates.primary, 1e-9),
              n.gpuRates.all / std::max(n.cpuRates.all, 1e-9));

@@ -12,6 +12,8 @@
 
 #include "iso/check.h"
 #include "iso/error.h"
+#include "iso/points.h"
+#include "viewer/splats.h"
 
 namespace iso::viewer {
 namespace shader {
@@ -41,6 +43,7 @@ class Tracer {
   void useChunk(uint) {}
   bool floatDistances() const { return (P.options.x & kOptionFloatDistances) != 0u; }
   bool flatTraversal() const { return (P.options.x & kOptionFlatTraversal) != 0u; }
+  static bool splatsCompiled() { return true; }
   static vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) {
     return vec3(std::fma(a.x, b.x, c.x), std::fma(a.y, b.y, c.y), std::fma(a.z, b.z, c.z));
   }
@@ -63,7 +66,7 @@ class Tracer {
 #undef ISO_ADDRESS
 }  // namespace shader
 
-CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
+CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds, bool splats) {
   CpuPool pool;
   const auto chunks = reader.chunks();
   const ChunkTree tree(chunks);
@@ -71,21 +74,39 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds) {
     throw FileError(reader.name(), std::nullopt, "the file holds no surface to trace");
   pool.topChunk = tree.topChunk();
   pool.blob = blobOptionsOf(reader.header());
-  pool.chunks.resize(chunks.size());
-  std::vector<std::vector<uint32_t>> blobs(chunks.size());
+  std::optional<SplatIndex> index;
+  if (splats) index = buildSplatIndex(reader);
+  const size_t count = chunks.size() + (index ? 1 : 0);
+  pool.chunks.resize(count);
+  std::vector<std::vector<uint32_t>> blobs(count);
   tbb::parallel_for(size_t(0), chunks.size(), [&](size_t i) {
-    if (chunks[i].kind != kSurfaceKind || (holds && !holds(chunks[i]))) return;
-    blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
+    if (holds && !holds(chunks[i])) return;
+    if (chunks[i].kind == kSurfaceKind)
+      blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
+    else if (chunks[i].kind == kPointsKind && index)
+      blobs[i] = buildSplatBlob(decodePointsChunk(reader, uint32_t(i)), chunks[i]);
   });
+  for (size_t i = 0; i < chunks.size(); ++i)
+    if (chunks[i].kind == kPointsKind && !blobs[i].empty()) {
+      pool.splatPoints += blobs[i][gpu::kSplatCount];
+      pool.splatBytes += blobs[i].size() * 4;
+    }
+  if (index) {
+    pool.splatIndex = index->chunk;
+    pool.splatRadius = index->typicalRadius;
+    blobs[index->chunk] = std::move(index->words);
+  }
   const auto pagesOf = [](size_t words) { return (words + gpu::kPageWords - 1) / gpu::kPageWords; };
   size_t pages = 0;
   for (const auto& b : blobs) pages += pagesOf(b.size());
   pool.words.assign(pages * gpu::kPageWords, 0);
   uint32_t next = 0;
-  for (size_t i = 0; i < chunks.size(); ++i) {
+  for (size_t i = 0; i < count; ++i) {
     gpu::ChunkEntry& e = pool.chunks[i];
-    e.state = {gpu::kNotResident, chunks[i].level, glm::floatBitsToUint(chunks[i].geometricError),
-               chunks[i].parent};
+    e.state = {gpu::kNotResident, 0u, 0u, gpu::kNotResident};
+    if (i < chunks.size())
+      e.state = {gpu::kNotResident, chunks[i].level,
+                 glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
     if (blobs[i].empty()) continue;
     std::vector<uint32_t>& b = blobs[i];
     const uint32_t n = uint32_t(pagesOf(b.size()));
@@ -143,11 +164,21 @@ gpu::FrameParams finestFrameParams(const CpuPool& pool) {
   return p;
 }
 
+gpu::FrameParams splatFrameParams(const CpuPool& pool, bool surfaceToo) {
+  ISO_CHECK(pool.splatIndex != kNoParent);
+  gpu::FrameParams p = finestFrameParams(pool);
+  p.options.x |= gpu::kOptionSplats | (surfaceToo ? 0u : gpu::kOptionNoSurface);
+  p.options.w = uint32_t(pool.chunks.size());
+  p.splatIndex.x = pool.splatIndex;
+  p.splat.x = kSplatBlendWindow;
+  return p;
+}
+
 std::optional<CpuHit> traceCpu(const CpuPool& pool, const gpu::FrameParams& params,
                                glm::vec3 origin, glm::vec3 direction, float side, bool strict) {
   shader::Tracer tracer(pool, params, nullptr);
   shader::Tracer::Hit hit;
-  if (!tracer.intersect(origin, direction, 0.0f, 1e30f, side, strict, 0.0f, false, hit))
+  if (!tracer.traceScene(origin, direction, 0.0f, 1e30f, side, strict, 0.0f, false, hit))
     return std::nullopt;
   return CpuHit{hit.t, hit.from, hit.normal};
 }
@@ -160,7 +191,7 @@ void traceCpu(const CpuPool& pool, const gpu::FrameParams& params, std::span<con
                       shader::Tracer tracer(pool, params, nullptr);
                       for (size_t i = range.begin(); i < range.end(); ++i) {
                         shader::Tracer::Hit hit;
-                        if (tracer.intersect(rays[i].origin, rays[i].direction, rays[i].tMin,
+                        if (tracer.traceScene(rays[i].origin, rays[i].direction, rays[i].tMin,
                                              rays[i].tMax, 0.0f, false, 0.0f, false, hit))
                           hits[i] = CpuHit{hit.t, hit.from, hit.normal};
                         else

@@ -25,12 +25,18 @@ struct CpuPool {
   std::vector<gpu::ChunkEntry> chunks;
   uint32_t topChunk = 0;  // the chunk holding the octree's root
   BlobOptions blob;       // what the corner records carry
+  // With splats: the splat index's chunk (one past the file's chunks) and the typical radius.
+  uint32_t splatIndex = kNoParent;
+  float splatRadius = 0.0f;
+  uint64_t splatPoints = 0, splatBytes = 0;  // in the points chunks' splat blobs (subsamples too)
 };
 // Every surface chunk, or those `holds` accepts (the others are not resident: a ray that needs
 // one draws the coarser level, as the GPU does until it arrives). Throws iso::FileError for files
 // whose payloads are damaged or that hold no surface.
+// With `splats`, also the points chunks (those `holds` accepts) as splat blobs and the splat
+// index, when the file keeps points.
 using ChunkFilter = std::function<bool(const ChunkInfo&)>;
-CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds = {});
+CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds = {}, bool splats = false);
 
 // Rays traced, by kind.
 struct RayCounts {
@@ -64,7 +70,12 @@ float tileStartCpu(const CpuPool& pool, const gpu::FrameParams& params, uint32_t
 // drawn) and nothing is shaded: for tracing single rays.
 gpu::FrameParams finestFrameParams(const CpuPool& pool);
 
-// The first surface hit of one ray (frame units) with the tracer's rules (trace.h, intersect):
+// The same with the splats drawn (the pool's points; `surfaceToo`: and the surface, the nearer
+// hit), at their finest, blended as the viewer blends them.
+gpu::FrameParams splatFrameParams(const CpuPool& pool, bool surfaceToo);
+
+// The first hit of one ray (frame units) with the tracer's rules (trace.h, traceScene; the
+// surface's: intersect):
 // `side` 0 takes a crossing either way, as camera rays do; +1 or -1 is the side a ray leaving a
 // surface starts on; `strict` keeps that rule past empty cells (back faces hidden).
 struct CpuHit {

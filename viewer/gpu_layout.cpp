@@ -38,7 +38,9 @@ static_assert(offsetof(FrameParams, poolAddress) == 272 + kMaxLights * 64);
 static_assert(offsetof(FrameParams, srgbToLinear) == 272 + kMaxLights * 64 + kPoolBuffers * 8);
 static_assert(offsetof(FrameParams, srgbBounds) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 1024);
 static_assert(offsetof(FrameParams, contentLo) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048);
-static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 32);
+static_assert(offsetof(FrameParams, splatIndex) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2080);
+static_assert(offsetof(FrameParams, splat) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2096);
+static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 64);
 static_assert(sizeof(ChunkEntry) == 16);
 static_assert(kPageWords == 8192 && kWorkgroupSize == 64);
 

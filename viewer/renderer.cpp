@@ -35,14 +35,23 @@ struct BlobSizes {
   uint64_t stagingRegion = 0, fileBytes = 0, largestBlob = 0;
 };
 
+// The same of a splat blob (buildSplatBlob): header, 6 words a point, at most 2 a point of
+// boxes and 6 for each level's rounding.
+uint64_t splatBlobBound(const ChunkInfo& c) {
+  return (gpu::kSplatHeaderWords + 8 * c.pointCount + 6 * gpu::kSplatMaxLevels) * 4;
+}
+
 BlobSizes blobSizes(const Asset& asset, uint64_t uploadBytes) {
   BlobSizes b;
-  for (const ChunkInfo& c : asset.reader.chunks())
-    if (c.kind == kSurfaceKind) {
-      const uint64_t bound = blobBound(c, asset.blob);
-      b.stagingRegion = std::max(b.stagingRegion, bound);
-      b.fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
-    }
+  const auto add = [&](uint64_t bound) {
+    b.stagingRegion = std::max(b.stagingRegion, bound);
+    b.fileBytes += (bound + kPageBytes - 1) / kPageBytes * kPageBytes;
+  };
+  for (const ChunkInfo& c : asset.reader.chunks()) {
+    if (c.kind == kSurfaceKind) add(blobBound(c, asset.blob));
+    if (c.kind == kPointsKind && asset.splats) add(splatBlobBound(c));
+  }
+  if (asset.splats) add(asset.splats->words.size() * 4);
   b.largestBlob = b.stagingRegion;
   b.stagingRegion = std::max(b.stagingRegion, std::min(uploadBytes, b.fileBytes));
   return b;
@@ -144,7 +153,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   ISO_CHECK(std::has_single_bit(options.workgroupSize) && options.workgroupSize >= 8 &&
             options.workgroupSize <= 1024);
   const auto chunks = asset.reader.chunks();
-  const uint32_t chunkCount = uint32_t(chunks.size());
+  const uint32_t chunkCount = uint32_t(chunks.size()) + (asset.splats ? 1 : 0);
   options_.capacityWidth = std::max(options.capacityWidth, options.width);
   options_.capacityHeight = std::max(options.capacityHeight, options.height);
   const uint64_t pixelsBytes = uint64_t(options_.capacityWidth) * options_.capacityHeight * 4;
@@ -167,7 +176,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
         fmt::format("--vram {} is too small: the frame buffers and tables alone take {} bytes",
                     options.vram, fixed));
   cache_ = std::make_unique<ChunkCache>(asset.reader, asset.tree, asset.blob, uint32_t(poolPages),
-                                        pagesPerBuffer_);
+                                        pagesPerBuffer_, asset.splats ? &*asset.splats : nullptr);
   // What is made here is destroyed with its member if a later step throws.
   output_ = createBuffer(gpu, pixelsBytes, kStorage | kTransferSrc, true);
   environment_ = createBuffer(gpu, envBytes, kStorage, true);
@@ -188,17 +197,23 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
     std::memset(environment_.mapped, 0, envBytes);
   table_.resize(chunkCount);
   for (uint32_t i = 0; i < chunkCount; ++i)
-    table_[i].state = {gpu::kNotResident, chunks[i].level,
-                       glm::floatBitsToUint(chunks[i].geometricError), chunks[i].parent};
+    table_[i].state = i < chunks.size()
+                          ? glm::uvec4{gpu::kNotResident, chunks[i].level,
+                                       glm::floatBitsToUint(chunks[i].geometricError),
+                                       chunks[i].parent}
+                          : glm::uvec4{gpu::kNotResident, 0u, 0u, gpu::kNotResident};
   const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1, 1, 1};
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
   // the options use (with oneKernel, one kernel and the cones).
   std::vector<std::vector<uint32_t>> variants;
   for (const Variant pass : {kOneKernel, kCones, kCameraRays, kShadeHits, kMirrorRays}) {
     if (options.oneKernel && pass != kOneKernel && pass != kCones) continue;
-    pipelineIndex_[pass] = uint32_t(variants.size());
-    variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
-                        options.workgroupSize, pass});
+    for (uint32_t splats = 0; splats < (asset.splats ? 2u : 1u); ++splats) {
+      pipelineIndex_[pass][splats] = uint32_t(variants.size());
+      pipelineIndex_[pass][1] = uint32_t(variants.size());  // (the same without splats)
+      variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
+                          options.workgroupSize, pass, splats});
+    }
   }
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);
@@ -213,6 +228,10 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.blob = asset.blob;
   setup_.contentLo = asset.contentLo;
   setup_.contentHi = asset.contentHi;
+  if (asset.splats) {
+    setup_.splatIndex = asset.splats->chunk;
+    setup_.splatRadius = asset.splats->typicalRadius;
+  }
   setup_.swapRedBlue = options.swapRedBlue;
   setup_.requests = options.streaming;
   setup_.flatTraversal = options.flatTraversal;
@@ -300,6 +319,7 @@ void Renderer::prepare(gpu::FrameParams params) {
   stage(slot);
   params.image.w = frame_;
   params.options.z = setup_.topChunk;
+  splatsDrawn_ = (params.options.x & gpu::kOptionSplats) != 0u;
   params.options.w = setup_.chunkCount;
   params.pool = {setup_.poolWordsLog2, setup_.poolWords, setup_.environmentWidth,
                  setup_.environmentHeight};

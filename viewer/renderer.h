@@ -146,8 +146,13 @@ class Renderer {
   RendererOptions options_;
   FrameSetup setup_;
   ComputePipeline pipeline_;
-  std::array<uint32_t, 5> pipelineIndex_{};  // by the shader's kPass: its pipeline in pipeline_
-  VkPipeline pipelineOf(uint32_t pass) const { return pipeline_.pipelines[pipelineIndex_[pass]]; }
+  // By the shader's kPass and kSplats: its pipeline in pipeline_ (the splat kernels exist when the
+  // file keeps points).
+  std::array<std::array<uint32_t, 2>, 5> pipelineIndex_{};
+  bool splatsDrawn_ = false;  // the frame being recorded meets splats (kOptionSplats)
+  VkPipeline pipelineOf(uint32_t pass) const {
+    return pipeline_.pipelines[pipelineIndex_[pass][splatsDrawn_ ? 1 : 0]];
+  }
   Buffer output_, environment_, staging_;
   Buffer hits_, queue_;     // the wavefront's hits to shade and its queue
   Buffer starts_;           // where each tile's camera rays start (shaders/cone.h)

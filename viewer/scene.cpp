@@ -10,6 +10,7 @@
 
 #include "iso/check.h"
 #include "iso/error.h"
+#include "viewer/splats.h"
 
 namespace iso::viewer {
 namespace {
@@ -236,6 +237,12 @@ void readRendering(const Fields& f, const json& j, const std::filesystem::path& 
     scene.backFaces = *value;
   }
   if (j.contains("backface_tint")) scene.backTint = f.color(j["backface_tint"], "backface_tint");
+  if (j.contains("draw")) {
+    const std::optional<Draw> value =
+        j["draw"].is_string() ? valueNamed(kDrawNames, j["draw"].get<std::string>()) : std::nullopt;
+    if (!value) f.fail("draw", namesOf(kDrawNames));
+    scene.draw = *value;
+  }
 }
 
 }  // namespace
@@ -328,7 +335,11 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.environmentWidth > 0) options |= gpu::kOptionEnvironment;
   if (s.requests) options |= gpu::kOptionRequests;
   if (s.flatTraversal) options |= gpu::kOptionFlatTraversal;
-  if (s.tileCones) options |= gpu::kOptionTileCones;
+  const bool splats = scene.draw != Draw::Surface && s.splatIndex != kNoParent;
+  // (Tile cones see the surface's nodes, not the splats.)
+  if (s.tileCones && !splats) options |= gpu::kOptionTileCones;
+  if (splats) options |= gpu::kOptionSplats;
+  if (splats && scene.draw == Draw::Points) options |= gpu::kOptionNoSurface;
   if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
   if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
@@ -352,6 +363,13 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   p.surface = vec4(s.blob.distanceUnit, 0, 0, 0);
   p.contentLo = vec4(s.contentLo, 0);
   p.contentHi = vec4(s.contentHi, 0);
+  if (splats) {
+    p.splatIndex = glm::uvec4(s.splatIndex, 0, 0, 0);
+    p.splat = vec4(kSplatBlendWindow, 0, 0, 0);
+    // Secondary rays leave a blend of disks half a typical radius away: the neighbouring disks
+    // of a curved or noisy scan lie that far off its tangent plane.
+    p.lod.y = std::max(p.lod.y, 0.5f * s.splatRadius);
+  }
   for (size_t i = 0; i < scene.lights.size() && i < gpu::kMaxLights; ++i) {
     const LightSpec& l = scene.lights[i];
     gpu::Light& g = p.lights[i];

@@ -51,6 +51,11 @@ inline constexpr NameTable<BackFaces, 3> kBackFaceNames{
 // A name of kBackFaceNames; UsageError naming the accepted words otherwise.
 BackFaces parseBackFaces(const std::string& text);
 
+// What rays meet: the surface, the kept points as splats, or both (the nearer hit).
+enum class Draw { Surface, Points, Both };
+inline constexpr NameTable<Draw, 3> kDrawNames{
+    {{"surface", Draw::Surface}, {"points", Draw::Points}, {"both", Draw::Both}}};
+
 struct Scene {
   std::optional<Camera> camera;      // none: framed on the surface's bounds
   std::optional<double> fovDegrees;  // overrides the camera's field of view
@@ -66,6 +71,7 @@ struct Scene {
   int samples = 1;         // per pixel (supersampling)
   float lodPixels = 1.0f;  // screen-space error allowed, pixels
   BackFaces backFaces = BackFaces::Show;
+  Draw draw = Draw::Surface;
   std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
 };
 
@@ -106,6 +112,10 @@ struct FrameSetup {
   bool swapRedBlue = false, requests = true;
   bool flatTraversal = false;  // the loop shape of the tracer (shaders/rays.h)
   bool tileCones = true;       // camera rays start where their tile's cone meets a node (cone.h)
+  // The splat index's chunk (kNoParent: the file keeps no points) and the typical splat radius
+  // (frame units; secondary rays leave splats half of it away).
+  uint32_t splatIndex = kNoParent;
+  float splatRadius = 0.0f;
 };
 
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.

@@ -5,32 +5,40 @@
 #include <stdexcept>
 
 #include "iso/error.h"
+#include "iso/points.h"
 #include "iso/surface.h"
 #include "shaders/shared.h"
 
 namespace iso::viewer {
 
 ChunkCache::ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options,
-                       uint32_t poolPages, uint32_t pagesPerBuffer)
+                       uint32_t poolPages, uint32_t pagesPerBuffer, const SplatIndex* splats)
     : reader_(reader),
       tree_(tree),
       options_(options),
+      splats_(splats),
       poolPages_(poolPages),
       pagesPerBuffer_(std::max<uint32_t>(pagesPerBuffer, 1)) {
-  state_.resize(reader.chunks().size());
+  state_.resize(reader.chunks().size() + (splats ? 1 : 0));
   used_.assign(poolPages, 0);
   if (tree.topChunk() == kNoParent) throw std::runtime_error("the file has no surface chunk");
+  std::vector<uint32_t> pinned{tree.topChunk()};
+  if (splats) pinned.push_back(splats->chunk);
+  uint64_t pages = 0;
   {
     std::lock_guard lock(mutex_);
-    state_[tree.topChunk()].queued = true;
-    state_[tree.topChunk()].pinned = true;
-    ready_.emplace_back(tree.topChunk(), prepare(tree.topChunk()));
+    for (uint32_t chunk : pinned) {
+      state_[chunk].queued = true;
+      state_[chunk].pinned = true;
+      ready_.emplace_back(chunk, prepare(chunk));
+      pages += blobPages(ready_.back().second.size());
+      if (blobPages(ready_.back().second.size()) > pagesPerBuffer_) pages = UINT64_MAX;
+    }
   }
-  if (blobPages(ready_.front().second.size()) > std::min(poolPages, pagesPerBuffer_))
-    throw std::runtime_error(
-        "--vram is too small: the coarsest chunk alone needs " +
-        std::to_string(blobPages(ready_.front().second.size()) * uint64_t(gpu::kPageWords) * 4) +
-        " bytes of page pool");
+  if (pages > poolPages)
+    throw std::runtime_error("--vram is too small: the coarsest chunk (and the splat index) alone "
+                             "need more than the page pool's " +
+                             std::to_string(uint64_t(poolPages) * gpu::kPageWords * 4) + " bytes");
   loader_ = std::thread([this] { loaderLoop(); });
 }
 
@@ -44,6 +52,9 @@ ChunkCache::~ChunkCache() {
 }
 
 std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
+  if (splats_ != nullptr && chunk == splats_->chunk) return splats_->words;
+  if (reader_.chunk(chunk).kind == kPointsKind)
+    return buildSplatBlob(decodePointsChunk(reader_, chunk), reader_.chunk(chunk));
   // Decoding checks the payload's checksum (once per load) and the table's node and leaf counts,
   // from which the renderer sizes buffers.
   const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
@@ -75,9 +86,11 @@ void ChunkCache::loaderLoop() {
       wake_.wait(lock, [&] { return stop_ || (!queue_.empty() && !error_); });
       if (stop_) return;
       // Coarser chunks first: they stand in for more of the picture.
-      auto best = std::min_element(queue_.begin(), queue_.end(), [&](uint32_t a, uint32_t b) {
-        return reader_.chunk(a).level < reader_.chunk(b).level;
-      });
+      const auto level = [&](uint32_t c) {
+        return c < reader_.chunks().size() ? reader_.chunk(c).level : uint8_t{0};
+      };
+      auto best = std::min_element(queue_.begin(), queue_.end(),
+                                   [&](uint32_t a, uint32_t b) { return level(a) < level(b); });
       chunk = *best;
       queue_.erase(best);
       busy_ = true;

@@ -18,6 +18,7 @@
 
 #include "iso/reader.h"
 #include "viewer/blob.h"
+#include "viewer/splats.h"
 
 namespace iso::viewer {
 
@@ -25,8 +26,10 @@ class ChunkCache {
  public:
   // A pool of poolPages pages in buffers of pagesPerBuffer pages (a run never crosses from one to
   // the next). Throws when the top chunk alone does not fit.
+  // With `splats`, points chunks are splat blobs and the splat index is one more chunk (number
+  // splats->chunk), pinned like the top chunk.
   ChunkCache(const Reader& reader, const ChunkTree& tree, BlobOptions options, uint32_t poolPages,
-             uint32_t pagesPerBuffer);
+             uint32_t pagesPerBuffer, const SplatIndex* splats = nullptr);
   ~ChunkCache();
   ChunkCache(const ChunkCache&) = delete;
   ChunkCache& operator=(const ChunkCache&) = delete;
@@ -92,6 +95,7 @@ class ChunkCache {
   const Reader& reader_;
   const ChunkTree& tree_;
   BlobOptions options_;
+  const SplatIndex* splats_;
   uint32_t poolPages_, pagesPerBuffer_;
   enum : uint8_t { kFree, kResident, kRetired };
   std::vector<uint8_t> used_;  // per pool page

@@ -10,6 +10,7 @@
 #include <numeric>
 #include <optional>
 
+#include "iso/error.h"
 #include "pipeline/base/text.h"
 #include "viewer/asset.h"
 #include "viewer/cpu_tracer.h"
@@ -66,6 +67,9 @@ gpu::FrameParams GpuView::params(const Scene& s) const {
 
 Scene completeScene(const ViewOptions& options, const Asset& asset) {
   Scene scene = options.scene;
+  if (scene.draw != Draw::Surface && !asset.splats)
+    throw FileError(asset.reader.name(), std::nullopt,
+                    "the file keeps no points to draw as splats (convert with --keep-points)");
   const Vec3d up = scene.up.value_or(asset.up);
   if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, scene.fovDegrees.value_or(40.0));
   if (scene.fovDegrees) scene.camera->fovDegrees = *scene.fovDegrees;
@@ -123,7 +127,7 @@ int viewCpu(const ViewOptions& options) {
   const Scene scene = completeScene(options, *asset);
   const auto env = environmentOf(scene);
   const auto t0 = Clock::now();
-  const CpuPool pool = buildCpuPool(asset->reader);
+  const CpuPool pool = buildCpuPool(asset->reader, {}, scene.draw != Draw::Surface);
   const double load = seconds(Clock::now() - t0);
   FrameSetup setup = cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr);
   setup.flatTraversal = options.flatTraversal;

@@ -3,7 +3,8 @@
 //
 // Mouse: left drag orbits, right or middle drag pans, the wheel zooms. Keys: W A S D fly, Q E
 // down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden),
-// + and - samples per pixel, P screenshot, R reloads the scene file (it also reloads by itself
+// K what is drawn (surface, kept points as splats, both), + and - samples per pixel, P
+// screenshot, R reloads the scene file (it also reloads by itself
 // when the file changes), Esc quits.
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
@@ -119,6 +120,7 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_R) in.reload = true;
     if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
     if (key == GLFW_KEY_B) in.toggled = 4;
+    if (key == GLFW_KEY_K) in.toggled = 5;
     if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
     if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
   });
@@ -173,12 +175,13 @@ void moveCamera(GLFWwindow* window, Camera& cam, Input& input, Mouse& mouse, dou
   }
 }
 
-// Keys 1, 2, 3, B, + and -.
+// Keys 1, 2, 3, B, K, + and -.
 void applySwitches(Input& input, Scene& scene) {
   if (input.toggled == 1) scene.shadows = !scene.shadows;
   if (input.toggled == 2) scene.reflections = !scene.reflections;
   if (input.toggled == 3) scene.refractions = !scene.refractions;
   if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
+  if (input.toggled == 5) scene.draw = Draw((int(scene.draw) + 1) % 3);
   input.toggled = 0;
   if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
   input.samples = 0;

@@ -549,6 +549,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     write.moreChunks = [&](Writer& out, const FileHeader& header) {
       timer.next("keep points", inputPoints);
       const KeptPointsStats kept = keep(out, header, points);
+      points = PointSet{};
       report["kept_points"] = kept.json();
       report["kept_points"]["max_error_over_spacing"] = kept.maxError / spacing;
     };
@@ -571,7 +572,14 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     octree = Octree{};
     closure = Closure{};
     lod = LodField{};
-    points = PointSet{};
+    if (!options.keepPoints) {
+      points = PointSet{};
+      return;
+    }
+    // The kept points take the radii and normals of these: keep only what they read.
+    points.color = {};
+    points.weight = {};
+    points.roughness = {};
   };
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {

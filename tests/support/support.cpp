@@ -228,12 +228,14 @@ void writePointsSeedFile(const std::filesystem::path& path) {
       if (variant == 1) {
         points.colors.push_back({uint16_t(i * 1000), uint16_t(65535 - i), 257});
         points.normals.push_back({int16_t(i * 500), int16_t(-i * 300), 32767});
+        points.radii.push_back(uint16_t(9000 + i * 17));
       }
     }
     ChunkDesc desc;
     desc.kind = kPointsKind;
     desc.level = 2;
     desc.key = uint64_t(variant) * 9;
+    desc.geometricError = variant == 1 ? 0.002f : 0.0f;
     desc.pointCount = points.size();
     desc.codec = variant == 0 ? Codec::Raw : Codec::Zstd;
     writer.addChunk(desc, encodePointsChunk(points));

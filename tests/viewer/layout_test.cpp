@@ -89,7 +89,9 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"srgbToLinear", offsetof(FrameParams, srgbToLinear)},
       {"srgbBounds", offsetof(FrameParams, srgbBounds)},
       {"contentLo", offsetof(FrameParams, contentLo)},
-      {"contentHi", offsetof(FrameParams, contentHi)}};
+      {"contentHi", offsetof(FrameParams, contentHi)},
+      {"splatIndex", offsetof(FrameParams, splatIndex)},
+      {"splat", offsetof(FrameParams, splat)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},

@@ -124,10 +124,16 @@ void printReport(const nlohmann::json& r, const Options& o) {
   if (r.contains("kept_points")) {
     const auto& k = r["kept_points"];
     fmt::print(
-        "  kept points: {} in {} chunk{}, {} ({:.2f} bytes/point), positions within {:.3g} "
+        "  kept points: {} in {} chunk{}{}, {} ({:.2f} bytes/point), positions within {:.3g} "
         "({:.3g} spacings){}\n",
         withSeparators(k["points"].get<uint64_t>()), withSeparators(k["chunks"].get<uint64_t>()),
-        k["chunks"].get<uint64_t>() == 1 ? "" : "s", byteSize(k["bytes"].get<uint64_t>()),
+        k["chunks"].get<uint64_t>() == 1 ? "" : "s",
+        k.value("subsample_chunks", uint64_t{0}) > 0
+            ? fmt::format(" and {} subsample chunks of {} points",
+                          withSeparators(k["subsample_chunks"].get<uint64_t>()),
+                          withSeparators(k["subsample_points"].get<uint64_t>()))
+            : "",
+        byteSize(k["bytes"].get<uint64_t>()),
         k["bytes_per_point"].get<double>(), k["max_error"].get<double>(),
         k["max_error_over_spacing"].get<double>(),
         k["coarser_chunks"].get<uint64_t>() > 0

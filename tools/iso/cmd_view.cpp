@@ -23,6 +23,8 @@ struct ViewArgs {
   std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
+  bool points = false;
+  std::string draw;
   std::string traversal = "nested";
 };
 
@@ -84,6 +86,8 @@ void buildScene(ViewArgs& a) {
   if (a.noReflections) s.reflections = false;
   if (a.noRefractions) s.refractions = false;
   if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
+  if (a.points) s.draw = viewer::Draw::Points;
+  if (!a.draw.empty()) s.draw = *valueNamed(viewer::kDrawNames, a.draw);
 }
 
 // The pictures to write (--out, --screenshot), checked before the file is opened: in a directory
@@ -169,6 +173,14 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "Back faces (the inside of the surface, e.g. an open scan seen from behind): "
                 "show (shaded, the default), tint, or hide (see through them)")
       ->check(CLI::IsMember(namesList(viewer::kBackFaceNames)));
+  auto* points = c->add_flag("--points", a->points,
+                             "Draw the kept points (iso convert --keep-points) as splats instead "
+                             "of the surface (--draw points); key K in the window cycles");
+  c->add_option("--draw", a->draw,
+                "What rays meet: surface (the default), points (the kept points as splats), or "
+                "both (the nearer)")
+      ->check(CLI::IsMember(namesList(viewer::kDrawNames)))
+      ->excludes(points);
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
