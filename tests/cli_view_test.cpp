@@ -204,6 +204,17 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
   const CommandResult faces = iso("view " + file + " --cpu --out x.png --backfaces invisible");
   EXPECT_EQ(faces.exitCode, 2);
   EXPECT_NE(faces.err.find("--backfaces"), std::string::npos) << faces.err;
+  const CommandResult draw = iso("view " + file + " --cpu --out x.png --draw splats");
+  EXPECT_EQ(draw.exitCode, 2);
+  EXPECT_NE(draw.err.find("--draw"), std::string::npos) << draw.err;
+  EXPECT_EQ(iso("view " + file + " --cpu --out x.png --points --draw both").exitCode, 2);
+  // Splats of a file that keeps no points: the file is named, nothing is written.
+  for (const char* mode : {"--cpu", "--headless"}) {
+    const CommandResult none = iso("view " + file + " " + mode + " --out x.png --points");
+    EXPECT_EQ(none.exitCode, 1) << mode;
+    EXPECT_NE(none.err.find("keeps no points"), std::string::npos) << none.err;
+    EXPECT_NE(none.err.find(kittenIso().filename().string()), std::string::npos) << none.err;
+  }
   const CommandResult small = iso("view " + file + " --headless --out x.png --vram 4K");
   EXPECT_EQ(small.exitCode, 1);
   EXPECT_NE(small.err.find("--vram"), std::string::npos) << small.err;
