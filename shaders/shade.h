@@ -98,13 +98,17 @@ vec3 shadeOutside(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng,
   return shade(p, d, hit, distance, rng, rays);
 }
 
-// The part of a surface's color shaded locally: the rest is reflected and refracted
-// (FrameParams.material.z and .w, when those rays are on).
-float localFraction() {
-  float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
-  float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
-  return 1.0f - reflectivity - transparency;
+// The material's reflectivity and transparency at a hit, when those rays are on (the ground is
+// diffuse: none).
+float hitReflectivity(Hit hit) {
+  return (P.options.x & kOptionReflections) != 0u && !onGround(hit) ? P.material.z : 0.0f;
 }
+float hitTransparency(Hit hit) {
+  return (P.options.x & kOptionRefractions) != 0u && !onGround(hit) ? P.material.w : 0.0f;
+}
+
+// The part of a hit's color shaded locally: the rest is reflected and refracted.
+float localFraction(Hit hit) { return 1.0f - hitReflectivity(hit) - hitTransparency(hit); }
 
 // A pending ray's side of the surface (-1, 0, +1) and whether it travels inside a transparent
 // object, packed into one float of the ray stack.
@@ -132,8 +136,6 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
   bool inMedium = false;
   uint count = 0u;
   vec3 color = vec3(0.0f);
-  float reflectivity = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
-  float transparency = (P.options.x & kOptionRefractions) != 0u ? P.material.w : 0.0f;
   float eta = P.medium.x;
   float offset = P.lod.y;
   bool more = true;  // a ray to trace
@@ -155,9 +157,10 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
       bool bounce = depth < P.options.y;
       if (!inMedium) {
         // Local shading, then the transmitted and the mirror rays.
-        color += weight * localFraction() *
+        color += weight * localFraction(hit) *
                  shadeOutside(p, direction, hit, distance, rng, rays);
-        float mirror = reflectivity;
+        float mirror = hitReflectivity(hit);
+        float transparency = hitTransparency(hit);
         if (bounce && transparency > 0.0f) {
           vec3 r = refract(direction, n, 1.0f / eta);
           if (dot(r, r) > 0.0f && count < kRayStack) {

@@ -98,6 +98,7 @@ ISO_CONST uint kOptionFlatTraversal = 4096u;   // one loop of turns, not a loop 
 ISO_CONST uint kOptionTileCones = 8192u;       // camera rays start where their tile's cone does
 ISO_CONST uint kOptionSplats = 16384u;         // rays also meet the kept points as splats
 ISO_CONST uint kOptionNoSurface = 32768u;      // rays do not meet the surface (splats alone)
+ISO_CONST uint kOptionGround = 65536u;         // rays meet the ground plane (FrameParams.ground)
 
 // Splats (shaders/splats.h, specs/viewer.md "Splats"). A points chunk on the GPU ("splat blob"):
 // word 0 the point count n, 1 the blob's words, 2 the levels of its box tree, 3 the word of point
@@ -175,6 +176,10 @@ struct FrameParams {
   uvec4 splatIndex;
   // x: the depth window of splat blending, in radii of the nearest splat.
   vec4 splat;
+  // The ground (kOptionGround): the points p with dot(xyz, p) = w (frame units), xyz the scene's
+  // up, seen from above; a diffuse plane of color groundColor (linear RGB).
+  vec4 ground;
+  vec4 groundColor;
 };
 
 // One chunk in the chunk table (binding 1).

@@ -210,8 +210,14 @@ bool intersectSplats(vec3 o, vec3 d, float tMin, float tMax, float distance, boo
   return true;
 }
 
+// Whether a hit is on the ground plane (its normal is the plane's, exactly: traceScene sets it).
+bool onGround(Hit hit) {
+  return (P.options.x & kOptionGround) != 0u && hit.normal.x == P.ground.x &&
+         hit.normal.y == P.ground.y && hit.normal.z == P.ground.z;
+}
+
 // The first hit of a ray on what the frame draws: the surface (intersect, rays.h), the splats, or
-// the nearer of the two.
+// the nearer of the two; then the ground plane when it is nearer (seen from above only).
 bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
                 bool request, ISO_INOUT(Hit) hit) {
   bool found = false;
@@ -222,6 +228,19 @@ bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict,
     Hit splat;
     if (intersectSplats(o, d, tMin, found ? hit.t : tMax, distance, request, splat)) {
       hit = splat;
+      found = true;
+    }
+  }
+  if ((P.options.x & kOptionGround) != 0u) {
+    vec3 n = vec3(P.ground.x, P.ground.y, P.ground.z);
+    float dn = dot(d, n);
+    float t = dn < 0.0f ? (P.ground.w - dot(o, n)) / dn : -1.0f;
+    if (t >= tMin && t <= (found ? hit.t : tMax)) {
+      hit.t = t;
+      hit.from = 1.0f;
+      hit.normal = n;
+      hit.color = vec3(P.groundColor.x, P.groundColor.y, P.groundColor.z);
+      hit.occlusion = 1.0f;
       found = true;
     }
   }

@@ -228,8 +228,8 @@ void shadeHits() {
   hit.normal = n;
   float distance = before + hit.t;
   uvec3 rays = uvec3(0u);
-  color += weight * localFraction() * shadeOutside(p, direction, hit, distance, rng, rays);
-  float mirror = (P.options.x & kOptionReflections) != 0u ? P.material.z : 0.0f;
+  color += weight * localFraction(hit) * shadeOutside(p, direction, hit, distance, rng, rays);
+  float mirror = hitReflectivity(hit);
   if (depth < P.options.y && mirror > 0.0f) {
     paths[4u * path] = vec4(color, uintBitsToFloat(rng));
     paths[4u * path + 1u] = vec4(weight * mirror, distance);

@@ -29,7 +29,7 @@
 //   records.h  chunks in the page pool, node records, corner records
 //   cell.h     the surface inside one cell: the cubic along the ray and its first root
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
-//   splats.h   the kept points as blended disks, and the first hit on surface or splats
+//   splats.h   the kept points as blended disks; the first hit on surface, splats, ground
 //   shade.h    shading, shadows, reflections, refractions, one pixel
 //   cone.h     camera rays a tile at a time: where the tile's rays start
 

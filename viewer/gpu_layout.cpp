@@ -40,7 +40,10 @@ static_assert(offsetof(FrameParams, srgbBounds) == 272 + kMaxLights * 64 + kPool
 static_assert(offsetof(FrameParams, contentLo) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048);
 static_assert(offsetof(FrameParams, splatIndex) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2080);
 static_assert(offsetof(FrameParams, splat) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2096);
-static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 64);
+static_assert(offsetof(FrameParams, ground) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2112);
+static_assert(offsetof(FrameParams, groundColor) ==
+              272 + kMaxLights * 64 + kPoolBuffers * 8 + 2128);
+static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 96);
 static_assert(sizeof(ChunkEntry) == 16);
 static_assert(kPageWords == 8192 && kWorkgroupSize == 64);
 

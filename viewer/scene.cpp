@@ -237,6 +237,18 @@ void readRendering(const Fields& f, const json& j, const std::filesystem::path& 
     scene.backFaces = *value;
   }
   if (j.contains("backface_tint")) scene.backTint = f.color(j["backface_tint"], "backface_tint");
+  if (j.contains("ground")) {
+    // true: under the surface (completeScene places it); a number: its height along up.
+    const nlohmann::json& g = j["ground"];
+    if (g.is_boolean()) {
+      scene.groundHeight.reset();
+      scene.groundAuto = g.get<bool>();
+    } else {
+      scene.groundHeight = f.number(g, "ground");
+      scene.groundAuto = false;
+    }
+  }
+  if (j.contains("ground_color")) scene.groundColor = f.color(j["ground_color"], "ground_color");
   if (j.contains("draw")) {
     const std::optional<Draw> value =
         j["draw"].is_string() ? valueNamed(kDrawNames, j["draw"].get<std::string>()) : std::nullopt;
@@ -257,7 +269,7 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   f.known(j, "",
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
-           "lod_pixels", "backfaces", "backface_tint"});
+           "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color"});
   if (j.contains("camera")) readCamera(f, j["camera"], scene);
   if (j.contains("lights")) readLights(f, j["lights"], scene);
   if (j.contains("material")) readMaterial(f, j["material"], scene.material);
@@ -336,8 +348,10 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.requests) options |= gpu::kOptionRequests;
   if (s.flatTraversal) options |= gpu::kOptionFlatTraversal;
   const bool splats = scene.draw != Draw::Surface && s.splatIndex != kNoParent;
-  // (Tile cones see the surface's nodes, not the splats.)
-  if (s.tileCones && !splats) options |= gpu::kOptionTileCones;
+  const bool ground = scene.groundHeight.has_value();
+  // (Tile cones see the surface's nodes, not the splats or the ground.)
+  if (s.tileCones && !splats && !ground) options |= gpu::kOptionTileCones;
+  if (ground) options |= gpu::kOptionGround;
   if (splats) options |= gpu::kOptionSplats;
   if (splats && scene.draw == Draw::Points) options |= gpu::kOptionNoSurface;
   if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
@@ -359,6 +373,14 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   p.skyBottom = rgb(scene.skyBottom);
   const Vec3d worldUp = normalized(scene.up.value_or(c.up));
   p.worldUp = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]), 0);
+  if (ground) {
+    // dot(up, world) = height, with world = origin + size · u: dot(up, u) = (height -
+    // dot(up, origin)) / size.
+    const Vec3d origin(frame.origin[0], frame.origin[1], frame.origin[2]);
+    p.ground = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]),
+                    float((*scene.groundHeight - glm::dot(worldUp, origin)) / frame.size));
+    p.groundColor = rgb(scene.groundColor);
+  }
   p.backface = rgb(scene.backTint);
   p.surface = vec4(s.blob.distanceUnit, 0, 0, 0);
   p.contentLo = vec4(s.contentLo, 0);

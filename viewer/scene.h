@@ -72,6 +72,11 @@ struct Scene {
   float lodPixels = 1.0f;  // screen-space error allowed, pixels
   BackFaces backFaces = BackFaces::Show;
   Draw draw = Draw::Surface;
+  // A diffuse ground plane across the scene's up axis at this height (world units, along up),
+  // seen from above; none when unset.
+  std::optional<double> groundHeight;
+  bool groundAuto = false;  // a ground just under the surface's bounds (completeScene)
+  std::array<float, 3> groundColor{0.6f, 0.6f, 0.58f};
   std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
 };
 

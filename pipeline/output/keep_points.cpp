@@ -140,7 +140,7 @@ void PointsChunkWriter::give(uint8_t level, uint64_t cell, const std::vector<Poi
   const uint64_t parent = cell >> 3;
   // The open gatherings contain the cell, so the innermost one is its parent or contains it.
   if (gatherings_.empty() || gatherings_.back().level != up)
-    gatherings_.push_back({up, parent, {}, {}, 0});  // NOLINT
+    gatherings_.push_back({up, parent, {}, {}, 0});
   Gathering& g = gatherings_.back();
   if (thinOut) {
     for (size_t i = 0; i < points.size(); i += 8) {

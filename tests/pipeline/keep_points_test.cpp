@@ -56,21 +56,26 @@ PointCloud hardCloud() {
   return cloud;
 }
 
+// A file of only the cloud's kept points, written straight (no conversion: no radii but the
+// chunks' densities, the input's normals).
+KeptPointsStats writeKeptPoints(const std::filesystem::path& path, const PointCloud& cloud,
+                                const Frame& frame, int bits, uint32_t limit) {
+  FileHeader header;
+  header.frame = frame;
+  header.maxLevel = kMaxLevel;
+  Writer writer(path, header);
+  const KeptPointsStats stats = keepPoints(writer, cloud, header, bits, limit);
+  writer.finish();
+  return stats;
+}
+
 TEST(KeptPoints, cellsAreTheCoarsestThatHoldAtMostTheLimitAndEveryPointComesBack) {
   const PointCloud cloud = hardCloud();
   const Frame frame = chooseFrame(cloud);
   test::TempDir dir;
   constexpr uint32_t kLimit = 250;
   constexpr int kBits = 20;
-  KeptPointsStats stats;
-  {
-    FileHeader header;
-    header.frame = frame;
-    header.maxLevel = kMaxLevel;
-    Writer writer(dir / "points.iso", header);
-    stats = keepPoints(writer, cloud, header, kBits, kLimit);
-    writer.finish();
-  }
+  const KeptPointsStats stats = writeKeptPoints(dir / "points.iso", cloud, frame, kBits, kLimit);
   EXPECT_EQ(stats.points, cloud.size());
   EXPECT_EQ(stats.coarserChunks, 0u);
   const Reader reader = Reader::open(dir / "points.iso");
@@ -138,15 +143,7 @@ TEST(KeptPoints, subsampleChunksFormATreeOfThinnedPointsOverTheChunks) {
   const Frame frame = chooseFrame(cloud);
   test::TempDir dir;
   constexpr uint32_t kLimit = 250;
-  KeptPointsStats stats;
-  {
-    FileHeader header;
-    header.frame = frame;
-    header.maxLevel = kMaxLevel;
-    Writer writer(dir / "points.iso", header);
-    stats = keepPoints(writer, cloud, header, 20, kLimit);
-    writer.finish();
-  }
+  const KeptPointsStats stats = writeKeptPoints(dir / "points.iso", cloud, frame, 20, kLimit);
   const Reader reader = Reader::open(dir / "points.iso");
   const std::vector<bool> subsample = subsampleChunks(reader);
   std::vector<int> children(reader.chunks().size(), 0);

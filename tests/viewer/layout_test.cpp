@@ -91,7 +91,9 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"contentLo", offsetof(FrameParams, contentLo)},
       {"contentHi", offsetof(FrameParams, contentHi)},
       {"splatIndex", offsetof(FrameParams, splatIndex)},
-      {"splat", offsetof(FrameParams, splat)}};
+      {"splat", offsetof(FrameParams, splat)},
+      {"ground", offsetof(FrameParams, ground)},
+      {"groundColor", offsetof(FrameParams, groundColor)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},

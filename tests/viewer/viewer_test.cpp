@@ -935,6 +935,14 @@ TEST(ViewerScene, sceneFilesSetEverythingAndNameWhatTheyCannotUse) {
   fails(R"({"brightness": 2})", "'brightness': unknown key");
   fails(R"({"samples": 0.5})", "samples");
   fails("{not json", "not valid JSON");
+  fails(R"({"draw": "splats"})", "draw");
+  fails(R"({"ground": "low"})", "ground");
+  std::ofstream(file) << R"({"draw": "both", "ground": -1.5, "ground_color": [0.1, 0.2, 0.3]})";
+  Scene drawn;
+  loadScene(file, drawn);
+  EXPECT_EQ(drawn.draw, Draw::Both);
+  EXPECT_EQ(drawn.groundHeight, -1.5);
+  EXPECT_FLOAT_EQ(drawn.groundColor[2], 0.3f);
   EXPECT_THROW(parseLight("spot:1,2,3"), std::invalid_argument);
   EXPECT_THROW(parseLight("point:1,2"), std::invalid_argument);
   const LightSpec l = parseLight("area:1,2,3:1,0,0:0,1,0:9:1,1,1:3");
@@ -1018,6 +1026,63 @@ Scene orbited(const Scene& scene, double degrees) {
   Camera& c = *s.camera;
   c.eye = c.target + rotated(c.eye - c.target, normalized(c.up), degrees * M_PI / 180.0);
   return s;
+}
+
+TEST(ViewerGround, theGroundIsThePlaneItSaysDiffuseShadowedAndDrawnAlikeOnTheGpu) {
+  const auto asset = Asset::open(files().sphere);
+  Scene scene = sceneFor(*asset);
+  scene.up = Vec3d(0, 1, 0);
+  const double height = asset->bounds.lo[1] - 0.1 * (asset->bounds.hi[1] - asset->bounds.lo[1]);
+  scene.groundHeight = height;
+  const auto header = asset->reader.header();
+  const uint32_t w = 128, h = 96;
+  const gpu::FrameParams params =
+      frameParams(scene, header.frame, header.maxLevel, cpuFrameSetup(*asset, w, h, nullptr));
+  ASSERT_NE(params.options.x & gpu::kOptionGround, 0u);
+  // Rays down onto the plane away from the sphere meet it where the plane is.
+  const CpuPool pool = buildCpuPool(asset->reader);
+  gpu::FrameParams rays = finestFrameParams(pool);
+  rays.options.x |= gpu::kOptionGround;
+  rays.ground = params.ground;
+  const double size = header.frame.size;
+  for (const glm::vec3 start : {glm::vec3(0.02f, 0.9f, 0.05f), glm::vec3(0.97f, 0.8f, 0.5f)}) {
+    const glm::vec3 down = glm::normalize(glm::vec3(0.1f, -1.0f, 0.2f));
+    const auto hit = traceCpu(pool, rays, start, down);
+    ASSERT_TRUE(hit.has_value());
+    const double y = header.frame.origin[1] + size * (start.y + hit->t * down.y);
+    EXPECT_NEAR(y, height, 1e-5 * size);
+    EXPECT_EQ(hit->normal, glm::vec3(0, 1, 0));
+  }
+  // Looking up from under the plane, away from the sphere: nothing (it is seen from above only).
+  EXPECT_FALSE(traceCpu(pool, rays, glm::vec3(0.02f, -5.0f, 0.05f), glm::vec3(0, 1, 0)));
+  // Drawn alike on the GPU; the sphere's shadow darkens the ground; a mirror material leaves the
+  // ground as it was (it is diffuse).
+  const auto cpuPicture = renderReference(*asset, scene, w, h);
+  const GpuRun gpuPicture = renderGpu(*asset, scene, w, h, uint64_t(1) << 30);
+  EXPECT_LE(differing(gpuPicture.pixels, cpuPicture), 0.005);
+  Scene none = scene;
+  none.groundHeight.reset();
+  EXPECT_GT(differing(renderReference(*asset, none, w, h), cpuPicture), 0.2);
+  Scene mirror = scene;
+  mirror.material.reflectivity = 0.6f;
+  const auto mirrored = renderReference(*asset, mirror, w, h);
+  size_t groundSame = 0, ground = 0;
+  const std::vector<CpuRay> cameraRaysOf = cameraRays(*asset, scene, w, h);
+  std::vector<std::optional<CpuHit>> hits(cameraRaysOf.size());
+  traceCpu(pool, params, cameraRaysOf, hits);
+  size_t dark = 0, lit = 0;
+  for (size_t i = 0; i < hits.size(); ++i) {
+    if (!hits[i] || hits[i]->normal != glm::vec3(0, 1, 0)) continue;
+    ++ground;
+    groundSame += mirrored[i] == cpuPicture[i];
+    const int g = int(cpuPicture[i] >> 8 & 0xFF);
+    dark += g < 90;
+    lit += g > 110;
+  }
+  EXPECT_GT(ground, w * h / 10);
+  EXPECT_EQ(groundSame, ground);
+  EXPECT_GT(dark, ground / 50);  // the shadow
+  EXPECT_GT(lit, ground / 2);
 }
 
 TEST(ViewerSplats, aSpheresSplatsHaveTheSurfacesSilhouetteAndDepth) {

@@ -23,7 +23,8 @@ struct ViewArgs {
   std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
-  bool points = false;
+  bool points = false, ground = false;
+  std::optional<double> groundHeight;
   std::string draw;
   std::string traversal = "nested";
 };
@@ -87,6 +88,8 @@ void buildScene(ViewArgs& a) {
   if (a.noRefractions) s.refractions = false;
   if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
   if (a.points) s.draw = viewer::Draw::Points;
+  if (a.ground) s.groundAuto = true;
+  if (a.groundHeight) s.groundHeight = *a.groundHeight;
   if (!a.draw.empty()) s.draw = *valueNamed(viewer::kDrawNames, a.draw);
 }
 
@@ -181,6 +184,11 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "both (the nearer)")
       ->check(CLI::IsMember(namesList(viewer::kDrawNames)))
       ->excludes(points);
+  c->add_flag("--ground", a->ground,
+             "A diffuse ground plane under the surface, across the up axis (the scene file's "
+             "\"ground\": true)");
+  c->add_option("--ground-height", a->groundHeight,
+                "The ground plane at this height along the up axis (world units)");
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
