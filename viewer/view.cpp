@@ -65,6 +65,20 @@ gpu::FrameParams GpuView::params(const Scene& s) const {
   return frameParams(s, header.frame, header.maxLevel, renderer.setup());
 }
 
+void placeGround(Scene& scene, const Asset& asset) {
+  if (!scene.groundAuto || scene.groundHeight || !scene.camera) return;
+  // Under the lowest corner of the bounds along up.
+  const Vec3d u = normalized(scene.up.value_or(scene.camera->up));
+  double lowest = 1e300;
+  for (int k = 0; k < 8; ++k) {
+    const Vec3d corner((k & 1) ? asset.bounds.hi[0] : asset.bounds.lo[0],
+                       (k & 2) ? asset.bounds.hi[1] : asset.bounds.lo[1],
+                       (k & 4) ? asset.bounds.hi[2] : asset.bounds.lo[2]);
+    lowest = std::min(lowest, glm::dot(u, corner));
+  }
+  scene.groundHeight = lowest;
+}
+
 Scene completeScene(const ViewOptions& options, const Asset& asset) {
   Scene scene = options.scene;
   if (scene.draw != Draw::Surface && !asset.splats)
@@ -74,18 +88,7 @@ Scene completeScene(const ViewOptions& options, const Asset& asset) {
   if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, scene.fovDegrees.value_or(40.0));
   if (scene.fovDegrees) scene.camera->fovDegrees = *scene.fovDegrees;
   if (scene.lights.empty()) scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
-  if (scene.groundAuto && !scene.groundHeight) {
-    // Under the lowest corner of the bounds along up.
-    const Vec3d u = normalized(scene.up.value_or(scene.camera->up));
-    double lowest = 1e300;
-    for (int k = 0; k < 8; ++k) {
-      const Vec3d corner((k & 1) ? asset.bounds.hi[0] : asset.bounds.lo[0],
-                         (k & 2) ? asset.bounds.hi[1] : asset.bounds.lo[1],
-                         (k & 4) ? asset.bounds.hi[2] : asset.bounds.lo[2]);
-      lowest = std::min(lowest, glm::dot(u, corner));
-    }
-    scene.groundHeight = lowest;
-  }
+  placeGround(scene, asset);
   return scene;
 }
 

@@ -201,6 +201,7 @@ void reloadScene(const ViewOptions& options, const Asset& asset, Input& input, S
       loadScene(options.sceneFile, next);
       next.camera = scene.camera;
       if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset.bounds));
+      placeGround(next, asset);
       scene = next;
       fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
     } catch (const std::exception& e) {
