@@ -40,6 +40,16 @@ vec4 segmentCubic(Corners c, vec3 ua, vec3 ub) {
               r2 * e.z);
 }
 
+// A direction with no zero component (each below 1e-12 in size set to 1e-12), so that its inverse
+// is finite: the slab tests of boxes divide by it.
+vec3 nonzeroDirection(vec3 d) {
+  vec3 dir = d;
+  if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
+  if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
+  if (abs(dir.z) < 1e-12f) dir.z = 1e-12f;
+  return dir;
+}
+
 float cubicAt(vec4 k, float s) { return ((k.w * s + k.z) * s + k.y) * s + k.x; }
 
 // Whether the sign change from value a to value b is a crossing for a ray on `side`: +1 or -1,

@@ -33,10 +33,7 @@ float coneEntry(vec3 eye, vec3 inv, float sine, vec3 lo, float size) {
 // answer. It looks at kConeNodes nodes at most and keeps kConeStack waiting; past either, the
 // entries of the nodes it did not look at are candidates too.
 float coneStart(vec3 eye, vec3 axis, float sine) {
-  vec3 dir = axis;
-  if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
-  if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
-  if (abs(dir.z) < 1e-12f) dir.z = 1e-12f;
+  vec3 dir = nonzeroDirection(axis);
   vec3 inv = vec3(1.0f) / dir;
   float best = 1e30f;
   float rootEntry = coneEntry(eye, inv, sine, vec3(0.0f), 1.0f);

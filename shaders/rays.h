@@ -310,10 +310,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   Walk w;
   w.o = o;
   w.d = d;
-  w.dir = d;
-  if (abs(w.dir.x) < 1e-12f) w.dir.x = 1e-12f;
-  if (abs(w.dir.y) < 1e-12f) w.dir.y = 1e-12f;
-  if (abs(w.dir.z) < 1e-12f) w.dir.z = 1e-12f;
+  w.dir = nonzeroDirection(d);
   w.inv = vec3(1.0f) / w.dir;
   // Clip to the root cube, then to the box of the nodes that are not empty grown by the widest
   // node the ray's level of detail may draw (kLodNodePixels pixels at its farthest distance) and a

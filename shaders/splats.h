@@ -175,11 +175,7 @@ void splatWalk(vec3 o, vec3 d, vec3 inv, float tMin, float tMax, float distance,
 // lacks.
 bool intersectSplats(vec3 o, vec3 d, float tMin, float tMax, float distance, bool request,
                      ISO_INOUT(Hit) hit) {
-  vec3 dir = d;
-  if (abs(dir.x) < 1e-12f) dir.x = 1e-12f;
-  if (abs(dir.y) < 1e-12f) dir.y = 1e-12f;
-  if (abs(dir.z) < 1e-12f) dir.z = 1e-12f;
-  vec3 inv = vec3(1.0f) / dir;
+  vec3 inv = vec3(1.0f) / nonzeroDirection(d);
   SplatSum s;
   s.leaving = distance > 0.0f;
   s.nearest = tMax;

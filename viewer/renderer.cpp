@@ -210,10 +210,10 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
     if (options.oneKernel && pass != kOneKernel && pass != kCones) continue;
     for (uint32_t splats = 0; splats < (asset.splats ? 2u : 1u); ++splats) {
       pipelineIndex_[pass][splats] = uint32_t(variants.size());
-      pipelineIndex_[pass][1] = uint32_t(variants.size());  // (the same without splats)
       variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
                           options.workgroupSize, pass, splats});
     }
+    if (!asset.splats) pipelineIndex_[pass][1] = pipelineIndex_[pass][0];
   }
   pipeline_ = createComputePipeline(gpu, kTraceSpirv, counts, variants, options.framesInFlight);
   createSlots(sizes.stagingRegion);

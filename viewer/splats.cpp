@@ -59,8 +59,9 @@ Box cellBox(const ChunkInfo& c) {
 
 }  // namespace
 
-double densityRadius(const ChunkInfo& info) {
-  return 2.0 * std::ldexp(1.0, -int(info.level)) / std::sqrt(double(std::max<uint64_t>(info.pointCount, 1)));
+// A points chunk's radius for files without stored radii (format 1.x): from its density.
+static double densityRadius(const ChunkInfo& info) {
+  return densityPointRadius(info.level, info.pointCount);
 }
 
 std::vector<uint32_t> buildSplatBlob(const PointsChunk& points, const ChunkInfo& info) {

@@ -35,7 +35,4 @@ std::optional<SplatIndex> buildSplatIndex(const Reader& reader);
 // stored one (or, for files without radii, the chunk's density) times kSplatRadiusScale.
 std::vector<uint32_t> buildSplatBlob(const PointsChunk& points, const ChunkInfo& info);
 
-// A points chunk's radius for files without stored radii (format 1.x): from its density.
-double densityRadius(const ChunkInfo& info);
-
 }  // namespace iso::viewer

@@ -229,6 +229,10 @@ uint16_t encodePointRadius(double radius) {
 
 double decodePointRadius(uint16_t code) { return std::exp2(-double(code) / 1024.0); }
 
+double densityPointRadius(uint8_t level, uint64_t count) {
+  return 2.0 * std::ldexp(1.0, -int(level)) / std::sqrt(double(std::max<uint64_t>(count, 1)));
+}
+
 std::vector<bool> subsampleChunks(const Reader& reader) {
   std::vector<bool> parent(reader.chunks().size(), false);
   for (const ChunkInfo& c : reader.chunks())

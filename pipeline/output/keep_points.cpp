@@ -211,10 +211,8 @@ void PointsChunkWriter::cutOne() {
   continues_ = level == finest_ && end != buffer_.end() && (end->key >> finestShift) == cell;
   floor_ = (cell + 1) << (3 * (kMaxLevel - level));
   Pending chunk{level, cell, std::vector<Point>(begin, end), 0, {}};
-  // Points without a radius: one from the chunk's density (a surface through the cell, its k-NN
-  // radius about twice the spacing).
-  const float densityRadius =
-      float(2.0 * std::ldexp(1.0, -int(level)) / std::sqrt(double(chunk.points.size())));
+  // Points without a radius: one from the chunk's density.
+  const float densityRadius = float(densityPointRadius(level, chunk.points.size()));
   for (Point& p : chunk.points)
     if (!(p.radius > 0.0f)) p.radius = densityRadius;
   head_ += size_t(end - begin);

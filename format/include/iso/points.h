@@ -29,6 +29,10 @@ inline constexpr uint8_t kPointsHaveRadii = 4;  // since 2.0
 // to [2^-64, 1].
 uint16_t encodePointRadius(double radius);
 double decodePointRadius(uint16_t code);
+// The radius of a point from its chunk's density, for points without one (specs/iso-format.md,
+// "Points chunks"): a surface through the cell at `level` sampled by `count` points, whose k-NN
+// radius is about twice their spacing: 2 · 2^-level / √count.
+double densityPointRadius(uint8_t level, uint64_t count);
 
 // The content of one points chunk. Point i lies at the chunk cell's minimum corner plus
 // offsets[i] · 2^-stepBits, in frame units.
