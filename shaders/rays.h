@@ -109,7 +109,7 @@ bool updateLod(ISO_INOUT(Walk) w) {
   if (at < w.lodDistance) return false;
   uint bucket = floatBitsToUint(max(at, 0.0f)) & 0xFFF00000u;
   float pixel = P.eye.w * uintBitsToFloat(bucket);  // a pixel's width at the bucket's near end
-  w.lod = lodRule(pixel, P.lod.x * pixel);
+  w.lod = lodRule(pixel, lodPixels() * pixel);
   w.lodDistance = uintBitsToFloat(bucket + 0x00100000u);
   return true;
 }
@@ -322,7 +322,7 @@ bool intersect(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, 
   w.t = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
   w.tEnd = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
   if (w.t > w.tEnd) return false;
-  float grow = (P.lod.x > 0.0f ? kLodNodePixels * P.eye.w * (distance + w.tEnd) : 0.0f) +
+  float grow = (lodPixels() > 0.0f ? kLodNodePixels * P.eye.w * (distance + w.tEnd) : 0.0f) +
                4.0f / kGridSize;
   ta = (vec3(P.contentLo.x, P.contentLo.y, P.contentLo.z) - vec3(grow) - o) * w.inv;
   tb = (vec3(P.contentHi.x, P.contentHi.y, P.contentHi.z) + vec3(grow) - o) * w.inv;

@@ -43,6 +43,29 @@ vec3 background(vec3 d) {
   return mix(bottom, top, clamp(0.5f + 0.5f * h, 0.0f, 1.0f));
 }
 
+// The irradiance the caustic map adds at a point p of the ground (caustics.h): its cells
+// interpolated bilinearly between their centers, none outside the map.
+vec3 causticIrradiance(vec3 p) {
+  float x = dot(vec3(P.causticU.x, P.causticU.y, P.causticU.z), p) + P.causticU.w - 0.5f;
+  float y = dot(vec3(P.causticV.x, P.causticV.y, P.causticV.z), p) + P.causticV.w - 0.5f;
+  float last = float(kCausticCells);
+  x = clamp(x, -2.0f, last);
+  y = clamp(y, -2.0f, last);
+  float fx = floor(x), fy = floor(y);
+  vec3 sum = vec3(0.0f);
+  for (uint k = 0u; k < 4u; ++k) {
+    int i = int(fx) + int(k & 1u);
+    int j = int(fy) + int(k >> 1u);
+    if (i < 0 || j < 0 || i >= int(kCausticCells) || j >= int(kCausticCells)) continue;
+    float w = ((k & 1u) != 0u ? x - fx : 1.0f - (x - fx)) *
+              ((k & 2u) != 0u ? y - fy : 1.0f - (y - fy));
+    uint at = 3u * (uint(j) * kCausticCells + uint(i));
+    sum += w * vec3(float(causticWord(at)), float(causticWord(at + 1u)),
+                    float(causticWord(at + 2u)));
+  }
+  return sum * (1.0f / kCausticScale);
+}
+
 // Phong lighting at p with the shading normal hit.normal (facing the ray) seen from direction
 // -d, with shadow rays that leave the surface on the side `from` of the hit.
 // `rays` counts the rays traced by kind: x camera, y shadow, z reflected and refracted.
@@ -86,6 +109,9 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
     if (samples > 0u)
       color += vec3(light.color.x, light.color.y, light.color.z) * sum / float(samples);
   }
+  // The caustics on the ground: light that came there through specular bounces.
+  if (P.caustics.x > 0u && onGround(hit))
+    color += P.material.x * hit.color * causticIrradiance(p);
   return color;
 }
 

@@ -62,6 +62,7 @@ ISO_CONST uint kRecordColorWords = 8u;
 ISO_CONST uint kFeedbackPrimaryRays = 0u;
 ISO_CONST uint kFeedbackShadowRays = 1u;
 ISO_CONST uint kFeedbackSecondaryRays = 2u;
+ISO_CONST uint kFeedbackPhotons = 3u;  // caustic photons traced (shaders/caustics.h)
 ISO_CONST uint kFeedbackHeaderWords = 4u;
 
 // The finest grid: 2^kGridLevels cells along an axis (the format's kMaxLevel).
@@ -125,6 +126,14 @@ ISO_CONST uint kSplatBoxWords = 6u;
 ISO_CONST uint kSplatIndexNodes = 2u;
 ISO_CONST uint kSplatNodeWords = 10u;
 
+// Caustics (shaders/caustics.h, specs/viewer.md "Caustics"): the caustic map is a square grid of
+// kCausticCells × kCausticCells cells over the ground plane, three words a cell (red, green, blue
+// irradiance in units of 1 / kCausticScale, summed by atomic adds), cell (i, j) at words
+// 3 (j · kCausticCells + i). A photon follows at most kPhotonBounces specular bounces.
+ISO_CONST uint kCausticCells = 512u;
+ISO_CONST float kCausticScale = 4096.0f;
+ISO_CONST uint kPhotonBounces = 8u;
+
 // Light kinds (Light.position.w).
 ISO_CONST uint kLightNone = 0u;
 ISO_CONST uint kLightPoint = 1u;
@@ -180,6 +189,15 @@ struct FrameParams {
   // up, seen from above; a diffuse plane of color groundColor (linear RGB).
   vec4 ground;
   vec4 groundColor;
+  // Caustics: x photons traced from each light toward the disc (0: none), y the photons of all
+  // lights (x times the lights, which come first in `lights`). The disc: center xyz and radius w (frame
+  // units), across the direction from the light (it covers the content box). A point p of the
+  // ground lies in map cell (dot(causticU.xyz, p) + causticU.w, dot(causticV.xyz, p) +
+  // causticV.w), cells as wide as 1 / |causticU.xyz|.
+  uvec4 caustics;
+  vec4 causticDisc;
+  vec4 causticU;
+  vec4 causticV;
 };
 
 // One chunk in the chunk table (binding 1).

@@ -156,7 +156,7 @@ void splatWalk(vec3 o, vec3 d, vec3 inv, float tMin, float tMax, float distance,
       continue;
     }
     bool leaf = skip == i + 1u;
-    bool coarseEnough = radius <= P.lod.x * P.eye.w * (distance + entry);
+    bool coarseEnough = radius <= lodPixels() * P.eye.w * (distance + entry);
     if (chunk != kNotResident && (leaf || coarseEnough)) {
       useChunk(chunk);
       splatChunk(blobBase(chunkState(chunk).x), o, d, inv, tMin, tMax, -everywhere, everywhere,

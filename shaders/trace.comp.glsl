@@ -34,6 +34,9 @@ layout(std430, binding = 7) buffer Starts { float starts[]; };
 // the paths whose mirror ray waits to be traced.
 layout(std430, binding = 8) buffer Paths { vec4 paths[]; };
 layout(std430, binding = 9) buffer Pending { uint pending[]; };
+// The caustic map (shared.h, kCausticCells), summed by the photon pass (kPass 5) in the frames
+// that recompute it, read by shading.
+layout(std430, binding = 10) buffer Caustics { uint causticMap[]; };
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
 // lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
@@ -78,6 +81,10 @@ vec3 environmentTexel(uint x, uint y) {
 
 vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) { return fma(a, b, c); }
 
+uint causticWord(uint word) { return causticMap[word]; }
+
+void depositCaustic(uint word, uint value) { atomicAdd(causticMap[word], value); }
+
 // The record layout is fixed for a file: a constant when the pipeline is made, so that the
 // branch on it is compiled away (as a uniform branch it cost lavapipe a fifth of its speed).
 layout(constant_id = 0) const bool kFloatDistances = false;
@@ -89,12 +96,14 @@ bool flatTraversal() { return kFlatTraversal; }
 // their hits to a queue, 2 shades the queued hits with their shadow rays, the hits side by side in
 // the SIMD lanes. 3 traces the tiles' cones first, a tile an invocation. In a frame whose hits
 // reflect mirror rays (and nothing refracts), 2 also queues those rays, 4 traces them and queues
-// their hits for 2, bounce after bounce.
+// their hits for 2, bounce after bounce. 5 traces the caustic photons, before the others, in the
+// frames that recompute the caustic map.
 layout(constant_id = 3) const uint kPass = 0u;
 // Whether the kernel meets splats at all (kOptionSplats): the surface-only kernels are made
 // without the splat code (compiled in, it cost lavapipe a third of its speed on the surface).
 layout(constant_id = 4) const bool kSplats = false;
 bool splatsCompiled() { return kSplats; }
+float lodPixels() { return kPass == 5u ? -1.0f : P.lod.x; }
 
 #include "trace.h"
 
@@ -270,7 +279,23 @@ void traceMirrorRays() {
   hits[3u * slot + 2u] = vec4(hit.color, uintBitsToFloat(state >> 2u));
 }
 
+// Pass 5: the photons of all lights (P.caustics.y), an invocation each in strides of the whole
+// dispatch, summed into the caustic map.
+void tracePhotons() {
+  uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+  uint traced = 0u;
+  for (uint i = gl_GlobalInvocationID.x; i < P.caustics.y; i += stride) {
+    tracePhoton(i);
+    traced += 1u;
+  }
+  if (traced != 0u) atomicAdd(feedback[kFeedbackPhotons], traced);
+}
+
 void main() {
+  if (kPass == 5u) {
+    tracePhotons();
+    return;
+  }
   if (kPass == 1u) {
     traceCameraRays();
     return;

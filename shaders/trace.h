@@ -16,6 +16,11 @@
 //                                        on the GPU a specialization constant, so no branch runs)
 //   bool flatTraversal();                the loop shape of intersect (kOptionFlatTraversal; on
 //                                        the GPU a specialization constant)
+//   uint causticWord(uint word);         a word of the caustic map (shared.h, kCausticCells)
+//   void depositCaustic(uint word, uint value);  an atomic add to one (caustics.h)
+//   float lodPixels();                   the screen-space error (pixels) below which a coarser
+//                                        level is drawn: P.lod.x, and -1 (the finest level
+//                                        resident) for caustic photons, whose rays no pixel sees
 //   bool splatsCompiled();               whether the splat code may run (on the GPU a
 //                                        specialization constant; kOptionSplats says whether
 //                                        it does)
@@ -31,6 +36,7 @@
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
 //   splats.h   the kept points as blended disks; the first hit on surface, splats, ground
 //   shade.h    shading, shadows, reflections, refractions, one pixel
+//   caustics.h photons from the lights through specular bounces into the caustic map
 //   cone.h     camera rays a tile at a time: where the tile's rays start
 
 #include "records.h"
@@ -38,4 +44,5 @@
 #include "rays.h"
 #include "splats.h"
 #include "shade.h"
+#include "caustics.h"
 #include "cone.h"

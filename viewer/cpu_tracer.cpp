@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <glm/glm.hpp>
 #include <glm/packing.hpp>
@@ -28,8 +29,9 @@ using namespace iso::gpu;
 // bindings, here from host memory. Its member functions are the shader's functions.
 class Tracer {
  public:
-  Tracer(const CpuPool& pool, const FrameParams& params, const Environment* env)
-      : P(params), pool_(pool), env_(env) {}
+  Tracer(const CpuPool& pool, const FrameParams& params, const Environment* env,
+         uint32_t* caustics = nullptr)
+      : P(params), pool_(pool), env_(env), caustics_(caustics) {}
 
   FrameParams P;
 
@@ -44,6 +46,12 @@ class Tracer {
   bool floatDistances() const { return (P.options.x & kOptionFloatDistances) != 0u; }
   bool flatTraversal() const { return (P.options.x & kOptionFlatTraversal) != 0u; }
   static bool splatsCompiled() { return true; }
+  float lodPixels() const { return photons_ ? -1.0f : P.lod.x; }
+  bool photons_ = false;  // tracing caustic photons (at the finest level)
+  uint causticWord(uint word) const { return caustics_ ? caustics_[word] : 0u; }
+  void depositCaustic(uint word, uint value) {
+    std::atomic_ref<uint32_t>(caustics_[word]).fetch_add(value, std::memory_order_relaxed);
+  }
   static vec3 fusedMultiplyAdd(vec3 a, vec3 b, vec3 c) {
     return vec3(std::fma(a.x, b.x, c.x), std::fma(a.y, b.y, c.y), std::fma(a.z, b.z, c.z));
   }
@@ -59,6 +67,7 @@ class Tracer {
  private:
   const CpuPool& pool_;
   const Environment* env_;
+  uint32_t* caustics_;  // the caustic map (shared.h, kCausticCells), or none
 };
 
 #undef ISO_INOUT
@@ -118,9 +127,29 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds, bool splats
   return pool;
 }
 
+CausticMap causticMapCpu(const CpuPool& pool, const gpu::FrameParams& params) {
+  CausticMap map;
+  map.words.assign(size_t(3) * gpu::kCausticCells * gpu::kCausticCells, 0u);
+  if (params.caustics.x == 0) return map;
+  const auto t0 = std::chrono::steady_clock::now();
+  tbb::parallel_for(tbb::blocked_range<uint32_t>(0, params.caustics.y, 4096),
+                    [&](const tbb::blocked_range<uint32_t>& range) {
+                      shader::Tracer tracer(pool, params, nullptr, map.words.data());
+                      tracer.photons_ = true;
+                      for (uint32_t i = range.begin(); i < range.end(); ++i) tracer.tracePhoton(i);
+                    });
+  map.photons = params.caustics.y;
+  map.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return map;
+}
+
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment) {
   CpuFrame frame;
+  CausticMap caustics;
+  if (params.caustics.x > 0) caustics = causticMapCpu(pool, params);
+  frame.photons = caustics.photons;
+  frame.photonSeconds = caustics.seconds;
   const uint32_t width = params.image.x, height = params.image.y;
   frame.pixels.resize(size_t(width) * height);
   std::atomic<uint64_t> primary{0}, shadow{0}, secondary{0};
@@ -129,7 +158,8 @@ CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
   static_assert(kTile * kTile == gpu::kWorkgroupSize);
   const uint32_t tilesX = (width + kTile - 1) / kTile, tilesY = (height + kTile - 1) / kTile;
   tbb::parallel_for(uint32_t(0), tilesX * tilesY, [&](uint32_t tile) {
-    shader::Tracer tracer(pool, params, environment);
+    shader::Tracer tracer(pool, params, environment,
+                          caustics.photons > 0 ? caustics.words.data() : nullptr);
     const uint32_t x0 = tile % tilesX * kTile, y0 = tile / tilesX * kTile;
     const uint32_t x1 = std::min(x0 + kTile, width), y1 = std::min(y0 + kTile, height);
     const float start = tracer.tileStart(x0, y0, x1, y1);

@@ -55,11 +55,23 @@ struct RayCounts {
 struct CpuFrame {
   std::vector<uint32_t> pixels;  // RGBA8
   RayCounts rays;
+  uint64_t photons = 0;  // caustic photons traced before the picture, and their time
+  double photonSeconds = 0;
 };
 
-// Render a frame. params.pool is ignored (the host pool is one array).
+// Render a frame: with caustics on (params.caustics.x), the caustic map first. params.pool is
+// ignored (the host pool is one array).
 CpuFrame renderCpu(const CpuPool& pool, const gpu::FrameParams& params,
                    const Environment* environment);
+
+// The caustic map of a frame's lights, material and ground (shaders/caustics.h): 3 words a cell
+// (shared.h, kCausticCells), each the irradiance times kCausticScale; zeros with caustics off.
+struct CausticMap {
+  std::vector<uint32_t> words;
+  uint64_t photons = 0;  // traced
+  double seconds = 0;
+};
+CausticMap causticMapCpu(const CpuPool& pool, const gpu::FrameParams& params);
 
 // Where the camera rays of the pixels [x0, x1) × [y0, y1) start in renderCpu: the start of the
 // tile's cone (shaders/cone.h), 1e30 where it meets nothing, 0 with tile cones off.

@@ -43,7 +43,12 @@ static_assert(offsetof(FrameParams, splat) == 272 + kMaxLights * 64 + kPoolBuffe
 static_assert(offsetof(FrameParams, ground) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2112);
 static_assert(offsetof(FrameParams, groundColor) ==
               272 + kMaxLights * 64 + kPoolBuffers * 8 + 2128);
-static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 96);
+static_assert(offsetof(FrameParams, caustics) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2144);
+static_assert(offsetof(FrameParams, causticDisc) ==
+              272 + kMaxLights * 64 + kPoolBuffers * 8 + 2160);
+static_assert(offsetof(FrameParams, causticU) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2176);
+static_assert(offsetof(FrameParams, causticV) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2192);
+static_assert(sizeof(FrameParams) == 272 + kMaxLights * 64 + kPoolBuffers * 8 + 2048 + 160);
 static_assert(sizeof(ChunkEntry) == 16);
 static_assert(kPageWords == 8192 && kWorkgroupSize == 64);
 

@@ -62,9 +62,10 @@ constexpr auto kUniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
 constexpr auto kTransferDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 
-// A slot's three timestamps, copied by the GPU into a host-visible buffer: reading them with
+// A slot's four timestamps (start, copies done, photons done, dispatch done), copied by the GPU into a host-visible buffer: reading them with
 // vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
-constexpr uint64_t kTimestampBytes = 3 * sizeof(uint64_t);
+constexpr uint32_t kTimestamps = 4;
+constexpr uint64_t kTimestampBytes = kTimestamps * sizeof(uint64_t);
 
 // The wavefront's queue (trace.comp.glsl): the count of hits, the shading pass's indirect
 // dispatch (x, y, z), the wave's first tile, the count of mirror rays, two unused words, the
@@ -79,8 +80,26 @@ constexpr uint64_t kPendingBytes = 4;  // its index while its ray waits
 // pictures fit small budgets.
 constexpr uint64_t kWavePixels = uint64_t(1) << 17;
 // The pipelines, by the shader's kPass (trace.comp.glsl): one kernel, the camera rays, the
-// shading of hits, the cones, the mirror rays.
-enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits, kCones, kMirrorRays };
+// shading of hits, the cones, the mirror rays, the caustic photons.
+enum Variant : uint32_t { kOneKernel, kCameraRays, kShadeHits, kCones, kMirrorRays, kPhotons };
+
+// The caustic map's bytes (shared.h), or a word without caustics.
+uint64_t causticBytes(bool caustics) {
+  return caustics ? uint64_t(3) * gpu::kCausticCells * gpu::kCausticCells * 4 : 4;
+}
+
+// The frame parameters the caustic map depends on: everything but the camera, the picture, the
+// frame number and the pool's addresses (photons ignore them).
+std::vector<std::byte> causticKey(gpu::FrameParams p) {
+  p.eye = glm::vec4(0.0f, 0.0f, 0.0f, p.eye.w);
+  p.right = p.up = p.forward = glm::vec4(0.0f);
+  p.image = glm::uvec4(0u);
+  p.pool = glm::uvec4(0u);
+  for (auto& a : p.poolAddress) a = glm::uvec4(0u);
+  p.options.x &= ~(gpu::kOptionSwapRB | gpu::kOptionTileCones);
+  const auto* bytes = reinterpret_cast<const std::byte*>(&p);
+  return {bytes, bytes + sizeof p};
+}
 
 // The workgroups of a frame: tiles of the workgroup's size, as the shader lays them out.
 uint32_t tileCount(uint32_t width, uint32_t height, uint32_t workgroupSize) {
@@ -168,7 +187,8 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   const uint64_t startsBytes = uint64_t(capacityTiles) * 4;  // a float a tile
   const uint64_t fixed =
       fixedBytes(gpu, chunkCount, options.framesInFlight, sizes.stagingRegion, pixelsBytes,
-                 {envBytes, hitsBytes, pathsBytes, pendingBytes, startsBytes});
+                 {envBytes, hitsBytes, pathsBytes, pendingBytes, startsBytes,
+                  causticBytes(options.caustics)});
   const uint64_t poolPages =
       poolPagesFor(options.vram, fixed, sizes.fileBytes, sizes.largestBlob, pagesPerBuffer_);
   if (poolPages == 0)
@@ -186,6 +206,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   starts_ = createBuffer(gpu, startsBytes, kStorage, false);
   paths_ = createBuffer(gpu, pathsBytes, kStorage, false);
   pending_ = createBuffer(gpu, pendingBytes, kStorage, false);
+  caustics_ = createBuffer(gpu, causticBytes(options.caustics), kStorage | kTransferDst, false);
   for (uint64_t first = 0; first < poolPages; first += pagesPerBuffer_) {
     const uint64_t pages = std::min<uint64_t>(pagesPerBuffer_, poolPages - first);
     pool_.push_back(createBuffer(gpu, pages * kPageBytes,
@@ -202,12 +223,13 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                                        glm::floatBitsToUint(chunks[i].geometricError),
                                        chunks[i].parent}
                           : glm::uvec4{gpu::kNotResident, 0u, 0u, gpu::kNotResident};
-  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1, 1, 1};
+  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
   // the options use (with oneKernel, one kernel and the cones).
   std::vector<std::vector<uint32_t>> variants;
-  for (const Variant pass : {kOneKernel, kCones, kCameraRays, kShadeHits, kMirrorRays}) {
-    if (options.oneKernel && pass != kOneKernel && pass != kCones) continue;
+  for (const Variant pass : {kOneKernel, kCones, kCameraRays, kShadeHits, kMirrorRays, kPhotons}) {
+    if (options.oneKernel && pass != kOneKernel && pass != kCones && pass != kPhotons) continue;
+    if (pass == kPhotons && !options.caustics) continue;
     for (uint32_t splats = 0; splats < (asset.splats ? 2u : 1u); ++splats) {
       pipelineIndex_[pass][splats] = uint32_t(variants.size());
       variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
@@ -259,7 +281,7 @@ void Renderer::createSlots(uint64_t stagingRegion) {
     writeDescriptors(s);
   }
   if (gpu_.timestampValidBits > 0) {
-    queries_ = createTimestampQueries(gpu_, 3 * uint32_t(slots_.size()));
+    queries_ = createTimestampQueries(gpu_, kTimestamps * uint32_t(slots_.size()));
     timestampSeconds_ = double(gpu_.properties.limits.timestampPeriod) * 1e-9;
     timestampMask_ =
         gpu_.timestampValidBits >= 64 ? ~uint64_t(0) : (uint64_t(1) << gpu_.timestampValidBits) - 1;
@@ -272,7 +294,8 @@ void Renderer::writeDescriptors(const Slot& slot) {
       {slot.feedback.buffer, 0, VK_WHOLE_SIZE}, {output_.buffer, 0, VK_WHOLE_SIZE},
       {environment_.buffer, 0, VK_WHOLE_SIZE},  {hits_.buffer, 0, VK_WHOLE_SIZE},
       {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE},
-      {paths_.buffer, 0, VK_WHOLE_SIZE},        {pending_.buffer, 0, VK_WHOLE_SIZE}};
+      {paths_.buffer, 0, VK_WHOLE_SIZE},        {pending_.buffer, 0, VK_WHOLE_SIZE},
+      {caustics_.buffer, 0, VK_WHOLE_SIZE}};
   constexpr uint32_t kBindings = std::size(infos);
   std::vector<VkWriteDescriptorSet> writes(kBindings, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
   for (uint32_t i = 0; i < kBindings; ++i) {
@@ -332,13 +355,27 @@ void Renderer::prepare(gpu::FrameParams params) {
     params.options.x |= gpu::kOptionRequests;
   else
     params.options.x &= ~gpu::kOptionRequests;
+  if (!options_.caustics) params.caustics = glm::uvec4(0u);
   std::memcpy(slot.params.mapped, &params, sizeof params);
+  // The caustic map again when what it depends on changed, the resident chunks included.
+  slot.photons = 0;
+  if (params.caustics.x > 0) {
+    std::vector<std::byte> key = causticKey(params);
+    const auto version = reinterpret_cast<const std::byte*>(&residentVersion_);
+    key.insert(key.end(), version, version + sizeof residentVersion_);
+    if (key != causticKey_) {
+      slot.photons = params.caustics.y;
+      causticKey_ = std::move(key);
+    }
+  } else {
+    causticKey_.clear();
+  }
   // A wavefront for frames of one sample a pixel whose hits leave one mirror ray at most.
   slot.wavefront = !options_.oneKernel && params.image.z <= 1 && !refractionRays(params);
   slot.stats.twoPasses = slot.wavefront;
   slot.stats.mirrorBounces = slot.wavefront && secondaryRays(params) ? params.options.y : 0;
-  for (uint32_t kind :
-       {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays, gpu::kFeedbackSecondaryRays})
+  for (uint32_t kind : {gpu::kFeedbackPrimaryRays, gpu::kFeedbackShadowRays,
+                        gpu::kFeedbackSecondaryRays, gpu::kFeedbackPhotons})
     static_cast<uint32_t*>(slot.feedback.mapped)[kind] = 0;
 }
 
@@ -370,6 +407,7 @@ void Renderer::stage(Slot& slot) {
   slot.stats.uploadedBytes = offset;
   slot.stats.streamedBytes = streamedBytes_;
   slot.stats.evicted = uint32_t(evicted.size());
+  if (!uploads.empty() || !evicted.empty()) ++residentVersion_;
 }
 
 VkCommandBuffer Renderer::record() {
@@ -380,9 +418,9 @@ VkCommandBuffer Renderer::record() {
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   ISO_VK(vkBeginCommandBuffer(cb, &begin));
-  const uint32_t query = 3 * current_;
+  const uint32_t query = kTimestamps * current_;
   if (hasTimestamps()) {
-    vkCmdResetQueryPool(cb, queries_, query, 3);
+    vkCmdResetQueryPool(cb, queries_, query, kTimestamps);
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query);
   }
   // The copies write only pages that no frame in flight reads (evicted pages wait), so they need
@@ -402,6 +440,9 @@ VkCommandBuffer Renderer::record() {
     vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 1);
   vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.layout, 0, 1, &slot.set, 0,
                           nullptr);
+  if (slot.photons > 0) recordPhotons(cb, slot.photons);
+  if (hasTimestamps())
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 2);
   const uint32_t tiles = tileCount(options_.width, options_.height, options_.workgroupSize);
   if (setup_.tileCones) recordCones(cb, tiles);
   if (slot.wavefront) {
@@ -411,8 +452,9 @@ VkCommandBuffer Renderer::record() {
     vkCmdDispatch(cb, tiles, 1, 1);
   }
   if (hasTimestamps()) {
-    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 2);
-    vkCmdCopyQueryPoolResults(cb, queries_, query, 3, slot.timestamps.buffer, 0, sizeof(uint64_t),
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_, query + 3);
+    vkCmdCopyQueryPoolResults(cb, queries_, query, kTimestamps, slot.timestamps.buffer, 0,
+                              sizeof(uint64_t),
                               VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT);
   }
   memoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
@@ -420,6 +462,25 @@ VkCommandBuffer Renderer::record() {
                 VK_PIPELINE_STAGE_HOST_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
                 VK_ACCESS_HOST_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT);
   return cb;
+}
+
+// The caustic map recomputed: emptied once the frames before have read it, then the photons of
+// all lights summed into it, before the passes that read it.
+void Renderer::recordPhotons(VkCommandBuffer cb, uint32_t photons) {
+  memoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                VK_ACCESS_TRANSFER_WRITE_BIT);
+  vkCmdFillBuffer(cb, caustics_.buffer, 0, VK_WHOLE_SIZE, 0u);
+  memoryBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+  vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipelineOf(kPhotons));
+  // (Each invocation takes photons a whole dispatch apart: the groups stay under every
+  // device's limit.)
+  const uint32_t groups = std::min<uint32_t>(
+      (photons + options_.workgroupSize - 1) / options_.workgroupSize, 65535u);
+  vkCmdDispatch(cb, groups, 1, 1);
+  memoryBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT);
 }
 
 // The cones of the frame's tiles (cone.h), a tile an invocation, before the passes that read them.
@@ -518,12 +579,16 @@ void Renderer::finish() {
 
 void Renderer::readTimestamps(const Slot& slot, FrameStats& stats) const {
   if (!hasTimestamps()) return;
-  uint64_t t[3];
+  uint64_t t[kTimestamps];
   std::memcpy(t, slot.timestamps.mapped, sizeof t);
-  stats.gpuSeconds = double((t[2] - t[0]) & timestampMask_) * timestampSeconds_;
-  stats.dispatchSeconds = double((t[2] - t[1]) & timestampMask_) * timestampSeconds_;
+  const auto between = [&](int a, int b) {
+    return double((t[b] - t[a]) & timestampMask_) * timestampSeconds_;
+  };
+  stats.gpuSeconds = between(0, 3);
+  stats.dispatchSeconds = between(1, 3);
+  stats.photonSeconds = between(1, 2);
   stats.gpuStart = double(t[0] & timestampMask_) * timestampSeconds_;
-  stats.gpuEnd = double(t[2] & timestampMask_) * timestampSeconds_;
+  stats.gpuEnd = double(t[3] & timestampMask_) * timestampSeconds_;
 }
 
 // The slot's feedback, read once its frame completed: the rays by kind, the chunks its rays asked
@@ -536,6 +601,7 @@ void Renderer::collect(Slot& slot) {
   FrameStats& s = slot.stats;
   s.rays = {fb[gpu::kFeedbackPrimaryRays], fb[gpu::kFeedbackShadowRays],
             fb[gpu::kFeedbackSecondaryRays]};
+  s.photons = fb[gpu::kFeedbackPhotons];
   for (uint32_t c = 0; c < n; ++c) {
     if (fb[gpu::kFeedbackHeaderWords + c] == frame) {
       if (table[c].state.x == gpu::kNotResident) ++s.requested;

@@ -47,6 +47,9 @@ struct RendererOptions {
   // every frame runs as one kernel (for measurements).
   bool oneKernel = false;
   uint32_t workgroupSize = 64;  // invocations a workgroup: a power of two, 8 to 1024
+  // Caustics: the caustic map and the photon pass exist (frames that ask for caustics without
+  // them are drawn without).
+  bool caustics = false;
 };
 
 // One frame, as collected once it completed.
@@ -64,8 +67,12 @@ struct FrameStats {
   uint32_t pending = 0;        // asked for, not resident yet
   uint64_t vramInUse = 0, vramPeak = 0, poolBytes = 0, poolBytesInUse = 0;
   double gpuSeconds = 0;            // copies and dispatch, from timestamps (0 without them)
-  double dispatchSeconds = 0;       // the dispatch alone, from timestamps (0 without them)
+  double dispatchSeconds = 0;  // the dispatches (photons too), from timestamps (0 without them)
   double gpuStart = 0, gpuEnd = 0;  // the device's clock at the frame's start and end (seconds)
+  // Caustic photons traced in the frame (the frames whose lights, material, ground, level of
+  // detail or resident chunks changed recompute the caustic map), and their pass's GPU time.
+  uint64_t photons = 0;
+  double photonSeconds = 0;
   std::chrono::steady_clock::time_point completed;  // when the host saw it done
 };
 
@@ -128,6 +135,7 @@ class Renderer {
     Buffer params, table, feedback, timestamps;
     VkDescriptorSet set = VK_NULL_HANDLE;
     bool wavefront = false;  // the prepared frame runs as a wavefront
+    uint32_t photons = 0;    // the prepared frame recomputes the caustic map with these photons
     uint64_t stagingOffset = 0;
     std::vector<Copy> copies;
     FrameStats stats;  // what prepare() knows of the slot's frame
@@ -148,7 +156,7 @@ class Renderer {
   ComputePipeline pipeline_;
   // By the shader's kPass and kSplats: its pipeline in pipeline_ (the splat kernels exist when the
   // file keeps points).
-  std::array<std::array<uint32_t, 2>, 5> pipelineIndex_{};
+  std::array<std::array<uint32_t, 2>, 6> pipelineIndex_{};
   bool splatsDrawn_ = false;  // the frame being recorded meets splats (kOptionSplats)
   VkPipeline pipelineOf(uint32_t pass) const {
     return pipeline_.pipelines[pipelineIndex_[pass][splatsDrawn_ ? 1 : 0]];
@@ -157,12 +165,19 @@ class Renderer {
   Buffer hits_, queue_;     // the wavefront's hits to shade and its queue
   Buffer starts_;           // where each tile's camera rays start (shaders/cone.h)
   Buffer paths_, pending_;  // the wave's paths that reflect mirror rays, and the rays waiting
+  Buffer caustics_;         // the caustic map (a word without RendererOptions::caustics)
+  // What the caustic map was last computed for: the frame parameters that photons depend on
+  // (causticKey), and the resident chunks' version (bumped by each upload or eviction).
+  std::vector<std::byte> causticKey_;
+  uint64_t residentVersion_ = 0;
+  void recordPhotons(VkCommandBuffer cb, uint32_t photons);
   std::vector<Buffer> pool_;
   uint32_t pagesPerBuffer_ = 0;
   std::unique_ptr<ChunkCache> cache_;
   std::vector<gpu::ChunkEntry> table_;  // the host's chunk table; each frame gets a copy
   std::vector<Slot> slots_;
-  Owned<VkQueryPool> queries_;  // 3 timestamps a slot: start, copies done, dispatch done
+  // 4 timestamps a slot: start, copies done, photons done, dispatch done.
+  Owned<VkQueryPool> queries_;
   double timestampSeconds_ = 0;
   uint64_t timestampMask_ = 0;
   std::vector<uint32_t> inFlight_;  // slots submitted and not collected, oldest first

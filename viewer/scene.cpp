@@ -1,6 +1,9 @@
 // Scene files, command-line scene options and the shaders' frame parameters (scene.h).
 #include "viewer/scene.h"
 
+#include <fmt/core.h>
+
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <glm/geometric.hpp>
@@ -249,6 +252,12 @@ void readRendering(const Fields& f, const json& j, const std::filesystem::path& 
     }
   }
   if (j.contains("ground_color")) scene.groundColor = f.color(j["ground_color"], "ground_color");
+  if (j.contains("caustics")) {
+    const double n = f.number(j["caustics"], "caustics");
+    if (n < 0 || n > kMaxCausticPhotons || n != std::floor(n))
+      f.fail("caustics", fmt::format("a whole number of photons from 0 to {}", kMaxCausticPhotons));
+    scene.caustics = uint32_t(n);
+  }
   if (j.contains("draw")) {
     const std::optional<Draw> value =
         j["draw"].is_string() ? valueNamed(kDrawNames, j["draw"].get<std::string>()) : std::nullopt;
@@ -269,7 +278,8 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   f.known(j, "",
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
-           "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color"});
+           "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color",
+           "caustics"});
   if (j.contains("camera")) readCamera(f, j["camera"], scene);
   if (j.contains("lights")) readLights(f, j["lights"], scene);
   if (j.contains("material")) readMaterial(f, j["material"], scene.material);
@@ -308,6 +318,33 @@ bool secondaryRays(const gpu::FrameParams& p) {
       p.options.y > 0u && (p.options.x & gpu::kOptionReflections) != 0u && p.material.z > 0.0f;
   return mirrors || refractionRays(p);
 }
+
+namespace {
+
+// The caustics of a frame whose ground is set (p.ground, frame units): the disc photons aim at
+// (the sphere around the content box, seen from each light), and the map: a square on the ground
+// centered under the content's center, reaching 1.5 content radii plus twice the center's height
+// above the ground from it (where lights well above the horizon focus what passes through).
+void setCaustics(gpu::FrameParams& p, const Scene& scene, const FrameSetup& s) {
+  const glm::dvec3 lo(s.contentLo), hi(s.contentHi);
+  const glm::dvec3 center = 0.5 * (lo + hi);
+  const double radius = 0.5 * glm::length(hi - lo);
+  const glm::dvec3 n(p.ground.x, p.ground.y, p.ground.z);
+  const double height = glm::dot(n, center) - double(p.ground.w);
+  const glm::dvec3 under = center - height * n;
+  const double half = 1.5 * radius + 2.0 * std::max(height, 0.0);
+  const double cell = 2.0 * half / gpu::kCausticCells;
+  const glm::dvec3 a = std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  const glm::dvec3 e1 = glm::normalize(glm::cross(n, a)), e2 = glm::cross(n, e1);
+  const auto lights = uint32_t(std::min<size_t>(scene.lights.size(), gpu::kMaxLights));
+  p.caustics = glm::uvec4(scene.caustics, scene.caustics * lights, 0, 0);
+  p.causticDisc = glm::vec4(glm::vec3(center), float(radius));
+  const double middle = 0.5 * gpu::kCausticCells;
+  p.causticU = glm::vec4(glm::vec3(e1 / cell), float(middle - glm::dot(e1, under) / cell));
+  p.causticV = glm::vec4(glm::vec3(e2 / cell), float(middle - glm::dot(e2, under) / cell));
+}
+
+}  // namespace
 
 gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t maxLevel,
                              const FrameSetup& s) {
@@ -380,6 +417,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
     p.ground = vec4(float(worldUp[0]), float(worldUp[1]), float(worldUp[2]),
                     float((*scene.groundHeight - glm::dot(worldUp, origin)) / frame.size));
     p.groundColor = rgb(scene.groundColor);
+    if (scene.caustics > 0) setCaustics(p, scene, s);
   }
   p.backface = rgb(scene.backTint);
   p.surface = vec4(s.blob.distanceUnit, 0, 0, 0);

@@ -56,6 +56,9 @@ enum class Draw { Surface, Points, Both };
 inline constexpr NameTable<Draw, 3> kDrawNames{
     {{"surface", Draw::Surface}, {"points", Draw::Points}, {"both", Draw::Both}}};
 
+// Caustic photons a light at most (all lights' photons are counted in 32 bits).
+inline constexpr uint32_t kMaxCausticPhotons = 256u << 20;
+
 struct Scene {
   std::optional<Camera> camera;      // none: framed on the surface's bounds
   std::optional<double> fovDegrees;  // overrides the camera's field of view
@@ -77,6 +80,9 @@ struct Scene {
   std::optional<double> groundHeight;
   bool groundAuto = false;  // a ground just under the surface's bounds (completeScene)
   std::array<float, 3> groundColor{0.6f, 0.6f, 0.58f};
+  // Caustic photons traced from each light onto the ground (shaders/caustics.h); 0: none. A
+  // scene with caustics and no ground gets one under the surface (completeScene).
+  uint32_t caustics = 0;
   std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
 };
 

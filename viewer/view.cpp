@@ -25,6 +25,12 @@ using Clock = std::chrono::steady_clock;
 
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
+// The caustic photons of a picture's last caustic map: how many, in how long (`where`).
+void printPhotons(uint64_t photons, double seconds, const char* where) {
+  fmt::print("  caustics: {} photons in {:.1f} ms {} ({:.2f} Mphotons/s)\n", photons,
+             seconds * 1e3, where, seconds > 0 ? photons / seconds / 1e6 : 0.0);
+}
+
 Gpu gpuFor(const ViewOptions& o) {
   GpuOptions g;
   g.validation = o.validation;
@@ -43,6 +49,7 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
   r.workgroupSize = o.workgroupSize;
   r.oneKernel = o.oneKernel;
   r.framesInFlight = framesInFlight;
+  r.caustics = o.scene.caustics > 0;
   return r;
 }
 
@@ -66,6 +73,7 @@ gpu::FrameParams GpuView::params(const Scene& s) const {
 }
 
 void placeGround(Scene& scene, const Asset& asset) {
+  if (scene.caustics > 0 && !scene.groundHeight) scene.groundAuto = true;  // caustics land there
   if (!scene.groundAuto || scene.groundHeight || !scene.camera) return;
   // Under the lowest corner of the bounds along up.
   const Vec3d u = normalized(scene.up.value_or(scene.camera->up));
@@ -102,10 +110,13 @@ int viewHeadless(const ViewOptions& options) {
   const auto start = Clock::now();
   double lastFrame = 0;
   uint32_t frames = 0;
+  std::pair<uint64_t, double> lastPhotons{0, 0.0};  // of the last frame that traced them
   for (; frames < options.maxFrames; ++frames) {
     const auto t0 = Clock::now();
     renderFrame(renderer, view.params(view.scene));
     renderer.finish();
+    if (renderer.stats().photons > 0)
+      lastPhotons = {renderer.stats().photons, renderer.stats().photonSeconds};
     lastFrame = seconds(Clock::now() - t0);
     if (renderer.converged() || renderer.stalled()) {
       ++frames;
@@ -114,6 +125,7 @@ int viewHeadless(const ViewOptions& options) {
   }
   const FrameStats& s = renderer.stats();
   const auto pixels = renderer.pixels();
+  const auto [photons, photonSeconds] = lastPhotons;
   writeImage(options.out, options.width, options.height, pixels);
   fmt::print("{}: {}x{} on {}, {} frame{} in {:.2f} s ({}), last frame {:.1f} ms, {:.1f} Mrays/s\n",
              options.out.string(), options.width, options.height, gpu.properties.deviceName, frames,
@@ -125,6 +137,7 @@ int viewHeadless(const ViewOptions& options) {
       "(--vram {})\n",
       s.resident, asset->reader.chunks().size(), byteSize(s.poolBytesInUse), byteSize(s.poolBytes),
       byteSize(s.streamedBytes), byteSize(s.vramPeak), byteSize(options.vram));
+  if (photons > 0) printPhotons(photons, photonSeconds, "on the GPU");
   if (renderer.stalled())
     fmt::print(stderr,
                "iso view: the view needs more chunks than --vram {} holds; coarser levels are "
@@ -158,6 +171,7 @@ int viewCpu(const ViewOptions& options) {
       "{:.2f} s\n",
       options.out.string(), options.width, options.height, render,
       frame.rays.total() / render / 1e6, load);
+  if (frame.photons > 0) printPhotons(frame.photons, frame.photonSeconds, "on the CPU");
   return 0;
 }
 

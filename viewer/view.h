@@ -41,7 +41,8 @@ struct Asset;
 // The options' scene with a camera (framed on the asset when it has none) and lights (one over the
 // camera's shoulder when it has none).
 Scene completeScene(const ViewOptions& options, const Asset& asset);
-// A ground asked for without a height (Scene::groundAuto) placed just under the asset's bounds.
+// A ground asked for without a height (Scene::groundAuto, or caustics without a ground) placed
+// just under the asset's bounds.
 void placeGround(Scene& scene, const Asset& asset);
 
 // Each returns the process exit code and throws for errors (file, Vulkan, options).

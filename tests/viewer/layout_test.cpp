@@ -93,7 +93,11 @@ TEST(ViewerLayout, theShaderLaysOutSharedStructsAsTheCppSideDoes) {
       {"splatIndex", offsetof(FrameParams, splatIndex)},
       {"splat", offsetof(FrameParams, splat)},
       {"ground", offsetof(FrameParams, ground)},
-      {"groundColor", offsetof(FrameParams, groundColor)}};
+      {"groundColor", offsetof(FrameParams, groundColor)},
+      {"caustics", offsetof(FrameParams, caustics)},
+      {"causticDisc", offsetof(FrameParams, causticDisc)},
+      {"causticU", offsetof(FrameParams, causticU)},
+      {"causticV", offsetof(FrameParams, causticV)}};
   EXPECT_EQ(spirv.membersOf("FrameParams"), frame);
   const std::map<std::string, uint32_t> light = {{"position", offsetof(gpu::Light, position)},
                                                  {"color", offsetof(gpu::Light, color)},

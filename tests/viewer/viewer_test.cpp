@@ -152,6 +152,7 @@ GpuRun renderGpu(const Asset& asset, const Scene& scene, uint32_t w, uint32_t h,
     o.workgroupSize = kernel.workgroup;
     o.oneKernel = kernel.oneKernel;
     o.tileCones = kernel.tileCones;
+    o.caustics = scene.caustics > 0;
     Renderer renderer(g, asset, env, o);
     renderUntilConverged(renderer, asset, scene, maxFrames, run);
   }
@@ -937,6 +938,8 @@ TEST(ViewerScene, sceneFilesSetEverythingAndNameWhatTheyCannotUse) {
   fails("{not json", "not valid JSON");
   fails(R"({"draw": "splats"})", "draw");
   fails(R"({"ground": "low"})", "ground");
+  fails(R"({"caustics": 1.5})", "caustics");
+  fails(R"({"caustics": -3})", "caustics");
   std::ofstream(file) << R"({"draw": "both", "ground": -1.5, "ground_color": [0.1, 0.2, 0.3]})";
   Scene drawn;
   loadScene(file, drawn);
@@ -1083,6 +1086,195 @@ TEST(ViewerGround, theGroundIsThePlaneItSaysDiffuseShadowedAndDrawnAlikeOnTheGpu
   EXPECT_EQ(groundSame, ground);
   EXPECT_GT(dark, ground / 50);  // the shadow
   EXPECT_GT(lit, ground / 2);
+}
+
+// A glass ball (the generated sphere, radius 1 at the origin, n = 1.5) over the ground, lit by a point light straight
+// above it, 20 radii from its center; the camera looks under the ball, 35 degrees down, at the
+// point below its center. The ground is `below` radii under the center, or (0) where the light
+// focuses: a ball lens's focal length is f = nR / (2 (n - 1)) from its center, and the light, s
+// away, is imaged at v = f s / (s - f) past it.
+struct Lens {
+  Scene scene;
+  Vec3d center;
+  double radius = 0, focus = 0;  // world units
+  Vec3d under() const { return {center.x, *scene.groundHeight, center.z}; }
+};
+
+Lens lensScene(double below = 0) {
+  Lens l;
+  const ShapeParams sphere;  // the generated sphere's
+  l.center = sphere.center;
+  l.radius = sphere.radius;
+  const double n = 1.5, s = 20 * l.radius, f = n * l.radius / (2 * (n - 1));
+  l.focus = f * s / (s - f);
+  Scene& scene = l.scene;
+  scene.up = Vec3d(0, 1, 0);
+  scene.groundHeight = l.center.y - (below > 0 ? below * l.radius : l.focus);
+  scene.camera = Camera{l.under() + Vec3d(0, 3.5 * l.radius, 5 * l.radius), l.under(),
+                        Vec3d(0, 1, 0), 40.0};
+  LightSpec light;
+  light.position = l.center + Vec3d(0, s, 0);
+  scene.lights = {light};
+  scene.material.transparency = 1.0f;
+  scene.material.ior = float(n);
+  scene.caustics = 300000;
+  return l;
+}
+
+// The caustic map's irradiance (light colors) summed over its cells within `within` (world
+// units) of a point, times the cells' area (frame units²): the flux landing there; or over all
+// cells.
+double causticFlux(const CausticMap& map, const gpu::FrameParams& p, const Frame& frame,
+                   const Vec3d& at, double within = 1e300) {
+  const glm::dvec3 u(p.causticU), v(p.causticV);
+  const glm::dvec3 q = (at - glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2])) /
+                       frame.size;
+  const double x = glm::dot(u, q) + p.causticU.w, y = glm::dot(v, q) + p.causticV.w;
+  const double cells = within / frame.size * glm::length(u), cellArea = 1.0 / glm::dot(u, u);
+  double sum = 0;
+  for (uint32_t j = 0; j < gpu::kCausticCells; ++j)
+    for (uint32_t i = 0; i < gpu::kCausticCells; ++i) {
+      if (std::hypot(i + 0.5 - x, j + 0.5 - y) > cells) continue;
+      const size_t at3 = 3 * (size_t(j) * gpu::kCausticCells + i);
+      sum += map.words[at3 + 1];  // green (the light is white)
+    }
+  return sum / gpu::kCausticScale * cellArea;
+}
+
+// The same flux from the exact ball: rays from the light through a grid over the caustic disc,
+// each carrying its share of the light as a photon does, refracted into and out of the sphere
+// (center and radius of the Lens, frame units) by Snell's law, summed where they land on the
+// ground into the map's cells, then over the cells within each of `within` (world units) of the
+// point under the center. The brute-force reference of the photon map.
+std::vector<double> exactLensFlux(const Lens& lens, const gpu::FrameParams& p, const Frame& frame,
+                                  const std::vector<double>& within) {
+  const glm::dvec3 origin(frame.origin[0], frame.origin[1], frame.origin[2]);
+  const auto toFrame = [&](const Vec3d& w) { return (w - origin) / frame.size; };
+  const glm::dvec3 c = toFrame(lens.center), light = toFrame(lens.scene.lights[0].position);
+  const double r = lens.radius / frame.size, groundY = toFrame(lens.under()).y;
+  const glm::dvec3 discCenter(p.causticDisc), u(p.causticU), v(p.causticV);
+  const double disc = p.causticDisc.w;
+  const glm::dvec3 axis = glm::normalize(discCenter - light);
+  const glm::dvec3 e1 = glm::normalize(glm::cross(axis, glm::dvec3(1, 0, 0))),
+                   e2 = glm::cross(axis, e1);
+  const glm::dvec3 under = toFrame(lens.under());
+  const double ux = glm::dot(u, under) + p.causticU.w, uy = glm::dot(v, under) + p.causticV.w;
+  const double cellArea = 1.0 / glm::dot(u, u), cellsPerWorld = glm::length(u) / frame.size;
+  const double n = lens.scene.material.ior;
+  std::vector<double> sums(within.size(), 0.0);
+  constexpr int kGrid = 1500;
+  const double step = 2.0 * disc / kGrid;
+  // The first hit of a ray on the sphere from outside (or, inside, its exit): t, or none.
+  const auto sphereHit = [&](const glm::dvec3& o, const glm::dvec3& d, bool inside) {
+    const glm::dvec3 oc = o - c;
+    const double b = glm::dot(oc, d), q = glm::dot(oc, oc) - r * r, h = b * b - q;
+    if (h < 0) return -1.0;
+    return inside ? -b + std::sqrt(h) : -b - std::sqrt(h);
+  };
+  for (int j = 0; j < kGrid; ++j)
+    for (int i = 0; i < kGrid; ++i) {
+      const double a = -disc + (i + 0.5) * step, b = -disc + (j + 0.5) * step;
+      if (a * a + b * b > disc * disc) continue;
+      glm::dvec3 d = glm::normalize(discCenter + a * e1 + b * e2 - light);
+      const double flux = step * step * glm::dot(d, axis);
+      const double t0 = sphereHit(light, d, false);
+      if (t0 < 0) continue;
+      glm::dvec3 at = light + t0 * d;
+      d = glm::refract(d, glm::normalize(at - c), 1.0 / n);
+      at += sphereHit(at, d, true) * d;
+      const glm::dvec3 out = glm::normalize(at - c);
+      d = glm::refract(d, -out, n);
+      if (glm::dot(d, d) == 0 || d.y >= 0) continue;
+      const glm::dvec3 land = at + (groundY - at.y) / d.y * d;
+      const double x = glm::dot(u, land) + p.causticU.w, y = glm::dot(v, land) + p.causticV.w;
+      if (!(x >= 0 && y >= 0 && x < gpu::kCausticCells && y < gpu::kCausticCells)) continue;
+      const double off = std::hypot(std::floor(x) + 0.5 - ux, std::floor(y) + 0.5 - uy);
+      for (size_t k = 0; k < within.size(); ++k)
+        if (off <= within[k] * cellsPerWorld) sums[k] += flux / cellArea * cellArea;
+    }
+  return sums;
+}
+
+TEST(ViewerCaustics, aGlassBallFocusesTheLightThatEntersItAsTheExactBallDoes) {
+  const auto asset = Asset::open(files().sphere);
+  const auto header = asset->reader.header();
+  const CpuPool pool = buildCpuPool(asset->reader);
+  const auto paramsOf = [&](const Scene& scene) {
+    return frameParams(scene, header.frame, header.maxLevel,
+                       cpuFrameSetup(*asset, 96, 96, nullptr));
+  };
+  // The ground just under the ball, where the lens formula puts the (paraxial) focus, and far
+  // past it.
+  for (const double below : {1.1, 0.0, 3.0}) {
+    const Lens lens = lensScene(below);
+    const gpu::FrameParams params = paramsOf(lens.scene);
+    ASSERT_EQ(params.caustics.y, lens.scene.caustics);
+    const CausticMap map = causticMapCpu(pool, params);
+    EXPECT_EQ(map.photons, lens.scene.caustics);
+    const double rad = lens.radius;
+    const std::vector<double> within = {0.1 * rad, 0.25 * rad, 0.5 * rad, 1e300};
+    const std::vector<double> exact = exactLensFlux(lens, params, header.frame, within);
+    std::printf("ground %.3f radii under the center (%.2f Mphotons/s):", 
+                (lens.center.y - *lens.scene.groundHeight) / rad, map.photons / map.seconds / 1e6);
+    for (size_t k = 0; k < within.size(); ++k) {
+      const double got = causticFlux(map, params, header.frame, lens.under(), within[k]);
+      std::printf(" [%.2g radii: %.5f exact %.5f]", within[k] / rad, got, exact[k]);
+      EXPECT_NEAR(got, exact[k], 0.02 * exact[k] + 0.001) << within[k] / rad << " radii";
+    }
+    std::printf("\n");
+  }
+}
+
+TEST(ViewerCaustics, theCausticBrightensTheFocusLeavesTheRestAsItWasAndIsDrawnAlikeOnTheGpu) {
+  const auto asset = Asset::open(files().sphere);
+  const auto header = asset->reader.header();
+  const Lens lens = lensScene();
+  const uint32_t w = 128, h = 96;
+  const auto caustic = renderReference(*asset, lens.scene, w, h);
+  Scene plain = lens.scene;
+  plain.caustics = 0;
+  const auto without = renderReference(*asset, plain, w, h);
+  // Where each pixel's camera ray meets the ground (world units).
+  const CpuPool pool = buildCpuPool(asset->reader);
+  const std::vector<CpuRay> rays = cameraRays(*asset, lens.scene, w, h);
+  std::vector<std::optional<CpuHit>> hits(rays.size());
+  traceCpu(pool, frameParams(lens.scene, header.frame, header.maxLevel,
+                             cpuFrameSetup(*asset, w, h, nullptr)),
+           rays, hits);
+  size_t focus = 0, brighter = 0, far = 0, same = 0;
+  int farDiff = 0;
+  for (size_t i = 0; i < hits.size(); ++i) {
+    if (!hits[i] || hits[i]->normal != glm::vec3(0, 1, 0)) continue;
+    const glm::dvec3 q = glm::dvec3(rays[i].origin) + double(hits[i]->t) * glm::dvec3(rays[i].direction);
+    const Vec3d p = glm::dvec3(header.frame.origin[0], header.frame.origin[1],
+                               header.frame.origin[2]) + q * header.frame.size;
+    const double off = std::hypot(p.x - lens.center.x, p.z - lens.center.z) / lens.radius;
+    const int green = int(caustic[i] >> 8 & 0xFF), greenWithout = int(without[i] >> 8 & 0xFF);
+    if (off < 0.1) {
+      ++focus;
+      brighter += green > greenWithout + 40;
+    } else if (off > 4.0) {
+      ++far;
+      same += caustic[i] == without[i];
+      farDiff = std::max(farDiff, green - greenWithout);
+    }
+  }
+  std::printf("ground pixels: %zu in the focus, %zu of them brighter; %zu far, %zu the same "
+              "(at most %d/255 brighter)\n", focus, brighter, far, same, farDiff);
+  EXPECT_GT(focus, 4u);
+  EXPECT_EQ(brighter, focus);
+  // Far from the focus the picture is the same, but for the faint light of rays that graze the
+  // ball (they leave it at up to 96 degrees from their way in, and land anywhere).
+  EXPECT_GT(far, w * h / 20);
+  EXPECT_GE(double(same), 0.97 * double(far));
+  EXPECT_LE(farDiff, 2);
+  const GpuRun gpuPicture = renderGpu(*asset, lens.scene, w, h, uint64_t(1) << 30);
+  const double gpuDiffers = differing(gpuPicture.pixels, caustic, 8);
+  const double causticDiffers = differing(caustic, without, 8);
+  std::printf("pixels over 8/255 apart: GPU and CPU %.4f %%, with and without caustics %.4f %%\n",
+              100 * gpuDiffers, 100 * causticDiffers);
+  EXPECT_LE(gpuDiffers, 0.005);
+  EXPECT_GT(causticDiffers, 0.01);
 }
 
 TEST(ViewerSplats, aSpheresSplatsHaveTheSurfacesSilhouetteAndDepth) {

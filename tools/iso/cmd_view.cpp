@@ -25,6 +25,7 @@ struct ViewArgs {
   bool noShadows = false, noReflections = false, noRefractions = false;
   bool points = false, ground = false;
   std::optional<double> groundHeight;
+  std::optional<uint32_t> caustics;
   std::string draw;
   std::string traversal = "nested";
 };
@@ -90,6 +91,7 @@ void buildScene(ViewArgs& a) {
   if (a.points) s.draw = viewer::Draw::Points;
   if (a.ground) s.groundAuto = true;
   if (a.groundHeight) s.groundHeight = *a.groundHeight;
+  if (a.caustics) s.caustics = *a.caustics;
   if (!a.draw.empty()) s.draw = *valueNamed(viewer::kDrawNames, a.draw);
 }
 
@@ -189,6 +191,11 @@ void addViewCommand(CLI::App& app, int& exitCode) {
              "\"ground\": true)");
   c->add_option("--ground-height", a->groundHeight,
                 "The ground plane at this height along the up axis (world units)");
+  c->add_option("--caustics", a->caustics,
+                "Trace this many photons from each light through the transparent and mirror "
+                "material onto the ground, and draw the caustics they make there (e.g. 1000000; "
+                "a ground is put under the surface when none is given)")
+      ->check(CLI::Range(uint32_t(0), viewer::kMaxCausticPhotons));
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
