@@ -187,6 +187,34 @@ TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {
   EXPECT_NE(run.err.find("text.iso"), std::string::npos) << run.err;
 }
 
+TEST(CliView, causticsPutAGroundUnderTheSurfaceAndSayHowManyPhotonsTheyTraced) {
+  TempDir dir;
+  const std::string file = quoted(kittenIso());
+  const auto out = dir / "glass.png", plain = dir / "plain.png";
+  const std::string glass = " --width 96 --height 96 --transparency 0.9 --out ";
+  for (const char* mode : {"--headless", "--cpu"}) {
+    const CommandResult run =
+        iso("view " + file + " " + mode + glass + quoted(out) + " --caustics 20000");
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    EXPECT_NE(run.out.find("caustics: 20000 photons"), std::string::npos) << run.out;
+  }
+  // The ground it put there, lit by the caustic: the picture differs from one with a ground
+  // and no caustics only where the light went through the glass.
+  ASSERT_EQ(iso("view " + file + " --cpu" + glass + quoted(plain) + " --ground").exitCode, 0);
+  uint32_t w = 0, h = 0;
+  const auto with = viewer::readImage(out, w, h), without = viewer::readImage(plain, w, h);
+  ASSERT_EQ(with.size(), without.size());
+  size_t brighter = 0, darker = 0;
+  for (size_t i = 0; i < with.size(); ++i) {
+    const int a = int(with[i] >> 8 & 0xFF), b = int(without[i] >> 8 & 0xFF);
+    brighter += a > b;
+    darker += a < b;
+  }
+  std::printf("caustics: %zu of %zu pixels brighter, %zu darker\n", brighter, with.size(), darker);
+  EXPECT_GT(brighter, 20u);
+  EXPECT_EQ(darker, 0u);
+}
+
 TEST(CliView, impossibleOptionsAreUsageErrors) {
   const std::string file = quoted(kittenIso());
   EXPECT_EQ(iso("view " + file + " --headless").exitCode, 2);  // no --out
@@ -208,6 +236,12 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
   EXPECT_EQ(draw.exitCode, 2);
   EXPECT_NE(draw.err.find("--draw"), std::string::npos) << draw.err;
   EXPECT_EQ(iso("view " + file + " --cpu --out x.png --points --draw both").exitCode, 2);
+  for (const char* photons : {"-5", "many", "1e12"}) {
+    const CommandResult caustics =
+        iso("view " + file + " --cpu --out x.png --caustics " + std::string(photons));
+    EXPECT_EQ(caustics.exitCode, 2) << photons;
+    EXPECT_NE(caustics.err.find("--caustics"), std::string::npos) << caustics.err;
+  }
   // Splats of a file that keeps no points: the file is named, nothing is written.
   for (const char* mode : {"--cpu", "--headless"}) {
     const CommandResult none = iso("view " + file + " " + mode + " --out x.png --points");

@@ -131,7 +131,8 @@ int viewHeadless(const ViewOptions& options) {
              options.out.string(), options.width, options.height, gpu.properties.deviceName, frames,
              frames == 1 ? "" : "s", seconds(Clock::now() - start),
              renderer.converged() ? "converged" : "not converged", lastFrame * 1e3,
-             lastFrame > 0 ? s.rays.total() / lastFrame / 1e6 : 0.0);
+             lastFrame > s.photonSeconds ? s.rays.total() / (lastFrame - s.photonSeconds) / 1e6
+                                         : 0.0);
   fmt::print(
       "  chunks {} resident of {}, pool {} of {}, streamed {}, GPU memory {} at most "
       "(--vram {})\n",
@@ -170,7 +171,7 @@ int viewCpu(const ViewOptions& options) {
       "{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
       "{:.2f} s\n",
       options.out.string(), options.width, options.height, render,
-      frame.rays.total() / render / 1e6, load);
+      frame.rays.total() / std::max(render - frame.photonSeconds, 1e-9) / 1e6, load);
   if (frame.photons > 0) printPhotons(frame.photons, frame.photonSeconds, "on the CPU");
   return 0;
 }

@@ -29,7 +29,8 @@ using Clock = std::chrono::steady_clock;
 struct Input {
   double wheel = 0;
   bool screenshot = false, reload = false;
-  int toggled = 0;  // 1 shadows, 2 reflections, 3 refractions, 4 back faces (next mode)
+  // 1 shadows, 2 reflections, 3 refractions, 4 back faces (next mode), 5 draw, 6 caustics
+  int toggled = 0;
   int samples = 0;  // +1 / -1
 };
 
@@ -121,6 +122,7 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
     if (key == GLFW_KEY_B) in.toggled = 4;
     if (key == GLFW_KEY_K) in.toggled = 5;
+    if (key == GLFW_KEY_C) in.toggled = 6;
     if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
     if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
   });
@@ -175,13 +177,16 @@ void moveCamera(GLFWwindow* window, Camera& cam, Input& input, Mouse& mouse, dou
   }
 }
 
-// Keys 1, 2, 3, B, K, + and -.
-void applySwitches(Input& input, Scene& scene) {
+// Keys 1, 2, 3, B, K, C, + and -. C turns the caustics of --caustics N off and on.
+void applySwitches(Input& input, Scene& scene, uint32_t photons) {
   if (input.toggled == 1) scene.shadows = !scene.shadows;
   if (input.toggled == 2) scene.reflections = !scene.reflections;
   if (input.toggled == 3) scene.refractions = !scene.refractions;
   if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
   if (input.toggled == 5) scene.draw = Draw((int(scene.draw) + 1) % 3);
+  if (input.toggled == 6 && photons == 0)
+    fmt::print("iso view: no caustics to show (start with --caustics N)\n");
+  if (input.toggled == 6) scene.caustics = scene.caustics > 0 ? 0 : photons;
   input.toggled = 0;
   if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
   input.samples = 0;
@@ -277,6 +282,7 @@ RendererOptions windowRendererOptions(const ViewOptions& options, const Swapchai
   ro.uploadBytes = options.uploadBytes;
   ro.framesInFlight = options.framesInFlight;
   ro.swapRedBlue = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+  ro.caustics = options.scene.caustics > 0;
   return ro;
 }
 
@@ -440,7 +446,7 @@ int viewWindow(const ViewOptions& options) {
     const double dt = std::chrono::duration<double>(now - last).count();
     last = now;
     moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height);
-    applySwitches(input, scene);
+    applySwitches(input, scene, options.scene.caustics);
     reloadScene(options, *asset, input, scene, sceneTime);
     int fbWidth = 0, fbHeight = 0;
     glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
@@ -454,7 +460,10 @@ int viewWindow(const ViewOptions& options) {
     renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
     stale = w.draw();
     ++frames;
-    const bool lastFrame = options.frames > 0 && frames >= options.frames;
+    // The last frame: --frames reached, or the window asked to close (Escape, its close button)
+    // while this one was prepared.
+    const bool lastFrame =
+        (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
     if (input.screenshot)
       saveScreenshot(fmt::format("iso-screenshot-{}.png", ++screenshots), renderer, bgra);
     input.screenshot = false;

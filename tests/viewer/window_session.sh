@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Drives `iso view` in a window on a virtual display (run under xvfb-run): resizes the window,
 # presses P for a screenshot, drags the mouse to orbit, turns the material red in the scene file
-# the window watches, and lets it quit after its frames.
+# the window watches, and closes it with Escape (--frames only bounds a session that hangs: a
+# count of frames would end it early on a fast machine, late on a slow one).
 # Usage: window_session.sh ISO_BINARY FILE.iso WORKDIR
 set -euo pipefail
 iso=$1 file=$2 work=$3
 cd "$work"
 echo '{"material": {"color": [0.7, 0.7, 0.7]}}' >scene.json
-"$iso" view "$file" --scene scene.json --width 300 --height 200 --frames 100 \
+"$iso" view "$file" --scene scene.json --width 300 --height 200 --frames 20000 \
   --screenshot final.png >out.txt 2>err.txt &
 pid=$!
 window=
@@ -31,4 +32,6 @@ xdotool mouseup 1
 sleep 1
 echo '{"material": {"color": [0.8, 0.05, 0.05]}}' >scene.json.new
 mv scene.json.new scene.json
+sleep 2
+xdotool key Escape
 wait $pid
