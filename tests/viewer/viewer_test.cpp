@@ -1277,6 +1277,67 @@ TEST(ViewerCaustics, theCausticBrightensTheFocusLeavesTheRestAsItWasAndIsDrawnAl
   EXPECT_GT(causticDiffers, 0.01);
 }
 
+TEST(ViewerCaustics, streamedChunksGiveTheCausticsOfTheWholeFile) {
+  // A glass torus in many chunks that stream in a few a frame: its photons ask for the chunks
+  // they meet, and the map is made again as they arrive, to the CPU reference's (all resident).
+  const auto asset = Asset::open(files().chunked);
+  ASSERT_GT(asset->reader.chunks().size(), 10u);
+  Scene scene = sceneFor(*asset);
+  scene.up = Vec3d(0, 1, 0);
+  scene.groundHeight = asset->bounds.lo.y - 0.2 * (asset->bounds.hi.y - asset->bounds.lo.y);
+  scene.material.transparency = 0.9f;
+  scene.caustics = 200000;
+  const uint32_t w = 128, h = 96;
+  const auto cpuPicture = renderReference(*asset, scene, w, h);
+  const GpuRun streamed = renderGpu(*asset, scene, w, h, uint64_t(1) << 30);
+  EXPECT_TRUE(streamed.converged);
+  EXPECT_GT(streamed.frameCount, 2u);
+  const double differs = differing(streamed.pixels, cpuPicture);
+  Scene plain = scene;
+  plain.caustics = 0;
+  const double caustic = differing(renderReference(*asset, plain, w, h), cpuPicture);
+  std::printf("streamed in %u frames: %.4f %% of the pixels over 8/255 from the CPU's; the "
+              "caustics change %.4f %%\n", streamed.frameCount, 100 * differs, 100 * caustic);
+  EXPECT_LE(differs, 0.005);
+  EXPECT_GT(caustic, 0.01);
+}
+
+TEST(ViewerCaustics, theGpuRecomputesTheMapWhenTheLightTheMaterialOrTheGroundChangesOnly) {
+  const auto asset = Asset::open(files().sphere);
+  const auto header = asset->reader.header();
+  const Lens lens = lensScene();
+  RendererOptions o = rendererOptions(64, 48, uint64_t(1) << 30, 2);
+  o.caustics = true;
+  Renderer renderer(gpu(), *asset, nullptr, o);
+  // The photons each frame traced (the renderer's feedback).
+  const auto photons = [&](const Scene& scene) {
+    renderFrame(renderer, frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+    renderer.finish();
+    return renderer.stats().photons;
+  };
+  const uint64_t all = lens.scene.caustics;
+  EXPECT_EQ(photons(lens.scene), all);
+  EXPECT_EQ(photons(lens.scene), 0u);
+  Scene moved = lens.scene;  // the camera alone moved
+  moved.camera->eye += Vec3d(0.5, 0.2, 0);
+  EXPECT_EQ(photons(moved), 0u);
+  Scene lit = moved;
+  lit.lights[0].position += Vec3d(1, 0, 0);
+  EXPECT_EQ(photons(lit), all);
+  Scene glass = lit;
+  glass.material.ior = 1.33f;
+  EXPECT_EQ(photons(glass), all);
+  EXPECT_EQ(photons(glass), 0u);
+  Scene lower = glass;
+  *lower.groundHeight -= 0.5;
+  EXPECT_EQ(photons(lower), all);
+  Scene off = lower;
+  off.caustics = 0;
+  EXPECT_EQ(photons(off), 0u);
+  EXPECT_EQ(photons(lower), all);
+  EXPECT_EQ(gpu().validationErrors->load(), 0u);
+}
+
 TEST(ViewerSplats, aSpheresSplatsHaveTheSurfacesSilhouetteAndDepth) {
   // Issue targets: silhouette IoU >= 0.97; depths within 2 spacings on >= 98 % of the pixels.
   const auto asset = Asset::open(files().spherePoints);
