@@ -117,5 +117,4 @@ void tracePhoton(uint index) {
       inMedium = !leaves;
     }
   }
-  return;
 }

@@ -190,9 +190,9 @@ struct FrameParams {
   vec4 ground;
   vec4 groundColor;
   // Caustics: x photons traced from each light toward the disc (0: none), y the photons of all
-  // lights (x times the lights, which come first in `lights`). The disc: center xyz and radius w (frame
-  // units), across the direction from the light (it covers the content box). A point p of the
-  // ground lies in map cell (dot(causticU.xyz, p) + causticU.w, dot(causticV.xyz, p) +
+  // lights (x times the lights, which come first in `lights`). The disc: center xyz and radius
+  // w (frame units), across the direction from the light (it covers the content box). A point p
+  // of the ground lies in map cell (dot(causticU.xyz, p) + causticU.w, dot(causticV.xyz, p) +
   // causticV.w), cells as wide as 1 / |causticU.xyz|.
   uvec4 caustics;
   vec4 causticDisc;

@@ -29,9 +29,10 @@ using namespace iso::gpu;
 // bindings, here from host memory. Its member functions are the shader's functions.
 class Tracer {
  public:
+  // `caustics`: the caustic map (read by shading, or summed into by photons: `photons`).
   Tracer(const CpuPool& pool, const FrameParams& params, const Environment* env,
-         uint32_t* caustics = nullptr)
-      : P(params), pool_(pool), env_(env), caustics_(caustics) {}
+         uint32_t* caustics = nullptr, bool photons = false)
+      : P(params), pool_(pool), env_(env), caustics_(caustics), photons_(photons) {}
 
   FrameParams P;
 
@@ -47,7 +48,6 @@ class Tracer {
   bool flatTraversal() const { return (P.options.x & kOptionFlatTraversal) != 0u; }
   static bool splatsCompiled() { return true; }
   float lodPixels() const { return photons_ ? -1.0f : P.lod.x; }
-  bool photons_ = false;  // tracing caustic photons (at the finest level)
   uint causticWord(uint word) const { return caustics_ ? caustics_[word] : 0u; }
   void depositCaustic(uint word, uint value) {
     std::atomic_ref<uint32_t>(caustics_[word]).fetch_add(value, std::memory_order_relaxed);
@@ -68,6 +68,7 @@ class Tracer {
   const CpuPool& pool_;
   const Environment* env_;
   uint32_t* caustics_;  // the caustic map (shared.h, kCausticCells), or none
+  bool photons_;        // tracing caustic photons (at the finest level resident)
 };
 
 #undef ISO_INOUT
@@ -134,8 +135,7 @@ CausticMap causticMapCpu(const CpuPool& pool, const gpu::FrameParams& params) {
   const auto t0 = std::chrono::steady_clock::now();
   tbb::parallel_for(tbb::blocked_range<uint32_t>(0, params.caustics.y, 4096),
                     [&](const tbb::blocked_range<uint32_t>& range) {
-                      shader::Tracer tracer(pool, params, nullptr, map.words.data());
-                      tracer.photons_ = true;
+                      shader::Tracer tracer(pool, params, nullptr, map.words.data(), true);
                       for (uint32_t i = range.begin(); i < range.end(); ++i) tracer.tracePhoton(i);
                     });
   map.photons = params.caustics.y;

@@ -62,8 +62,9 @@ constexpr auto kUniform = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
 constexpr auto kTransferDst = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 constexpr auto kTransferSrc = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
 
-// A slot's four timestamps (start, copies done, photons done, dispatch done), copied by the GPU into a host-visible buffer: reading them with
-// vkGetQueryPoolResults would make lavapipe wait for its whole queue, frames in flight included.
+// A slot's four timestamps (start, copies done, photons done, dispatch done), copied by the GPU
+// into a host-visible buffer: reading them with vkGetQueryPoolResults would make lavapipe wait
+// for its whole queue, frames in flight included.
 constexpr uint32_t kTimestamps = 4;
 constexpr uint64_t kTimestampBytes = kTimestamps * sizeof(uint64_t);
 
