@@ -19,8 +19,8 @@
 // fractions of a unit are rounded up or down at random (stochastic rounding: the expected sum
 // is exact). Photons outside the map are lost.
 void depositPhoton(vec3 p, vec3 power, ISO_INOUT(uint) rng) {
-  float x = dot(vec3(P.causticU.x, P.causticU.y, P.causticU.z), p) + P.causticU.w;
-  float y = dot(vec3(P.causticV.x, P.causticV.y, P.causticV.z), p) + P.causticV.w;
+  vec2 cell = causticCell(p);
+  float x = cell.x, y = cell.y;
   if (!(x >= 0.0f && y >= 0.0f && x < float(kCausticCells) && y < float(kCausticCells))) return;
   uint at = 3u * (uint(y) * kCausticCells + uint(x));
   float u = randomUnit(rng);

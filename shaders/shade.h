@@ -43,14 +43,20 @@ vec3 background(vec3 d) {
   return mix(bottom, top, clamp(0.5f + 0.5f * h, 0.0f, 1.0f));
 }
 
+// Where a point p of the ground lies on the caustic map, in cells (cell (i, j) spans [i, i + 1) ×
+// [j, j + 1)).
+vec2 causticCell(vec3 p) {
+  return vec2(dot(vec3(P.causticU.x, P.causticU.y, P.causticU.z), p) + P.causticU.w,
+              dot(vec3(P.causticV.x, P.causticV.y, P.causticV.z), p) + P.causticV.w);
+}
+
 // The irradiance the caustic map adds at a point p of the ground (caustics.h): its cells
 // interpolated bilinearly between their centers, none outside the map.
 vec3 causticIrradiance(vec3 p) {
-  float x = dot(vec3(P.causticU.x, P.causticU.y, P.causticU.z), p) + P.causticU.w - 0.5f;
-  float y = dot(vec3(P.causticV.x, P.causticV.y, P.causticV.z), p) + P.causticV.w - 0.5f;
+  vec2 at = causticCell(p) - vec2(0.5f);
   float last = float(kCausticCells);
-  x = clamp(x, -2.0f, last);
-  y = clamp(y, -2.0f, last);
+  float x = clamp(at.x, -2.0f, last);
+  float y = clamp(at.y, -2.0f, last);
   float fx = floor(x), fy = floor(y);
   vec3 sum = vec3(0.0f);
   for (uint k = 0u; k < 4u; ++k) {

@@ -1159,7 +1159,7 @@ std::vector<double> exactLensFlux(const Lens& lens, const gpu::FrameParams& p, c
                    e2 = glm::cross(axis, e1);
   const glm::dvec3 under = toFrame(lens.under());
   const double ux = glm::dot(u, under) + p.causticU.w, uy = glm::dot(v, under) + p.causticV.w;
-  const double cellArea = 1.0 / glm::dot(u, u), cellsPerWorld = glm::length(u) / frame.size;
+  const double cellsPerWorld = glm::length(u) / frame.size;
   const double n = lens.scene.material.ior;
   std::vector<double> sums(within.size(), 0.0);
   constexpr int kGrid = 1500;
@@ -1190,7 +1190,7 @@ std::vector<double> exactLensFlux(const Lens& lens, const gpu::FrameParams& p, c
       if (!(x >= 0 && y >= 0 && x < gpu::kCausticCells && y < gpu::kCausticCells)) continue;
       const double off = std::hypot(std::floor(x) + 0.5 - ux, std::floor(y) + 0.5 - uy);
       for (size_t k = 0; k < within.size(); ++k)
-        if (off <= within[k] * cellsPerWorld) sums[k] += flux / cellArea * cellArea;
+        if (off <= within[k] * cellsPerWorld) sums[k] += flux;
     }
   return sums;
 }

@@ -57,12 +57,12 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed = 
 // iso::FileError naming the file, the chunk's offset and the problem.
 PointsChunk decodePointsChunk(const Reader& reader, uint32_t id);
 
-// A stored point's frame position: the cell (level, key)'s minimum corner plus offset ·
-// 2^-stepBits (exact in double for in-frame points).
 // The points chunks of a file that are subsamples (the parents of other points chunks: drawn from
 // afar in place of them, and not among the file's kept points), by chunk id.
 std::vector<bool> subsampleChunks(const Reader& reader);
 
+// A stored point's frame position: the cell (level, key)'s minimum corner plus offset ·
+// 2^-stepBits (exact in double for in-frame points).
 std::array<double, 3> pointFramePosition(uint8_t level, uint64_t key, uint8_t stepBits,
                                          const std::array<int32_t, 3>& offset);
 
