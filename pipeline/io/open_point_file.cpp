@@ -15,7 +15,7 @@ namespace iso {
 namespace {
 
 constexpr const char* kSupportedFormats =
-    "supported: PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
+    "supported: PLY (.ply), LAS 1.0-1.4 (.las), E57 (.e57), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
     ".csv .asc .neu .xyzrgb .xyzn, or any name with --columns), each optionally gzip-compressed "
     "(.gz)";
 
@@ -23,7 +23,7 @@ constexpr const char* kSupportedFormats =
 constexpr std::string_view kTextExtensions[] = {".xyz", ".txt", ".pts",    ".csv",
                                                 ".asc", ".neu", ".xyzrgb", ".xyzn"};
 
-enum class Format : uint8_t { kPly, kLas, kDraco, kPcd, kText };
+enum class Format : uint8_t { kPly, kLas, kDraco, kE57, kPcd, kText };
 
 // Reservations follow the header's count only up to this many points, so that a hostile count
 // cannot allocate more than the file's content justifies.
@@ -55,7 +55,7 @@ std::optional<Format> formatBySignature(io::InputStream& in) {
   if (startsWith(head, "ply\n") || startsWith(head, "ply\r\n")) return Format::kPly;
   if (startsWith(head, "LASF")) return Format::kLas;
   if (startsWith(head, "DRACO")) return Format::kDraco;
-  if (startsWith(head, "ASTM-E57")) throw FileError(in.name(), 0, io::kE57NotSupported);
+  if (startsWith(head, "ASTM-E57")) return Format::kE57;
   return std::nullopt;
 }
 
@@ -76,7 +76,7 @@ Format chooseFormat(io::InputStream& in, const ReadOptions& options) {
   if (const std::optional<Format> format = formatBySignature(in)) return *format;
   const std::string extension = io::lowercaseExtension(in.path());
   if (extension == ".laz") throw FileError(in.name(), std::nullopt, io::kLazNotSupported);
-  if (extension == ".e57") throw FileError(in.name(), 0, io::kE57NotSupported);
+  if (extension == ".e57") throw FileError(in.name(), 0, "not an E57 file: no ASTM-E57 signature");
   if (extension == ".pcd" || io::looksLikePcd(in)) return Format::kPcd;
   if (!options.columns.empty()) return Format::kText;
   if (extension == ".ply")
@@ -103,6 +103,8 @@ std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
       return io::makeLasReader(std::move(in));
     case Format::kDraco:
       return io::makeDracoReader(std::move(in));
+    case Format::kE57:
+      return io::makeE57Reader(std::move(in), options);
     case Format::kPcd:
       return io::makePcdReader(std::move(in));
     case Format::kText:

@@ -25,6 +25,8 @@ std::optional<std::string> whyNotText(InputStream& in);
 bool looksLikePcd(InputStream& in);
 // Draco decodes whole buffers: the reader reads the stream and decodes it on opening.
 std::unique_ptr<PointReader> makeDracoReader(InputStream in);
+// E57 (ASTM E2807): every point cloud of the file's data3D, each with its pose applied.
+std::unique_ptr<PointReader> makeE57Reader(InputStream in, const ReadOptions& options);
 
 // The extension in lower case with its dot, looking through a final ".gz" ("a.PLY.gz" -> ".ply").
 std::string lowercaseExtension(const std::filesystem::path& path);
@@ -34,10 +36,5 @@ std::string lowercaseExtension(const std::filesystem::path& path);
 inline constexpr const char* kLazNotSupported =
     "LAZ (compressed LAS) is not supported: no LAZ decoder is packaged for Debian 12; decompress "
     "it to LAS first, e.g. `pdal translate in.laz out.las` or `laszip -i in.laz -o out.las`";
-// The E57 refusal (openPointFile: the "ASTM-E57" signature or the .e57 extension). Debian 12
-// packages no E57 library (libE57Format).
-inline constexpr const char* kE57NotSupported =
-    "E57 is not supported: no E57 library is packaged for Debian 12; convert it to LAS or PLY "
-    "first, e.g. `pdal translate in.e57 out.las`";
 
 }  // namespace iso::io
