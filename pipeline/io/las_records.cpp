@@ -231,7 +231,8 @@ std::optional<CoordinateSystem> LasCoordinateRecords::coordinateSystem(
 }
 
 void readLasVlrs(InputStream& in, uint64_t pointDataOffset, uint32_t count,
-                 LasCoordinateRecords& records, std::vector<std::string>& notes) {
+                 LasCoordinateRecords& records, std::vector<std::string>& notes,
+                 std::vector<std::byte>* laszip) {
   for (uint32_t i = 0; i < count; ++i) {
     const uint64_t at = in.offset();
     if (at + kVlrHeaderBytes > pointDataOffset) {
@@ -259,6 +260,8 @@ void readLasVlrs(InputStream& in, uint64_t pointDataOffset, uint32_t count,
     if (payload.size() < length)
       in.fail(fmt::format("file ends inside VLR {} of {}", i + 1, count));
     if (LasCoordinateRecords::isWanted(user, id)) records.add(id, payload.first(length), "VLR");
+    if (laszip != nullptr && user == kLaszipUser && id == kLaszipRecord && laszip->empty())
+      laszip->assign(payload.begin(), payload.begin() + ptrdiff_t(length));
     in.consume(length);
   }
 }
@@ -309,6 +312,19 @@ void readLasEvlrs(const std::filesystem::path& path, uint64_t start, uint32_t co
       in.seek(next);
     }
   }
+}
+
+std::optional<CoordinateSystem> readLasCoordinateSystem(InputStream& in, const LasHeader& header,
+                                                        uint64_t pointDataEnd,
+                                                        std::vector<std::string>& notes,
+                                                        std::vector<std::byte>* laszip) {
+  if (in.skip(header.headerSize) != header.headerSize)
+    in.fail(fmt::format("file ends inside the {}-byte header", header.headerSize));
+  LasCoordinateRecords records;
+  readLasVlrs(in, header.pointDataOffset, header.vlrCount, records, notes, laszip);
+  if (!records.hasWkt() && header.evlrCount > 0)
+    readLasEvlrs(in.path(), header.evlrStart, header.evlrCount, pointDataEnd, records, notes);
+  return records.coordinateSystem(notes);
 }
 
 }  // namespace iso::io

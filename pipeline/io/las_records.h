@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "pipeline/io/input_stream.h"
+#include "pipeline/io/las_format.h"
 #include "pipeline/io/readers.h"
 
 namespace iso::io {
@@ -39,14 +40,28 @@ class LasCoordinateRecords {
 };
 
 // Read the `count` VLRs from the stream, which is at the end of the public header, keeping the
-// wanted ones; the stream is left at pointDataOffset (FileError when the file ends before it).
+// wanted ones (and the LASzip VLR's payload in laszip, when given and present); the stream is
+// left at the end of the last VLR read (FileError when the file ends before it).
 void readLasVlrs(InputStream& in, uint64_t pointDataOffset, uint32_t count,
-                 LasCoordinateRecords& records, std::vector<std::string>& notes);
+                 LasCoordinateRecords& records, std::vector<std::string>& notes,
+                 std::vector<std::byte>* laszip = nullptr);
 
 // Read the `count` EVLRs of a LAS 1.4 file from `start` (after `pointDataEnd`), keeping the wanted
 // ones. Opens the file again, so the points' stream is not moved.
 void readLasEvlrs(const std::filesystem::path& path, uint64_t start, uint32_t count,
                   uint64_t pointDataEnd, LasCoordinateRecords& records,
                   std::vector<std::string>& notes);
+
+// The coordinate system of a LAS or LAZ file: from its VLRs, else from the EVLRs of LAS 1.4
+// (which start after pointDataEnd). The stream is at the start of the file, and is left at the
+// end of the VLRs. The LASzip VLR's payload goes to laszip when given.
+std::optional<CoordinateSystem> readLasCoordinateSystem(InputStream& in, const LasHeader& header,
+                                                        uint64_t pointDataEnd,
+                                                        std::vector<std::string>& notes,
+                                                        std::vector<std::byte>* laszip = nullptr);
+
+// The LASzip VLR: user "laszip encoded", record 22204.
+inline constexpr std::string_view kLaszipUser = "laszip encoded";
+inline constexpr uint16_t kLaszipRecord = 22204;
 
 }  // namespace iso::io

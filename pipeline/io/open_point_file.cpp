@@ -15,7 +15,7 @@ namespace iso {
 namespace {
 
 constexpr const char* kSupportedFormats =
-    "supported: PLY (.ply), LAS 1.0-1.4 (.las), E57 (.e57), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
+    "supported: PLY (.ply), LAS 1.0-1.4 (.las), LAZ (.laz), E57 (.e57), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
     ".csv .asc .neu .xyzrgb .xyzn, or any name with --columns), each optionally gzip-compressed "
     "(.gz)";
 
@@ -75,7 +75,7 @@ std::optional<Format> formatBySignature(io::InputStream& in) {
 Format chooseFormat(io::InputStream& in, const ReadOptions& options) {
   if (const std::optional<Format> format = formatBySignature(in)) return *format;
   const std::string extension = io::lowercaseExtension(in.path());
-  if (extension == ".laz") throw FileError(in.name(), std::nullopt, io::kLazNotSupported);
+  if (extension == ".laz") throw FileError(in.name(), 0, "not a LAZ file: no LASF signature");
   if (extension == ".e57") throw FileError(in.name(), 0, "not an E57 file: no ASTM-E57 signature");
   if (extension == ".pcd" || io::looksLikePcd(in)) return Format::kPcd;
   if (!options.columns.empty()) return Format::kText;
@@ -100,7 +100,7 @@ std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
     case Format::kPly:
       return io::makePlyReader(std::move(in), options);
     case Format::kLas:
-      return io::makeLasReader(std::move(in));
+      return io::makeLasReader(std::move(in), options);
     case Format::kDraco:
       return io::makeDracoReader(std::move(in));
     case Format::kE57:
