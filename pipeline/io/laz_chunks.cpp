@@ -7,6 +7,7 @@
 #include <limits>
 #include <string>
 
+#include "pipeline/io/laz_coder.h"
 #include "pipeline/io/laz_decoder.h"
 #include "pipeline/io/little_endian.h"
 
@@ -83,71 +84,11 @@ constexpr uint16_t kStandardRecord[9] = {20, 28, 26, 34, 57, 63, 30, 36, 38};
 // chunk puts 800 billion points in them).
 constexpr uint64_t kMaxChunks = uint64_t{1} << 24;
 
-// LASzip's arithmetic decoder (Amir Said's FastAC: 32-bit interval, periodic model updates) and
-// integer decompressor, as far as the chunk table needs them: 32-bit integers in two contexts.
-// Models are decoded by bisection, which selects the same symbol as LASzip's lookup tables.
-class ChunkTableDecoder {
+// The bytes of the chunk table, read from the stream up to a limit (then zeros, noted).
+class TableBytes {
  public:
-  // Decode from the stream, reading at most `limit` bytes of it.
-  ChunkTableDecoder(InputStream& in, uint64_t limit) : in_(in), limit_(limit) {
-    for (uint32_t k = 1; k <= 32; ++k) corrector_.emplace_back(k <= kBitsHigh ? 1u << k : 256u);
-    for (int i = 0; i < 4; ++i) value_ = (value_ << 8) | nextByte();
-  }
-
-  // The integer whose prediction is `predicted`, in context 0 or 1.
-  uint32_t decompress(uint32_t predicted, int context) {
-    return predicted + uint32_t(readCorrector(intervals_[context]));
-  }
-  // Whether the decoder needed bytes past the end of what it was given.
-  bool isOverrun() const { return isOverrun_; }
-
- private:
-  static constexpr uint32_t kMinLength = 0x01000000u;
-  static constexpr uint32_t kSymbolShift = 15;  // DM__LengthShift
-  static constexpr uint32_t kBitShift = 13;     // BM__LengthShift
-  static constexpr uint32_t kBitsHigh = 8;
-
-  struct SymbolModel {
-    explicit SymbolModel(uint32_t symbols)
-        : distribution(symbols), counts(symbols, 1), updateCycle(symbols) {
-      update();
-      untilUpdate = updateCycle = (symbols + 6) >> 1;
-    }
-    void update() {
-      const uint32_t symbols = uint32_t(counts.size());
-      if ((total += updateCycle) > (1u << kSymbolShift)) {
-        total = 0;
-        for (uint32_t& count : counts) total += (count = (count + 1) >> 1);
-      }
-      const uint32_t scale = 0x80000000u / total;
-      uint32_t sum = 0;
-      for (uint32_t k = 0; k < symbols; ++k) {
-        distribution[k] = (scale * sum) >> (31 - kSymbolShift);
-        sum += counts[k];
-      }
-      updateCycle = std::min((5 * updateCycle) >> 2, (symbols + 6) << 3);
-      untilUpdate = updateCycle;
-    }
-    std::vector<uint32_t> distribution, counts;
-    uint32_t total = 0, updateCycle, untilUpdate = 0;
-  };
-
-  struct BitModel {
-    void update() {
-      if ((count += updateCycle) > (1u << kBitShift)) {
-        count = (count + 1) >> 1;
-        zeros = (zeros + 1) >> 1;
-        if (zeros == count) ++count;
-      }
-      zeroProbability = (zeros * (0x80000000u / count)) >> (31 - kBitShift);
-      updateCycle = std::min<uint32_t>((5 * updateCycle) >> 2, 64);
-      untilUpdate = updateCycle;
-    }
-    uint32_t zeroProbability = 1u << (kBitShift - 1), zeros = 1, count = 2;
-    uint32_t updateCycle = 4, untilUpdate = 4;
-  };
-
-  uint32_t nextByte() {
+  TableBytes(InputStream& in, uint64_t limit) : in_(in), limit_(limit) {}
+  uint32_t next() {
     if (read_ < limit_) {
       const std::span<const std::byte> bytes = in_.peek(1);
       if (!bytes.empty()) {
@@ -159,80 +100,13 @@ class ChunkTableDecoder {
     isOverrun_ = true;
     return 0;
   }
+  // Whether the decoder needed bytes past the end of the table.
+  bool isOverrun() const { return isOverrun_; }
 
-  void renormalize() {
-    do {
-      value_ = (value_ << 8) | nextByte();
-    } while ((length_ <<= 8) < kMinLength);
-  }
-
-  uint32_t decodeSymbol(SymbolModel& m) {
-    uint32_t y = length_, x = 0, symbol = 0, n = uint32_t(m.distribution.size());
-    length_ >>= kSymbolShift;
-    for (uint32_t k = n >> 1; k != symbol; k = (symbol + n) >> 1) {
-      const uint32_t z = length_ * m.distribution[k];
-      if (z > value_) {
-        n = k;
-        y = z;
-      } else {
-        symbol = k;
-        x = z;
-      }
-    }
-    value_ -= x;
-    length_ = y - x;
-    if (length_ < kMinLength) renormalize();
-    ++m.counts[symbol];
-    if (--m.untilUpdate == 0) m.update();
-    return symbol;
-  }
-
-  uint32_t decodeBit(BitModel& m) {
-    const uint32_t x = m.zeroProbability * (length_ >> kBitShift);
-    const uint32_t bit = value_ >= x ? 1 : 0;
-    if (bit == 0) {
-      length_ = x;
-      ++m.zeros;
-    } else {
-      value_ -= x;
-      length_ -= x;
-    }
-    if (length_ < kMinLength) renormalize();
-    if (--m.untilUpdate == 0) m.update();
-    return bit;
-  }
-
-  uint32_t readBits(uint32_t bits) {
-    if (bits > 19) {
-      const uint32_t low = readBits(16);
-      return (readBits(bits - 16) << 16) | low;
-    }
-    const uint32_t symbol = value_ / (length_ >>= bits);
-    value_ -= length_ * symbol;
-    if (length_ < kMinLength) renormalize();
-    return symbol;
-  }
-
-  // The corrector: its bit length k (0 for 0 or 1), then its bits, the top 8 modelled.
-  int64_t readCorrector(SymbolModel& interval) {
-    const uint32_t k = decodeSymbol(interval);
-    if (k == 0) return decodeBit(zeroOrOne_);
-    if (k >= 32) return std::numeric_limits<int32_t>::min();
-    int64_t c = decodeSymbol(corrector_[k - 1]);
-    if (k > kBitsHigh) {
-      const uint32_t low = k - kBitsHigh;
-      c = (c << low) | readBits(low);
-    }
-    return c >= (int64_t{1} << (k - 1)) ? c + 1 : c - ((int64_t{1} << k) - 1);
-  }
-
+ private:
   InputStream& in_;
   uint64_t limit_, read_ = 0;
   bool isOverrun_ = false;
-  uint32_t value_ = 0, length_ = 0xFFFFFFFFu;
-  std::array<SymbolModel, 2> intervals_{SymbolModel(33), SymbolModel(33)};
-  std::vector<SymbolModel> corrector_;
-  BitModel zeroOrOne_;
 };
 
 // Where the chunk table starts: the offset at the start of the point data, or, when that is −1
@@ -341,14 +215,16 @@ std::vector<LazChunk> readLazChunkTable(InputStream& in, const LasHeader& header
     fail(fmt::format("it lists {} chunks, but {} points in chunks of {} take {}", count,
                      header.pointCount, chunkSize, needed));
   // The table ends where the file ends (or EVLRs begin); the decoder reads ahead a few bytes.
-  ChunkTableDecoder decoder(in, fileSize - tableAt - 8);
+  TableBytes source(in, fileSize - tableAt - 8);
+  laz::ArithmeticDecoder decoder(source);
+  laz::IntegerModels models(32, 2);  // the count in context 0, the size in context 1
   std::vector<LazChunk> chunks(static_cast<size_t>(count));
   uint32_t points = 0, size = 0;
   uint64_t offset = firstChunk, remaining = header.pointCount;
   for (size_t i = 0; i < chunks.size(); ++i) {
-    if (isVariable) points = decoder.decompress(points, 0);
-    size = decoder.decompress(size, 1);
-    if (decoder.isOverrun()) fail(fmt::format("the file ends inside entry {} of {}", i + 1, count));
+    if (isVariable) points = decoder.decodeInteger(models, points, 0);
+    size = decoder.decodeInteger(models, size, 1);
+    if (source.isOverrun()) fail(fmt::format("the file ends inside entry {} of {}", i + 1, count));
     LazChunk& chunk = chunks[i];
     chunk.offset = offset;
     chunk.bytes = size;

@@ -40,6 +40,17 @@ nlohmann::json inputJson(const PointReader& reader, uint64_t points) {
   return input;
 }
 
+// "FILE: NOTE", or for several files "N files (FIRST, SECOND, ...): NOTE".
+std::string noteOfFiles(const std::string& note, const std::vector<std::string>& paths) {
+  if (paths.size() == 1) return paths[0] + ": " + note;
+  constexpr size_t kNamed = 3;
+  std::string names;
+  for (size_t i = 0; i < std::min(paths.size(), kNamed); ++i)
+    names += (i > 0 ? ", " : "") + paths[i];
+  if (paths.size() > kNamed) names += ", ...";
+  return std::to_string(paths.size()) + " files (" + names + "): " + note;
+}
+
 }  // namespace
 
 std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& arguments) {
@@ -92,6 +103,8 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
     progress->begin("read", declared);
   }
   begin(normals, colors);
+  // A note said of many files (the tiles of one scan) is said once.
+  std::vector<std::pair<std::string, std::vector<std::string>>> filesOfNote;  // first said first
   PointCloud batch;
   for (auto& reader : readers) {
     uint64_t points = 0;
@@ -106,9 +119,15 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
     }
     summary.nonFiniteDropped += reader->stats().droppedNonFinite;
     summary.inputs.push_back(inputJson(*reader, points));
-    for (const std::string& note : reader->info().notes)
-      summary.notes.push_back(reader->info().path.string() + ": " + note);
+    for (const std::string& note : reader->info().notes) {
+      auto said = std::find_if(filesOfNote.begin(), filesOfNote.end(),
+                               [&](const auto& entry) { return entry.first == note; });
+      if (said == filesOfNote.end()) said = filesOfNote.insert(said, {note, {}});
+      said->second.push_back(reader->info().path.string());
+    }
+    reader.reset();  // its file and buffers
   }
+  for (const auto& [note, paths] : filesOfNote) summary.notes.push_back(noteOfFiles(note, paths));
   if (progress != nullptr) progress->end();
   summary.seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
