@@ -24,7 +24,8 @@ uint64_t rawValue(const std::byte* data, uint64_t bit, uint32_t width, uint64_t 
   const unsigned shift = static_cast<unsigned>(bit % 8);
   uint64_t value = loadLittleEndian<uint64_t>(p) >> shift;
   if constexpr (kIsWide) {
-    if (shift != 0 && width + shift > 64) value |= loadLittleEndian<uint64_t>(p + 8) << (64 - shift);
+    if (shift != 0 && width + shift > 64)
+      value |= loadLittleEndian<uint64_t>(p + 8) << (64 - shift);
   }
   return value & mask;
 }
@@ -32,12 +33,12 @@ uint64_t rawValue(const std::byte* data, uint64_t bit, uint32_t width, uint64_t 
 template <bool kIsWide>
 void unpack(const std::byte* data, uint64_t bit, uint32_t width, int64_t minimum, double scale,
             double offset, size_t count, double* out) {
-  const uint64_t mask = width == 64 ? std::numeric_limits<uint64_t>::max()
-                                    : (uint64_t{1} << width) - 1;
+  const uint64_t mask =
+      width == 64 ? std::numeric_limits<uint64_t>::max() : (uint64_t{1} << width) - 1;
   for (size_t i = 0; i < count; ++i, bit += width) {
     // minimum + raw lies in [minimum, maximum]: the unsigned sum wraps to the right integer.
-    const auto value = static_cast<int64_t>(uint64_t(minimum) +
-                                            rawValue<kIsWide>(data, bit, width, mask));
+    const auto value =
+        static_cast<int64_t>(uint64_t(minimum) + rawValue<kIsWide>(data, bit, width, mask));
     out[i] = double(value) * scale + offset;
   }
 }
@@ -54,14 +55,16 @@ E57ByteStream::E57ByteStream(const E57Field& field)
 
 void E57ByteStream::append(std::span<const std::byte> bytes) {
   if (bytes.empty()) return;
-  // Drop the decoded whole bytes first, so that the buffer holds only what is pending.
+  // Drop the decoded whole bytes once they are as many as the pending ones: each byte is then
+  // moved a bounded number of times on average, and the buffer stays under twice what is pending.
   const size_t decoded = static_cast<size_t>(bitPosition_ / 8);
-  if (decoded > 0) {
+  if (decoded > 0 && decoded >= size_ - decoded) {
     std::memmove(bytes_.data(), bytes_.data() + decoded, size_ - decoded);
     size_ -= decoded;
     bitPosition_ %= 8;
   }
-  if (bytes_.size() < size_ + bytes.size() + kPadding) bytes_.resize(size_ + bytes.size() + kPadding);
+  if (bytes_.size() < size_ + bytes.size() + kPadding)
+    bytes_.resize(size_ + bytes.size() + kPadding);
   std::memcpy(bytes_.data() + size_, bytes.data(), bytes.size());
   size_ += bytes.size();
   std::memset(bytes_.data() + size_, 0, kPadding);

@@ -14,8 +14,8 @@
 
 namespace iso::io {
 
-// The bytes of a field's bytestream that arrived and are not decoded yet. Memory: the pending
-// bytes (the caller bounds them) and 16 bytes.
+// The bytes of a field's bytestream that arrived and are not decoded yet. Memory: at most twice
+// the pending bytes (which the caller bounds) and the last buffer appended.
 class E57ByteStream {
  public:
   explicit E57ByteStream(const E57Field& field);
@@ -40,8 +40,8 @@ class E57ByteStream {
   int64_t minimum_;
   double scale_;
   double offset_;
-  // The pending bytes from bitPosition_ / 8 to size_, then zeros, so that a value can be loaded
-  // with two 8-byte reads wherever it starts.
+  // Decoded bytes, the pending bytes from bitPosition_ / 8 to size_, then zeros, so that a value
+  // can be loaded with two 8-byte reads wherever it starts.
   std::vector<std::byte> bytes_;
   size_t size_ = 0;
   uint64_t bitPosition_ = 0;  // the first bit not decoded

@@ -42,8 +42,8 @@ E57Header readE57Header(InputStream& in) {
   if (!in.knownSize())
     in.failAt(0, "gzip-compressed E57 files are not supported: decompress it first (gunzip)");
   if (bytes.size() < kHeaderSize)
-    in.failAt(bytes.size(), fmt::format("file ends inside the 48-byte E57 header ({} bytes)",
-                                        bytes.size()));
+    in.failAt(bytes.size(),
+              fmt::format("file ends inside the 48-byte E57 header ({} bytes)", bytes.size()));
   const std::byte* p = bytes.data();
   E57Header h;
   h.versionMajor = loadLittleEndian<uint32_t>(p + kVersionMajorAt);

@@ -65,8 +65,9 @@ E57Section readE57Section(E57Pages& pages, const E57Scan& scan, const std::strin
   section.dataBegin = *data;
   const uint64_t bits = bitsPerRecord(scan);
   if (bits == 0)
-    fail("every field of its prototype is constant (0 bits per record), which this reader does not "
-         "support");
+    fail(
+        "every field of its prototype is constant (0 bits per record), which this reader does not "
+        "support");
   const uint64_t capacity = (section.end - section.dataBegin) * 8 / bits;
   if (scan.recordCount > capacity)
     fail(fmt::format("its section's {} bytes cannot hold {} records of {} bits", length,
@@ -121,8 +122,8 @@ void E57PacketReader::readDataPacket(uint64_t at, size_t length) {
                            count, streams_.size()));
   size_t buffer = kDataHeaderSize + 2 * count;
   if (buffer > length)
-    failAt(at, fmt::format("a data packet's {} buffer lengths run past its {} bytes", count,
-                           length));
+    failAt(at,
+           fmt::format("a data packet's {} buffer lengths run past its {} bytes", count, length));
   for (size_t i = 0; i < count; ++i) {
     const size_t size = loadLittleEndian<uint16_t>(packet_.data() + kDataHeaderSize + 2 * i);
     if (size > length - buffer)
@@ -143,11 +144,11 @@ void E57PacketReader::checkPendingBytes(uint64_t at) const {
     if (streams_[i].pendingBytes() > streams_[largest].pendingBytes()) largest = i;
   }
   if (pending > kE57MaxPendingBytes)
-    failAt(at, fmt::format("field '{}' has {} of values waiting for the other fields' (more than "
-                           "the {} held for all fields): its packets do not interleave the fields",
-                           scan_.prototype[largest].name,
-                           byteSize(streams_[largest].pendingBytes()),
-                           byteSize(kE57MaxPendingBytes)));
+    failAt(at,
+           fmt::format("field '{}' has {} of values waiting for the other fields' (more than "
+                       "the {} held for all fields): its packets do not interleave the fields",
+                       scan_.prototype[largest].name, byteSize(streams_[largest].pendingBytes()),
+                       byteSize(kE57MaxPendingBytes)));
 }
 
 }  // namespace iso::io

@@ -143,7 +143,8 @@ class XmlParser {
                 fmt::format("the XML section's offset {} is past the end of the file or inside a "
                             "page checksum",
                             header_.xmlPhysicalOffset));
-    if (header_.xmlLogicalLength == 0) in.failAt(header_.xmlPhysicalOffset, "the XML section is empty");
+    if (header_.xmlLogicalLength == 0)
+      in.failAt(header_.xmlPhysicalOffset, "the XML section is empty");
     if (header_.xmlLogicalLength > kE57MaxXmlBytes)
       in.failAt(header_.xmlPhysicalOffset,
                 fmt::format("the XML section has {} bytes, more than the {} supported",
@@ -195,17 +196,18 @@ class XmlParser {
   static void XMLCALL onDoctype(void* user, const XML_Char*, const XML_Char*, const XML_Char*,
                                 int) {
     guarded(user, [&](XmlParser& self) {
-      self.fail("the XML section has a DOCTYPE declaration, which E57 never needs (refused, so "
-                "that no entity is expanded)");
+      self.fail(
+          "the XML section has a DOCTYPE declaration, which E57 never needs (refused, so "
+          "that no entity is expanded)");
     });
   }
   static void XMLCALL onEntity(void* user, const XML_Char* name, int, const XML_Char*, int,
-                               const XML_Char*, const XML_Char*, const XML_Char*,
-                               const XML_Char*) {
+                               const XML_Char*, const XML_Char*, const XML_Char*, const XML_Char*) {
     guarded(user, [&](XmlParser& self) {
-      self.fail(fmt::format("the XML section declares an entity ('{:.40}'), which E57 never "
-                            "needs",
-                            name));
+      self.fail(
+          fmt::format("the XML section declares an entity ('{:.40}'), which E57 never "
+                      "needs",
+                      name));
     });
   }
 
@@ -256,8 +258,7 @@ class XmlParser {
   Role roleOf(Role parent, std::string_view name) {
     switch (parent) {
       case Role::kDocument:
-        if (name != "e57Root")
-          fail(fmt::format("the root element is '{:.40}', not e57Root", name));
+        if (name != "e57Root") fail(fmt::format("the root element is '{:.40}', not e57Root", name));
         return Role::kRoot;
       case Role::kRoot:
         return name == "data3D" ? Role::kData3D : Role::kOther;
@@ -287,13 +288,15 @@ class XmlParser {
       case Role::kPrototype:
         return Role::kField;
       case Role::kField:
-        failInScan(fmt::format("its prototype field '{:.40}' holds an element ('{:.40}'): nested "
-                               "fields are not supported",
-                               stack_.back().name, name));
+        failInScan(
+            fmt::format("its prototype field '{:.40}' holds an element ('{:.40}'): nested "
+                        "fields are not supported",
+                        stack_.back().name, name));
       case Role::kCodecs:
-        failInScan(fmt::format("its points name a codec ('{:.40}'): only the default bitpack "
-                               "codec is supported",
-                               name));
+        failInScan(
+            fmt::format("its points name a codec ('{:.40}'): only the default bitpack "
+                        "codec is supported",
+                        name));
       default:
         return Role::kOther;
     }
@@ -346,8 +349,8 @@ class XmlParser {
     if (text == nullptr) return std::nullopt;
     double value = 0.0;
     if (!parseNumber(trimmed(text), value) || !std::isfinite(value))
-      failInScan(fmt::format("the {} of '{:.40}' is '{:.40}', not a finite number", name, element,
-                             text));
+      failInScan(
+          fmt::format("the {} of '{:.40}' is '{:.40}', not a finite number", name, element, text));
     return value;
   }
 
@@ -357,16 +360,16 @@ class XmlParser {
     if (text == nullptr) return std::nullopt;
     int64_t value = 0;
     if (!parseInteger(trimmed(text), value))
-      failInScan(fmt::format("the {} of '{:.40}' is '{:.40}', not a 64-bit integer", name,
-                             element, text));
+      failInScan(
+          fmt::format("the {} of '{:.40}' is '{:.40}', not a 64-bit integer", name, element, text));
     return value;
   }
 
   void addField(std::string_view name, const XML_Char** attributes) {
     E57Scan& scan = scans_.back();
     if (scan.prototype.size() == kE57MaxFields)
-      failInScan(fmt::format("its prototype has more than {} fields, the most supported",
-                             kE57MaxFields));
+      failInScan(
+          fmt::format("its prototype has more than {} fields, the most supported", kE57MaxFields));
     if (++fieldsInAll_ > kE57MaxFieldsInAll)
       fail(fmt::format("the prototypes have more than {} fields in all, the most supported",
                        withSeparators(kE57MaxFieldsInAll)));
@@ -376,9 +379,10 @@ class XmlParser {
     if (type == "Float") {
       const std::string_view precision = valueOr(attribute(attributes, "precision"), "double");
       if (precision != "single" && precision != "double")
-        failInScan(fmt::format("its prototype field '{}' has precision '{:.40}' (known: single, "
-                               "double)",
-                               field.name, precision));
+        failInScan(
+            fmt::format("its prototype field '{}' has precision '{:.40}' (known: single, "
+                        "double)",
+                        field.name, precision));
       field.encoding = precision == "single" ? E57Encoding::kSingle : E57Encoding::kDouble;
       field.lowest = optionalNumber(attributes, "minimum", name);
       field.highest = optionalNumber(attributes, "maximum", name);
@@ -401,9 +405,10 @@ class XmlParser {
       field.lowest = std::min(low, high);
       field.highest = std::max(low, high);
     } else {
-      failInScan(fmt::format("its prototype field '{}' has type '{:.40}', which this reader "
-                             "cannot decode (supported: Float, Integer, ScaledInteger)",
-                             field.name, type));
+      failInScan(
+          fmt::format("its prototype field '{}' has type '{:.40}', which this reader "
+                      "cannot decode (supported: Float, Integer, ScaledInteger)",
+                      field.name, type));
     }
     scan.prototype.push_back(std::move(field));
   }
@@ -413,8 +418,8 @@ class XmlParser {
     switch (stack_.back().role) {
       case Role::kNumber:
         if (text_.size() + text.size() > kMaxNumberText)
-          failInScan(fmt::format("the value of '{}' is too long to be a number",
-                                 stack_.back().name));
+          failInScan(
+              fmt::format("the value of '{}' is too long to be a number", stack_.back().name));
         text_.append(text);
         break;
       case Role::kScanName:

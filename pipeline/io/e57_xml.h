@@ -3,13 +3,14 @@
 // of its points (where its binary section is, how many records it holds, and the prototype that
 // says how each record is encoded). Everything else is skipped.
 //
-// The XML is untrusted: it is parsed by expat as a stream, page by page, and refused (iso::FileError
-// naming the file, the byte and the XML line) when it is malformed, has a DOCTYPE (E57 needs none,
-// and refusing it stops any entity expansion), nests deeper than kE57MaxXmlDepth, is longer than
-// kE57MaxXmlBytes, declares more than kE57MaxScans point clouds or kE57MaxFields fields in a
-// prototype (kE57MaxFieldsInAll in all), holds a malformed number, a prototype field of a type
-// that records cannot hold, a codec other than bitpack, or a point cloud without its points. What
-// the values mean (which fields are there, whether a pose is a rotation) is the reader's to check.
+// The XML is untrusted: it is parsed by expat as a stream, page by page, and refused
+// (iso::FileError naming the file, the byte and the XML line) when it is malformed, has a DOCTYPE
+// (E57 needs none, and refusing it stops any entity expansion), nests deeper than kE57MaxXmlDepth,
+// is longer than kE57MaxXmlBytes, declares more than kE57MaxScans point clouds or kE57MaxFields
+// fields in a prototype (kE57MaxFieldsInAll in all), holds a malformed number, a prototype field of
+// a type that records cannot hold, a codec other than bitpack, or a point cloud without its points.
+// What the values mean (which fields are there, whether a pose is a rotation) is the reader's to
+// check.
 #pragma once
 
 #include <array>
@@ -25,7 +26,7 @@ namespace iso::io {
 inline constexpr uint64_t kE57MaxXmlBytes = uint64_t{64} << 20;
 inline constexpr size_t kE57MaxXmlDepth = 64;
 inline constexpr size_t kE57MaxScans = size_t{1} << 16;
-inline constexpr size_t kE57MaxFields = 1024;                 // per prototype
+inline constexpr size_t kE57MaxFields = 1024;                  // per prototype
 inline constexpr size_t kE57MaxFieldsInAll = size_t{1} << 19;  // in all prototypes together
 
 // How a prototype field's values are stored in its bytestream (bitpack codec, E2807 Table 26).

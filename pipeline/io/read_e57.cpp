@@ -63,10 +63,10 @@ enum Role : uint8_t {
   kRoleCount
 };
 constexpr std::array<std::string_view, kRoleCount> kRoleNames = {
-    "cartesianX",         "cartesianY",       "cartesianZ",     "cartesianInvalidState",
-    "sphericalRange",     "sphericalAzimuth", "sphericalElevation", "sphericalInvalidState",
-    "colorRed",           "colorGreen",       "colorBlue",      "isColorInvalid",
-    "intensity",          "isIntensityInvalid"};
+    "cartesianX",     "cartesianY",        "cartesianZ",         "cartesianInvalidState",
+    "sphericalRange", "sphericalAzimuth",  "sphericalElevation", "sphericalInvalidState",
+    "colorRed",       "colorGreen",        "colorBlue",          "isColorInvalid",
+    "intensity",      "isIntensityInvalid"};
 
 // How one scan is read.
 struct ScanPlan {
@@ -130,8 +130,9 @@ ScanPlan planScan(const E57Scan& scan, size_t index, const InputStream& in) {
   }
   if (!hasAll(plan, kCartesianX)) {
     if (!hasAll(plan, kRange))
-      fail("its prototype has neither cartesianX, cartesianY and cartesianZ nor sphericalRange, "
-           "sphericalAzimuth and sphericalElevation");
+      fail(
+          "its prototype has neither cartesianX, cartesianY and cartesianZ nor sphericalRange, "
+          "sphericalAzimuth and sphericalElevation");
     plan.isSpherical = true;
   }
   plan.hasColors = hasAll(plan, kRed);
@@ -149,9 +150,8 @@ void checkSectionsApart(const std::vector<ScanPlan>& plans, const std::vector<E5
   std::vector<size_t> order;
   for (size_t i = 0; i < scans.size(); ++i)
     if (scans[i].recordCount > 0) order.push_back(i);
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return plans[a].section.begin < plans[b].section.begin;
-  });
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return plans[a].section.begin < plans[b].section.begin; });
   for (size_t k = 1; k < order.size(); ++k) {
     const ScanPlan& before = plans[order[k - 1]];
     const ScanPlan& after = plans[order[k]];
@@ -177,11 +177,12 @@ class E57PointReader final : public PointReader {
     uint64_t declared = 0;
     for (const E57Scan& scan : scans_) declared += scan.recordCount;
     info_.path = in_.path();
-    info_.format = fmt::format("e57 {}.{} ({} scan{})", header_.versionMajor,
-                               header_.versionMinor, scans_.size(), scans_.size() == 1 ? "" : "s");
+    info_.format = fmt::format("e57 {}.{} ({} scan{})", header_.versionMajor, header_.versionMinor,
+                               scans_.size(), scans_.size() == 1 ? "" : "s");
     info_.declaredPoints = declared;
-    info_.hasColors = everyScanWithPointsHas(&ScanPlan::hasColors, "colors (colorRed, colorGreen, "
-                                                                   "colorBlue)");
+    info_.hasColors = everyScanWithPointsHas(&ScanPlan::hasColors,
+                                             "colors (colorRed, colorGreen, "
+                                             "colorBlue)");
     if (options.keepExtras &&
         everyScanWithPointsHas(&ScanPlan::hasIntensity, "intensity (kept as an extra)"))
       info_.extraNames = {"intensity"};
@@ -209,8 +210,8 @@ class E57PointReader final : public PointReader {
         if (!packets_->readPacket()) failSectionEnds();
         continue;
       }
-      const size_t count = static_cast<size_t>(
-          std::min<uint64_t>({available, kBatchRecords, maxPoints - appended}));
+      const size_t count =
+          static_cast<size_t>(std::min<uint64_t>({available, kBatchRecords, maxPoints - appended}));
       appended += decodeRecords(count, out);
       recordsDone_ += count;
     }
@@ -274,10 +275,10 @@ class E57PointReader final : public PointReader {
 
   [[noreturn]] void failSectionEnds() const {
     const ScanPlan& plan = plans_[scanIndex_];
-    in_.failAt(pages_.physicalOffset(plan.section.end),
-               fmt::format("{}: its section ends after {} of {} records", plan.label,
-                           withSeparators(recordsDone_),
-                           withSeparators(scans_[scanIndex_].recordCount)));
+    in_.failAt(
+        pages_.physicalOffset(plan.section.end),
+        fmt::format("{}: its section ends after {} of {} records", plan.label,
+                    withSeparators(recordsDone_), withSeparators(scans_[scanIndex_].recordCount)));
   }
 
   // Decode `count` records of the current scan into out; returns the points appended.
@@ -292,22 +293,37 @@ class E57PointReader final : public PointReader {
   }
 
   // The values of a role for the batch, or nullptr when the scan does not decode it.
-  const double* column(Role role) const {
-    return decoded_[role] ? columns_[role].data() : nullptr;
+  const double* column(Role role) const { return decoded_[role] ? columns_[role].data() : nullptr; }
+
+  // Append the batch's valid records with finite positions, in passes: positions, then the
+  // colors and intensities of the records kept. Returns the points appended.
+  size_t appendPoints(const ScanPlan& plan, size_t count, PointCloud& out) {
+    const size_t begin = out.size();
+    out.positions.resize(begin + count);
+    const size_t kept = appendPositions(plan, count, out.positions.data() + begin);
+    out.positions.resize(begin + kept);
+    if (info_.hasColors) {
+      out.colors.resize(begin + kept);
+      appendColors(plan, kept, out.colors.data() + begin);
+    }
+    if (!info_.extraNames.empty()) {
+      out.extras.resize(begin + kept);
+      appendIntensities(kept, out.extras.data() + begin);
+    }
+    return kept;
   }
 
-  size_t appendPoints(const ScanPlan& plan, size_t count, PointCloud& out) {
+  // World positions of the records that are valid and finite; their indices go to kept_.
+  size_t appendPositions(const ScanPlan& plan, size_t count, glm::dvec3* out) {
     const Role first = plan.isSpherical ? kRange : kCartesianX;
     const double* a = column(first);
     const double* b = column(Role(first + 1));
     const double* c = column(Role(first + 2));
     const double* invalid = column(Role(first + 3));
-    const size_t begin = out.size();
-    out.positions.resize(begin + count);
-    if (info_.hasColors) out.colors.resize(begin + count);
-    const bool hasIntensity = !info_.extraNames.empty();
-    if (hasIntensity) out.extras.resize(begin + count);
-    size_t written = begin;
+    const glm::dmat3 rotation = plan.rotation;
+    const glm::dvec3 translation = plan.translation;
+    uint32_t* records = kept_.data();
+    size_t kept = 0;
     for (size_t i = 0; i < count; ++i) {
       if (invalid != nullptr && invalid[i] != 0.0) {
         ++droppedInvalid_;
@@ -319,58 +335,69 @@ class E57PointReader final : public PointReader {
         local = {a[i] * cosElevation * std::cos(b[i]), a[i] * cosElevation * std::sin(b[i]),
                  a[i] * std::sin(c[i])};
       }
-      const glm::dvec3 position = plan.rotation * local + plan.translation;
+      const glm::dvec3 position = rotation * local + translation;
       if (!isFinite(position)) {
         ++stats_.droppedNonFinite;
         continue;
       }
-      out.positions[written] = position;
-      if (info_.hasColors) out.colors[written] = colorOf(plan, i);
-      if (hasIntensity) out.extras[written] = intensityOf(i);
-      ++written;
+      out[kept] = position;
+      records[kept++] = static_cast<uint32_t>(i);
     }
-    out.positions.resize(written);
-    if (info_.hasColors) out.colors.resize(written);
-    if (hasIntensity) out.extras.resize(written);
-    return written - begin;
+    return kept;
   }
 
-  glm::vec3 colorOf(const ScanPlan& plan, size_t i) {
+  void appendColors(const ScanPlan& plan, size_t kept, glm::vec3* out) {
+    const float* table = srgb16ToLinearTable().data();
     const double* invalid = column(kColorInvalid);
-    if (invalid != nullptr && invalid[i] != 0.0) {
-      ++neutralColors_;
-      const float grey = srgbToLinear(0.5f);
-      return {grey, grey, grey};
-    }
-    const std::array<float, 65536>& table = srgb16ToLinearTable();
-    glm::vec3 color;
-    for (int ch = 0; ch < 3; ++ch) {
-      double unit = (columns_[size_t(kRed + ch)][i] - plan.colorLow[size_t(ch)]) *
-                    plan.colorScale[size_t(ch)];
+    const uint32_t* records = kept_.data();
+    const float grey = srgbToLinear(0.5f);
+    // Locals, so that the loop does not reload them after each store.
+    const std::array<const double*, 3> values = {column(kRed), column(kGreen), column(kBlue)};
+    const std::array<double, 3> low = plan.colorLow;
+    const std::array<double, 3> scale = plan.colorScale;
+    const auto channel = [&](size_t ch, size_t i) {
+      double unit = (values[ch][i] - low[ch]) * scale[ch];
       if (!(unit > 0.0)) unit = 0.0;  // NaN too
       if (unit > 1.0) unit = 1.0;
       // 8-bit codes land on entries v * 257 exactly; other ranges within 1 / 131070.
-      color[ch] = table[static_cast<size_t>(std::lround(unit * 65535.0))];
+      return table[static_cast<size_t>(unit * 65535.0 + 0.5)];
+    };
+    size_t neutral = 0;
+    for (size_t k = 0; k < kept; ++k) {
+      const size_t i = records[k];
+      if (invalid != nullptr && invalid[i] != 0.0) {
+        ++neutral;
+        out[k] = glm::vec3(grey);
+      } else {
+        out[k] = {channel(0, i), channel(1, i), channel(2, i)};
+      }
     }
-    return color;
+    neutralColors_ += neutral;
   }
 
-  float intensityOf(size_t i) {
+  void appendIntensities(size_t kept, float* out) {
+    const double* intensity = column(kIntensity);
     const double* invalid = column(kIntensityInvalid);
-    if (invalid != nullptr && invalid[i] != 0.0) {
-      ++invalidIntensities_;
-      return std::numeric_limits<float>::quiet_NaN();
+    const uint32_t* records = kept_.data();
+    for (size_t k = 0; k < kept; ++k) {
+      const size_t i = records[k];
+      if (invalid != nullptr && invalid[i] != 0.0) {
+        ++invalidIntensities_;
+        out[k] = std::numeric_limits<float>::quiet_NaN();
+      } else {
+        out[k] = narrowToFloat(intensity[i]);
+      }
     }
-    return narrowToFloat(columns_[kIntensity][i]);
   }
 
   void addClosingNotes() {
     if (hasClosingNotes_) return;
     hasClosingNotes_ = true;
     if (droppedInvalid_ > 0)
-      info_.notes.push_back(fmt::format("{} points marked invalid (cartesianInvalidState or "
-                                        "sphericalInvalidState not 0) dropped",
-                                        withSeparators(droppedInvalid_)));
+      info_.notes.push_back(
+          fmt::format("{} points marked invalid (cartesianInvalidState or "
+                      "sphericalInvalidState not 0) dropped",
+                      withSeparators(droppedInvalid_)));
     if (neutralColors_ > 0)
       info_.notes.push_back(fmt::format("{} points marked isColorInvalid given a neutral grey",
                                         withSeparators(neutralColors_)));
@@ -389,9 +416,10 @@ class E57PointReader final : public PointReader {
   size_t scanIndex_ = 0;
   uint64_t recordsDone_ = 0;  // of the current scan, dropped ones included
   std::optional<E57PacketReader> packets_;
-  std::array<bool, kRoleCount> decoded_{};  // the roles the current scan decodes
-  std::vector<bool> isFieldDecoded_;         // per prototype field of the current scan
-  std::array<std::vector<double>, kRoleCount> columns_;
+  std::array<bool, kRoleCount> decoded_{};               // the roles the current scan decodes
+  std::vector<bool> isFieldDecoded_;                     // per prototype field of the current scan
+  std::array<std::vector<double>, kRoleCount> columns_;  // the batch's values of each role
+  std::vector<uint32_t> kept_ = std::vector<uint32_t>(kBatchRecords);  // records appended
   uint64_t droppedInvalid_ = 0;
   uint64_t neutralColors_ = 0;
   uint64_t invalidIntensities_ = 0;
