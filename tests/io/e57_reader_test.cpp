@@ -618,6 +618,15 @@ TEST(E57Reader, refusesTruncatedFilesSayingSo) {
   EXPECT_HAS(errorOf(cut), "byte 30: file ends inside the 48-byte E57 header (30 bytes)");
 }
 
+// Sections are read out of order and the file's length is checked against its size: a gzip
+// stream allows neither cheaply.
+TEST(E57Reader, refusesGzipCompressedFilesSayingToDecompressThem) {
+  test::TempDir dir;
+  test::writeGzip(dir / "scan.e57.gz", test::makeE57(smallFile()));
+  EXPECT_HAS(test::readError(dir / "scan.e57.gz"),
+             "byte 0: gzip-compressed E57 files are not supported: decompress it first (gunzip)");
+}
+
 TEST(E57Reader, refusesUnsupportedVersionsAndPageSizes) {
   E57Spec spec = smallFile();
   spec.versionMajor = 2;
