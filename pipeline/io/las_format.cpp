@@ -119,8 +119,8 @@ LasHeader readLasHeader(InputStream& in) {
 }
 
 std::string lasFormatName(const LasHeader& header) {
-  return fmt::format("{} {}.{} format {}", header.isCompressed ? "laz" : "las",
-                     header.versionMajor, header.versionMinor, header.pointFormat);
+  return fmt::format("{} {}.{} format {}", header.isCompressed ? "laz" : "las", header.versionMajor,
+                     header.versionMinor, header.pointFormat);
 }
 
 size_t lasRgbOffset(int pointFormat) { return kRgbAt[pointFormat]; }

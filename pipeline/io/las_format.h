@@ -21,9 +21,9 @@ struct LasHeader {
   uint64_t headerSize = 0;
   uint64_t pointDataOffset = 0;
   uint32_t vlrCount = 0;
-  uint64_t evlrStart = 0;  // LAS 1.4
-  uint32_t evlrCount = 0;  // LAS 1.4
-  int pointFormat = 0;     // without the compression bits
+  uint64_t evlrStart = 0;     // LAS 1.4
+  uint32_t evlrCount = 0;     // LAS 1.4
+  int pointFormat = 0;        // without the compression bits
   bool isCompressed = false;  // LASzip: bit 7 (bit 6 in early versions) of the format byte
   uint64_t recordLength = 0;
   uint64_t pointCount = 0;
@@ -50,8 +50,7 @@ uint64_t lasColorProbeRecords(const LasHeader& header);
 // Many writers store 8-bit colors in the 16-bit RGB fields, as they are (0–255) or times 256
 // (0–65280, every low byte 0). Decided from the given records (the probe's): none above 255 is
 // 8-bit; every low byte 0 is 8-bit times 256; otherwise 16-bit.
-LasColorCoding probeLasColorCoding(const LasHeader& header, const std::byte* records,
-                                   size_t count);
+LasColorCoding probeLasColorCoding(const LasHeader& header, const std::byte* records, size_t count);
 
 // The note a reader adds for 8-bit colors times 256.
 inline constexpr const char* kLasColorsTimes256Note =

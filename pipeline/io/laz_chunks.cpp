@@ -24,7 +24,12 @@ constexpr size_t kItemCountAt = 32;
 constexpr size_t kItemsAt = 34;
 constexpr size_t kItemBytes = 6;
 
-enum Compressor : uint16_t { kNone = 0, kPointwise = 1, kPointwiseChunked = 2, kLayeredChunked = 3 };
+enum Compressor : uint16_t {
+  kNone = 0,
+  kPointwise = 1,
+  kPointwiseChunked = 2,
+  kLayeredChunked = 3
+};
 
 // Item types and the versions laz-perf decodes: version 2 of the LAS 1.0–1.3 items, version 3 of
 // the LAS 1.4 ones.
@@ -47,17 +52,28 @@ struct Item {
 
 std::string itemName(uint16_t type) {
   switch (type) {
-    case kByte: return "BYTE";
-    case kPoint10: return "POINT10";
-    case kGpsTime11: return "GPSTIME11";
-    case kRgb12: return "RGB12";
-    case kWavepacket13: return "WAVEPACKET13";
-    case kPoint14: return "POINT14";
-    case kRgb14: return "RGB14";
-    case kRgbNir14: return "RGBNIR14";
-    case kWavepacket14: return "WAVEPACKET14";
-    case kByte14: return "BYTE14";
-    default: return fmt::format("of type {}", type);
+    case kByte:
+      return "BYTE";
+    case kPoint10:
+      return "POINT10";
+    case kGpsTime11:
+      return "GPSTIME11";
+    case kRgb12:
+      return "RGB12";
+    case kWavepacket13:
+      return "WAVEPACKET13";
+    case kPoint14:
+      return "POINT14";
+    case kRgb14:
+      return "RGB14";
+    case kRgbNir14:
+      return "RGBNIR14";
+    case kWavepacket14:
+      return "WAVEPACKET14";
+    case kByte14:
+      return "BYTE14";
+    default:
+      return fmt::format("of type {}", type);
   }
 }
 
@@ -151,13 +167,15 @@ uint32_t checkLaszipRecord(const InputStream& in, const LasHeader& header,
   if (u16(kCoderAt) != 0) fail(fmt::format("unknown LASzip coder {}", u16(kCoderAt)));
   const int format = header.pointFormat;
   if (format == 4 || format == 5 || format >= 9)
-    fail(fmt::format("LAZ point format {} (with waveform packets) is not decoded: laz-perf "
-                     "decodes point formats 0-3 and 6-8",
-                     format));
+    fail(
+        fmt::format("LAZ point format {} (with waveform packets) is not decoded: laz-perf "
+                    "decodes point formats 0-3 and 6-8",
+                    format));
   if (compressor == kNone || compressor == kPointwise)
-    fail(fmt::format("LASzip compressor {} ({}) is not decoded: laz-perf decodes chunked LAZ "
-                     "(LASzip 2 and later)",
-                     compressor, compressor == kNone ? "none" : "pointwise, without chunks"));
+    fail(
+        fmt::format("LASzip compressor {} ({}) is not decoded: laz-perf decodes chunked LAZ "
+                    "(LASzip 2 and later)",
+                    compressor, compressor == kNone ? "none" : "pointwise, without chunks"));
   const uint16_t expected = format <= 3 ? kPointwiseChunked : kLayeredChunked;
   if (compressor != expected)
     fail(fmt::format("LASzip compressor {} does not fit point format {} (it takes {})", compressor,
@@ -167,22 +185,24 @@ uint32_t checkLaszipRecord(const InputStream& in, const LasHeader& header,
   const std::vector<Item> items = expectedItems(format, extraBytes);
   for (size_t i = 0; i < std::max<size_t>(items.size(), itemCount); ++i) {
     if (i >= itemCount || i >= items.size())
-      fail(fmt::format("the LASzip VLR lists {} items where point format {} with {} extra bytes "
-                       "has {}",
-                       itemCount, format, extraBytes, items.size()));
+      fail(
+          fmt::format("the LASzip VLR lists {} items where point format {} with {} extra bytes "
+                      "has {}",
+                      itemCount, format, extraBytes, items.size()));
     const Item found{u16(kItemsAt + kItemBytes * i), u16(kItemsAt + kItemBytes * i + 2),
                      u16(kItemsAt + kItemBytes * i + 4)};
     const Item& want = items[i];
     if (found.type != want.type || found.size != want.size)
-      fail(fmt::format("LASzip item {} is {} of {} bytes where point format {} (record of {} "
-                       "bytes) has {} of {}",
-                       i + 1, itemName(found.type), found.size, format, header.recordLength,
-                       itemName(want.type), want.size));
+      fail(
+          fmt::format("LASzip item {} is {} of {} bytes where point format {} (record of {} "
+                      "bytes) has {} of {}",
+                      i + 1, itemName(found.type), found.size, format, header.recordLength,
+                      itemName(want.type), want.size));
     if (found.version != want.version)
-      fail(fmt::format("LASzip item {} version {} is not decoded: laz-perf decodes version {} "
-                       "(written by LASzip {} and later)",
-                       itemName(found.type), found.version, want.version,
-                       want.version == 2 ? "2" : "3"));
+      fail(fmt::format(
+          "LASzip item {} version {} is not decoded: laz-perf decodes version {} "
+          "(written by LASzip {} and later)",
+          itemName(found.type), found.version, want.version, want.version == 2 ? "2" : "3"));
   }
   const uint32_t chunkSize = loadLittleEndian<uint32_t>(payload.data() + kChunkSizeAt);
   if (chunkSize == 0) fail("the LASzip VLR's chunk size is 0");
@@ -244,8 +264,8 @@ std::vector<LazChunk> readLazChunkTable(InputStream& in, const LasHeader& header
     offset += chunk.bytes;
   }
   if (remaining > 0)
-    fail(fmt::format("its chunks hold {} points, the header says {}",
-                     header.pointCount - remaining, header.pointCount));
+    fail(fmt::format("its chunks hold {} points, the header says {}", header.pointCount - remaining,
+                     header.pointCount));
   return chunks;
 }
 

@@ -13,9 +13,9 @@
 namespace iso::io::laz {
 
 inline constexpr uint32_t kMinLength = 0x01000000u;  // below it the interval is renormalized
-inline constexpr uint32_t kSymbolShift = 15;         // length bits dropped before a symbol's product
-inline constexpr uint32_t kBitShift = 13;            // and before a bit's
-inline constexpr uint32_t kBitsHigh = 8;             // corrector bits coded with a model
+inline constexpr uint32_t kSymbolShift = 15;  // length bits dropped before a symbol's product
+inline constexpr uint32_t kBitShift = 13;     // and before a bit's
+inline constexpr uint32_t kBitsHigh = 8;      // corrector bits coded with a model
 
 // An adaptive model of `symbols` symbols.
 struct SymbolModel {

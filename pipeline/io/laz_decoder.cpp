@@ -15,7 +15,7 @@
 #include <type_traits>
 
 extern "C" {
-#include "lazperf.h"  // made by wasm2c from npm's laz-perf (pipeline/io/CMakeLists.txt)
+#include <lazperf.h>  // made by wasm2c from npm's laz-perf (pipeline/io/CMakeLists.txt)
 }
 #include "pipeline/io/laz_wasm_runtime.h"
 
@@ -149,8 +149,7 @@ u32 Z_wasi_snapshot_preview1Z_fd_seek(Z_wasi_snapshot_preview1_instance_t*, u32,
                                       u32) {
   return 8;  // WASI EBADF
 }
-u32 Z_wasi_snapshot_preview1Z_fd_write(Z_wasi_snapshot_preview1_instance_t*, u32, u32, u32,
-                                       u32) {
+u32 Z_wasi_snapshot_preview1Z_fd_write(Z_wasi_snapshot_preview1_instance_t*, u32, u32, u32, u32) {
   return 8;
 }
 
@@ -286,8 +285,8 @@ void LazChunkDecoder::open(int format, size_t recordLength, std::span<const std:
   std::byte* input = reinterpret_cast<std::byte*>(w.module.w2c_memory.data + w.input);
   std::copy(chunk.begin(), chunk.end(), input);
   std::fill_n(input + chunk.size(), kPadding, std::byte{0});
-  const auto openChunk = w.function<void (*)(void*, u32, u32, u32, u32, u32)>(
-      w.env.open, functionTypes().open);
+  const auto openChunk =
+      w.function<void (*)(void*, u32, u32, u32, u32, u32)>(w.env.open, functionTypes().open);
   auto call = [&] {
     openChunk.call(openChunk.instance, w.env.open.context, w.decoder, u32(format),
                    u32(recordLength), w.input);
@@ -301,8 +300,8 @@ void LazChunkDecoder::decode(size_t count, std::byte* out) {
   Instance& w = *instance_;
   if (w.isBroken || recordLength_ == 0) throw LazDecodeError("no chunk is open");
   w.reserve(w.output, w.outputCapacity, std::min(count, kSliceRecords) * recordLength_);
-  const auto getPoint = w.function<void (*)(void*, u32, u32, u32)>(w.env.getPoint,
-                                                                   functionTypes().getPoint);
+  const auto getPoint =
+      w.function<void (*)(void*, u32, u32, u32)>(w.env.getPoint, functionTypes().getPoint);
   for (size_t done = 0; done < count;) {
     const size_t slice = std::min(count - done, kSliceRecords);
     auto call = [&] {

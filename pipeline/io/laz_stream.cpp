@@ -28,9 +28,7 @@ constexpr size_t kLargeSliceRecords = 65536;
 // Chunks a stream queues ahead of the one it reads.
 constexpr size_t kQueuedAhead = 64;
 
-size_t workerCount() {
-  return std::clamp<size_t>(std::thread::hardware_concurrency(), 1, 32);
-}
+size_t workerCount() { return std::clamp<size_t>(std::thread::hardware_concurrency(), 1, 32); }
 
 }  // namespace
 
@@ -267,8 +265,8 @@ std::span<const std::byte> LazChunkStream::next(size_t maxRecords) {
       const size_t records = current_->records.size() / recordLength_;
       if (recordsTaken_ < records) {
         const size_t count = std::min(maxRecords, records - recordsTaken_);
-        const std::span<const std::byte> out(current_->records.data() + recordsTaken_ * recordLength_,
-                                             count * recordLength_);
+        const std::span<const std::byte> out(
+            current_->records.data() + recordsTaken_ * recordLength_, count * recordLength_);
         recordsTaken_ += count;
         return out;
       }
@@ -286,25 +284,26 @@ std::span<const std::byte> LazChunkStream::next(size_t maxRecords) {
         large_->decoder = std::make_unique<LazChunkDecoder>();
         large_->decoder->open(format_, recordLength_, compressed);
       } catch (const LazDecodeError& error) {
-        throw FileError(file_->name(), chunk.offset,
-                        fmt::format("chunk {} of {}: {}", nextChunk_, chunks_.size(),
-                                    error.what()));
+        throw FileError(
+            file_->name(), chunk.offset,
+            fmt::format("chunk {} of {}: {}", nextChunk_, chunks_.size(), error.what()));
       }
       large_->remaining = chunk.points;
       continue;
     }
     Pool::shared().take(*job);
     if (job->error)
-      throw FileError(job->error->file(), job->error->offset(),
-                      fmt::format("chunk {} of {}: {}", nextChunk_, chunks_.size(),
-                                  job->error->reason()));
+      throw FileError(
+          job->error->file(), job->error->offset(),
+          fmt::format("chunk {} of {}: {}", nextChunk_, chunks_.size(), job->error->reason()));
     current_ = std::move(job);
     recordsTaken_ = 0;
   }
 }
 
 std::span<const std::byte> LazChunkStream::fromLargeChunk(size_t maxRecords) {
-  const size_t count = size_t(std::min<uint64_t>({large_->remaining, maxRecords, kLargeSliceRecords}));
+  const size_t count =
+      size_t(std::min<uint64_t>({large_->remaining, maxRecords, kLargeSliceRecords}));
   if (count == 0) {
     large_.reset();
     return next(maxRecords);

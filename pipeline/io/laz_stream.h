@@ -59,12 +59,12 @@ class LazChunkStream {
   int format_;
   size_t recordLength_;
   std::vector<LazChunk> chunks_;
-  uint64_t number_;        // in the pool's order of streams
-  size_t nextChunk_ = 0;   // the chunk next() continues with
-  size_t nextQueued_ = 0;  // the first chunk not queued yet
+  uint64_t number_;                           // in the pool's order of streams
+  size_t nextChunk_ = 0;                      // the chunk next() continues with
+  size_t nextQueued_ = 0;                     // the first chunk not queued yet
   std::deque<std::shared_ptr<LazJob>> jobs_;  // chunks nextChunk_ to nextQueued_ (null: large)
-  std::shared_ptr<LazJob> current_;            // the chunk records come from
-  size_t recordsTaken_ = 0;                    // of current_'s
+  std::shared_ptr<LazJob> current_;           // the chunk records come from
+  size_t recordsTaken_ = 0;                   // of current_'s
   struct LargeChunk;
   std::unique_ptr<LargeChunk> large_;  // a chunk too large to decode at once
 };

@@ -15,9 +15,9 @@ namespace iso {
 namespace {
 
 constexpr const char* kSupportedFormats =
-    "supported: PLY (.ply), LAS 1.0-1.4 (.las), LAZ (.laz), E57 (.e57), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
+    "supported: PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt .pts "
     ".csv .asc .neu .xyzrgb .xyzn, or any name with --columns), each optionally gzip-compressed "
-    "(.gz)";
+    "(.gz); LAZ (.laz) and E57 (.e57)";
 
 // Extensions always read as text (CloudCompare's ASCII cloud names among them).
 constexpr std::string_view kTextExtensions[] = {".xyz", ".txt", ".pts",    ".csv",

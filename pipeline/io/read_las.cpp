@@ -51,7 +51,8 @@ class LasPointReader final : public PointReader {
     if (coding == LasColorCoding::kEightTimes256) info_.notes.push_back(kLasColorsTimes256Note);
     decoder_.emplace(header_, coding, options.keepExtras);
     info_.extraNames = decoder_->extraNames();
-    if (isLazByName) info_.notes.push_back("named .laz but its points are not compressed: read as LAS");
+    if (isLazByName)
+      info_.notes.push_back("named .laz but its points are not compressed: read as LAS");
   }
 
   const PointFileInfo& info() const override { return info_; }

@@ -31,8 +31,8 @@ class LazPointReader final : public PointReader {
     if (!in.knownSize())
       in.failAt(0, "a compressed copy of a LAZ file is not read: decompress it (gunzip) first");
     std::vector<std::byte> laszip;
-    info_.crs = readLasCoordinateSystem(in, header_, header_.pointDataOffset + 8, info_.notes,
-                                        &laszip);
+    info_.crs =
+        readLasCoordinateSystem(in, header_, header_.pointDataOffset + 8, info_.notes, &laszip);
     const uint32_t chunkSize = checkLaszipRecord(in, header_, laszip);
     std::vector<LazChunk> chunks = readLazChunkTable(in, header_, chunkSize, *in.knownSize());
     stream_.emplace(std::make_shared<SharedFile>(in.path()), header_.pointFormat,

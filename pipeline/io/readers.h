@@ -1,7 +1,8 @@
 // Readers of point files: PLY (ASCII, binary little and big endian), XYZ-like text with a column
-// spec or guessed columns, LAS 1.0–1.4 (with its coordinate system), PCD (ascii, binary,
-// binary_compressed) and Draco. Gzip-compressed files (.gz)
-// are read transparently. Readers stream: they hand out points in batches, so memory does not grow
+// spec or guessed columns, LAS 1.0–1.4 (with its coordinate system), LAZ (LASzip-compressed LAS,
+// decoded by laz-perf on every core), E57 (every scan, its pose applied), PCD (ascii, binary,
+// binary_compressed) and Draco. Gzip-compressed files (.gz) are read transparently, but for LAZ
+// and E57, which seek. Readers stream: they hand out points in batches, so memory does not grow
 // with the file (except Draco, which decodes a whole file at once).
 //
 // Errors (unreadable, malformed, truncated, unsupported files) throw iso::FileError naming the file
@@ -33,8 +34,9 @@ struct ReadOptions {
   // Colors in text files are 0–255 when any color value of those rows exceeds 1, else 0–1.
   std::string columns;
   // PLY: carry every vertex scalar property that is not read as a position, normal or color
-  // (intensity, confidence, scalar_*, ...) as a float extra, in header order. Other formats have
-  // none. Off: such properties are skipped at no cost.
+  // (intensity, confidence, scalar_*, ...) as a float extra, in header order. LAS, LAZ and E57:
+  // the intensity as the extra "intensity" (as stored; E57's NaN where marked invalid). Other
+  // formats have none. Off: such properties are skipped at no cost.
   bool keepExtras = false;
 };
 
@@ -83,12 +85,12 @@ class PointReader {
   virtual const ReadStats& stats() const = 0;
 };
 
-// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF", "DRACO"),
-// then by extension (.pcd; .xyz .txt .pts .csv .asc .neu .xyzrgb .xyzn as text), then by content
-// again: a PCD header, or text (whyNotText in point_readers.h) for a name of another extension, or
-// of any extension with ReadOptions::columns. LAZ and E57 files (by signature or extension) are
-// refused with a message saying how to convert them; a file of no known format with one naming
-// each format tried and why the text check failed.
+// Open a point file, choosing the reader by content (PLY magic, LAS signature "LASF" — LAZ when
+// its point format is marked compressed —, "DRACO", "ASTM-E57"), then by extension (.pcd; .xyz
+// .txt .pts .csv .asc .neu .xyzrgb .xyzn as text), then by content again: a PCD header, or text
+// (whyNotText in point_readers.h) for a name of another extension, or of any extension with
+// ReadOptions::columns. A .laz or .e57 name without its signature is refused saying so; a file of
+// no known format with a message naming each format tried and why the text check failed.
 std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
                                            const ReadOptions& options = {});
 

@@ -18,7 +18,7 @@
 #include <sstream>
 
 #include "iso/quantize.h"
-#include "tests/io/e57_file.h"
+#include "tests/support/e57_file.h"
 #include "tests/io/io_test_util.h"
 
 namespace iso {

@@ -18,10 +18,9 @@
 namespace iso {
 namespace {
 
-constexpr const char* kSamples[] = {"las10-f0-chunks100",    "las11-f1-geotiff",
-                                    "las12-f2-variable",     "las13-f3-onechunk",
-                                    "las14-f6-variable-evlr", "las14-f7-extrabytes",
-                                    "las14-f8-tableatend",   "lion-tile-r006"};
+constexpr const char* kSamples[] = {
+    "las10-f0-chunks100",     "las11-f1-geotiff",    "las12-f2-variable",   "las13-f3-onechunk",
+    "las14-f6-variable-evlr", "las14-f7-extrabytes", "las14-f8-tableatend", "lion-tile-r006"};
 
 constexpr size_t kPointDataOffsetAt = 96;
 constexpr size_t kPointFormatAt = 104;
@@ -54,6 +53,13 @@ T loadAt(const std::vector<std::byte>& bytes, size_t at) {
 template <typename T>
 void storeAt(std::vector<std::byte>& bytes, size_t at, T value) {
   std::memcpy(bytes.data() + at, &value, sizeof value);
+}
+
+// A copy of `bytes` with `value` at `at`.
+template <typename T>
+std::vector<std::byte> patched(std::vector<std::byte> bytes, size_t at, T value) {
+  storeAt(bytes, at, value);
+  return bytes;
 }
 
 // Where the payload of the LASzip VLR starts.
@@ -110,9 +116,9 @@ TEST_F(LazReader, theSamplesCoverEveryDecodedFormatChunkingAndCoordinateSystemRe
   std::vector<std::string> formats;
   for (const char* name : kSamples)
     formats.push_back(openPointFile(sample(std::string(name) + ".laz"))->info().format);
-  for (const char* format : {"laz 1.0 format 0", "laz 1.1 format 1", "laz 1.2 format 2",
-                             "laz 1.3 format 3", "laz 1.4 format 6", "laz 1.4 format 7",
-                             "laz 1.4 format 8"})
+  for (const char* format :
+       {"laz 1.0 format 0", "laz 1.1 format 1", "laz 1.2 format 2", "laz 1.3 format 3",
+        "laz 1.4 format 6", "laz 1.4 format 7", "laz 1.4 format 8"})
     EXPECT_NE(std::find(formats.begin(), formats.end(), format), formats.end()) << format;
   // Variable chunks, the table's offset at the end, the WKT in an EVLR, extra bytes.
   const auto variable = test::readFile(sample("las12-f2-variable.laz"));
@@ -134,7 +140,8 @@ TEST_F(LazReader, readsTheSamePointsInAnyBatchSize) {
 TEST_F(LazReader, readersOpenedTogetherGetTheirOwnPointsWhateverTheOrderOfReading) {
   std::vector<std::unique_ptr<PointReader>> readers;
   for (const char* name : kSamples)
-    readers.push_back(openPointFile(sample(std::string(name) + ".laz"), {.columns = "", .keepExtras = true}));
+    readers.push_back(
+        openPointFile(sample(std::string(name) + ".laz"), {.columns = "", .keepExtras = true}));
   // Drop two before reading anything and one half read: their queued chunks are cancelled.
   readers[1].reset();
   PointCloud half;
@@ -180,23 +187,18 @@ TEST_F(LazReader, thePublishedLionTilesAreExactlyThePointsOfTheMergedLas) {
 TEST_F(LazReader, refusesByNameWhatLazPerfDoesNotDecode) {
   const auto good = test::readFile(sample("las10-f0-chunks100.laz"));
   const size_t vlr = laszipPayloadAt(good);
-  auto patched = [&](size_t at, auto value) {
-    auto bytes = good;
-    storeAt(bytes, at, value);
-    return bytes;
-  };
-  EXPECT_CONTAINS(lazError(patched(vlr, uint16_t{1})),
+  EXPECT_CONTAINS(lazError(patched(good, vlr, uint16_t{1})),
                   "LASzip compressor 1 (pointwise, without chunks) is not decoded: laz-perf "
                   "decodes chunked LAZ");
-  EXPECT_CONTAINS(lazError(patched(vlr + 2, uint16_t{1})), "unknown LASzip coder 1");
-  EXPECT_CONTAINS(lazError(patched(vlr + 34 + 4, uint16_t{1})),
+  EXPECT_CONTAINS(lazError(patched(good, vlr + 2, uint16_t{1})), "unknown LASzip coder 1");
+  EXPECT_CONTAINS(lazError(patched(good, vlr + 34 + 4, uint16_t{1})),
                   "LASzip item POINT10 version 1 is not decoded: laz-perf decodes version 2");
-  EXPECT_CONTAINS(lazError(patched(vlr + 34 + 2, uint16_t{21})),
+  EXPECT_CONTAINS(lazError(patched(good, vlr + 34 + 2, uint16_t{21})),
                   "LASzip item 1 is POINT10 of 21 bytes where point format 0 (record of 20 "
                   "bytes) has POINT10 of 20");
-  EXPECT_CONTAINS(lazError(patched(vlr - 54 + 2, uint8_t{'X'})),
+  EXPECT_CONTAINS(lazError(patched(good, vlr - 54 + 2, uint8_t{'X'})),
                   "no LASzip VLR (user \"laszip encoded\", record 22204): not LAZ");
-  auto waveform = patched(kPointFormatAt, uint8_t{0x84});
+  auto waveform = patched(good, kPointFormatAt, uint8_t{0x84});
   storeAt(waveform, kRecordLengthAt, uint16_t{57});
   EXPECT_CONTAINS(lazError(waveform),
                   "LAZ point format 4 (with waveform packets) is not decoded: laz-perf decodes "
@@ -207,20 +209,15 @@ TEST_F(LazReader, damagedChunkTablesAreRefusedNamingTheTable) {
   const auto good = test::readFile(sample("las10-f0-chunks100.laz"));
   const uint32_t pointData = loadAt<uint32_t>(good, kPointDataOffsetAt);
   const uint64_t table = chunkTableAt(good);
-  auto patched = [&](size_t at, auto value) {
-    auto bytes = good;
-    storeAt(bytes, at, value);
-    return bytes;
-  };
-  EXPECT_CONTAINS(lazError(patched(pointData, int64_t{1})),
+  EXPECT_CONTAINS(lazError(patched(good, pointData, int64_t{1})),
                   "damaged chunk table: its offset 1 lies outside");
-  EXPECT_CONTAINS(lazError(patched(pointData, int64_t(good.size()))),
+  EXPECT_CONTAINS(lazError(patched(good, pointData, int64_t(good.size()))),
                   "damaged chunk table: its offset");
-  EXPECT_CONTAINS(lazError(patched(table, uint32_t{7})),
+  EXPECT_CONTAINS(lazError(patched(good, table, uint32_t{7})),
                   "damaged chunk table: unknown version 7 (LASzip writes 0)");
-  EXPECT_CONTAINS(lazError(patched(table + 4, uint32_t{0})),
+  EXPECT_CONTAINS(lazError(patched(good, table + 4, uint32_t{0})),
                   "damaged chunk table: it lists 0 chunks, but 684 points in chunks of 100 take 7");
-  EXPECT_CONTAINS(lazError(patched(table + 4, uint32_t{0xFFFFFFFF})),
+  EXPECT_CONTAINS(lazError(patched(good, table + 4, uint32_t{0xFFFFFFFF})),
                   "damaged chunk table: 4294967295 chunks in");
   auto scrambled = good;
   std::fill(scrambled.begin() + ptrdiff_t(table + 8), scrambled.end(), std::byte{0xFF});
@@ -246,8 +243,9 @@ TEST_F(LazReader, pointCountsThatLieAreRefused) {
   const uint32_t firstChunk = loadAt<uint32_t>(layered, kPointDataOffsetAt) + 8;
   ASSERT_EQ(loadAt<uint32_t>(layered, firstChunk + 30), 150u);
   storeAt(layered, firstChunk + 30, uint32_t{999});
-  EXPECT_CONTAINS(lazError(layered), "chunk 1 of 6: the chunk says it holds 999 points, the "
-                                     "chunk table 150");
+  EXPECT_CONTAINS(lazError(layered),
+                  "chunk 1 of 6: the chunk says it holds 999 points, the "
+                  "chunk table 150");
 }
 
 TEST_F(LazReader, damagedChunksAreFileErrorsNamingTheChunkOrDecodeToTheirCount) {
@@ -257,8 +255,9 @@ TEST_F(LazReader, damagedChunksAreFileErrorsNamingTheChunkOrDecodeToTheirCount) 
   const uint32_t firstChunk = loadAt<uint32_t>(layered, kPointDataOffsetAt) + 8;
   std::fill_n(layered.begin() + firstChunk + 34, 12, std::byte{0xFF});
   const std::string error = lazError(layered);
-  EXPECT_CONTAINS(error, "d.laz: byte " + std::to_string(firstChunk) + ": chunk 1 of 6: the LAZ "
-                         "decoder failed");
+  EXPECT_CONTAINS(error, "d.laz: byte " + std::to_string(firstChunk) +
+                             ": chunk 1 of 6: the LAZ "
+                             "decoder failed");
   // Anywhere else, damage decodes to other points or fails; never more, fewer or a crash.
   const auto good = test::readFile(sample("las12-f2-variable.laz"));
   const uint32_t data = loadAt<uint32_t>(good, kPointDataOffsetAt) + 8;
@@ -292,7 +291,8 @@ TEST_F(LazReader, aCompressedCopyOrANameWithoutTheSignatureIsRefusedSayingWhy) {
   EXPECT_CONTAINS(test::readError(dir / "a.laz.gz"),
                   "a compressed copy of a LAZ file is not read: decompress it (gunzip) first");
   test::writeText(dir / "b.laz", "not a point file at all");
-  EXPECT_CONTAINS(test::readError(dir / "b.laz"), "b.laz: byte 0: not a LAZ file: no LASF signature");
+  EXPECT_CONTAINS(test::readError(dir / "b.laz"),
+                  "b.laz: byte 0: not a LAZ file: no LASF signature");
 }
 
 TEST_F(LazReader, anUncompressedFileNamedLazIsReadAsLasWithANote) {
@@ -322,7 +322,8 @@ TEST_F(LazReader, aDecoderFailsCleanlyOnAChunkAndThenDecodesTheNextOne) {
   const auto bytes = test::readFile(path);
   const uint32_t chunkSize = io::checkLaszipRecord(
       in, header, std::span(bytes).subspan(laszipPayloadAt(bytes), 34 + 4 * 6));
-  const std::vector<io::LazChunk> chunks = io::readLazChunkTable(in, header, chunkSize, bytes.size());
+  const std::vector<io::LazChunk> chunks =
+      io::readLazChunkTable(in, header, chunkSize, bytes.size());
   ASSERT_EQ(chunks.size(), 4u);
   io::InputStream las(sample("las14-f7-extrabytes.las.gz"));
   const io::LasHeader lasHeader = io::readLasHeader(las);

@@ -101,7 +101,8 @@ TEST_F(LazWriter, everyFieldOfPointFormatZeroRoundTripsThroughLazPerf) {
     record.le(random() % 3 == 0 ? bits : uint8_t(0x09));
     record.le(uint8_t(random() % 5 == 0 ? random() % 32 : 2));
     record.le(int8_t(random() % 4 == 0 ? int(random() % 181) - 90 : 0));
-    record.le(uint8_t(random() % 9 == 0 ? random() : 0)).le(uint16_t(random() % 11 == 0 ? random() : 7));
+    record.le(uint8_t(random() % 9 == 0 ? random() : 0))
+        .le(uint16_t(random() % 11 == 0 ? random() : 7));
     las.insert(las.end(), record.bytes().begin(), record.bytes().end());
   }
   const uint32_t count32 = count;

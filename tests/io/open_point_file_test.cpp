@@ -42,7 +42,8 @@ TEST(OpenPointFile, rejectsUnknownFormatsListingTheSupportedOnes) {
             std::string::npos)
       << error;
   EXPECT_NE(error.find("PLY (.ply), LAS 1.0-1.4 (.las), PCD (.pcd), Draco (.drc), text (.xyz .txt "
-                       ".pts .csv .asc .neu .xyzrgb .xyzn, or any name with --columns)"),
+                       ".pts .csv .asc .neu .xyzrgb .xyzn, or any name with --columns), each "
+                       "optionally gzip-compressed (.gz); LAZ (.laz) and E57 (.e57)"),
             std::string::npos)
       << error;
   test::writeText(dir / "b.ply", "1 2 3\n");

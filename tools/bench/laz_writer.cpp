@@ -202,14 +202,14 @@ class Median5 {
 
 // LASzip's contexts of a return: by (number of returns, return number), each 0–7.
 constexpr uint8_t kReturnMap[8][8] = {
-    {15, 14, 13, 12, 11, 10, 9, 8},    {14, 0, 1, 3, 6, 10, 10, 9},
-    {13, 1, 2, 4, 7, 11, 11, 10},      {12, 3, 4, 5, 8, 12, 12, 11},
-    {11, 6, 7, 8, 9, 13, 13, 12},      {10, 10, 11, 12, 13, 14, 14, 13},
-    {9, 10, 11, 12, 13, 14, 15, 14},   {8, 9, 10, 11, 12, 13, 14, 15}};
-constexpr uint8_t kReturnLevel[8][8] = {
-    {0, 1, 2, 3, 4, 5, 6, 7}, {1, 0, 1, 2, 3, 4, 5, 6}, {2, 1, 0, 1, 2, 3, 4, 5},
-    {3, 2, 1, 0, 1, 2, 3, 4}, {4, 3, 2, 1, 0, 1, 2, 3}, {5, 4, 3, 2, 1, 0, 1, 2},
-    {6, 5, 4, 3, 2, 1, 0, 1}, {7, 6, 5, 4, 3, 2, 1, 0}};
+    {15, 14, 13, 12, 11, 10, 9, 8},  {14, 0, 1, 3, 6, 10, 10, 9},
+    {13, 1, 2, 4, 7, 11, 11, 10},    {12, 3, 4, 5, 8, 12, 12, 11},
+    {11, 6, 7, 8, 9, 13, 13, 12},    {10, 10, 11, 12, 13, 14, 14, 13},
+    {9, 10, 11, 12, 13, 14, 15, 14}, {8, 9, 10, 11, 12, 13, 14, 15}};
+constexpr uint8_t kReturnLevel[8][8] = {{0, 1, 2, 3, 4, 5, 6, 7}, {1, 0, 1, 2, 3, 4, 5, 6},
+                                        {2, 1, 0, 1, 2, 3, 4, 5}, {3, 2, 1, 0, 1, 2, 3, 4},
+                                        {4, 3, 2, 1, 0, 1, 2, 3}, {5, 4, 3, 2, 1, 0, 1, 2},
+                                        {6, 5, 4, 3, 2, 1, 0, 1}, {7, 6, 5, 4, 3, 2, 1, 0}};
 
 struct Point10 {
   int32_t x, y, z;
@@ -250,12 +250,11 @@ class Point10Encoder {
     ArithmeticEncoder& encoder = *encoder_;
     const uint32_t r = p.bits & 7, n = (p.bits >> 3) & 7;
     const uint32_t m = kReturnMap[n][r], l = kReturnLevel[n][r];
-    const uint32_t changed = (uint32_t(p.bits != last_.bits) << 5) |
-                             (uint32_t(p.intensity != lastIntensity_[m]) << 4) |
-                             (uint32_t(p.classification != last_.classification) << 3) |
-                             (uint32_t(p.scanAngle != last_.scanAngle) << 2) |
-                             (uint32_t(p.userData != last_.userData) << 1) |
-                             uint32_t(p.source != last_.source);
+    const uint32_t changed =
+        (uint32_t(p.bits != last_.bits) << 5) | (uint32_t(p.intensity != lastIntensity_[m]) << 4) |
+        (uint32_t(p.classification != last_.classification) << 3) |
+        (uint32_t(p.scanAngle != last_.scanAngle) << 2) |
+        (uint32_t(p.userData != last_.userData) << 1) | uint32_t(p.source != last_.source);
     encoder.encodeSymbol(changedValues_, changed);
     if (changed & 32) encoder.encodeSymbol(model(bitByte_, last_.bits), p.bits);
     if (changed & 16) {

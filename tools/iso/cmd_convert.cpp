@@ -353,17 +353,15 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   auto o = std::make_shared<Options>();
   CLI::App* c = app.add_subcommand(
       "convert",
-      "Convert point files (PLY, LAS, PCD, Draco, text: XYZ/TXT/PTS/CSV/ASC/NEU/XYZRGB or any "
-      "name with --columns; .gz too) into an .iso file");
+      "Convert point files (PLY, LAS, LAZ, E57, PCD, Draco, text: XYZ/TXT/PTS/CSV/ASC/NEU/XYZRGB "
+      "or any name with --columns; .gz too) into an .iso file");
   c->footer(
-      "Inputs: PLY, LAS 1.0-1.4 (point formats 0-10), PCD, Draco .drc and text, each also "
-      "gzip-compressed (.gz); text of another extension is read when its lines are numbers, or "
-      "always with --columns. The coordinate system of LAS inputs (OGC WKT, EPSG code of GeoTIFF "
-      "keys) is kept in the file's metadata and shown by `iso info`.\n"
-      "LAZ and E57 are not read: no decoder for either is packaged for Debian 12. Convert them to "
-      "LAS on a machine with PDAL (or LAStools' laszip for LAZ), then convert the LAS:\n"
-      "  pdal translate in.laz out.las      (or: laszip -i in.laz -o out.las)\n"
-      "  pdal translate in.e57 out.las");
+      "Inputs: PLY, LAS 1.0-1.4 (point formats 0-10), LAZ (LASzip-compressed LAS, point formats "
+      "0-3 and 6-8, decoded by laz-perf on every core), E57 (every scan, its pose applied), PCD, "
+      "Draco .drc and text, each but LAZ and E57 also gzip-compressed (.gz); text of another "
+      "extension is read when its lines are numbers, or always with --columns. Files and "
+      "directories mix freely. The coordinate system of LAS and LAZ inputs (OGC WKT, EPSG code of "
+      "GeoTIFF keys) is kept in the file's metadata and shown by `iso info`.");
   c->add_option("inputs", o->inputs, "Point files or directories of them")->required();
   c->add_option("-o,--output", o->output,
                 "The .iso file to write (its directory must exist); Ctrl-C stops the conversion "
@@ -372,8 +370,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_flag("-f,--force", o->force, "Replace the output file if it exists");
   c->add_option("--columns", o->columns,
                 "Column spec of text inputs, e.g. x,y,z,nx,ny,nz,r,g,b (_ skips); with it, an "
-                "input of any extension that is not PLY, LAS, Draco or PCD is read as text "
-                "(without it: guessed from the first lines)");
+                "input of any extension that is not PLY, LAS, LAZ, E57, Draco or PCD is read as "
+                "text (without it: guessed from the first lines)");
   c->add_option("--neighbors", o->build.neighbors,
                 "k of the k-nearest-neighbour radius of influence")
       ->capture_default_str();

@@ -247,7 +247,7 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--columns", o->columns,
                 "Column spec of text point files, as for `iso convert` (with it, an input of any "
-                "extension that is not PLY, LAS, Draco or PCD is read as text)");
+                "extension that is not PLY, LAS, LAZ, E57, Draco or PCD is read as text)");
   c->add_flag("--keep-outliers", o->keepOutliers,
               "Measure every point: by default the strays the conversion removed (found again "
               "by its rule, specs/pipeline.md §2) are left out and counted (strays_left_out)");

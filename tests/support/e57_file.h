@@ -9,12 +9,15 @@
 #include <array>
 #include <bit>
 #include <charconv>
+#include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <optional>
+#include <stdexcept>
+#include <span>
 #include <string>
+#include <utility>
 #include <vector>
-
-#include "tests/io/io_test_util.h"
 
 namespace iso::test {
 
@@ -194,7 +197,8 @@ inline uint64_t appendSection(const E57Layout& layout, const E57ScanSpec& scan,
       out.insert(out.end(), streams[f].begin() + ptrdiff_t(cut(f, first)),
                  streams[f].begin() + ptrdiff_t(cut(f, last)));
     pad4(out);
-    if (out.size() - at > 65536) ADD_FAILURE() << "a data packet over 64 KiB";
+    // A packet holds at most 64 KiB (its length is a 16-bit count): recordsPerPacket keeps it so.
+    if (out.size() - at > 65536) throw std::logic_error("an E57 data packet over 64 KiB");
     patchLE(out, at + 2, out.size() - at - 1, 2);
     if (!scan.emptyAndIndexPackets) continue;
     out.push_back(std::byte{2});  // empty packet: type, reserved, length - 1, padding
