@@ -117,7 +117,19 @@ class Pool {
   // A number for a new stream, larger than the ones before.
   uint64_t numberStream() {
     std::lock_guard lock(mutex_);
+    ++liveStreams_;
     return streams_++;
+  }
+
+  // A stream is gone; when none is left, the decoders' memory goes too (a conversion reads its
+  // inputs first, then needs the memory for other stages).
+  void endStream() {
+    {
+      std::lock_guard lock(mutex_);
+      if (--liveStreams_ > 0) return;
+      spares_.clear();
+    }
+    workAvailable_.notify_all();
   }
 
   Pool(const Pool&) = delete;
@@ -147,10 +159,15 @@ class Pool {
     if (job.state == LazJob::State::kQueued) {
       queue_.erase(job.order);
       job.state = LazJob::State::kRunning;
+      std::unique_ptr<LazChunkDecoder> decoder;
+      if (!spares_.empty()) {
+        decoder = std::move(spares_.back());
+        spares_.pop_back();
+      }
       lock.unlock();
-      thread_local std::unique_ptr<LazChunkDecoder> decoder;
       decodeJob(job, decoder);
       lock.lock();
+      if (decoder && liveStreams_ > 0) spares_.push_back(std::move(decoder));
     } else {
       jobDone_.wait(lock, [&] { return job.state == LazJob::State::kDone; });
       --outstanding_;
@@ -187,9 +204,15 @@ class Pool {
     std::unique_ptr<LazChunkDecoder> decoder;
     std::unique_lock lock(mutex_);
     for (;;) {
-      workAvailable_.wait(
-          lock, [&] { return isStopping_ || (!queue_.empty() && outstanding_ < window()); });
+      workAvailable_.wait(lock, [&] {
+        return isStopping_ || (!queue_.empty() && outstanding_ < window()) ||
+               (decoder && liveStreams_ == 0);
+      });
       if (isStopping_) return;
+      if (liveStreams_ == 0) {
+        decoder.reset();
+        continue;
+      }
       const std::shared_ptr<LazJob> job = queue_.begin()->second;
       queue_.erase(queue_.begin());
       job->state = LazJob::State::kRunning;
@@ -212,7 +235,8 @@ class Pool {
   std::map<std::pair<uint64_t, uint64_t>, std::shared_ptr<LazJob>> queue_;
   size_t outstanding_ = 0;
   std::vector<std::thread> workers_;
-  uint64_t streams_ = 0;
+  uint64_t streams_ = 0, liveStreams_ = 0;
+  std::vector<std::unique_ptr<LazChunkDecoder>> spares_;  // for readers that decode themselves
   bool isStopping_ = false;
 };
 
@@ -238,6 +262,7 @@ LazChunkStream::LazChunkStream(std::shared_ptr<const SharedFile> file, int forma
 LazChunkStream::~LazChunkStream() {
   for (const std::shared_ptr<LazJob>& job : jobs_)
     if (job) Pool::shared().cancel(*job);
+  Pool::shared().endStream();
 }
 
 void LazChunkStream::queueAhead() {
