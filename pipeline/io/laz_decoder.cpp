@@ -127,12 +127,18 @@ void Z_envZ_emscripten_memcpy_big(Z_env_instance_t* env, u32 to, u32 from, u32 b
   std::memmove(memory.data + to, memory.data + from, bytes);
 }
 
-// Emscripten's malloc asks for a memory of `bytes` in all: 1 when it grew, 0 when it cannot.
+// Emscripten's malloc asks for a memory of `bytes` in all: 1 when it grew, 0 when it cannot. It
+// asks for little more than it needs each time, so the memory grows by half at least (as
+// Emscripten's own JavaScript grows it): a growth copies the memory.
 u32 Z_envZ_emscripten_resize_heap(Z_env_instance_t* env, u32 bytes) {
   wasm_rt_memory_t& memory = env->module->w2c_memory;
-  const uint64_t pages = (uint64_t{bytes} + 65535) / 65536;
-  if (pages <= memory.pages) return 1;
-  return wasm_rt_grow_memory(&memory, uint32_t(pages - memory.pages)) != UINT32_MAX ? 1 : 0;
+  const uint64_t needed = (uint64_t{bytes} + 65535) / 65536;
+  if (needed <= memory.pages) return 1;
+  const uint64_t pages =
+      std::min<uint64_t>(std::max<uint64_t>(needed, memory.pages * 3 / 2), memory.max_pages);
+  if (pages >= needed && wasm_rt_grow_memory(&memory, uint32_t(pages - memory.pages)) != UINT32_MAX)
+    return 1;
+  return wasm_rt_grow_memory(&memory, uint32_t(needed - memory.pages)) != UINT32_MAX ? 1 : 0;
 }
 
 u32 Z_envZ_strftime_l(Z_env_instance_t*, u32, u32, u32, u32, u32) { return 0; }

@@ -88,16 +88,19 @@ TEST_F(LazWriter, everyFieldOfPointFormatZeroRoundTripsThroughLazPerf) {
   const auto file = test::makeLas(spec);  // the header; records are appended below
   std::vector<std::byte> las = file.bytes();
   const size_t count = 4321;
-  int32_t x = 0, y = 0, z = 0;
+  uint32_t x = 0, y = 0, z = 0;  // coordinates wrap around, as int32 records may
   for (size_t i = 0; i < count; ++i) {
-    const int scale = 1 << (random() % 31);
-    x += int32_t(random() % 2001) - 1000 + (random() % 50 == 0 ? scale : 0);
-    y += int32_t(random() % 201) - 100;
-    z = random() % 10 == 0 ? int32_t(random()) : z + int32_t(random() % 21) - 10;
+    const uint32_t scale = 1u << (random() % 31);
+    x += uint32_t(random() % 2001) - 1000 + (random() % 50 == 0 ? scale : 0);
+    y += uint32_t(random() % 201) - 100;
+    z = random() % 10 == 0 ? uint32_t(random()) : z + uint32_t(random() % 21) - 10;
     test::Bytes record;
     const uint8_t returns = uint8_t(1 + random() % 5);
     const uint8_t bits = uint8_t((1 + random() % returns) | (returns << 3) | (random() % 4) << 6);
-    record.le(x).le(y).le(z).le(uint16_t(random() % 7 == 0 ? random() : 100));
+    record.le(int32_t(x))
+        .le(int32_t(y))
+        .le(int32_t(z))
+        .le(uint16_t(random() % 7 == 0 ? random() : 100));
     record.le(random() % 3 == 0 ? bits : uint8_t(0x09));
     record.le(uint8_t(random() % 5 == 0 ? random() % 32 : 2));
     record.le(int8_t(random() % 4 == 0 ? int(random() % 181) - 90 : 0));
