@@ -200,6 +200,35 @@ struct FrameParams {
   vec4 causticV;
 };
 
+// Image-space point rendering (shaders/image.h, specs/viewer.md "Image-space points"): bits of
+// ImageParams.image.w.
+ISO_CONST uint kImageCull = 1u;        // points whose normal faces away are not drawn
+ISO_CONST uint kImageShadows = 2u;     // shading reads each point's shadow texture value
+ISO_CONST uint kImagePeel = 4u;        // a layer after the first: points must lie behind the last
+ISO_CONST uint kImageEyeDome = 8u;     // normal-free shading from the depth alone
+ISO_CONST uint kImageAaEdges = 16u;    // anti-aliasing also at the edges between layers
+ISO_CONST uint kImageAaOff = 32u;      // no anti-aliasing
+ISO_CONST uint kImageSmoothOff = 64u;  // no smoothing
+ISO_CONST uint kImageNoPoint = 0xFFFFFFFFu;  // a pixel no point covers
+ISO_CONST uint kImageMaxFillRadius = 8u;
+
+// One pass of the image-space point renderer: the camera (the eye's or a light's), the image and
+// the layer. Positions are world units relative to the scene's origin (the renderer's choice).
+struct ImageParams {
+  vec4 eye;       // xyz: the viewpoint; w: 1 / the far distance (depths are distance / far)
+  vec4 toX;       // xyz: right / (tan(fov/2) · aspect): a point v from the eye is at
+                  // dot(v, toX) / dot(v, forward) across the image, -1 left to +1 right
+  vec4 toY;       // xyz: up / tan(fov/2): likewise, +1 at the top
+  vec4 forward;   // xyz: the view direction, unit; w: the near distance
+  uvec4 image;    // width, height, the masks' largest radius (pixels), option bits (kImage...)
+  vec4 layer;     // x: the least gap between two layers (d̃) in depth units; y: the size of a
+                  // pixel at distance 1 (2 tan(fov/2) / height); z: the least |cos| between a
+                  // light's ray and a normal in the shadow offset; w: eye-dome strength
+  vec4 ambient;   // rgb: ambient light; w: the light count
+  vec4 material;  // x: diffuse, y: specular, z: Phong exponent
+  Light lights[kMaxLights];  // in the renderer's world units
+};
+
 // One chunk in the chunk table (binding 1).
 struct ChunkEntry {
   uvec4 state;  // x: first pool page or kNotResident; y: the chunk's level; z: float bits of its
