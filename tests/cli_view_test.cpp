@@ -103,6 +103,24 @@ TEST(CliView, benchTracesTheSameRaysOfEachKindOnTheGpuAndTheCpu) {
   EXPECT_GT(j["cpu"]["gpu_over_cpu"]["all"].get<double>(), 0.0);
 }
 
+// Frames without refraction run as a wavefront on a CPU device (lavapipe, llvmpipe) and as one
+// kernel on a GPU, the faster on each (specs/viewer.md, "On an NVIDIA H200"); --one-kernel and
+// --wavefront choose.
+TEST(CliView, theKernelsFollowTheDeviceUnlessNamed) {
+  auto twoPasses = [](const std::string& options) {
+    const CommandResult run = iso("view " + quoted(kittenIso()) +
+                                  " --bench --json --bench-frames 2 --width 64 --height 48 "
+                                  "--no-cpu-compare " + options);
+    EXPECT_EQ(run.exitCode, 0) << run.err;
+    const auto j = nlohmann::json::parse(run.out);
+    return std::pair(j["two_passes"].get<bool>(), j["device"].get<std::string>());
+  };
+  const auto [byDefault, device] = twoPasses("");
+  EXPECT_EQ(byDefault, device.find("llvmpipe") != std::string::npos) << device;
+  EXPECT_FALSE(twoPasses("--one-kernel").first);
+  EXPECT_TRUE(twoPasses("--wavefront").first);
+}
+
 TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
   if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0)
     GTEST_SKIP() << "xvfb-run is not installed (tools/run setup installs it)";
@@ -236,6 +254,7 @@ TEST(CliView, impossibleOptionsAreUsageErrors) {
   EXPECT_EQ(draw.exitCode, 2);
   EXPECT_NE(draw.err.find("--draw"), std::string::npos) << draw.err;
   EXPECT_EQ(iso("view " + file + " --cpu --out x.png --points --draw both").exitCode, 2);
+  EXPECT_EQ(iso("view " + file + " --bench --one-kernel --wavefront").exitCode, 2);
   for (const char* photons : {"-5", "many", "1e12"}) {
     const CommandResult caustics =
         iso("view " + file + " --cpu --out x.png --caustics " + std::string(photons));

@@ -38,7 +38,7 @@ Gpu gpuFor(const ViewOptions& o) {
   return createGpu(g);
 }
 
-RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
+RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight, const Gpu& gpu) {
   RendererOptions r;
   r.width = o.width;
   r.height = o.height;
@@ -47,7 +47,8 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight) {
   r.flatTraversal = o.flatTraversal;
   r.tileCones = o.tileCones;
   r.workgroupSize = o.workgroupSize;
-  r.oneKernel = o.oneKernel;
+  r.oneKernel = o.oneKernel ||
+                (!o.wavefront && gpu.properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU);
   r.framesInFlight = framesInFlight;
   r.caustics = o.scene.caustics > 0;
   return r;
@@ -65,7 +66,7 @@ GpuView::GpuView(const ViewOptions& o, uint32_t framesInFlight)
       scene(completeScene(o, *asset)),
       env(environmentOf(scene)),
       gpu(gpuFor(o)),
-      renderer(gpu, *asset, env ? &*env : nullptr, rendererOptions(o, framesInFlight)) {}
+      renderer(gpu, *asset, env ? &*env : nullptr, rendererOptions(o, framesInFlight, gpu)) {}
 
 gpu::FrameParams GpuView::params(const Scene& s) const {
   const FileHeader& header = asset->reader.header();

@@ -32,7 +32,10 @@ struct ViewOptions {
   bool flatTraversal = false;
   bool tileCones = true;  // camera rays start where their tile's cone meets a node (cone.h)
   uint32_t workgroupSize = 64;
-  bool oneKernel = false;  // RendererOptions::oneKernel
+  // RendererOptions::oneKernel: one kernel, or the wavefront; neither named: one kernel on a GPU,
+  // the wavefront on a CPU device (lavapipe), the faster of the two on each (specs/viewer.md).
+  bool oneKernel = false;
+  bool wavefront = false;
   bool cpuCompare = true;  // also trace the first view with the CPU reference tracer
   bool benchJson = false;  // print the numbers as one JSON object instead of text
 };

@@ -218,11 +218,17 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "measurements")
       ->capture_default_str()
       ->check(CLI::IsMember({8u, 16u, 32u, 64u, 128u, 256u, 512u, 1024u}));
-  c->add_flag("--one-kernel", a->view.oneKernel,
-              "GPU: draw every frame with one kernel (by default frames of one sample a pixel "
-              "without refraction rays run as a wavefront: the camera rays, then the hits' "
-              "shading and shadow rays side by side, then bounce after bounce the mirror rays and "
-              "their hits' shading); for measurements");
+  auto* oneKernel = c->add_flag(
+      "--one-kernel", a->view.oneKernel,
+      "Draw every frame with one kernel (the default on a GPU; on a CPU device such as lavapipe "
+      "frames of one sample a pixel without refraction rays run as a wavefront by default); for "
+      "measurements");
+  c->add_flag("--wavefront", a->view.wavefront,
+              "Draw frames of one sample a pixel without refraction rays as a wavefront: the "
+              "camera rays, then the hits' shading and shadow rays side by side, then bounce "
+              "after bounce the mirror rays and their hits' shading (the default on a CPU device "
+              "such as lavapipe); for measurements")
+      ->excludes(oneKernel);
   c->add_flag("!--no-tile-cones", a->view.tileCones,
               "Start every camera ray at the eye (by default the rays of a tile of pixels start "
               "where a cone around them first meets the octree, traced once a tile; the "
