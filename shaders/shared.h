@@ -211,6 +211,24 @@ ISO_CONST uint kImageAaOff = 32u;      // no anti-aliasing
 ISO_CONST uint kImageSmoothOff = 64u;  // no smoothing
 ISO_CONST uint kImageNoPoint = 0xFFFFFFFFu;  // a pixel no point covers
 ISO_CONST uint kImageMaxFillRadius = 8u;
+// The stages of shaders/image.comp.glsl (its specialization constant 0).
+ISO_CONST uint kImageStageProject = 0u;    // a point into the keys (64-bit atomic minimum)
+ISO_CONST uint kImageStageResolve = 1u;    // the keys into layer A
+ISO_CONST uint kImageStageFill = 2u;       // one filling pass, layer A into layer B
+ISO_CONST uint kImageStageControl = 3u;    // whether the next filling pass runs
+ISO_CONST uint kImageStageCopy = 4u;       // layer B into layer A
+ISO_CONST uint kImageStageShade = 5u;      // layer A's pixels shaded
+ISO_CONST uint kImageStageSmooth = 6u;
+ISO_CONST uint kImageStageAntialias = 7u;
+ISO_CONST uint kImageStageBlend = 8u;      // the layer under the ones before; A kept as R
+ISO_CONST uint kImageStageFinish = 9u;     // over the background, into sRGB8 pixels
+ISO_CONST uint kImageStageLit = 10u;       // a point of a light's first layer counts as lit
+ISO_CONST uint kImageStages = 11u;
+// Words of the control buffer: the filling pass's indirect dispatch (x, y, z), the pixels the
+// last pass changed, then the passes that changed something, of each kind.
+ISO_CONST uint kImageControlChanged = 3u;
+ISO_CONST uint kImageControlPasses = 4u;
+ISO_CONST uint kImageControlWords = 8u;
 
 // One pass of the image-space point renderer: the camera (the eye's or a light's), the image and
 // the layer. Positions are world units relative to the scene's origin (the renderer's choice).
@@ -225,8 +243,9 @@ struct ImageParams {
                   // pixel at distance 1 (2 tan(fov/2) / height); z: the least |cos| between a
                   // light's ray and a normal in the shadow offset; w: eye-dome strength
   vec4 ambient;   // rgb: ambient light; w: the light count
-  vec4 material;  // x: diffuse, y: specular, z: Phong exponent
-  Light lights[kMaxLights];  // in the renderer's world units
+  vec4 material;  // x: diffuse, y: specular, z: Phong exponent; w: a light's pass: its light
+  vec4 background;  // rgb: the background's linear color
+  Light lights[kMaxLights];  // in the renderer's world units; color.w: the light's samples
 };
 
 // One chunk in the chunk table (binding 1).

@@ -33,13 +33,11 @@ struct Layer {
 // the shaded colors, read from host memory.
 class Pass {
  public:
-  Pass(const ImageParams& params, const vec3* positions, const vec3* normals, const vec4* colors,
-       const float* spacing, const float* shadow, uint lights)
+  Pass(const ImageParams& params, const PointImageScene& scene, const float* shadow, uint lights)
       : Q(params),
-        positions_(positions),
-        normals_(normals),
-        colors_(colors),
-        spacing_(spacing),
+        positions_(scene.positions().data()),
+        normals_(scene.normals().data()),
+        colors_(scene.colors().data()),
         shadow_(shadow),
         lights_(lights),
         width_(int(params.image.x)),
@@ -50,10 +48,10 @@ class Pass {
   const Layer* reference = nullptr;
   const vec4* color = nullptr;
 
-  vec3 pointPosition(uint i) const { return positions_[i]; }
-  vec3 pointNormal(uint i) const { return normals_[i]; }
+  vec3 pointPosition(uint i) const { return vec3(positions_[i]); }
+  vec3 pointNormal(uint i) const { return vec3(normals_[i]); }
   vec4 pointColor(uint i) const { return colors_[i]; }
-  float pointSpacing(uint i) const { return spacing_[i]; }
+  float pointSpacing(uint i) const { return positions_[i].w; }
   float pointShadow(uint i, uint light) const { return shadow_[size_t(i) * lights_ + light]; }
   bool inside(ivec2 p) const { return p.x >= 0 && p.y >= 0 && p.x < width_ && p.y < height_; }
   size_t at(ivec2 p) const { return size_t(p.y) * size_t(width_) + size_t(p.x); }
@@ -65,10 +63,9 @@ class Pass {
 #include "shaders/image.h"
 
  private:
-  const vec3* positions_;
-  const vec3* normals_;
+  const vec4* positions_;
+  const vec4* normals_;
   const vec4* colors_;
-  const float* spacing_;
   const float* shadow_;
   uint lights_;
   int width_, height_;
@@ -220,14 +217,13 @@ glm::vec2 halton(uint32_t i) {
 
 }  // namespace
 
-PointImageRenderer::PointImageRenderer(std::vector<ImageObject> objects) {
+PointImageScene::PointImageScene(std::span<const ImageObject> objects) {
   size_t total = 0;
   for (const ImageObject& o : objects) total += o.positions.size();
   if (total >= kImageNoPoint) throw UsageError("image-space points: more than 2^32 - 1 points");
   positions_.reserve(total);
   normals_.reserve(total);
   colors_.reserve(total);
-  spacing_.reserve(total);
   lo_ = glm::vec3(std::numeric_limits<float>::max());
   hi_ = -lo_;
   bool anyNormals = false;
@@ -236,53 +232,73 @@ PointImageRenderer::PointImageRenderer(std::vector<ImageObject> objects) {
     ISO_CHECK(o.colors.empty() || o.colors.size() == o.positions.size());
     if (!(o.spacing > 0.0f)) throw UsageError("image-space points: an object without a spacing");
     anyNormals |= !o.normals.empty();
-    normals_all_ &= !o.normals.empty() || o.positions.empty();
+    normalsAll_ &= !o.normals.empty() || o.positions.empty();
     largestSpacing_ = std::max(largestSpacing_, o.spacing);
     for (size_t i = 0; i < o.positions.size(); ++i) {
-      positions_.push_back(o.positions[i]);
-      normals_.push_back(o.normals.empty() ? glm::vec3(0.0f) : o.normals[i]);
+      positions_.emplace_back(o.positions[i], o.spacing);
+      normals_.emplace_back(o.normals.empty() ? glm::vec3(0.0f) : o.normals[i], 0.0f);
       colors_.emplace_back(o.colors.empty() ? o.color : o.colors[i], o.opacity);
-      spacing_.push_back(o.spacing);
       lo_ = glm::min(lo_, o.positions[i]);
       hi_ = glm::max(hi_, o.positions[i]);
     }
   }
-  normals_all_ = normals_all_ && anyNormals;
+  normalsAll_ = normalsAll_ && anyNormals;
   if (total == 0) lo_ = hi_ = glm::vec3(0.0f);
 }
 
-PointImageRenderer::~PointImageRenderer() = default;
-
-float PointImageRenderer::gap(const ImageSettings& settings) const {
+float PointImageScene::gap(const ImageSettings& settings) const {
   return settings.layerGap > 0.0f ? settings.layerGap : kDefaultGapSpacings * largestSpacing_;
 }
 
-void PointImageRenderer::computeShadows(std::span<const ImageLight> lights,
-                                        const ImageSettings& settings, ImageStats& stats) {
-  // The shadow textures stay while the lights and the settings they depend on do (the points
-  // never move): the paper's reuse of a texture while light and object stay put.
-  std::vector<float> key = {float(settings.shadowResolution), gap(settings),
-                            float(settings.maxFillRadius), settings.cull ? 1.0f : 0.0f};
-  for (const ImageLight& l : lights) {
-    for (int k = 0; k < 3; ++k) key.insert(key.end(), {l.position[k], l.u[k], l.v[k]});
-    key.push_back(float(l.samples));
+ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
+                    std::span<const ImageLight> lights, const ImageSettings& settings) {
+  if (camera.width < 1 || camera.height < 1) throw UsageError("image-space points: empty image");
+  if (settings.layers < 1) throw UsageError("image-space points: --layers must be at least 1");
+  if (lights.size() > gpu::kMaxLights)
+    throw UsageError("image-space points: at most " + std::to_string(gpu::kMaxLights) + " lights");
+  ImagePlan plan;
+  plan.layers = settings.layers;
+  plan.fillPasses = std::max(settings.maxFillPasses, 0);
+  plan.shadows = settings.shadows && !lights.empty();
+  const glm::vec3 lo = scene.lo(), hi = scene.hi();
+  const float gap = scene.gap(settings);
+  const uint32_t radius =
+      uint32_t(std::clamp(settings.maxFillRadius, 1, int(gpu::kImageMaxFillRadius)));
+  const uint32_t cull = settings.cull && scene.normals_everywhere() ? gpu::kImageCull : 0u;
+
+  ImageParams& q = plan.eye;
+  q = viewParams(camera.eye, camera.target - camera.eye, camera.up, glm::radians(camera.fovDegrees),
+                 camera.width, camera.height, lo, hi);
+  plan.far = 1.0f / q.eye.w;
+  q.layer.x = gap * q.eye.w;
+  q.layer.w = settings.eyeDomeStrength;
+  q.image.z = radius;
+  uint32_t options = cull;
+  if (plan.shadows) options |= gpu::kImageShadows;
+  if (settings.eyeDome || !scene.normals_everywhere()) options |= gpu::kImageEyeDome;
+  if (settings.antialias == ImageAntialias::Off) options |= gpu::kImageAaOff;
+  if (settings.antialias == ImageAntialias::Edges) options |= gpu::kImageAaEdges;
+  if (!settings.smooth) options |= gpu::kImageSmoothOff;
+  q.image.w = options;
+  q.ambient = glm::vec4(settings.ambient, float(lights.size()));
+  q.material = glm::vec4(settings.diffuse, settings.specular, settings.shininess, 0.0f);
+  q.background = glm::vec4(settings.background, 0.0f);
+  for (size_t l = 0; l < lights.size(); ++l) {
+    const int samples = lights[l].area() ? std::max(lights[l].samples, 1) : 1;
+    q.lights[l].position = glm::vec4(lights[l].position, float(gpu::kLightPoint));
+    q.lights[l].color = glm::vec4(lights[l].color, float(samples));
   }
-  const size_t n = positions_.size();
-  if (key == shadowKey_ && shadow_.size() == n * lights.size()) {
-    stats.shadowsReused = true;
-    return;
-  }
-  shadow_.assign(n * lights.size(), 0.0f);
-  const glm::vec3 center = 0.5f * (lo_ + hi_);
-  const int size = settings.shadowResolution;
+  if (!plan.shadows) return plan;
+
+  // One square view a sample of each light, from the sample toward the points' box, holding it.
+  const glm::vec3 center = 0.5f * (lo + hi);
+  const int size = std::max(settings.shadowResolution, 8);
   for (size_t l = 0; l < lights.size(); ++l) {
     const ImageLight& light = lights[l];
-    const int samples = light.area() ? std::max(light.samples, 1) : 1;
-    std::vector<uint32_t> lit(n, 0);
+    const int samples = int(q.lights[l].color.w);
     for (int s = 0; s < samples; ++s) {
       const glm::vec2 h = light.area() ? halton(uint32_t(s) + 1u) - 0.5f : glm::vec2(0.0f);
       const glm::vec3 at = light.position + h.x * light.u + h.y * light.v;
-      // A square view from the sample toward the points' box that holds all of it.
       const glm::vec3 forward = glm::normalize(center - at);
       glm::vec3 right = glm::cross(forward, glm::vec3(0, 1, 0));
       if (glm::dot(right, right) < 1e-6f) right = glm::cross(forward, glm::vec3(1, 0, 0));
@@ -291,7 +307,7 @@ void PointImageRenderer::computeShadows(std::span<const ImageLight> lights,
       float spread = 0.0f;  // the largest tangent of a corner off the axis
       for (int c = 0; c < 8; ++c) {
         const glm::vec3 v =
-            glm::vec3((c & 1) ? hi_.x : lo_.x, (c & 2) ? hi_.y : lo_.y, (c & 4) ? hi_.z : lo_.z) - at;
+            glm::vec3((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y, (c & 4) ? hi.z : lo.z) - at;
         const float z = glm::dot(v, forward);
         spread = z > 0.0f ? std::max({spread, std::abs(glm::dot(v, right)) / z,
                                       std::abs(glm::dot(v, up)) / z})
@@ -301,77 +317,92 @@ void PointImageRenderer::computeShadows(std::span<const ImageLight> lights,
         throw UsageError(
             "image-space shadows: a light too close to the points (a light's view of the points' "
             "box must fit in 2·atan(5) = 157°): move it farther out");
-      const float fov = 2.0f * std::atan(spread * 1.01f);
-      ImageParams q = viewParams(at, forward, up, fov, size, size, lo_, hi_);
-      q.layer.x = gap(settings) * q.eye.w;
-      q.image.z = uint32_t(std::clamp(settings.maxFillRadius, 1, int(gpu::kImageMaxFillRadius)));
-      q.image.w = settings.cull && normals_all_ ? gpu::kImageCull : 0u;
-      Pass pass(q, positions_.data(), normals_.data(), colors_.data(), spacing_.data(), nullptr, 0);
-      Layer layer = project(pass, n, [](uint32_t, glm::ivec2, float) { return true; });
-      stats.projected += n;
-      // Only occluded pixels are filled (section 6): a background hole filled from the nearest
-      // neighbour would grow the occluders' silhouettes over the surfaces behind them.
-      fill(pass, layer, settings.maxFillPasses, true);
-      pass.layer = &layer;
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const auto& range) {
-        for (size_t i = range.begin(); i != range.end(); ++i)
-          if (pass.imageLit(positions_[i], normals_[i])) ++lit[i];
-      });
-      stats.projected += n;
+      ImageParams v = viewParams(at, forward, up, 2.0f * std::atan(spread * 1.01f), size, size, lo, hi);
+      v.layer.x = gap * v.eye.w;
+      v.image.z = radius;
+      v.image.w = cull;
+      v.ambient.w = float(lights.size());
+      v.material.w = float(l);
+      plan.samples.push_back(v);
+      plan.light.push_back(uint32_t(l));
     }
-    for (size_t i = 0; i < n; ++i) shadow_[i * lights.size() + l] = float(lit[i]) / float(samples);
   }
+  return plan;
+}
+
+uint32_t imagePixelWord(glm::vec3 linear) {
+  uint32_t word = 0xFF000000u;
+  for (int k = 0; k < 3; ++k) {
+    const float v = std::clamp(linear[k], 0.0f, 1.0f);
+    const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+    word |= uint32_t(std::lround(s * 255.0f)) << (8 * k);
+  }
+  return word;
+}
+
+PointImageRenderer::PointImageRenderer(std::vector<ImageObject> objects) : scene_(objects) {}
+
+PointImageRenderer::~PointImageRenderer() = default;
+
+void PointImageRenderer::computeShadows(const ImagePlan& plan, size_t lights, ImageStats& stats) {
+  // The shadow textures stay while the lights' samples do (the points never move): the paper's
+  // reuse of a texture while light and object stay put.
+  std::vector<float> key;
+  for (const ImageParams& q : plan.samples) {
+    const float* words = &q.eye.x;
+    key.insert(key.end(), words, words + sizeof(ImageParams) / sizeof(float));
+  }
+  const size_t n = scene_.size();
+  if (key == shadowKey_ && shadow_.size() == n * lights) {
+    stats.shadowsReused = true;
+    return;
+  }
+  std::vector<uint32_t> lit(n * lights, 0);
+  for (size_t s = 0; s < plan.samples.size(); ++s) {
+    Pass pass(plan.samples[s], scene_, nullptr, 0);
+    Layer layer = project(pass, n, [](uint32_t, glm::ivec2, float) { return true; });
+    // Only occluded pixels are filled (section 6): a background hole filled from the nearest
+    // neighbour would grow the occluders' silhouettes over the surfaces behind them.
+    fill(pass, layer, plan.fillPasses, true);
+    pass.layer = &layer;
+    const size_t l = plan.light[s];
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const auto& range) {
+      for (size_t i = range.begin(); i != range.end(); ++i)
+        if (pass.imageLit(pass.pointPosition(uint32_t(i)), pass.pointNormal(uint32_t(i))))
+          ++lit[i * lights + l];
+    });
+    stats.projected += 2 * n;
+  }
+  shadow_.assign(n * lights, 0.0f);
+  for (size_t i = 0; i < n; ++i)
+    for (size_t l = 0; l < lights; ++l)
+      shadow_[i * lights + l] = float(lit[i * lights + l]) / plan.eye.lights[l].color.w;
   shadowKey_ = std::move(key);
 }
 
 ImageResult PointImageRenderer::render(const ImageCamera& camera, std::span<const ImageLight> lights,
                                        const ImageSettings& settings) {
-  if (camera.width < 1 || camera.height < 1) throw UsageError("image-space points: empty image");
-  if (settings.layers < 1) throw UsageError("image-space points: --layers must be at least 1");
-  if (lights.size() > gpu::kMaxLights)
-    throw UsageError("image-space points: at most " + std::to_string(gpu::kMaxLights) + " lights");
+  const ImagePlan plan = planImage(scene_, camera, lights, settings);
   ImageResult result;
   result.width = camera.width;
   result.height = camera.height;
   const size_t pixels = size_t(camera.width) * camera.height;
-  if (settings.shadows && !lights.empty()) computeShadows(lights, settings, result.stats);
+  if (plan.shadows) computeShadows(plan, lights.size(), result.stats);
 
-  ImageParams q = viewParams(camera.eye, camera.target - camera.eye, camera.up,
-                             glm::radians(camera.fovDegrees), camera.width, camera.height, lo_, hi_);
-  const float far = 1.0f / q.eye.w;
-  q.layer.x = gap(settings) * q.eye.w;
-  q.layer.w = settings.eyeDomeStrength;
-  q.image.z = uint32_t(std::clamp(settings.maxFillRadius, 1, int(gpu::kImageMaxFillRadius)));
-  uint32_t options = 0;
-  if (settings.cull && normals_all_) options |= gpu::kImageCull;
-  if (settings.shadows && !lights.empty()) options |= gpu::kImageShadows;
-  if (settings.eyeDome || !normals_all_) options |= gpu::kImageEyeDome;
-  if (settings.antialias == ImageAntialias::Off) options |= gpu::kImageAaOff;
-  if (settings.antialias == ImageAntialias::Edges) options |= gpu::kImageAaEdges;
-  if (!settings.smooth) options |= gpu::kImageSmoothOff;
-  q.image.w = options;
-  q.ambient = glm::vec4(settings.ambient, float(lights.size()));
-  q.material = glm::vec4(settings.diffuse, settings.specular, settings.shininess, 0.0f);
-  for (size_t l = 0; l < lights.size(); ++l) {
-    q.lights[l].position = glm::vec4(lights[l].position, float(gpu::kLightPoint));
-    q.lights[l].color = glm::vec4(lights[l].color, 0.0f);
-  }
-
-  Pass pass(q, positions_.data(), normals_.data(), colors_.data(), spacing_.data(), shadow_.data(),
-            uint32_t(lights.size()));
+  Pass pass(plan.eye, scene_, shadow_.data(), uint32_t(lights.size()));
   std::vector<glm::vec4> sum(pixels, glm::vec4(0.0f));
   Layer last;
-  for (int k = 0; k < settings.layers; ++k) {
-    pass.Q.image.w = options | (k > 0 ? gpu::kImagePeel : 0u);
+  for (int k = 0; k < plan.layers; ++k) {
+    pass.Q.image.w = plan.eye.image.w | (k > 0 ? gpu::kImagePeel : 0u);
     pass.reference = &last;
-    Layer layer = project(pass, positions_.size(), [&](uint32_t, glm::ivec2 pixel, float depth) {
+    Layer layer = project(pass, scene_.size(), [&](uint32_t, glm::ivec2 pixel, float depth) {
       return pass.imageBehindLast(pixel, depth);
     });
-    result.stats.projected += positions_.size();
+    result.stats.projected += scene_.size();
     if (std::all_of(layer.index.begin(), layer.index.end(),
                     [](uint32_t i) { return i == kImageNoPoint; }))
       break;
-    const auto [background, occluded] = fill(pass, layer, settings.maxFillPasses);
+    const auto [background, occluded] = fill(pass, layer, plan.fillPasses);
     result.stats.backgroundPasses.push_back(background);
     result.stats.occludedPasses.push_back(occluded);
     ++result.stats.layers;
@@ -381,7 +412,7 @@ ImageResult PointImageRenderer::render(const ImageCamera& camera, std::span<cons
     });
     if (k == 0) {
       result.depth.resize(pixels);
-      for (size_t i = 0; i < pixels; ++i) result.depth[i] = layer.depth[i] * far;
+      for (size_t i = 0; i < pixels; ++i) result.depth[i] = layer.depth[i] * plan.far;
       result.points = layer.index;
     }
     last = std::move(layer);
@@ -393,7 +424,7 @@ ImageResult PointImageRenderer::render(const ImageCamera& camera, std::span<cons
   result.color.resize(pixels);
   result.coverage.resize(pixels);
   for (size_t i = 0; i < pixels; ++i) {
-    result.color[i] = glm::vec3(sum[i]) + (1.0f - sum[i].a) * settings.background;
+    result.color[i] = glm::vec3(sum[i]) + (1.0f - sum[i].a) * glm::vec3(plan.eye.background);
     result.coverage[i] = sum[i].a;
   }
   return result;

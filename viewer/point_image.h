@@ -9,6 +9,8 @@
 #include <span>
 #include <vector>
 
+#include "shaders/shared.h"
+
 namespace iso::viewer {
 
 // One point cloud of a scene, in the scene's float frame (the caller's choice of origin).
@@ -51,7 +53,7 @@ struct ImageSettings {
   bool shadows = false;        // shadow textures for every light
   int shadowResolution = 1024; // the lights' square images
   int maxFillRadius = 8;       // the masks' largest radius (pixels, ≤ kImageMaxFillRadius)
-  int maxFillPasses = 64;      // a guard: filling stops when nothing changes, long before
+  int maxFillPasses = 24;      // a guard: filling stops when nothing changes, long before
   glm::vec3 ambient{0.15f};
   glm::vec3 background{0.0f};
   float diffuse = 0.85f, specular = 0.25f, shininess = 40.0f;
@@ -76,6 +78,49 @@ struct ImageResult {
   ImageStats stats;
 };
 
+// The points of a scene as both renderers read them: object after object, each point's position
+// and spacing, normal (zero: none) and color (linear RGB and its object's opacity), and their box.
+class PointImageScene {
+ public:
+  explicit PointImageScene(std::span<const ImageObject> objects);
+
+  size_t size() const { return positions_.size(); }
+  const std::vector<glm::vec4>& positions() const { return positions_; }  // xyz, w: spacing
+  const std::vector<glm::vec4>& normals() const { return normals_; }      // xyz, w: 0
+  const std::vector<glm::vec4>& colors() const { return colors_; }
+  glm::vec3 lo() const { return lo_; }
+  glm::vec3 hi() const { return hi_; }
+  bool normals_everywhere() const { return normalsAll_; }
+  float largestSpacing() const { return largestSpacing_; }
+  float gap(const ImageSettings& settings) const;  // d̃ in world units
+
+ private:
+  std::vector<glm::vec4> positions_, normals_, colors_;
+  bool normalsAll_ = true;
+  float largestSpacing_ = 0.0f;
+  glm::vec3 lo_{0.0f}, hi_{0.0f};
+};
+
+// The passes of a frame, the same for both renderers: the eye's parameters (kImagePeel is added
+// for the layers after the first) and one pass a sample of each light.
+struct ImagePlan {
+  gpu::ImageParams eye{};
+  std::vector<gpu::ImageParams> samples;  // light after light, sample after sample
+  std::vector<uint32_t> light;            // the light of each sample
+  float far = 0.0f;                       // the eye's far distance: depth 1
+  int layers = 1;
+  int fillPasses = 24;                    // a kind of filling stops after at most this many
+  bool shadows = false;
+};
+
+// The plan of a frame; UsageError for what cannot be drawn (no layer, too many lights, a light
+// too close to the points for one square view of them).
+ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
+                    std::span<const ImageLight> lights, const ImageSettings& settings);
+
+// The linear color of a pixel as an sRGB8 RGBA word (alpha 255), as the GPU writes it.
+uint32_t imagePixelWord(glm::vec3 linear);
+
 class PointImageRenderer {
  public:
   explicit PointImageRenderer(std::vector<ImageObject> objects);
@@ -87,20 +132,12 @@ class PointImageRenderer {
   // The shadow texture of the last frame with shadows: per point and light, the fraction of the
   // light's samples that reach it (points ordered object after object).
   const std::vector<float>& shadowTexture() const { return shadow_; }
-  size_t pointCount() const { return positions_.size(); }
-  float gap(const ImageSettings& settings) const;
+  const PointImageScene& scene() const { return scene_; }
 
  private:
-  struct ShadowKey;
-  void computeShadows(std::span<const ImageLight> lights, const ImageSettings& settings,
-                      ImageStats& stats);
+  void computeShadows(const ImagePlan& plan, size_t lights, ImageStats& stats);
 
-  std::vector<glm::vec3> positions_, normals_;
-  std::vector<glm::vec4> colors_;  // linear RGB and the object's opacity
-  std::vector<float> spacing_;
-  bool normals_all_ = true;        // every object has normals
-  float largestSpacing_ = 0.0f;
-  glm::vec3 lo_{0.0f}, hi_{0.0f};
+  PointImageScene scene_;
   std::vector<float> shadow_;
   std::vector<float> shadowKey_;
 };

@@ -180,6 +180,9 @@ void createDevice(Gpu& gpu, bool swapchain) {
                     gpu.properties.deviceName));
   VkPhysicalDeviceVulkan12Features use12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
   use12.bufferDeviceAddress = VK_TRUE;
+  // Image-space points project with 64-bit atomic minima (point_image_gpu.h), where offered.
+  use12.shaderBufferInt64Atomics = has12.shaderBufferInt64Atomics;
+  gpu.int64Atomics = has12.shaderBufferInt64Atomics == VK_TRUE;
   VkPhysicalDeviceFeatures2 use{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
   use.pNext = &use12;
   use.features.shaderInt64 = VK_TRUE;
@@ -250,6 +253,7 @@ Gpu::Gpu(Gpu&& o) noexcept
       queue(o.queue),
       queueFamily(o.queueFamily),
       timestampValidBits(o.timestampValidBits),
+      int64Atomics(o.int64Atomics),
       properties(o.properties),
       memory(o.memory),
       commandPool(std::exchange(o.commandPool, VK_NULL_HANDLE)),

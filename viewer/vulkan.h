@@ -83,6 +83,7 @@ struct Gpu {
   VkQueue queue = VK_NULL_HANDLE;
   uint32_t queueFamily = 0;
   uint32_t timestampValidBits = 0;  // of the queue family; 0: no timestamps
+  bool int64Atomics = false;        // shaderBufferInt64Atomics is on
   VkPhysicalDeviceProperties properties{};
   VkPhysicalDeviceMemoryProperties memory{};
   VkCommandPool commandPool = VK_NULL_HANDLE;

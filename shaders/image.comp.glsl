@@ -1,0 +1,126 @@
+// Image-space point rendering on the GPU (specs/viewer.md, "Image-space points"): the steps of
+// shaders/image.h, one stage a pipeline (specialization constant 0), over every point or pixel.
+// viewer/point_image_gpu.cpp records them in order; viewer/point_image.cpp runs the same steps
+// on the CPU.
+#version 450
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+
+#define ISO_INOUT(T) inout T
+#include "shared.h"
+
+// The stages (kImageStage...: shared.h).
+layout(constant_id = 0) const uint kStage = 0u;
+// The fill stage's kind: 0 background pixels, 1 occluded pixels.
+layout(constant_id = 1) const uint kKind = 0u;
+
+layout(local_size_x = 64) in;
+
+layout(std140, binding = 0) uniform Pass { ImageParams Q; };
+layout(std430, binding = 1) readonly buffer Positions { vec4 positions[]; };  // xyz, spacing
+layout(std430, binding = 2) readonly buffer Normals { vec4 normals[]; };
+layout(std430, binding = 3) readonly buffer Colors { vec4 colors[]; };
+// Per pixel the least (depth bits << 32 | point) of the points projected there.
+layout(std430, binding = 4) buffer Keys { uint64_t keys[]; };
+// Layers: per pixel (depth bits, point). A the layer, B the fill stage's output, R the previous
+// layer (depth peeling) or the light's first layer (shadows).
+layout(std430, binding = 5) buffer LayerA { uvec2 layerA[]; };
+layout(std430, binding = 6) buffer LayerB { uvec2 layerB[]; };
+layout(std430, binding = 7) buffer LayerR { uvec2 layerR[]; };
+// Shaded colors (premultiplied RGBA): shade writes A, smooth A to B, anti-aliasing B to A.
+layout(std430, binding = 8) buffer ColorA { vec4 colorA[]; };
+layout(std430, binding = 9) buffer ColorB { vec4 colorB[]; };
+// The layers blended so far, front to back (premultiplied RGBA).
+layout(std430, binding = 10) buffer Blend { vec4 blended[]; };
+// Per point and light, the samples of the light that reach it (shadow textures).
+layout(std430, binding = 11) buffer Lit { uint lit[]; };
+// Words: 0-2 the fill stage's indirect dispatch, 3 pixels the last fill pass changed, 4 fill
+// passes that changed something (kImageControl...: shared.h).
+layout(std430, binding = 12) buffer Control { uint control[]; };
+// The picture: sRGB8 RGBA words; the background in the scene's color.
+layout(std430, binding = 13) writeonly buffer Pixels { uint pixels[]; };
+
+bool inside(ivec2 p) { return p.x >= 0 && p.y >= 0 && p.x < int(Q.image.x) && p.y < int(Q.image.y); }
+uint at(ivec2 p) { return uint(p.y) * Q.image.x + uint(p.x); }
+
+vec3 pointPosition(uint i) { return vec3(positions[i]); }
+vec3 pointNormal(uint i) { return vec3(normals[i]); }
+vec4 pointColor(uint i) { return colors[i]; }
+float pointSpacing(uint i) { return positions[i].w; }
+float pointShadow(uint i, uint light) {
+  return float(lit[i * uint(Q.ambient.w) + light]) / Q.lights[light].color.w;
+}
+float layerDepth(ivec2 p) { return inside(p) ? uintBitsToFloat(layerA[at(p)].x) : 0.0f; }
+uint layerIndex(ivec2 p) { return inside(p) ? layerA[at(p)].y : kImageNoPoint; }
+float referenceDepth(ivec2 p) { return inside(p) ? uintBitsToFloat(layerR[at(p)].x) : 0.0f; }
+vec4 layerColor(ivec2 p) {
+  if (!inside(p)) return vec4(0.0f);
+  return kStage == kImageStageSmooth ? colorA[at(p)] : colorB[at(p)];
+}
+
+#include "image.h"
+
+void main() {
+  // Dispatches wider than a row of workgroups continue on the next rows (gl_NumWorkGroups.y).
+  uint id = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
+  if (kStage == kImageStageProject || kStage == kImageStageLit) {
+    if (id >= uint(positions.length())) return;
+    vec3 p = pointPosition(id);
+    vec3 n = pointNormal(id);
+    if (kStage == kImageStageLit) {
+      // The light's first layer, filled, is layer A; material.w names the pass's light.
+      if (imageLit(p, n)) atomicAdd(lit[id * uint(Q.ambient.w) + uint(Q.material.w)], 1u);
+      return;
+    }
+    ivec2 pixel = ivec2(0);
+    float depth = 0.0f;
+    if (!imageProject(p, n, pixel, depth) || !imageBehindLast(pixel, depth)) return;
+    atomicMin(keys[at(pixel)], (uint64_t(floatBitsToUint(depth)) << 32) | uint64_t(id));
+    return;
+  }
+  if (kStage == kImageStageControl) {
+    // After a fill pass and its copy: the next ones run only where this one changed something.
+    if (id != 0u) return;
+    bool changed = control[kImageControlChanged] != 0u;
+    if (changed) control[kImageControlPasses + kKind] += 1u;
+    else control[0] = 0u;
+    control[kImageControlChanged] = 0u;
+    return;
+  }
+  if (id >= Q.image.x * Q.image.y) return;
+  ivec2 p = ivec2(int(id % Q.image.x), int(id / Q.image.x));
+  if (kStage == kImageStageResolve) {
+    uint64_t key = keys[id];
+    bool none = key == ~0ul;
+    layerA[id] = none ? uvec2(0u, kImageNoPoint) : uvec2(uint(key >> 32), uint(key));
+  } else if (kStage == kImageStageFill) {
+    float self = layerDepth(p);
+    float depth = self;
+    uint index = layerIndex(p);
+    if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index))
+      atomicAdd(control[kImageControlChanged], 1u);
+    layerB[id] = uvec2(floatBitsToUint(depth), index);
+  } else if (kStage == kImageStageCopy) {
+    layerA[id] = layerB[id];
+  } else if (kStage == kImageStageShade) {
+    colorA[id] = imageShade(p);
+  } else if (kStage == kImageStageSmooth) {
+    colorB[id] = imageSmooth(p);
+  } else if (kStage == kImageStageAntialias) {
+    colorA[id] = imageAntialias(p);
+  } else if (kStage == kImageStageBlend) {
+    vec4 sum = blended[id];
+    blended[id] = sum + (1.0f - sum.a) * colorA[id];
+    layerR[id] = layerA[id];
+  } else if (kStage == kImageStageFinish) {
+    vec4 sum = blended[id];
+    vec3 c = clamp(vec3(sum) + (1.0f - sum.a) * vec3(Q.background), 0.0f, 1.0f);
+    uint word = 0xFF000000u;
+    for (int k = 0; k < 3; ++k) {
+      float s = c[k] <= 0.0031308f ? 12.92f * c[k] : 1.055f * pow(c[k], 1.0f / 2.4f) - 0.055f;
+      word |= uint(round(s * 255.0f)) << (8 * k);
+    }
+    pixels[id] = word;
+  }
+}

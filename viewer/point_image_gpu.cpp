@@ -1,0 +1,318 @@
+// Image-space point rendering on the GPU (point_image_gpu.h).
+#include "viewer/point_image_gpu.h"
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+
+#include "iso/error.h"
+#include "shaders/shared.h"
+
+namespace iso::viewer {
+namespace {
+
+const uint32_t kImageSpirv[] =
+#include "image.comp.spv.inc"
+    ;
+
+using gpu::ImageParams;
+
+constexpr uint32_t kGroup = 64;           // invocations a workgroup (image.comp.glsl)
+constexpr uint32_t kMaxSamples = 64;      // samples of an area light at most
+constexpr uint32_t kSets = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peeled, samples
+constexpr VkDeviceSize kParamsStride = 512;
+constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes of each kind
+constexpr uint32_t kMaxLayers = 64;
+
+// The pipelines: a stage, and for filling and control a kind.
+enum Variant : uint32_t {
+  kProject,
+  kResolve,
+  kFillBackground,
+  kFillOccluded,
+  kControlBackground,
+  kControlOccluded,
+  kCopy,
+  kShade,
+  kSmooth,
+  kAntialias,
+  kBlend,
+  kFinish,
+  kLit,
+  kVariants
+};
+constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
+    {gpu::kImageStageProject, 0},
+    {gpu::kImageStageResolve, 0},
+    {gpu::kImageStageFill, 0},
+    {gpu::kImageStageFill, 1},
+    {gpu::kImageStageControl, 0},
+    {gpu::kImageStageControl, 1},
+    {gpu::kImageStageCopy, 0},
+    {gpu::kImageStageShade, 0},
+    {gpu::kImageStageSmooth, 0},
+    {gpu::kImageStageAntialias, 0},
+    {gpu::kImageStageBlend, 0},
+    {gpu::kImageStageFinish, 0},
+    {gpu::kImageStageLit, 0},
+}};
+
+constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT |
+                                        VK_BUFFER_USAGE_TRANSFER_DST_BIT |
+                                        VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
+
+// Workgroups for `count` invocations, rows of at most 65,535 (the shader continues on rows).
+std::array<uint32_t, 3> groups(uint64_t count) {
+  const uint64_t n = std::max<uint64_t>((count + kGroup - 1) / kGroup, 1);
+  const uint32_t x = uint32_t(std::min<uint64_t>(n, 65535));
+  return {x, uint32_t((n + x - 1) / x), 1};
+}
+
+// What the commands before wrote (shaders, transfers) made visible to what follows (shaders,
+// indirect dispatches, transfers).
+void barrier(VkCommandBuffer cb) {
+  VkMemoryBarrier b{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  b.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT |
+                    VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT |
+                    VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_READ_BIT;
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT |
+                           VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
+                       0, 1, &b, 0, nullptr, 0, nullptr);
+}
+
+Buffer upload(Gpu& gpu, const std::vector<glm::vec4>& data) {
+  Buffer b = createBuffer(gpu, std::max<VkDeviceSize>(data.size() * sizeof(glm::vec4), 16),
+                          kStorage, true);
+  if (!data.empty()) std::memcpy(b.mapped, data.data(), data.size() * sizeof(glm::vec4));
+  return b;
+}
+
+}  // namespace
+
+GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu), scene_(scene) {
+  if (!gpu.int64Atomics)
+    throw UsageError(std::string("image-space points need 64-bit buffer atomics, which ") +
+                     gpu.properties.deviceName + " lacks: draw them with --cpu");
+  std::vector<std::vector<uint32_t>> variants;
+  for (const auto& c : kVariantConstants) variants.push_back({c[0], c[1]});
+  const std::array<uint32_t, 13> counts = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+  pipeline_ = createComputePipeline(gpu, kImageSpirv, counts, variants, kSets);
+  positions_ = upload(gpu, scene.positions());
+  normals_ = upload(gpu, scene.normals());
+  colors_ = upload(gpu, scene.colors());
+  params_ = createBuffer(gpu, kParamsStride * kSets, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
+  control_ = createBuffer(gpu, (kStatsWord + 2 * kMaxLayers) * 4,
+                         kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, true);
+  cb_ = allocateCommandBuffer(gpu);
+  fence_ = createFence(gpu, false);
+  if (gpu.timestampValidBits > 0) queries_ = createTimestampQueries(gpu, 2);
+}
+
+GpuPointImage::~GpuPointImage() {
+  if (!gpu_.device) return;
+  vkDeviceWaitIdle(gpu_.device);
+  vkFreeCommandBuffers(gpu_.device, gpu_.commandPool, 1, &cb_);
+}
+
+uint64_t GpuPointImage::memoryBytes() const {
+  uint64_t sum = 0;
+  for (const Buffer* b : {&positions_, &normals_, &colors_, &params_, &keys_, &layerA_, &layerB_,
+                          &layerR_, &colorA_, &colorB_, &blended_, &lit_, &control_, &pixels_})
+    sum += b->allocated;
+  return sum;
+}
+
+void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
+  size_t pixels = size_t(plan.eye.image.x) * plan.eye.image.y;
+  for (const ImageParams& q : plan.samples) pixels = std::max(pixels, size_t(q.image.x) * q.image.y);
+  const size_t eyePixels = size_t(plan.eye.image.x) * plan.eye.image.y;
+  const size_t litWords = std::max<size_t>(scene_.size() * lights, 1);
+  bool changed = false;
+  if (pixels > pixelCapacity_) {
+    keys_ = createBuffer(gpu_, pixels * 8, kStorage, false);
+    layerA_ = createBuffer(gpu_, pixels * 8, kStorage, false);
+    layerB_ = createBuffer(gpu_, pixels * 8, kStorage, false);
+    layerR_ = createBuffer(gpu_, pixels * 8, kStorage, false);
+    pixelCapacity_ = pixels;
+    changed = true;
+  }
+  if (eyePixels != eyePixels_) {
+    colorA_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
+    colorB_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
+    blended_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
+    pixels_ = createBuffer(gpu_, eyePixels * 4, kStorage, true);
+    eyePixels_ = eyePixels;
+    changed = true;
+  }
+  if (litWords > litCapacity_) {
+    lit_ = createBuffer(gpu_, litWords * 4, kStorage, false);
+    litCapacity_ = litWords;
+    shadowKey_.clear();
+    changed = true;
+  }
+  if (!changed && sets_ == kSets) return;
+  const Buffer* storage[] = {&positions_, &normals_, &colors_, &keys_,    &layerA_,
+                             &layerB_,    &layerR_,  &colorA_, &colorB_,  &blended_,
+                             &lit_,       &control_, &pixels_};
+  std::vector<VkDescriptorBufferInfo> infos;
+  infos.reserve(kSets * 14);
+  std::vector<VkWriteDescriptorSet> writes;
+  for (uint32_t set = 0; set < kSets; ++set) {
+    infos.push_back({params_.buffer, set * kParamsStride, sizeof(ImageParams)});
+    for (const Buffer* b : storage) infos.push_back({b->buffer, 0, VK_WHOLE_SIZE});
+    for (uint32_t binding = 0; binding < 14; ++binding) {
+      VkWriteDescriptorSet w{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+      w.dstSet = pipeline_.sets[set];
+      w.dstBinding = binding;
+      w.descriptorCount = 1;
+      w.descriptorType =
+          binding == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      w.pBufferInfo = &infos[set * 14 + binding];
+      writes.push_back(w);
+    }
+  }
+  vkUpdateDescriptorSets(gpu_.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
+  sets_ = kSets;
+}
+
+GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const ImageLight> lights,
+                                    const ImageSettings& settings) {
+  const ImagePlan plan = planImage(scene_, camera, lights, settings);
+  if (plan.samples.size() > kSets - 2)
+    throw UsageError("image-space shadows: at most " + std::to_string(kMaxSamples) +
+                     " samples a light");
+  if (plan.layers > int(kMaxLayers))
+    throw UsageError("image-space points: at most " + std::to_string(kMaxLayers) + " layers");
+  prepare(plan, lights.size());
+
+  // The parameters: set 0 the eye's first layer, 1 its later layers, 2 + s the light samples.
+  auto* params = static_cast<std::byte*>(params_.mapped);
+  ImageParams peeled = plan.eye;
+  peeled.image.w |= gpu::kImagePeel;
+  std::memcpy(params, &plan.eye, sizeof(ImageParams));
+  std::memcpy(params + kParamsStride, &peeled, sizeof(ImageParams));
+  for (size_t s = 0; s < plan.samples.size(); ++s)
+    std::memcpy(params + (2 + s) * kParamsStride, &plan.samples[s], sizeof(ImageParams));
+
+  std::vector<float> key;
+  for (const ImageParams& q : plan.samples) {
+    const float* words = &q.eye.x;
+    key.insert(key.end(), words, words + sizeof(ImageParams) / sizeof(float));
+  }
+  GpuImageFrame frame;
+  const bool shadows = plan.shadows && key != shadowKey_;
+  frame.stats.shadowsReused = plan.shadows && !shadows;
+
+  VkCommandBuffer cb = cb_;
+  ISO_VK(vkResetCommandBuffer(cb, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  if (queries_) {
+    vkCmdResetQueryPool(cb, queries_.get(), 0, 2);
+    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
+  }
+  const VkPipelineLayout layout = pipeline_.layout;
+  auto dispatch = [&](Variant v, uint32_t set, uint64_t count) {
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &pipeline_.sets[set],
+                            0, nullptr);
+    const auto g = groups(count);
+    vkCmdDispatch(cb, g[0], g[1], g[2]);
+    barrier(cb);
+  };
+  auto indirect = [&](Variant v, uint32_t set) {
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &pipeline_.sets[set],
+                            0, nullptr);
+    vkCmdDispatchIndirect(cb, control_.buffer, 0);
+    barrier(cb);
+  };
+  const uint64_t n = scene_.size();
+  // Projection into fresh keys, then layer A.
+  auto project = [&](uint32_t set, uint64_t pixels) {
+    vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);
+    barrier(cb);
+    dispatch(kProject, set, n);
+    dispatch(kResolve, set, pixels);
+  };
+  // Filling passes of one kind until one changes nothing (its indirect dispatch then empties
+  // the rest), at most plan.fillPasses.
+  auto fill = [&](uint32_t set, uint64_t pixels, uint32_t kind) {
+    const auto g = groups(pixels);
+    const uint32_t start[4] = {g[0], g[1], g[2], 0};
+    vkCmdUpdateBuffer(cb, control_.buffer, 0, sizeof start, start);
+    barrier(cb);
+    for (int round = 0; round < plan.fillPasses; ++round) {
+      indirect(kind == 0 ? kFillBackground : kFillOccluded, set);
+      indirect(kCopy, set);
+      dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);
+    }
+  };
+
+  if (shadows) {
+    vkCmdFillBuffer(cb, lit_.buffer, 0, VK_WHOLE_SIZE, 0);
+    barrier(cb);
+    for (size_t s = 0; s < plan.samples.size(); ++s) {
+      const uint32_t set = uint32_t(2 + s);
+      const uint64_t pixels = uint64_t(plan.samples[s].image.x) * plan.samples[s].image.y;
+      project(set, pixels);
+      fill(set, pixels, 1);  // occluded pixels only (point_image.cpp, computeShadows)
+      dispatch(kLit, set, n);
+      frame.stats.projected += 2 * n;
+    }
+  }
+  const uint64_t pixels = eyePixels_;
+  vkCmdFillBuffer(cb, blended_.buffer, 0, VK_WHOLE_SIZE, 0);
+  for (int k = 0; k < plan.layers; ++k) {
+    const uint32_t set = k == 0 ? 0 : 1;
+    const uint32_t zero[2] = {0, 0};
+    vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlPasses * 4, sizeof zero, zero);
+    project(set, pixels);
+    fill(set, pixels, 0);
+    fill(set, pixels, 1);
+    VkBufferCopy copy{gpu::kImageControlPasses * 4, (kStatsWord + 2 * uint64_t(k)) * 4, 8};
+    vkCmdCopyBuffer(cb, control_.buffer, control_.buffer, 1, &copy);
+    dispatch(kShade, set, pixels);
+    dispatch(kSmooth, set, pixels);
+    dispatch(kAntialias, set, pixels);
+    dispatch(kBlend, set, pixels);
+    frame.stats.projected += n;
+  }
+  dispatch(kFinish, 0, pixels);
+  if (queries_) vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
+  ISO_VK(vkEndCommandBuffer(cb));
+  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &cb;
+  VkFence fence = fence_.get();
+  ISO_VK(vkResetFences(gpu_.device, 1, &fence));
+  ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
+  ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+  if (shadows) shadowKey_ = std::move(key);
+
+  const auto* words = static_cast<const uint32_t*>(pixels_.mapped);
+  frame.pixels.assign(words, words + pixels);
+  const auto* control = static_cast<const uint32_t*>(control_.mapped);
+  for (int k = 0; k < plan.layers; ++k) {
+    frame.stats.backgroundPasses.push_back(int(control[kStatsWord + 2 * k]));
+    frame.stats.occludedPasses.push_back(int(control[kStatsWord + 2 * k + 1]));
+  }
+  frame.stats.layers = plan.layers;
+  if (queries_) {
+    uint64_t t[2] = {0, 0};
+    if (vkGetQueryPoolResults(gpu_.device, queries_.get(), 0, 2, sizeof t, t, 8,
+                              VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
+      const uint64_t mask = gpu_.timestampValidBits >= 64
+                                ? ~uint64_t(0)
+                                : (uint64_t(1) << gpu_.timestampValidBits) - 1;
+      frame.gpuSeconds = double((t[1] - t[0]) & mask) *
+                         double(gpu_.properties.limits.timestampPeriod) * 1e-9;
+    }
+  }
+  return frame;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,51 @@
+// Image-space point rendering on the GPU: shaders/image.comp.glsl's stages recorded in the order
+// the CPU reference (point_image.h) runs them, over the same plan (planImage), so that the two
+// draw the same pictures (specs/viewer.md, "Image-space points").
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "viewer/point_image.h"
+#include "viewer/vulkan.h"
+
+namespace iso::viewer {
+
+struct GpuImageFrame {
+  std::vector<uint32_t> pixels;  // sRGB8 RGBA words, row after row
+  ImageStats stats;
+  double gpuSeconds = 0.0;       // the frame's commands, from timestamps (0 without them)
+};
+
+class GpuPointImage {
+ public:
+  // Uploads the scene's points; UsageError when the device lacks 64-bit buffer atomics.
+  GpuPointImage(Gpu& gpu, const PointImageScene& scene);
+  ~GpuPointImage();
+  GpuPointImage(const GpuPointImage&) = delete;
+  GpuPointImage& operator=(const GpuPointImage&) = delete;
+
+  // Draws one frame and waits for it.
+  GpuImageFrame render(const ImageCamera& camera, std::span<const ImageLight> lights,
+                       const ImageSettings& settings);
+
+  uint64_t memoryBytes() const;  // device memory of its buffers
+
+ private:
+  void prepare(const ImagePlan& plan, size_t lights);  // buffers and sets sized for the plan
+
+  Gpu& gpu_;
+  const PointImageScene& scene_;
+  ComputePipeline pipeline_;
+  Buffer positions_, normals_, colors_;
+  Buffer params_, keys_, layerA_, layerB_, layerR_, colorA_, colorB_, blended_, lit_, control_,
+      pixels_;
+  Owned<VkQueryPool> queries_;
+  VkCommandBuffer cb_ = VK_NULL_HANDLE;
+  Owned<VkFence> fence_;
+  size_t sets_ = 0, pixelCapacity_ = 0, eyePixels_ = 0, litCapacity_ = 0;
+  std::vector<float> shadowKey_;
+};
+
+}  // namespace iso::viewer
