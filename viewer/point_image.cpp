@@ -106,7 +106,7 @@ ImageParams viewParams(glm::vec3 eye, glm::vec3 forward, glm::vec3 up, float fov
   q.toY = glm::vec4(upv / t, 0.0f);
   q.forward = glm::vec4(forward, far * 1e-6f);
   q.image = glm::uvec4(uint32_t(width), uint32_t(height), 1u, 0u);
-  q.layer = glm::vec4(0.0f, 2.0f * t / float(height), 0.2f, 0.0f);
+  q.layer = glm::vec4(0.0f, 2.0f * t / float(height), kShadowLeastCosine, 0.0f);
   return q;
 }
 
@@ -232,10 +232,12 @@ PointImageScene::PointImageScene(std::span<const ImageObject> objects) {
     ISO_CHECK(o.colors.empty() || o.colors.size() == o.positions.size());
     if (!(o.spacing > 0.0f)) throw UsageError("image-space points: an object without a spacing");
     anyNormals |= !o.normals.empty();
+    ISO_CHECK(o.spacings.empty() || o.spacings.size() == o.positions.size());
     normalsAll_ &= !o.normals.empty() || o.positions.empty();
+    orientedAll_ &= o.orientedNormals || o.positions.empty();
     largestSpacing_ = std::max(largestSpacing_, o.spacing);
     for (size_t i = 0; i < o.positions.size(); ++i) {
-      positions_.emplace_back(o.positions[i], o.spacing);
+      positions_.emplace_back(o.positions[i], o.spacings.empty() ? o.spacing : o.spacings[i]);
       normals_.emplace_back(o.normals.empty() ? glm::vec3(0.0f) : o.normals[i], 0.0f);
       colors_.emplace_back(o.colors.empty() ? o.color : o.colors[i], o.opacity);
       lo_ = glm::min(lo_, o.positions[i]);
@@ -243,6 +245,7 @@ PointImageScene::PointImageScene(std::span<const ImageObject> objects) {
     }
   }
   normalsAll_ = normalsAll_ && anyNormals;
+  orientedAll_ = orientedAll_ && normalsAll_;
   if (total == 0) lo_ = hi_ = glm::vec3(0.0f);
 }
 
@@ -260,11 +263,12 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
   plan.layers = settings.layers;
   plan.fillPasses = std::max(settings.maxFillPasses, 0);
   plan.shadows = settings.shadows && !lights.empty();
+  plan.reuseShadows = settings.reuseShadows;
   const glm::vec3 lo = scene.lo(), hi = scene.hi();
   const float gap = scene.gap(settings);
   const uint32_t radius =
       uint32_t(std::clamp(settings.maxFillRadius, 1, int(gpu::kImageMaxFillRadius)));
-  const uint32_t cull = settings.cull && scene.normals_everywhere() ? gpu::kImageCull : 0u;
+  const uint32_t cull = settings.cull && scene.orientedEverywhere() ? gpu::kImageCull : 0u;
 
   ImageParams& q = plan.eye;
   q = viewParams(camera.eye, camera.target - camera.eye, camera.up, glm::radians(camera.fovDegrees),
@@ -275,7 +279,7 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
   q.image.z = radius;
   uint32_t options = cull;
   if (plan.shadows) options |= gpu::kImageShadows;
-  if (settings.eyeDome || !scene.normals_everywhere()) options |= gpu::kImageEyeDome;
+  if (settings.eyeDome || !scene.normalsEverywhere()) options |= gpu::kImageEyeDome;
   if (settings.antialias == ImageAntialias::Off) options |= gpu::kImageAaOff;
   if (settings.antialias == ImageAntialias::Edges) options |= gpu::kImageAaEdges;
   if (!settings.smooth) options |= gpu::kImageSmoothOff;
@@ -292,7 +296,7 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
 
   // One square view a sample of each light, from the sample toward the points' box, holding it.
   const glm::vec3 center = 0.5f * (lo + hi);
-  const int size = std::max(settings.shadowResolution, 8);
+
   for (size_t l = 0; l < lights.size(); ++l) {
     const ImageLight& light = lights[l];
     const int samples = int(q.lights[l].color.w);
@@ -317,6 +321,15 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
         throw UsageError(
             "image-space shadows: a light too close to the points (a light's view of the points' "
             "box must fit in 2·atan(5) = 157°): move it farther out");
+      // The lights' images: the size asked for, or one whose pixels are about the points'
+      // spacing where they lie (denser images leave holes between points that the filling
+      // must close, and let points behind show through them).
+      int size = settings.shadowResolution;
+      if (size <= 0) {
+        const float across = 2.0f * spread * glm::length(center - at);
+        size = int(std::clamp(across / (kShadowPixelSpacings * scene.largestSpacing()), 256.0f,
+                              4096.0f));
+      }
       ImageParams v = viewParams(at, forward, up, 2.0f * std::atan(spread * 1.01f), size, size, lo, hi);
       v.layer.x = gap * v.eye.w;
       v.image.z = radius;
@@ -353,7 +366,7 @@ void PointImageRenderer::computeShadows(const ImagePlan& plan, size_t lights, Im
     key.insert(key.end(), words, words + sizeof(ImageParams) / sizeof(float));
   }
   const size_t n = scene_.size();
-  if (key == shadowKey_ && shadow_.size() == n * lights) {
+  if (plan.reuseShadows && key == shadowKey_ && shadow_.size() == n * lights) {
     stats.shadowsReused = true;
     return;
   }

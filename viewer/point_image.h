@@ -20,7 +20,9 @@ struct ImageObject {
   std::vector<glm::vec3> colors;   // empty (every point `color`), or linear RGB a point
   glm::vec3 color{0.75f, 0.75f, 0.72f};
   float opacity = 1.0f;
-  float spacing = 0.0f;  // the distance between neighbouring points (> 0)
+  float spacing = 0.0f;  // the distance between neighbouring points (> 0): the typical one
+  std::vector<float> spacings;  // empty, or each point's own (> 0): the masks' radius follows it
+  bool orientedNormals = true;  // normals face outward (false: estimated, either way): no culling
 };
 
 enum class ImageAntialias { Off, Silhouettes, Edges };
@@ -51,7 +53,8 @@ struct ImageSettings {
   float eyeDomeStrength = 20.0f;
   bool cull = true;            // back-face culling of points with normals
   bool shadows = false;        // shadow textures for every light
-  int shadowResolution = 1024; // the lights' square images
+  bool reuseShadows = true;    // keep the last frame's shadow textures while the lights stay
+  int shadowResolution = 0;    // the lights' square images, pixels across (0: from the spacing)
   int maxFillRadius = 8;       // the masks' largest radius (pixels, ≤ kImageMaxFillRadius)
   int maxFillPasses = 24;      // a guard: filling stops when nothing changes, long before
   glm::vec3 ambient{0.15f};
@@ -60,6 +63,10 @@ struct ImageSettings {
 };
 
 inline constexpr float kDefaultGapSpacings = 3.0f;
+// A light's image has pixels this many point spacings wide where the points lie (by default).
+inline constexpr float kShadowPixelSpacings = 1.0f;
+// The shadow texture's depth window d̃ / |cos| grows at most to d̃ / this at grazing light.
+inline constexpr float kShadowLeastCosine = 0.35f;
 
 struct ImageStats {
   int layers = 0;                        // layers that held points
@@ -90,13 +97,14 @@ class PointImageScene {
   const std::vector<glm::vec4>& colors() const { return colors_; }
   glm::vec3 lo() const { return lo_; }
   glm::vec3 hi() const { return hi_; }
-  bool normals_everywhere() const { return normalsAll_; }
+  bool normalsEverywhere() const { return normalsAll_; }    // every point has a normal
+  bool orientedEverywhere() const { return orientedAll_; }  // ... facing outward (culling)
   float largestSpacing() const { return largestSpacing_; }
   float gap(const ImageSettings& settings) const;  // d̃ in world units
 
  private:
   std::vector<glm::vec4> positions_, normals_, colors_;
-  bool normalsAll_ = true;
+  bool normalsAll_ = true, orientedAll_ = true;
   float largestSpacing_ = 0.0f;
   glm::vec3 lo_{0.0f}, hi_{0.0f};
 };
@@ -111,6 +119,7 @@ struct ImagePlan {
   int layers = 1;
   int fillPasses = 24;                    // a kind of filling stops after at most this many
   bool shadows = false;
+  bool reuseShadows = true;
 };
 
 // The plan of a frame; UsageError for what cannot be drawn (no layer, too many lights, a light

@@ -202,7 +202,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     key.insert(key.end(), words, words + sizeof(ImageParams) / sizeof(float));
   }
   GpuImageFrame frame;
-  const bool shadows = plan.shadows && key != shadowKey_;
+  const bool shadows = plan.shadows && (!plan.reuseShadows || key != shadowKey_);
   frame.stats.shadowsReused = plan.shadows && !shadows;
 
   VkCommandBuffer cb = cb_;

@@ -254,6 +254,7 @@ TEST(PointImage, ShadowTextureMatchesTheAnalyticShadow) {
   camera.width = camera.height = 256;
   ImageSettings settings;
   settings.shadows = true;
+  settings.shadowResolution = 1024;
   settings.layerGap = 0.08f;
   const ImageResult result = renderer.render(camera, std::span(&light, 1), settings);
   const std::vector<float>& m = renderer.shadowTexture();
@@ -307,6 +308,7 @@ TEST(PointImage, AreaLightGivesTheAnalyticPenumbra) {
   camera.width = camera.height = 64;
   ImageSettings settings;
   settings.shadows = true;
+  settings.shadowResolution = 1024;
   settings.layerGap = 0.08f;
   renderer.render(camera, std::span(&light, 1), settings);
   const std::vector<float>& m = renderer.shadowTexture();

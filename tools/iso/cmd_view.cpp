@@ -2,12 +2,15 @@
 // or a benchmark (--bench), streaming its chunks under a GPU memory budget (specs/viewer.md).
 #include <fmt/core.h>
 
+#include <fstream>
+
 #include "iso/error.h"
 #include "pipeline/base/files.h"
 #include "pipeline/io/image.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
+#include "tools/iso/view_points.h"
 #include "viewer/renderer.h"
 #include "viewer/view.h"
 
@@ -28,7 +31,53 @@ struct ViewArgs {
   std::optional<uint32_t> caustics;
   std::string draw;
   std::string traversal = "nested";
+  // Image-space points (--draw image; the default for raw scans).
+  std::vector<std::string> files;
+  viewer::ImageViewOptions image;
+  std::string antialias = "silhouettes", opacity;
+  bool noSmooth = false;
 };
+
+// Whether a file is an .iso file (its header's magic), not a raw scan.
+bool isIsoFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::array<char, 8> magic{};
+  in.read(magic.data(), magic.size());
+  return in.gcount() == 8 && std::equal(magic.begin(), magic.end(), kHeaderMagic.begin(),
+                                        [](char a, uint8_t b) { return uint8_t(a) == b; });
+}
+
+// Raw scans, or --draw image: every file read whole and drawn as image-space points.
+int viewImage(ViewArgs& a) {
+  for (const std::string& f : a.files)
+    if (isIsoFile(f))
+      throw UsageError(f + ": --draw image draws point files (raw scans); .iso files are drawn "
+                           "by the tracer");
+  viewer::ImageSettings& s = a.image.settings;
+  s.antialias = a.antialias == "off"     ? viewer::ImageAntialias::Off
+                : a.antialias == "edges" ? viewer::ImageAntialias::Edges
+                                         : viewer::ImageAntialias::Silhouettes;
+  s.smooth = !a.noSmooth;
+  s.shadows = true;  // unless --no-shadows (the scene's)
+  viewer::ImageInputs inputs = loadImageInputs({a.files.begin(), a.files.end()});
+  if (!a.opacity.empty()) {
+    const std::vector<double> v = viewer::parseNumbers(a.opacity, inputs.objects.size(),
+                                                       "--opacity (one a file)");
+    for (size_t i = 0; i < v.size(); ++i) {
+      if (!(v[i] > 0.0 && v[i] <= 1.0)) throw UsageError("--opacity: each in (0, 1]");
+      inputs.objects[i].opacity = float(v[i]);
+    }
+  }
+  if (a.view.scene.material.color != viewer::Material{}.color)
+    for (auto& o : inputs.objects)
+      if (o.colors.empty())
+        o.color = glm::vec3(a.view.scene.material.color[0], a.view.scene.material.color[1],
+                            a.view.scene.material.color[2]);
+  if (a.cpu) return viewer::viewImageCpu(a.view, a.image, inputs);
+  if (a.headless) return viewer::viewImageHeadless(a.view, a.image, inputs);
+  if (a.bench) return viewer::viewImageBench(a.view, a.image, inputs);
+  throw UsageError("--draw image: the window is not built yet; use --headless, --cpu or --bench");
+}
 
 viewer::Vec3d parseUp(const std::string& text) {
   if (text == "x") return {1, 0, 0};
@@ -117,7 +166,11 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       "view",
       "Look at an .iso file: a window (default), a picture (--headless --out F.png, or --cpu), "
       "or a benchmark (--bench); chunks stream to the GPU under --vram");
-  c->add_option("file", a->view.file, ".iso file")->required()->check(CLI::ExistingFile);
+  c->add_option("file", a->files,
+                ".iso file, or point files (raw scans: every format iso convert reads), drawn "
+                "as image-space points")
+      ->required()
+      ->check(CLI::ExistingFile);
   c->add_flag("--headless", a->headless, "Render a picture to --out without a window (GPU)");
   c->add_flag("--cpu", a->cpu, "Render the picture with the CPU reference tracer instead");
   c->add_flag("--bench", a->bench,
@@ -181,11 +234,38 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   auto* points = c->add_flag("--points", a->points,
                              "Draw the kept points (iso convert --keep-points) as splats instead "
                              "of the surface (--draw points); key K in the window cycles");
+  auto drawNames = namesList(viewer::kDrawNames);
+  drawNames.push_back("image");
   c->add_option("--draw", a->draw,
                 "What rays meet: surface (the default), points (the kept points as splats), or "
-                "both (the nearer)")
-      ->check(CLI::IsMember(namesList(viewer::kDrawNames)))
+                "both (the nearer); or image: point files drawn as image-space points (the "
+                "default for raw scans)")
+      ->check(CLI::IsMember(drawNames))
       ->excludes(points);
+  c->add_option("--layers", a->image.settings.layers,
+                "--draw image: surface layers peeled and blended front to back (transparency)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  c->add_option("--layer-gap", a->image.settings.layerGap,
+                "--draw image: the least distance between two surface layers (world units; "
+                "default 3 point spacings)")
+      ->check(CLI::PositiveNumber);
+  c->add_option("--opacity", a->opacity, "--draw image: each input's opacity, A[,A...] (0 to 1]");
+  c->add_option("--shadow-samples", a->image.shadowSamples,
+                "--draw image: samples of each light for soft shadows (a point light becomes a "
+                "small square light)")
+      ->check(CLI::Range(1, 64));
+  c->add_option("--shadow-resolution", a->image.settings.shadowResolution,
+                "--draw image: the lights' images, pixels across (default: pixels about as wide "
+                "as the points' spacing)")
+      ->check(CLI::Range(64, 8192));
+  c->add_option("--antialias", a->antialias,
+                "--draw image: anti-aliasing at silhouettes, at every layer edge, or off")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"silhouettes", "edges", "off"}));
+  c->add_flag("--no-smooth", a->noSmooth, "--draw image: no smoothing filter");
+  c->add_flag("--eye-dome", a->image.settings.eyeDome,
+              "--draw image: normal-free shading from the depth alone (eye-dome style)");
   c->add_flag("--ground", a->ground,
              "A diffuse ground plane under the surface, across the up axis (the scene file's "
              "\"ground\": true)");
@@ -260,10 +340,21 @@ void addViewCommand(CLI::App& app, int& exitCode) {
         fmt::print(stderr, "iso view: --headless and --cpu need --out FILE\n");
         return kExitUsage;
       }
+      a->view.file = a->files.front();
+      const bool image = a->draw == "image" || !isIsoFile(a->view.file);
+      if (!image && a->files.size() > 1) {
+        fmt::print(stderr, "iso view: one .iso file at a time (several files: point files)\n");
+        return kExitUsage;
+      }
       a->view.vram = parseSize(a->vram, "--vram");
       a->view.flatTraversal = a->traversal == "flat";
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
       checkPictures(*a);
+      if (image) {
+        a->draw.clear();
+        buildScene(*a);
+        return viewImage(*a);
+      }
       buildScene(*a);
       if (a->cpu) return viewer::viewCpu(a->view);
       if (a->headless) return viewer::viewHeadless(a->view);

@@ -1,0 +1,224 @@
+// `iso view --draw image` (image_view.h).
+#include "viewer/image_view.h"
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "viewer/image.h"
+#include "viewer/point_image_gpu.h"
+#include "viewer/vulkan.h"
+
+namespace iso::viewer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+glm::vec3 local(const ImageInputs& in, const Vec3d& world) { return glm::vec3(world - in.origin); }
+
+// The scene's camera (framed on the points when it has none) in the points' frame.
+ImageCamera cameraOf(const ViewOptions& o, const ImageInputs& in, const Camera& c) {
+  ImageCamera camera;
+  camera.eye = local(in, c.eye);
+  camera.target = local(in, c.target);
+  camera.up = glm::vec3(c.up);
+  camera.fovDegrees = float(c.fovDegrees);
+  camera.width = int(o.width);
+  camera.height = int(o.height);
+  return camera;
+}
+
+Camera sceneCamera(const ViewOptions& o, const ImageInputs& in) {
+  const Scene& s = o.scene;
+  Camera c = s.camera ? *s.camera
+                      : frameCamera(in.bounds, s.up.value_or(in.up), s.fovDegrees.value_or(40.0));
+  if (s.fovDegrees) c.fovDegrees = *s.fovDegrees;
+  return c;
+}
+
+std::vector<ImageLight> lightsOf(const ViewOptions& o, const ImageViewOptions& image,
+                                 const ImageInputs& in, const Camera& camera) {
+  std::vector<LightSpec> specs = o.scene.lights;
+  if (specs.empty()) specs.push_back(defaultLight(camera, in.bounds));
+  std::vector<ImageLight> lights;
+  for (const LightSpec& s : specs) {
+    ImageLight l;
+    l.position = local(in, s.position);
+    l.color = glm::vec3(s.color[0], s.color[1], s.color[2]) * s.intensity;
+    if (s.area) {
+      l.u = glm::vec3(s.u);
+      l.v = glm::vec3(s.v);
+      l.samples = image.shadowSamples > 0 ? image.shadowSamples : s.samples;
+    } else if (image.shadowSamples > 1) {
+      // Soft shadows asked for a point light: a square light a twentieth of the scene wide,
+      // across the direction to the scene.
+      const glm::vec3 toScene = glm::normalize(local(in, 0.5 * (in.bounds.lo + in.bounds.hi)) -
+                                               l.position);
+      glm::vec3 a = glm::cross(toScene, glm::vec3(0, 0, 1));
+      if (glm::dot(a, a) < 1e-6f) a = glm::cross(toScene, glm::vec3(1, 0, 0));
+      a = glm::normalize(a);
+      const float size = 0.05f * float(glm::length(in.bounds.hi - in.bounds.lo));
+      l.u = size * a;
+      l.v = size * glm::normalize(glm::cross(toScene, a));
+      l.samples = image.shadowSamples;
+    }
+    lights.push_back(l);
+  }
+  return lights;
+}
+
+ImageSettings settingsOf(const ViewOptions& o, const ImageViewOptions& image) {
+  ImageSettings s = image.settings;
+  s.shadows = s.shadows && o.scene.shadows;
+  s.ambient = glm::vec3(o.scene.ambient[0], o.scene.ambient[1], o.scene.ambient[2]);
+  s.diffuse = o.scene.material.diffuse;
+  s.specular = o.scene.material.specular;
+  s.shininess = o.scene.material.shininess;
+  return s;
+}
+
+// The picture of a frame's linear colors (the CPU reference), as the GPU writes it.
+std::vector<uint32_t> pixelsOf(const ImageResult& r) {
+  std::vector<uint32_t> pixels(r.color.size());
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = imagePixelWord(r.color[i]);
+  return pixels;
+}
+
+void printInputs(const ImageInputs& in, size_t points) {
+  fmt::print("{} point{} from {} file{}{}, read and prepared in {:.2f} s\n", points,
+             points == 1 ? "" : "s", in.names.size(), in.names.size() == 1 ? "" : "s",
+             in.normalsEstimated ? " (normals estimated)" : "", in.loadSeconds);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
+                      const ImageInputs& in) {
+  GpuOptions g;
+  g.validation = o.validation;
+  g.deviceName = o.device;
+  Gpu gpu = createGpu(g);
+  const PointImageScene scene(in.objects);
+  const Camera camera = sceneCamera(o, in);
+  const auto lights = lightsOf(o, image, in, camera);
+  GpuPointImage renderer(gpu, scene);
+  const auto t0 = Clock::now();
+  const GpuImageFrame frame = renderer.render(cameraOf(o, in, camera), lights, settingsOf(o, image));
+  const double wall = seconds(Clock::now() - t0);
+  writeImage(o.out, o.width, o.height, frame.pixels);
+  printInputs(in, scene.size());
+  fmt::print("{}: {}x{} image-space points on {}, {} layer{}, {:.3f} s ({:.3f} s GPU), GPU memory "
+             "{:.1f} MiB\n",
+             o.out.string(), o.width, o.height, gpu.properties.deviceName, frame.stats.layers,
+             frame.stats.layers == 1 ? "" : "s", wall, frame.gpuSeconds,
+             double(gpu.memoryPeak) / (1 << 20));
+  if (o.validation && gpu.validationErrors->load() > 0)
+    throw std::runtime_error("Vulkan validation errors");
+  return 0;
+}
+
+int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
+  PointImageRenderer renderer(in.objects);
+  const Camera camera = sceneCamera(o, in);
+  const auto lights = lightsOf(o, image, in, camera);
+  const auto t0 = Clock::now();
+  const ImageResult r = renderer.render(cameraOf(o, in, camera), lights, settingsOf(o, image));
+  const double render = seconds(Clock::now() - t0);
+  writeImage(o.out, o.width, o.height, pixelsOf(r));
+  printInputs(in, renderer.scene().size());
+  fmt::print("{}: {}x{} image-space points on the CPU reference, {} layer{}, {:.2f} s\n",
+             o.out.string(), o.width, o.height, r.stats.layers, r.stats.layers == 1 ? "" : "s",
+             render);
+  return 0;
+}
+
+int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
+  GpuOptions g;
+  g.validation = o.validation;
+  g.deviceName = o.device;
+  Gpu gpu = createGpu(g);
+  const PointImageScene scene(in.objects);
+  const Camera start = sceneCamera(o, in);
+  const auto lights = lightsOf(o, image, in, start);
+  ImageSettings settings = settingsOf(o, image);
+  // Every frame computes its shadow textures, as the paper's timings do.
+  settings.reuseShadows = false;
+  const auto t0 = Clock::now();
+  GpuPointImage renderer(gpu, scene);
+  const double upload = seconds(Clock::now() - t0);
+  std::vector<double> wall, device;
+  uint64_t projected = 0;
+  const uint32_t frames = std::max(o.benchFrames, 2u);
+  GpuImageFrame first;
+  for (uint32_t f = 0; f < frames; ++f) {
+    Camera c = start;
+    const Vec3d axis = normalized(c.up);
+    c.eye = c.target + rotated(c.eye - c.target, axis, 2.0 * M_PI * f / frames);
+    const auto t = Clock::now();
+    GpuImageFrame frame = renderer.render(cameraOf(o, in, c), lights, settings);
+    if (f == 0) {
+      first = std::move(frame);
+      continue;  // the first frame compiles and warms: not timed
+    }
+    wall.push_back(seconds(Clock::now() - t) * 1e3);
+    device.push_back(frame.gpuSeconds * 1e3);
+    projected = frame.stats.projected;
+  }
+  // The first view on the CPU reference.
+  PointImageRenderer cpu(in.objects);
+  const auto t1 = Clock::now();
+  cpu.render(cameraOf(o, in, start), lights, settings);
+  const double cpuSeconds = seconds(Clock::now() - t1);
+  const double ms = median(wall), gpuMs = median(device);
+  const double fps = 1e3 / std::max(ms, 1e-9);
+  const double pointsPerSecond = double(projected) / std::max(gpuMs > 0 ? gpuMs : ms, 1e-9) * 1e3;
+  const int samples = lights.empty() || !settings.shadows ? 0 : lights.front().area() ? lights.front().samples : 1;
+  if (o.benchJson) {
+    nlohmann::json j = {{"files", in.names},
+                        {"points", scene.size()},
+                        {"device", gpu.properties.deviceName},
+                        {"width", o.width},
+                        {"height", o.height},
+                        {"layers", settings.layers},
+                        {"shadow_samples", samples},
+                        {"frames", frames - 1},
+                        {"ms_per_frame", ms},
+                        {"gpu_ms_per_frame", gpuMs},
+                        {"frames_per_second", fps},
+                        {"points_projected_per_second", pointsPerSecond},
+                        {"gpu_memory_bytes", gpu.memoryPeak},
+                        {"load_seconds", in.loadSeconds},
+                        {"upload_seconds", upload},
+                        {"cpu_seconds", cpuSeconds},
+                        {"fill_passes", {{"background", first.stats.backgroundPasses},
+                                         {"occluded", first.stats.occludedPasses}}}};
+    fmt::print("{}\n", j.dump(2));
+    return 0;
+  }
+  printInputs(in, scene.size());
+  fmt::print(
+      "bench image: {}x{} on {}, {} point{}, {} layer{}, shadows {}, {} frames orbiting\n"
+      "  ms/frame    median {:.2f} ({:.1f} frames/s), GPU {:.2f} ms (timestamps)\n"
+      "  points      {:.1f} M projected a second (eye and light passes)\n"
+      "  GPU memory  {:.1f} MiB; points uploaded in {:.2f} s\n"
+      "  CPU         the first view in {:.2f} s on the CPU reference ({:.1f} times the GPU's "
+      "frame)\n",
+      o.width, o.height, gpu.properties.deviceName, scene.size(), scene.size() == 1 ? "" : "s",
+      settings.layers, settings.layers == 1 ? "" : "s",
+      samples == 0 ? std::string("off") : fmt::format("{} sample{}", samples, samples == 1 ? "" : "s"),
+      frames - 1, ms, fps, gpuMs, pointsPerSecond / 1e6, double(gpu.memoryPeak) / (1 << 20),
+      upload, cpuSeconds, cpuSeconds * 1e3 / std::max(ms, 1e-9));
+  return 0;
+}
+
+}  // namespace iso::viewer
