@@ -145,12 +145,13 @@ Layer project(Pass& pass, size_t points, Keep keep) {
 // Fills the holes of `layer`: background passes until none changes a pixel (unless
 // `occludedOnly`), then occluded passes likewise. Returns the passes that changed something, of
 // each kind.
-std::pair<int, int> fill(Pass& pass, Layer& layer, int maxPasses, bool occludedOnly = false) {
+std::pair<int, int> fill(Pass& pass, Layer& layer, int maxPasses, int maxOccluded,
+                         bool occludedOnly = false) {
   const int width = int(pass.Q.image.x), height = int(pass.Q.image.y);
   Layer next = layer;
   int counts[2] = {0, 0};
   for (int kind = occludedOnly ? 1 : 0; kind < 2; ++kind) {
-    for (int round = 0; round < maxPasses; ++round) {
+    for (int round = 0; round < (kind == 0 ? maxPasses : maxOccluded); ++round) {
       pass.layer = &layer;
       const size_t changed = tbb::parallel_reduce(
           tbb::blocked_range<int>(0, height), size_t(0),
@@ -262,6 +263,11 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
   ImagePlan plan;
   plan.layers = settings.layers;
   plan.fillPasses = std::max(settings.maxFillPasses, 0);
+  // A hole in a front layer is about a point spacing wide, which the masks' radius follows (at
+  // most maxFillRadius): it closes in as many passes. More occluded passes only go on flattening
+  // creases deeper than d̃, a pixel a pass.
+  plan.occludedPasses = std::min(plan.fillPasses, std::clamp(settings.maxFillRadius, 1,
+                                                             int(gpu::kImageMaxFillRadius)));
   plan.shadows = settings.shadows && !lights.empty();
   plan.reuseShadows = settings.reuseShadows;
   const glm::vec3 lo = scene.lo(), hi = scene.hi();
@@ -376,7 +382,7 @@ void PointImageRenderer::computeShadows(const ImagePlan& plan, size_t lights, Im
     Layer layer = project(pass, n, [](uint32_t, glm::ivec2, float) { return true; });
     // Only occluded pixels are filled (section 6): a background hole filled from the nearest
     // neighbour would grow the occluders' silhouettes over the surfaces behind them.
-    fill(pass, layer, plan.fillPasses, true);
+    fill(pass, layer, plan.fillPasses, plan.occludedPasses, true);
     pass.layer = &layer;
     const size_t l = plan.light[s];
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const auto& range) {
@@ -415,7 +421,7 @@ ImageResult PointImageRenderer::render(const ImageCamera& camera, std::span<cons
     if (std::all_of(layer.index.begin(), layer.index.end(),
                     [](uint32_t i) { return i == kImageNoPoint; }))
       break;
-    const auto [background, occluded] = fill(pass, layer, plan.fillPasses);
+    const auto [background, occluded] = fill(pass, layer, plan.fillPasses, plan.occludedPasses);
     result.stats.backgroundPasses.push_back(background);
     result.stats.occludedPasses.push_back(occluded);
     ++result.stats.layers;

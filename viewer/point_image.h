@@ -117,7 +117,8 @@ struct ImagePlan {
   std::vector<uint32_t> light;            // the light of each sample
   float far = 0.0f;                       // the eye's far distance: depth 1
   int layers = 1;
-  int fillPasses = 24;                    // a kind of filling stops after at most this many
+  int fillPasses = 24;                    // background filling stops after at most this many
+  int occludedPasses = 8;                 // occluded filling likewise
   bool shadows = false;
   bool reuseShadows = true;
 };

@@ -23,6 +23,7 @@ constexpr uint32_t kSets = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peele
 constexpr VkDeviceSize kParamsStride = 512;
 constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes of each kind
 constexpr uint32_t kMaxLayers = 64;
+constexpr int kRoundsPerSubmit = 2;     // filling rounds recorded between two looks at the GPU
 
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
@@ -240,15 +241,39 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   };
   // Filling passes of one kind until one changes nothing (its indirect dispatch then empties
   // the rest), at most plan.fillPasses.
+  // The commands so far submitted and waited for; recording goes on in the same buffer.
+  VkFence fence = fence_.get();
+  auto flush = [&] {
+    ISO_VK(vkEndCommandBuffer(cb));
+    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    submit.commandBufferCount = 1;
+    submit.pCommandBuffers = &cb;
+    ISO_VK(vkResetFences(gpu_.device, 1, &fence));
+    ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
+    ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+    ISO_VK(vkResetCommandBuffer(cb, 0));
+    ISO_VK(vkBeginCommandBuffer(cb, &begin));
+  };
+  // Rounds of filling (a pass, its copy back, and the control that empties the next rounds'
+  // dispatches once one changed nothing) submitted a few at a time, until one changes nothing
+  // or plan.fillPasses ran: empty dispatches cost lavapipe about a millisecond each, and filling
+  // takes a few passes.
+  const auto* control = static_cast<const uint32_t*>(control_.mapped);
   auto fill = [&](uint32_t set, uint64_t pixels, uint32_t kind) {
     const auto g = groups(pixels);
     const uint32_t start[4] = {g[0], g[1], g[2], 0};
     vkCmdUpdateBuffer(cb, control_.buffer, 0, sizeof start, start);
     barrier(cb);
-    for (int round = 0; round < plan.fillPasses; ++round) {
-      indirect(kind == 0 ? kFillBackground : kFillOccluded, set);
-      indirect(kCopy, set);
-      dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);
+    const int rounds = kind == 0 ? plan.fillPasses : plan.occludedPasses;
+    for (int round = 0; round < rounds;) {
+      for (int k = 0; k < kRoundsPerSubmit && round < rounds; ++k, ++round) {
+        indirect(kind == 0 ? kFillBackground : kFillOccluded, set);
+        indirect(kCopy, set);
+        dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);
+      }
+      flush();
+      ++frame.submits;
+      if (control[0] == 0) break;  // a round changed nothing
     }
   };
 
@@ -287,15 +312,14 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
   submit.commandBufferCount = 1;
   submit.pCommandBuffers = &cb;
-  VkFence fence = fence_.get();
   ISO_VK(vkResetFences(gpu_.device, 1, &fence));
   ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
   ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+  ++frame.submits;
   if (shadows) shadowKey_ = std::move(key);
 
   const auto* words = static_cast<const uint32_t*>(pixels_.mapped);
   frame.pixels.assign(words, words + pixels);
-  const auto* control = static_cast<const uint32_t*>(control_.mapped);
   for (int k = 0; k < plan.layers; ++k) {
     frame.stats.backgroundPasses.push_back(int(control[kStatsWord + 2 * k]));
     frame.stats.occludedPasses.push_back(int(control[kStatsWord + 2 * k + 1]));

@@ -16,6 +16,7 @@ struct GpuImageFrame {
   std::vector<uint32_t> pixels;  // sRGB8 RGBA words, row after row
   ImageStats stats;
   double gpuSeconds = 0.0;       // the frame's commands, from timestamps (0 without them)
+  int submits = 0;               // command buffers submitted (filling waits for its counts)
 };
 
 class GpuPointImage {
