@@ -205,6 +205,57 @@ TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {
   EXPECT_NE(run.err.find("text.iso"), std::string::npos) << run.err;
 }
 
+// Raw scans draw as image-space points without a conversion: on the CPU reference and on the
+// GPU alike, several files at once, timed; damaged files are the reader's errors.
+TEST(CliView, rawScansDrawAsImageSpacePoints) {
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  const std::string kitten = quoted(data / "kitten_normals.xyz");
+  const std::string size = " --width 200 --height 160";
+  const auto cpu = dir / "cpu.png", gpu = dir / "gpu.png";
+  CommandResult run = iso("view " + kitten + " --cpu --out " + quoted(cpu) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("5210 points from 1 file"), std::string::npos) << run.out;
+  expectPicture(cpu, 200, 160);
+  run = iso("view " + kitten + " --draw image --headless --out " + quoted(gpu) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  uint32_t w = 0, h = 0;
+  const auto a = viewer::readImage(cpu, w, h), b = viewer::readImage(gpu, w, h);
+  ASSERT_EQ(a.size(), b.size());
+  size_t differ = 0;
+  for (size_t i = 0; i < a.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      if (std::abs(int((a[i] >> (8 * k)) & 255) - int((b[i] >> (8 * k)) & 255)) > 8) {
+        ++differ;
+        break;
+      }
+  EXPECT_LT(double(differ) / double(a.size()), 0.005) << differ << " pixels differ";
+  // Two files, one a LAZ, each with its opacity, in three layers; timed.
+  const std::string both = kitten + " " + quoted(data / "laz" / "las12-f2-variable.laz");
+  run = iso("view " + both + " --bench --json --bench-frames 2 --layers 3 --opacity 1,0.5" + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto j = nlohmann::json::parse(run.out);
+  EXPECT_EQ(j["files"].size(), 2u);
+  EXPECT_EQ(j["layers"].get<int>(), 3);
+  EXPECT_GT(j["frames_per_second"].get<double>(), 0.0);
+  EXPECT_GT(j["points"].get<uint64_t>(), 5210u);
+  // Impossible options.
+  EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 0.5").exitCode, 2);
+  EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 1,0").exitCode, 2);
+  EXPECT_EQ(iso("view " + quoted(kittenIso()) + " --draw image --cpu --out x.png").exitCode, 2);
+  EXPECT_EQ(iso("view " + quoted(kittenIso()) + " " + kitten + " --cpu --out x.png").exitCode, 2);
+  // A truncated LAZ: the reader's error naming it, and the old picture stays.
+  const std::vector<std::byte> laz = readFile(data / "laz" / "las12-f2-variable.laz");
+  writeFile(dir / "cut.laz", std::vector<std::byte>(laz.begin(), laz.begin() + laz.size() / 2));
+  std::ofstream(cpu) << "old picture";
+  for (const char* mode : {"--cpu", "--headless"}) {
+    run = iso("view " + quoted(dir / "cut.laz") + " " + mode + " --out " + quoted(cpu) + size);
+    EXPECT_EQ(run.exitCode, 1) << mode;
+    EXPECT_NE(run.err.find("cut.laz"), std::string::npos) << run.err;
+    EXPECT_EQ(slurp(cpu), "old picture");
+  }
+}
+
 TEST(CliView, causticsPutAGroundUnderTheSurfaceAndSayHowManyPhotonsTheyTraced) {
   TempDir dir;
   const std::string file = quoted(kittenIso());

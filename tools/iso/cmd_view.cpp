@@ -341,7 +341,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
         return kExitUsage;
       }
       a->view.file = a->files.front();
-      const bool image = a->draw == "image" || !isIsoFile(a->view.file);
+      // A file named .iso is one (its reader says what is wrong with it); others by content.
+      const bool image = a->draw == "image" || (a->view.file.extension() != ".iso" &&
+                                                !isIsoFile(a->view.file));
       if (!image && a->files.size() > 1) {
         fmt::print(stderr, "iso view: one .iso file at a time (several files: point files)\n");
         return kExitUsage;

@@ -1,26 +1,12 @@
 // Raw scans for `iso view --draw image` (view_points.h).
 #include "tools/iso/view_points.h"
 
-#include <algorithm>
 #include <chrono>
 
 #include "pipeline/io/readers.h"
-#include "pipeline/points/knn.h"
-#include "pipeline/points/points.h"
+#include "pipeline/points/viewing.h"
 
 namespace iso::cli {
-namespace {
-
-// Neighbours a point's spacing and normal come from.
-constexpr int kNeighbours = 10;
-
-float medianOf(std::vector<float> v) {
-  if (v.empty()) return 0.0f;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
-}  // namespace
 
 viewer::ImageInputs loadImageInputs(const std::vector<std::filesystem::path>& files) {
   const auto start = std::chrono::steady_clock::now();
@@ -45,38 +31,17 @@ viewer::ImageInputs loadImageInputs(const std::vector<std::filesystem::path>& fi
   if (lo.x > hi.x) lo = hi = glm::dvec3(0.0);
   in.bounds = {lo, hi};
   in.origin = 0.5 * (lo + hi);
+  const float fallback = std::max(float(glm::length(hi - lo)) * 0.01f, 1e-6f);
   for (PointCloud& cloud : clouds) {
+    ViewingPoints v = prepareForViewing(std::move(cloud), in.origin, fallback);
     viewer::ImageObject o;
-    const size_t n = cloud.size();
-    PointSet set;
-    set.position.resize(n);
-    for (size_t i = 0; i < n; ++i) set.position[i] = glm::vec3(cloud.positions[i] - in.origin);
-    o.positions.assign(set.position.begin(), set.position.end());
-    if (cloud.hasColors()) o.colors = std::move(cloud.colors);
-    if (n > size_t(kNeighbours)) {
-      const PointIndex index(o.positions);
-      const Neighbors neighbours = findNeighbors(set, index, kNeighbours);
-      // Each point's spacing: its third nearest neighbour (a duplicate or two do not shrink it).
-      o.spacings.resize(n);
-      for (size_t i = 0; i < n; ++i)
-        o.spacings[i] = std::max(neighbours.distance[i * kNeighbours + 2], 1e-9f);
-      o.spacing = std::max(medianOf(o.spacings), 1e-9f);
-      for (float& s : o.spacings) s = std::min(s, 8.0f * o.spacing);  // strays do not spread
-      if (cloud.hasNormals()) {
-        set.normal.resize(n);
-        for (size_t i = 0; i < n; ++i) {
-          const float length = glm::length(cloud.normals[i]);
-          set.normal[i] = length > 0.0f ? cloud.normals[i] / length : glm::vec3(0.0f);
-        }
-      } else {
-        in.normalsEstimated = true;
-        o.orientedNormals = false;
-      }
-      estimateNormals(set, neighbours);  // fills the zero ones
-      o.normals.assign(set.normal.begin(), set.normal.end());
-    } else {
-      o.spacing = std::max(float(glm::length(hi - lo)) * 0.01f, 1e-6f);
-    }
+    o.positions = std::move(v.positions);
+    o.normals = std::move(v.normals);
+    o.colors = std::move(v.colors);
+    o.spacings = std::move(v.spacings);
+    o.spacing = v.spacing;
+    o.orientedNormals = !v.normalsEstimated;
+    in.normalsEstimated |= v.normalsEstimated;
     in.objects.push_back(std::move(o));
   }
   in.loadSeconds =
