@@ -116,6 +116,7 @@ int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
   const Camera camera = sceneCamera(o, in);
   const auto lights = lightsOf(o, image, in, camera);
   GpuPointImage renderer(gpu, scene);
+  if (image.fillRoundsPerSubmit > 0) renderer.setRoundsPerSubmit(image.fillRoundsPerSubmit);
   const auto t0 = Clock::now();
   const GpuImageFrame frame = renderer.render(cameraOf(o, in, camera), lights, settingsOf(o, image));
   const double wall = seconds(Clock::now() - t0);
@@ -156,6 +157,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
   settings.reuseShadows = false;
   const auto t0 = Clock::now();
   GpuPointImage renderer(gpu, scene);
+  if (image.fillRoundsPerSubmit > 0) renderer.setRoundsPerSubmit(image.fillRoundsPerSubmit);
   const double upload = seconds(Clock::now() - t0);
   std::vector<double> wall, device;
   uint64_t projected = 0;

@@ -24,6 +24,7 @@ struct ImageInputs {
 struct ImageViewOptions {
   ImageSettings settings;
   int shadowSamples = 0;  // samples of each area light (0: the scene's own)
+  int fillRoundsPerSubmit = 0;  // GpuPointImage::setRoundsPerSubmit (0: its default)
 };
 
 // Each returns the process exit code and throws for errors.

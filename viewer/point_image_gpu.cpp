@@ -23,7 +23,6 @@ constexpr uint32_t kSets = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peele
 constexpr VkDeviceSize kParamsStride = 512;
 constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes of each kind
 constexpr uint32_t kMaxLayers = 64;
-constexpr int kRoundsPerSubmit = 2;     // filling rounds recorded between two looks at the GPU
 
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
@@ -266,7 +265,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     barrier(cb);
     const int rounds = kind == 0 ? plan.fillPasses : plan.occludedPasses;
     for (int round = 0; round < rounds;) {
-      for (int k = 0; k < kRoundsPerSubmit && round < rounds; ++k, ++round) {
+      for (int k = 0; k < roundsPerSubmit_ && round < rounds; ++k, ++round) {
         indirect(kind == 0 ? kFillBackground : kFillOccluded, set);
         indirect(kCopy, set);
         dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);

@@ -3,6 +3,7 @@
 // draw the same pictures (specs/viewer.md, "Image-space points").
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -11,6 +12,10 @@
 #include "viewer/vulkan.h"
 
 namespace iso::viewer {
+
+// Lavapipe pays about a millisecond for an empty dispatch, so filling rounds go to the GPU two
+// at a time and the host stops when one changed nothing (specs/viewer.md, "Image-space points").
+inline constexpr int kFillRoundsPerSubmit = 2;
 
 struct GpuImageFrame {
   std::vector<uint32_t> pixels;  // sRGB8 RGBA words, row after row
@@ -32,6 +37,8 @@ class GpuPointImage {
                        const ImageSettings& settings);
 
   uint64_t memoryBytes() const;  // device memory of its buffers
+  // Filling rounds recorded between two looks at their counts (default kFillRoundsPerSubmit).
+  void setRoundsPerSubmit(int rounds) { roundsPerSubmit_ = std::max(rounds, 1); }
 
  private:
   void prepare(const ImagePlan& plan, size_t lights);  // buffers and sets sized for the plan
@@ -47,6 +54,7 @@ class GpuPointImage {
   Owned<VkFence> fence_;
   size_t sets_ = 0, pixelCapacity_ = 0, eyePixels_ = 0, litCapacity_ = 0;
   std::vector<float> shadowKey_;
+  int roundsPerSubmit_ = kFillRoundsPerSubmit;
 };
 
 }  // namespace iso::viewer

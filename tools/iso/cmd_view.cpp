@@ -264,6 +264,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str()
       ->check(CLI::IsMember({"silhouettes", "edges", "off"}));
   c->add_flag("--no-smooth", a->noSmooth, "--draw image: no smoothing filter");
+  c->add_option("--fill-rounds", a->image.fillRoundsPerSubmit,
+                "--draw image, GPU: filling rounds submitted before the host looks whether one "
+                "changed nothing (default 2); for measurements")
+      ->check(CLI::Range(1, 64));
   c->add_flag("--eye-dome", a->image.settings.eyeDome,
               "--draw image: normal-free shading from the depth alone (eye-dome style)");
   c->add_flag("--ground", a->ground,
