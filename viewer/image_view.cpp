@@ -160,6 +160,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
   if (image.fillRoundsPerSubmit > 0) renderer.setRoundsPerSubmit(image.fillRoundsPerSubmit);
   const double upload = seconds(Clock::now() - t0);
   std::vector<double> wall, device;
+  std::array<double, size_t(ImageStep::Count)> steps{};  // ms summed over the timed frames
   uint64_t projected = 0;
   const uint32_t frames = std::max(o.benchFrames, 2u);
   GpuImageFrame first;
@@ -175,6 +176,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
     }
     wall.push_back(seconds(Clock::now() - t) * 1e3);
     device.push_back(frame.gpuSeconds * 1e3);
+    for (size_t k = 0; k < steps.size(); ++k) steps[k] += frame.stepSeconds[k] * 1e3;
     projected = frame.stats.projected;
   }
   // The first view on the CPU reference.
@@ -183,6 +185,14 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
   cpu.render(cameraOf(o, in, start), lights, settings);
   const double cpuSeconds = seconds(Clock::now() - t1);
   const double ms = median(wall), gpuMs = median(device);
+  for (double& step : steps) step /= double(std::max<size_t>(wall.size(), 1));
+  nlohmann::json stepsJson = nlohmann::json::object();
+  std::string stepsText;
+  for (size_t k = 0; k < steps.size(); ++k) {
+    stepsJson[kImageStepNames[k]] = steps[k];
+    if (steps[k] >= 0.005) stepsText += fmt::format(" {} {:.2f},", kImageStepNames[k], steps[k]);
+  }
+  if (!stepsText.empty()) stepsText.pop_back();
   const double fps = 1e3 / std::max(ms, 1e-9);
   const double pointsPerSecond = double(projected) / std::max(gpuMs > 0 ? gpuMs : ms, 1e-9) * 1e3;
   const int samples = lights.empty() || !settings.shadows ? 0 : lights.front().area() ? lights.front().samples : 1;
@@ -200,6 +210,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
                         {"frames_per_second", fps},
                         {"points_projected_per_second", pointsPerSecond},
                         {"gpu_memory_bytes", gpu.memoryPeak},
+                        {"gpu_ms_per_step", stepsJson},
                         {"load_seconds", in.loadSeconds},
                         {"upload_seconds", upload},
                         {"cpu_seconds", cpuSeconds},
@@ -212,6 +223,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
   fmt::print(
       "bench image: {}x{} on {}, {} point{}, {} layer{}, shadows {}, {} frames orbiting\n"
       "  ms/frame    median {:.2f} ({:.1f} frames/s), GPU {:.2f} ms (timestamps)\n"
+      "  GPU steps   ms a frame:{}\n"
       "  points      {:.1f} M projected a second (eye and light passes)\n"
       "  GPU memory  {:.1f} MiB; points uploaded in {:.2f} s\n"
       "  CPU         the first view in {:.2f} s on the CPU reference ({:.1f} times the GPU's "
@@ -219,7 +231,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
       o.width, o.height, gpu.properties.deviceName, scene.size(), scene.size() == 1 ? "" : "s",
       settings.layers, settings.layers == 1 ? "" : "s",
       samples == 0 ? std::string("off") : fmt::format("{} sample{}", samples, samples == 1 ? "" : "s"),
-      frames - 1, ms, fps, gpuMs, pointsPerSecond / 1e6, double(gpu.memoryPeak) / (1 << 20),
+      frames - 1, ms, fps, gpuMs, stepsText, pointsPerSecond / 1e6, double(gpu.memoryPeak) / (1 << 20),
       upload, cpuSeconds, cpuSeconds * 1e3 / std::max(ms, 1e-9));
   return 0;
 }

@@ -23,6 +23,7 @@ constexpr uint32_t kSets = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peele
 constexpr VkDeviceSize kParamsStride = 512;
 constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes of each kind
 constexpr uint32_t kMaxLayers = 64;
+constexpr uint32_t kMaxStamps = 4096;  // timestamps a frame: one after each step
 
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
@@ -41,6 +42,11 @@ enum Variant : uint32_t {
   kLit,
   kVariants
 };
+constexpr std::array<ImageStep, kVariants> kVariantSteps = {
+    ImageStep::Project, ImageStep::Resolve,   ImageStep::Fill,  ImageStep::Fill,
+    ImageStep::Control, ImageStep::Control,   ImageStep::Copy,  ImageStep::Shade,
+    ImageStep::Smooth,  ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,
+    ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
     {gpu::kImageStageResolve, 0},
@@ -107,7 +113,7 @@ GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu)
                          kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, true);
   cb_ = allocateCommandBuffer(gpu);
   fence_ = createFence(gpu, false);
-  if (gpu.timestampValidBits > 0) queries_ = createTimestampQueries(gpu, 2);
+  if (gpu.timestampValidBits > 0) queries_ = createTimestampQueries(gpu, kMaxStamps);
 }
 
 GpuPointImage::~GpuPointImage() {
@@ -210,10 +216,16 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   ISO_VK(vkBeginCommandBuffer(cb, &begin));
-  if (queries_) {
-    vkCmdResetQueryPool(cb, queries_.get(), 0, 2);
-    vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries_.get(), 0);
-  }
+  // A timestamp after each step, named by the step (ImageStep): the time from the one before
+  // is that step's. A stamp at the start of each submit measures the wait before it.
+  std::vector<ImageStep> stamps;
+  auto stamp = [&](ImageStep step, VkPipelineStageFlagBits where) {
+    if (!queries_ || stamps.size() >= kMaxStamps) return;
+    vkCmdWriteTimestamp(cb, where, queries_.get(), uint32_t(stamps.size()));
+    stamps.push_back(step);
+  };
+  if (queries_) vkCmdResetQueryPool(cb, queries_.get(), 0, kMaxStamps);
+  stamp(ImageStep::Wait, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
   const VkPipelineLayout layout = pipeline_.layout;
   auto dispatch = [&](Variant v, uint32_t set, uint64_t count) {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
@@ -222,6 +234,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     const auto g = groups(count);
     vkCmdDispatch(cb, g[0], g[1], g[2]);
     barrier(cb);
+    stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
   };
   auto indirect = [&](Variant v, uint32_t set) {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
@@ -229,12 +242,14 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
                             0, nullptr);
     vkCmdDispatchIndirect(cb, control_.buffer, 0);
     barrier(cb);
+    stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
   };
   const uint64_t n = scene_.size();
   // Projection into fresh keys, then layer A.
   auto project = [&](uint32_t set, uint64_t pixels) {
     vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);
     barrier(cb);
+    stamp(ImageStep::Clear, VK_PIPELINE_STAGE_TRANSFER_BIT);
     dispatch(kProject, set, n);
     dispatch(kResolve, set, pixels);
   };
@@ -252,6 +267,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
     ISO_VK(vkResetCommandBuffer(cb, 0));
     ISO_VK(vkBeginCommandBuffer(cb, &begin));
+    stamp(ImageStep::Wait, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
   };
   // Rounds of filling (a pass, its copy back, and the control that empties the next rounds'
   // dispatches once one changed nothing) submitted a few at a time, until one changes nothing
@@ -306,7 +322,6 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     frame.stats.projected += n;
   }
   dispatch(kFinish, 0, pixels);
-  if (queries_) vkCmdWriteTimestamp(cb, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries_.get(), 1);
   ISO_VK(vkEndCommandBuffer(cb));
   VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
   submit.commandBufferCount = 1;
@@ -324,15 +339,19 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     frame.stats.occludedPasses.push_back(int(control[kStatsWord + 2 * k + 1]));
   }
   frame.stats.layers = plan.layers;
-  if (queries_) {
-    uint64_t t[2] = {0, 0};
-    if (vkGetQueryPoolResults(gpu_.device, queries_.get(), 0, 2, sizeof t, t, 8,
-                              VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
+  if (queries_ && stamps.size() > 1) {
+    std::vector<uint64_t> t(stamps.size());
+    if (vkGetQueryPoolResults(gpu_.device, queries_.get(), 0, uint32_t(t.size()),
+                              t.size() * 8, t.data(), 8, VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
       const uint64_t mask = gpu_.timestampValidBits >= 64
                                 ? ~uint64_t(0)
                                 : (uint64_t(1) << gpu_.timestampValidBits) - 1;
-      frame.gpuSeconds = double((t[1] - t[0]) & mask) *
-                         double(gpu_.properties.limits.timestampPeriod) * 1e-9;
+      const double tick = double(gpu_.properties.limits.timestampPeriod) * 1e-9;
+      for (size_t i = 1; i < t.size(); ++i) {
+        const double seconds = double((t[i] - t[i - 1]) & mask) * tick;
+        frame.stepSeconds[size_t(stamps[i])] += seconds;
+        if (stamps[i] != ImageStep::Wait) frame.gpuSeconds += seconds;
+      }
     }
   }
   return frame;

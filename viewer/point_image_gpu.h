@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -17,10 +18,21 @@ namespace iso::viewer {
 // at a time and the host stops when one changed nothing (specs/viewer.md, "Image-space points").
 inline constexpr int kFillRoundsPerSubmit = 2;
 
+// The steps of a frame on the GPU, as its timestamps count them (GpuImageFrame::stepSeconds).
+enum class ImageStep : uint8_t {
+  Wait,  // the GPU between two submits: the host looked at the filling's counts
+  Clear, Project, Resolve, Fill, Copy, Control, Shade, Smooth, Antialias, Blend, Finish, Lit,
+  Count
+};
+inline constexpr std::array<const char*, size_t(ImageStep::Count)> kImageStepNames = {
+    "wait", "clear", "project", "resolve", "fill", "copy", "control", "shade", "smooth",
+    "antialias", "blend", "finish", "lit"};
+
 struct GpuImageFrame {
   std::vector<uint32_t> pixels;  // sRGB8 RGBA words, row after row
   ImageStats stats;
-  double gpuSeconds = 0.0;       // the frame's commands, from timestamps (0 without them)
+  double gpuSeconds = 0.0;       // the frame's steps, from timestamps (0 without them), waits out
+  std::array<double, size_t(ImageStep::Count)> stepSeconds{};  // each kind of step, summed
   int submits = 0;               // command buffers submitted (filling waits for its counts)
 };
 
