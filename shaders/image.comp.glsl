@@ -23,8 +23,8 @@ layout(std430, binding = 2) readonly buffer Normals { vec4 normals[]; };
 layout(std430, binding = 3) readonly buffer Colors { vec4 colors[]; };
 // Per pixel the least (depth bits << 32 | point) of the points projected there.
 layout(std430, binding = 4) buffer Keys { uint64_t keys[]; };
-// Layers: per pixel (depth bits, point). A the layer, B the fill stage's output, R the previous
-// layer (depth peeling) or the light's first layer (shadows).
+// Layers: per pixel (depth bits, point). A the layer, B the fill stage's output (the host swaps
+// the two buffers' bindings after each filling pass), R the previous layer (depth peeling).
 layout(std430, binding = 5) buffer LayerA { uvec2 layerA[]; };
 layout(std430, binding = 6) buffer LayerB { uvec2 layerB[]; };
 layout(std430, binding = 7) buffer LayerR { uvec2 layerR[]; };
@@ -80,7 +80,7 @@ void main() {
     return;
   }
   if (kStage == kImageStageControl) {
-    // After a fill pass and its copy: the next ones run only where this one changed something.
+    // After a fill pass: the next ones run only where this one changed something.
     if (id != 0u) return;
     bool changed = control[kImageControlChanged] != 0u;
     if (changed) control[kImageControlPasses + kKind] += 1u;
@@ -101,8 +101,6 @@ void main() {
     if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index))
       atomicAdd(control[kImageControlChanged], 1u);
     layerB[id] = uvec2(floatBitsToUint(depth), index);
-  } else if (kStage == kImageStageCopy) {
-    layerA[id] = layerB[id];
   } else if (kStage == kImageStageShade) {
     colorA[id] = imageShade(p);
   } else if (kStage == kImageStageSmooth) {

@@ -214,16 +214,15 @@ ISO_CONST uint kImageMaxFillRadius = 8u;
 // The stages of shaders/image.comp.glsl (its specialization constant 0).
 ISO_CONST uint kImageStageProject = 0u;    // a point into the keys (64-bit atomic minimum)
 ISO_CONST uint kImageStageResolve = 1u;    // the keys into layer A
-ISO_CONST uint kImageStageFill = 2u;       // one filling pass, layer A into layer B
+ISO_CONST uint kImageStageFill = 2u;       // one filling pass, layer A into layer B (ping-pong)
 ISO_CONST uint kImageStageControl = 3u;    // whether the next filling pass runs
-ISO_CONST uint kImageStageCopy = 4u;       // layer B into layer A
-ISO_CONST uint kImageStageShade = 5u;      // layer A's pixels shaded
-ISO_CONST uint kImageStageSmooth = 6u;
-ISO_CONST uint kImageStageAntialias = 7u;
-ISO_CONST uint kImageStageBlend = 8u;      // the layer under the ones before; A kept as R
-ISO_CONST uint kImageStageFinish = 9u;     // over the background, into sRGB8 pixels
-ISO_CONST uint kImageStageLit = 10u;       // a point of a light's first layer counts as lit
-ISO_CONST uint kImageStages = 11u;
+ISO_CONST uint kImageStageShade = 4u;      // layer A's pixels shaded
+ISO_CONST uint kImageStageSmooth = 5u;
+ISO_CONST uint kImageStageAntialias = 6u;
+ISO_CONST uint kImageStageBlend = 7u;      // the layer under the ones before; A kept as R
+ISO_CONST uint kImageStageFinish = 8u;     // over the background, into sRGB8 pixels
+ISO_CONST uint kImageStageLit = 9u;        // a point of a light's first layer counts as lit
+ISO_CONST uint kImageStages = 10u;
 // Words of the control buffer: the filling pass's indirect dispatch (x, y, z), the pixels the
 // last pass changed, then the passes that changed something, of each kind.
 ISO_CONST uint kImageControlChanged = 3u;

@@ -19,7 +19,10 @@ using gpu::ImageParams;
 
 constexpr uint32_t kGroup = 64;           // invocations a workgroup (image.comp.glsl)
 constexpr uint32_t kMaxSamples = 64;      // samples of an area light at most
-constexpr uint32_t kSets = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peeled, samples
+constexpr uint32_t kSlots = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peeled, samples
+// A descriptor set a slot and a side: side 0 binds layer buffers A and B as layers A and B, side
+// 1 the other way round. Filling passes alternate sides (ping-pong), so no pass copies a layer.
+constexpr uint32_t kSets = 2 * kSlots;
 constexpr VkDeviceSize kParamsStride = 512;
 constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes of each kind
 constexpr uint32_t kMaxLayers = 64;
@@ -33,7 +36,6 @@ enum Variant : uint32_t {
   kFillOccluded,
   kControlBackground,
   kControlOccluded,
-  kCopy,
   kShade,
   kSmooth,
   kAntialias,
@@ -43,10 +45,9 @@ enum Variant : uint32_t {
   kVariants
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
-    ImageStep::Project, ImageStep::Resolve,   ImageStep::Fill,  ImageStep::Fill,
-    ImageStep::Control, ImageStep::Control,   ImageStep::Copy,  ImageStep::Shade,
-    ImageStep::Smooth,  ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,
-    ImageStep::Lit};
+    ImageStep::Project, ImageStep::Resolve, ImageStep::Fill,      ImageStep::Fill,
+    ImageStep::Control, ImageStep::Control, ImageStep::Shade,     ImageStep::Smooth,
+    ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,    ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
     {gpu::kImageStageResolve, 0},
@@ -54,7 +55,6 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageFill, 1},
     {gpu::kImageStageControl, 0},
     {gpu::kImageStageControl, 1},
-    {gpu::kImageStageCopy, 0},
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
     {gpu::kImageStageAntialias, 0},
@@ -108,7 +108,7 @@ GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu)
   positions_ = upload(gpu, scene.positions());
   normals_ = upload(gpu, scene.normals());
   colors_ = upload(gpu, scene.colors());
-  params_ = createBuffer(gpu, kParamsStride * kSets, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
+  params_ = createBuffer(gpu, kParamsStride * kSlots, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
   control_ = createBuffer(gpu, (kStatsWord + 2 * kMaxLayers) * 4,
                          kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, true);
   cb_ = allocateCommandBuffer(gpu);
@@ -159,14 +159,16 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
     changed = true;
   }
   if (!changed && sets_ == kSets) return;
-  const Buffer* storage[] = {&positions_, &normals_, &colors_, &keys_,    &layerA_,
-                             &layerB_,    &layerR_,  &colorA_, &colorB_,  &blended_,
-                             &lit_,       &control_, &pixels_};
   std::vector<VkDescriptorBufferInfo> infos;
   infos.reserve(kSets * 14);
   std::vector<VkWriteDescriptorSet> writes;
   for (uint32_t set = 0; set < kSets; ++set) {
-    infos.push_back({params_.buffer, set * kParamsStride, sizeof(ImageParams)});
+    const uint32_t slot = set / 2, side = set % 2;
+    const Buffer* storage[] = {&positions_, &normals_, &colors_, &keys_,
+                               side == 0 ? &layerA_ : &layerB_, side == 0 ? &layerB_ : &layerA_,
+                               &layerR_,    &colorA_,  &colorB_, &blended_,
+                               &lit_,       &control_, &pixels_};
+    infos.push_back({params_.buffer, slot * kParamsStride, sizeof(ImageParams)});
     for (const Buffer* b : storage) infos.push_back({b->buffer, 0, VK_WHOLE_SIZE});
     for (uint32_t binding = 0; binding < 14; ++binding) {
       VkWriteDescriptorSet w{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
@@ -186,7 +188,7 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
 GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const ImageLight> lights,
                                     const ImageSettings& settings) {
   const ImagePlan plan = planImage(scene_, camera, lights, settings);
-  if (plan.samples.size() > kSets - 2)
+  if (plan.samples.size() > kSlots - 2)
     throw UsageError("image-space shadows: at most " + std::to_string(kMaxSamples) +
                      " samples a light");
   if (plan.layers > int(kMaxLayers))
@@ -227,19 +229,21 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   if (queries_) vkCmdResetQueryPool(cb, queries_.get(), 0, kMaxStamps);
   stamp(ImageStep::Wait, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
   const VkPipelineLayout layout = pipeline_.layout;
-  auto dispatch = [&](Variant v, uint32_t set, uint64_t count) {
+  // The side whose layer A holds the layer now (filling passes flip it).
+  uint32_t side = 0;
+  auto dispatch = [&](Variant v, uint32_t slot, uint64_t count) {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
-    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &pipeline_.sets[set],
-                            0, nullptr);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1,
+                            &pipeline_.sets[2 * slot + side], 0, nullptr);
     const auto g = groups(count);
     vkCmdDispatch(cb, g[0], g[1], g[2]);
     barrier(cb);
     stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
   };
-  auto indirect = [&](Variant v, uint32_t set) {
+  auto indirect = [&](Variant v, uint32_t slot) {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_.pipelines[v]);
-    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1, &pipeline_.sets[set],
-                            0, nullptr);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, layout, 0, 1,
+                            &pipeline_.sets[2 * slot + side], 0, nullptr);
     vkCmdDispatchIndirect(cb, control_.buffer, 0);
     barrier(cb);
     stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
@@ -269,8 +273,8 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     ISO_VK(vkBeginCommandBuffer(cb, &begin));
     stamp(ImageStep::Wait, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
   };
-  // Rounds of filling (a pass, its copy back, and the control that empties the next rounds'
-  // dispatches once one changed nothing) submitted a few at a time, until one changes nothing
+  // Rounds of filling (a pass, and the control that empties the next rounds' dispatches once one
+  // changed nothing) submitted a few at a time, until one changes nothing
   // or plan.fillPasses ran: empty dispatches cost lavapipe about a millisecond each, and filling
   // takes a few passes.
   const auto* control = static_cast<const uint32_t*>(control_.mapped);
@@ -282,8 +286,10 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     const int rounds = kind == 0 ? plan.fillPasses : plan.occludedPasses;
     for (int round = 0; round < rounds;) {
       for (int k = 0; k < roundsPerSubmit_ && round < rounds; ++k, ++round) {
+        // The pass reads this side's layer A and writes its layer B, the other side's A. A pass
+        // that is skipped follows one that changed nothing, after which both hold the layer.
         indirect(kind == 0 ? kFillBackground : kFillOccluded, set);
-        indirect(kCopy, set);
+        side ^= 1u;
         dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);
       }
       flush();

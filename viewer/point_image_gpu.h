@@ -21,11 +21,11 @@ inline constexpr int kFillRoundsPerSubmit = 2;
 // The steps of a frame on the GPU, as its timestamps count them (GpuImageFrame::stepSeconds).
 enum class ImageStep : uint8_t {
   Wait,  // the GPU between two submits: the host looked at the filling's counts
-  Clear, Project, Resolve, Fill, Copy, Control, Shade, Smooth, Antialias, Blend, Finish, Lit,
+  Clear, Project, Resolve, Fill, Control, Shade, Smooth, Antialias, Blend, Finish, Lit,
   Count
 };
 inline constexpr std::array<const char*, size_t(ImageStep::Count)> kImageStepNames = {
-    "wait", "clear", "project", "resolve", "fill", "copy", "control", "shade", "smooth",
+    "wait", "clear", "project", "resolve", "fill", "control", "shade", "smooth",
     "antialias", "blend", "finish", "lit"};
 
 struct GpuImageFrame {
