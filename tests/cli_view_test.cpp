@@ -244,6 +244,15 @@ TEST(CliView, rawScansDrawAsImageSpacePoints) {
   EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 1,0").exitCode, 2);
   EXPECT_EQ(iso("view " + quoted(kittenIso()) + " --draw image --cpu --out x.png").exitCode, 2);
   EXPECT_EQ(iso("view " + quoted(kittenIso()) + " " + kitten + " --cpu --out x.png").exitCode, 2);
+  // A picture over any of the inputs is refused, the input untouched (a text scan named like a
+  // picture reads by its content).
+  const auto second = dir / "second.ppm";
+  std::filesystem::copy_file(data / "kitten_normals.xyz", second);
+  const std::string before = slurp(second);
+  run = iso("view " + kitten + " " + quoted(second) + " --cpu --out " + quoted(second));
+  EXPECT_NE(run.exitCode, 0);
+  EXPECT_NE(run.err.find("second.ppm"), std::string::npos) << run.err;
+  EXPECT_EQ(slurp(second), before);
   // A truncated LAZ: the reader's error naming it, and the old picture stays.
   const std::vector<std::byte> laz = readFile(data / "laz" / "las12-f2-variable.laz");
   writeFile(dir / "cut.laz", std::vector<std::byte>(laz.begin(), laz.begin() + laz.size() / 2));

@@ -94,13 +94,6 @@ void printInputs(const ImageInputs& in, size_t points) {
              in.normalsEstimated ? " (normals estimated)" : "", in.loadSeconds);
 }
 
-Gpu gpuOf(const ViewOptions& o) {
-  GpuOptions g;
-  g.validation = o.validation;
-  g.deviceName = o.device;
-  return createGpu(g);
-}
-
 double median(std::vector<double> v) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -111,7 +104,7 @@ double median(std::vector<double> v) {
 
 int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
                       const ImageInputs& in) {
-  Gpu gpu = gpuOf(o);
+  Gpu gpu = gpuFor(o);
   const PointImageScene scene(in.objects);
   const Camera camera = sceneCamera(o, in);
   const auto lights = lightsOf(o, image, in, camera);
@@ -148,7 +141,7 @@ int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const Imag
 }
 
 int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
-  Gpu gpu = gpuOf(o);
+  Gpu gpu = gpuFor(o);
   const PointImageScene scene(in.objects);
   const Camera start = sceneCamera(o, in);
   const auto lights = lightsOf(o, image, in, start);

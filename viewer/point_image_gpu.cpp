@@ -261,7 +261,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   // the rest), at most plan.fillPasses.
   // The commands so far submitted and waited for; recording goes on in the same buffer.
   VkFence fence = fence_.get();
-  auto flush = [&] {
+  auto submitAndWait = [&] {
     ISO_VK(vkEndCommandBuffer(cb));
     VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
     submit.commandBufferCount = 1;
@@ -269,6 +269,10 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     ISO_VK(vkResetFences(gpu_.device, 1, &fence));
     ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
     ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+    ++frame.submits;
+  };
+  auto flush = [&] {
+    submitAndWait();
     ISO_VK(vkResetCommandBuffer(cb, 0));
     ISO_VK(vkBeginCommandBuffer(cb, &begin));
     stamp(ImageStep::Wait, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT);
@@ -293,7 +297,6 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
         dispatch(kind == 0 ? kControlBackground : kControlOccluded, set, 1);
       }
       flush();
-      ++frame.submits;
       if (control[0] == 0) break;  // a round changed nothing
     }
   };
@@ -328,14 +331,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     frame.stats.projected += n;
   }
   dispatch(kFinish, 0, pixels);
-  ISO_VK(vkEndCommandBuffer(cb));
-  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-  submit.commandBufferCount = 1;
-  submit.pCommandBuffers = &cb;
-  ISO_VK(vkResetFences(gpu_.device, 1, &fence));
-  ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
-  ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
-  ++frame.submits;
+  submitAndWait();
   if (shadows) shadowKey_ = std::move(key);
 
   const auto* words = static_cast<const uint32_t*>(pixels_.mapped);

@@ -31,13 +31,6 @@ void printPhotons(uint64_t photons, double seconds, const char* where) {
              seconds * 1e3, where, seconds > 0 ? photons / seconds / 1e6 : 0.0);
 }
 
-Gpu gpuFor(const ViewOptions& o) {
-  GpuOptions g;
-  g.validation = o.validation;
-  g.deviceName = o.device;
-  return createGpu(g);
-}
-
 RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight, const Gpu& gpu) {
   RendererOptions r;
   r.width = o.width;
@@ -55,6 +48,13 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight, c
 }
 
 }  // namespace
+
+Gpu gpuFor(const ViewOptions& o) {
+  GpuOptions g;
+  g.validation = o.validation;
+  g.deviceName = o.device;
+  return createGpu(g);
+}
 
 std::optional<Environment> environmentOf(const Scene& scene) {
   if (scene.environment.empty()) return std::nullopt;

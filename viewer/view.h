@@ -41,6 +41,9 @@ struct ViewOptions {
 };
 
 struct Asset;
+struct Gpu;
+// The Vulkan device the options name (--device, --validation).
+Gpu gpuFor(const ViewOptions& options);
 // The options' scene with a camera (framed on the asset when it has none) and lights (one over the
 // camera's shoulder when it has none).
 Scene completeScene(const ViewOptions& options, const Asset& asset);

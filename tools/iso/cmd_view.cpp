@@ -152,7 +152,7 @@ void checkPictures(const ViewArgs& a) {
   for (const auto& [path, option] : pictures) {
     if (path.empty()) continue;
     checkOutputPath(path, option, true);
-    refuseOutputOverInput(path, a.view.file, option);
+    for (const std::string& file : a.files) refuseOutputOverInput(path, file, option);
     checkImageWritable(path, option);
     setInterruptMessage("iso view: interrupted; nothing was written");
   }
