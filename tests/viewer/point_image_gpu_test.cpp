@@ -7,18 +7,12 @@
 #include <cstdlib>
 
 #include "point_scenes.h"
+#include "test_gpu.h"
 
 namespace iso::viewer {
 namespace {
 
-Gpu& imageGpu() {
-  static Gpu g = [] {
-    GpuOptions o;
-    o.validation = true;
-    return createGpu(o);
-  }();
-  return g;
-}
+Gpu& imageGpu() { return test::testGpu(); }
 
 // The share of pixels whose sRGB8 channels differ by more than 8 between the two pictures.
 double differing(const std::vector<uint32_t>& gpu, const ImageResult& cpu) {

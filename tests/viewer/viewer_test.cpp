@@ -23,8 +23,19 @@
 #include "viewer/scene.h"
 #include "viewer/streaming.h"
 #include "viewer/vulkan.h"
+#include "test_gpu.h"
 
 namespace iso::test {
+
+viewer::Gpu& testGpu() {
+  static viewer::Gpu g = [] {
+    viewer::GpuOptions o;
+    o.validation = true;
+    return viewer::createGpu(o);
+  }();
+  return g;
+}
+
 namespace {
 
 using namespace iso::viewer;
@@ -67,14 +78,7 @@ const Files& files() {
 }
 
 // One Vulkan device for the whole program, validation on when the layer is installed.
-Gpu& gpu() {
-  static Gpu g = [] {
-    GpuOptions o;
-    o.validation = true;
-    return createGpu(o);
-  }();
-  return g;
-}
+Gpu& gpu() { return testGpu(); }
 
 Scene sceneFor(const Asset& asset) {
   Scene scene;
