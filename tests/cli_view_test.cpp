@@ -240,9 +240,11 @@ TEST(CliView, rawScansDrawAsImageSpacePoints) {
   EXPECT_GT(j["frames_per_second"].get<double>(), 0.0);
   EXPECT_GT(j["points"].get<uint64_t>(), 5210u);
   // Impossible options.
-  EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 0.5").exitCode, 2);
+  EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 0.5,0.5,0.5").exitCode, 2);
   EXPECT_EQ(iso("view " + both + " --cpu --out x.png --opacity 1,0").exitCode, 2);
-  EXPECT_EQ(iso("view " + quoted(kittenIso()) + " --draw image --cpu --out x.png").exitCode, 2);
+  run = iso("view " + quoted(kittenIso()) + " --draw image --cpu --out x.png");
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find("keeps no points"), std::string::npos) << run.err;
   EXPECT_EQ(iso("view " + quoted(kittenIso()) + " " + kitten + " --cpu --out x.png").exitCode, 2);
   // A picture over any of the inputs is refused, the input untouched (a text scan named like a
   // picture reads by its content).
@@ -262,6 +264,75 @@ TEST(CliView, rawScansDrawAsImageSpacePoints) {
     EXPECT_EQ(run.exitCode, 1) << mode;
     EXPECT_NE(run.err.find("cut.laz"), std::string::npos) << run.err;
     EXPECT_EQ(slurp(cpu), "old picture");
+  }
+}
+
+// A raw scan in a window: the first picture as soon as points are read; M, L and the scene file
+// change the shading, the layers and the opacity while it is open.
+TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
+  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  const std::string command =
+      "xvfb-run -a -s '-screen 0 800x600x24' " +
+      quoted(data / ".." / "viewer" / "image_window_session.sh") + " " +
+      std::string(ISO_BINARY) + " " + quoted(data / "kitten_normals.xyz") + " " +
+      quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
+  const int status = std::system(command.c_str());
+  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
+      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  const std::string out = slurp(dir / "out.txt");
+  EXPECT_NE(out.find("first picture"), std::string::npos) << out;
+  EXPECT_NE(out.find("reloaded"), std::string::npos) << out;
+  // The last title: eye-dome shading of two layers.
+  EXPECT_NE(out.find("5210 points | eye-dome | 2 layers"), std::string::npos) << out;
+  expectPicture(dir / "iso-screenshot-1.png", 300, 200);
+  expectPicture(dir / "final.png", 300, 200);
+  uint32_t w = 0, h = 0;
+  const auto lit = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
+  const auto seeThrough = viewer::readImage(dir / "final.png", w, h);
+  size_t changed = 0;
+  for (size_t i = 0; i < lit.size(); ++i) changed += lit[i] != seeThrough[i];
+  EXPECT_GT(changed, lit.size() / 20);
+}
+
+// The kept points of an .iso file drawn as image-space points: the level of detail that fits
+// --vram (all of the kitten's here, or a subsample under a small budget), as the raw scan draws.
+TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  const std::string kitten = quoted(data / "kitten_normals.xyz");
+  const auto kept = dir / "kept.iso";
+  CommandResult run = iso("convert --quiet --keep-points " + kitten + " -o " + quoted(kept));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const std::string size = " --width 200 --height 160";
+  const auto fromIso = dir / "iso.png", fromScan = dir / "scan.png", small = dir / "small.png";
+  run = iso("view " + quoted(kept) + " --draw image --cpu --out " + quoted(fromIso) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("5210 points from 1 file"), std::string::npos) << run.out;
+  run = iso("view " + kitten + " --cpu --out " + quoted(fromScan) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  uint32_t w = 0, h = 0;
+  const auto a = viewer::readImage(fromIso, w, h), b = viewer::readImage(fromScan, w, h);
+  const uint32_t sky = a[0];
+  size_t both = 0, either = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    both += a[i] != sky && b[i] != sky;
+    either += a[i] != sky || b[i] != sky;
+  }
+  EXPECT_GT(double(both) / double(either), 0.95) << both << " of " << either;
+  // A budget with room for about 1,900 points: a uniform subsample (the kitten's kept points are
+  // one chunk, with no coarser one: keep_points_test tests the cut of finer files).
+  for (const std::string& input : {kitten, quoted(kept)}) {
+    run = iso("view " + input + " --draw image --cpu --vram 19600000 --out " + quoted(small) +
+              size);
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    const size_t drawn = std::stoul(run.out);
+    EXPECT_LT(drawn, 2000u) << run.out;
+    EXPECT_GT(drawn, 500u) << run.out;
+    expectPicture(small, 200, 160);
+    EXPECT_NE(run.out.find("a uniform subsample of 5210"), std::string::npos) << run.out;
   }
 }
 

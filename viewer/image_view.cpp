@@ -18,31 +18,35 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-glm::vec3 local(const ImageInputs& in, const Vec3d& world) { return glm::vec3(world - in.origin); }
+}  // namespace
+
+static glm::vec3 local(const ImageInputs& in, const Vec3d& world) {
+  return glm::vec3(world - in.origin);
+}
 
 // The scene's camera (framed on the points when it has none) in the points' frame.
-ImageCamera cameraOf(const ViewOptions& o, const ImageInputs& in, const Camera& c) {
+ImageCamera cameraOf(const ImageInputs& in, const Camera& c, uint32_t width, uint32_t height) {
   ImageCamera camera;
   camera.eye = local(in, c.eye);
   camera.target = local(in, c.target);
   camera.up = glm::vec3(c.up);
   camera.fovDegrees = float(c.fovDegrees);
-  camera.width = int(o.width);
-  camera.height = int(o.height);
+  camera.width = int(width);
+  camera.height = int(height);
   return camera;
 }
 
-Camera sceneCamera(const ViewOptions& o, const ImageInputs& in) {
-  const Scene& s = o.scene;
+Camera sceneCamera(const Scene& s, const ImageInputs& in) {
   Camera c = s.camera ? *s.camera
                       : frameCamera(in.bounds, s.up.value_or(in.up), s.fovDegrees.value_or(40.0));
   if (s.fovDegrees) c.fovDegrees = *s.fovDegrees;
   return c;
 }
 
-std::vector<ImageLight> lightsOf(const ViewOptions& o, const ImageViewOptions& image,
-                                 const ImageInputs& in, const Camera& camera) {
-  std::vector<LightSpec> specs = o.scene.lights;
+std::vector<ImageLight> lightsOf(const Scene& scene, const ImageInputs& in,
+                                 const Camera& camera) {
+  const int shadowSamples = scene.image.shadowSamples;
+  std::vector<LightSpec> specs = scene.lights;
   if (specs.empty()) specs.push_back(defaultLight(camera, in.bounds));
   std::vector<ImageLight> lights;
   for (const LightSpec& s : specs) {
@@ -52,8 +56,8 @@ std::vector<ImageLight> lightsOf(const ViewOptions& o, const ImageViewOptions& i
     if (s.area) {
       l.u = glm::vec3(s.u);
       l.v = glm::vec3(s.v);
-      l.samples = image.shadowSamples > 0 ? image.shadowSamples : s.samples;
-    } else if (image.shadowSamples > 1) {
+      l.samples = shadowSamples > 0 ? shadowSamples : s.samples;
+    } else if (shadowSamples > 1) {
       // Soft shadows asked for a point light: a square light a twentieth of the scene wide,
       // across the direction to the scene.
       const glm::vec3 toScene = glm::normalize(local(in, 0.5 * (in.bounds.lo + in.bounds.hi)) -
@@ -64,22 +68,44 @@ std::vector<ImageLight> lightsOf(const ViewOptions& o, const ImageViewOptions& i
       const float size = 0.05f * float(glm::length(in.bounds.hi - in.bounds.lo));
       l.u = size * a;
       l.v = size * glm::normalize(glm::cross(toScene, a));
-      l.samples = image.shadowSamples;
+      l.samples = shadowSamples;
     }
     lights.push_back(l);
   }
   return lights;
 }
 
-ImageSettings settingsOf(const ViewOptions& o, const ImageViewOptions& image) {
+ImageSettings settingsOf(const Scene& scene, const ImageViewOptions& image) {
   ImageSettings s = image.settings;
-  s.shadows = s.shadows && o.scene.shadows;
-  s.ambient = glm::vec3(o.scene.ambient[0], o.scene.ambient[1], o.scene.ambient[2]);
-  s.diffuse = o.scene.material.diffuse;
-  s.specular = o.scene.material.specular;
-  s.shininess = o.scene.material.shininess;
+  s.layers = scene.image.layers;
+  s.layerGap = float(scene.image.layerGap);
+  s.eyeDome = s.eyeDome || scene.image.eyeDome;
+  s.shadows = s.shadows && scene.shadows;
+  s.ambient = glm::vec3(scene.ambient[0], scene.ambient[1], scene.ambient[2]);
+  s.diffuse = scene.material.diffuse;
+  s.specular = scene.material.specular;
+  s.shininess = scene.material.shininess;
   return s;
 }
+
+std::vector<ImageObject> withOpacity(const std::vector<ImageObject>& objects,
+                                     const ImageScene& scene) {
+  const std::vector<float>& a = scene.opacity;
+  if (!a.empty() && a.size() != 1 && a.size() != objects.size())
+    throw UsageError(fmt::format("opacity: one number, or one for each of the {} inputs (got {})",
+                                 objects.size(), a.size()));
+  std::vector<ImageObject> out = objects;
+  for (size_t i = 0; i < out.size() && !a.empty(); ++i) out[i].opacity = a[a.size() == 1 ? 0 : i];
+  return out;
+}
+
+// The budget's largest light image for these points (imageBudget).
+ImageSettings budgeted(ImageSettings s, const ViewOptions& o, size_t points, size_t lights) {
+  s.maxShadowResolution = imageBudget(o.vram, points, o.width, o.height, lights).shadowResolution;
+  return s;
+}
+
+namespace {
 
 // The picture of a frame's linear colors (the CPU reference), as the GPU writes it.
 std::vector<uint32_t> pixelsOf(const ImageResult& r) {
@@ -89,8 +115,11 @@ std::vector<uint32_t> pixelsOf(const ImageResult& r) {
 }
 
 void printInputs(const ImageInputs& in, size_t points) {
-  fmt::print("{} point{} from {} file{}{}, read and prepared in {:.2f} s\n", points,
+  fmt::print("{} point{} from {} file{}{}{}, read and prepared in {:.2f} s\n", points,
              points == 1 ? "" : "s", in.names.size(), in.names.size() == 1 ? "" : "s",
+             in.pointsRead > points
+                 ? fmt::format(" (a uniform subsample of {} that fits --vram)", in.pointsRead)
+                 : std::string(),
              in.normalsEstimated ? " (normals estimated)" : "", in.loadSeconds);
 }
 
@@ -105,13 +134,15 @@ double median(std::vector<double> v) {
 int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
                       const ImageInputs& in) {
   Gpu gpu = gpuFor(o);
-  const PointImageScene scene(in.objects);
-  const Camera camera = sceneCamera(o, in);
-  const auto lights = lightsOf(o, image, in, camera);
+  const PointImageScene scene(withOpacity(in.objects, o.scene.image));
+  const Camera camera = sceneCamera(o.scene, in);
+  const auto lights = lightsOf(o.scene, in, camera);
   GpuPointImage renderer(gpu, scene);
   if (image.fillRoundsPerSubmit > 0) renderer.setRoundsPerSubmit(image.fillRoundsPerSubmit);
   const auto t0 = Clock::now();
-  const GpuImageFrame frame = renderer.render(cameraOf(o, in, camera), lights, settingsOf(o, image));
+  const GpuImageFrame frame =
+      renderer.render(cameraOf(in, camera, o.width, o.height), lights,
+                      budgeted(settingsOf(o.scene, image), o, scene.size(), lights.size()));
   const double wall = seconds(Clock::now() - t0);
   writeImage(o.out, o.width, o.height, frame.pixels);
   printInputs(in, scene.size());
@@ -126,11 +157,13 @@ int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
 }
 
 int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
-  PointImageRenderer renderer(in.objects);
-  const Camera camera = sceneCamera(o, in);
-  const auto lights = lightsOf(o, image, in, camera);
+  PointImageRenderer renderer(withOpacity(in.objects, o.scene.image));
+  const Camera camera = sceneCamera(o.scene, in);
+  const auto lights = lightsOf(o.scene, in, camera);
   const auto t0 = Clock::now();
-  const ImageResult r = renderer.render(cameraOf(o, in, camera), lights, settingsOf(o, image));
+  const ImageResult r = renderer.render(
+      cameraOf(in, camera, o.width, o.height), lights,
+      budgeted(settingsOf(o.scene, image), o, renderer.scene().size(), lights.size()));
   const double render = seconds(Clock::now() - t0);
   writeImage(o.out, o.width, o.height, pixelsOf(r));
   printInputs(in, renderer.scene().size());
@@ -142,10 +175,12 @@ int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const Imag
 
 int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
   Gpu gpu = gpuFor(o);
-  const PointImageScene scene(in.objects);
-  const Camera start = sceneCamera(o, in);
-  const auto lights = lightsOf(o, image, in, start);
-  ImageSettings settings = settingsOf(o, image);
+  const std::vector<ImageObject> objects = withOpacity(in.objects, o.scene.image);
+  const PointImageScene scene(objects);
+  const Camera start = sceneCamera(o.scene, in);
+  const auto lights = lightsOf(o.scene, in, start);
+  ImageSettings settings =
+      budgeted(settingsOf(o.scene, image), o, scene.size(), lights.size());
   // Every frame computes its shadow textures, as the paper's timings do.
   settings.reuseShadows = false;
   const auto t0 = Clock::now();
@@ -162,7 +197,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
     const Vec3d axis = normalized(c.up);
     c.eye = c.target + rotated(c.eye - c.target, axis, 2.0 * M_PI * f / frames);
     const auto t = Clock::now();
-    GpuImageFrame frame = renderer.render(cameraOf(o, in, c), lights, settings);
+    GpuImageFrame frame = renderer.render(cameraOf(in, c, o.width, o.height), lights, settings);
     if (f == 0) {
       first = std::move(frame);
       continue;  // the first frame compiles and warms: not timed
@@ -173,9 +208,9 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
     projected = frame.stats.projected;
   }
   // The first view on the CPU reference.
-  PointImageRenderer cpu(in.objects);
+  PointImageRenderer cpu(objects);
   const auto t1 = Clock::now();
-  cpu.render(cameraOf(o, in, start), lights, settings);
+  cpu.render(cameraOf(in, start, o.width, o.height), lights, settings);
   const double cpuSeconds = seconds(Clock::now() - t1);
   const double ms = median(wall), gpuMs = median(device);
   for (double& step : steps) step /= double(std::max<size_t>(wall.size(), 1));
@@ -227,6 +262,26 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
       frames - 1, ms, fps, gpuMs, stepsText, pointsPerSecond / 1e6, double(gpu.memoryPeak) / (1 << 20),
       upload, cpuSeconds, cpuSeconds * 1e3 / std::max(ms, 1e-9));
   return 0;
+}
+
+void ImageFeed::publish(ImageInputs&& inputs) {
+  auto next = std::make_shared<const ImageInputs>(std::move(inputs));
+  const std::lock_guard lock(mutex_);
+  latest_ = std::move(next);
+  ++version_;
+}
+
+void ImageFeed::fail(std::exception_ptr error) {
+  const std::lock_guard lock(mutex_);
+  error_ = error;
+}
+
+std::shared_ptr<const ImageInputs> ImageFeed::since(uint64_t& version) const {
+  const std::lock_guard lock(mutex_);
+  if (error_) std::rethrow_exception(error_);
+  if (version == version_) return nullptr;
+  version = version_;
+  return latest_;
 }
 
 }  // namespace iso::viewer

@@ -3,6 +3,9 @@
 // reads the inputs (tools/iso/view_points.cpp): this layer gets their points.
 #pragma once
 
+#include <exception>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "viewer/point_image.h"
@@ -19,13 +22,30 @@ struct ImageInputs {
   Vec3d up{0, 1, 0};                 // the scene's default up (z for LAS inputs)
   bool normalsEstimated = false;     // some object's normals were estimated, not read
   double loadSeconds = 0.0;          // reading and preparing the points
+  uint64_t pointsRead = 0;           // from the files (more than drawn: a subsample, --vram)
+  bool preview = false;              // what was read so far (a window draws it while reading)
 };
 
+// The objects with the scene's opacity (one for all, or one an object; UsageError otherwise).
+std::vector<ImageObject> withOpacity(const std::vector<ImageObject>& objects,
+                                     const ImageScene& scene);
+
 struct ImageViewOptions {
-  ImageSettings settings;
-  int shadowSamples = 0;  // samples of each area light (0: the scene's own)
+  ImageSettings settings;  // layers, layer gap and eye-dome shading come from the scene
   int fillRoundsPerSubmit = 0;  // GpuPointImage::setRoundsPerSubmit (0: its default)
 };
+
+// The scene's camera (framed on the points when it has none), lights (a point light made a small
+// square one for the scene's shadow samples) and settings, for the points' frame.
+Camera sceneCamera(const Scene& scene, const ImageInputs& inputs);
+ImageCamera cameraOf(const ImageInputs& inputs, const Camera& camera, uint32_t width,
+                     uint32_t height);
+std::vector<ImageLight> lightsOf(const Scene& scene, const ImageInputs& inputs,
+                                 const Camera& camera);
+ImageSettings settingsOf(const Scene& scene, const ImageViewOptions& image);
+// ... with the lights' images no larger than --vram leaves room for beside `points`.
+ImageSettings budgeted(ImageSettings settings, const ViewOptions& options, size_t points,
+                       size_t lights);
 
 // Each returns the process exit code and throws for errors.
 int viewImageHeadless(const ViewOptions& options, const ImageViewOptions& image,
@@ -34,5 +54,25 @@ int viewImageCpu(const ViewOptions& options, const ImageViewOptions& image,
                  const ImageInputs& inputs);
 int viewImageBench(const ViewOptions& options, const ImageViewOptions& image,
                    const ImageInputs& inputs);
+
+// Points arriving while a window is open: a loader publishes what it has read (previews, then
+// all of it), or its error; the window draws the latest.
+class ImageFeed {
+ public:
+  void publish(ImageInputs&& inputs);
+  void fail(std::exception_ptr error);
+  // What was published since `version` (null when nothing new), moving `version` on; rethrows
+  // the loader's error.
+  std::shared_ptr<const ImageInputs> since(uint64_t& version) const;
+
+ private:
+  mutable std::mutex mutex_;
+  std::shared_ptr<const ImageInputs> latest_;
+  uint64_t version_ = 0;
+  std::exception_ptr error_;
+};
+
+// The window (image_window.cpp): draws the feed's latest points from the first preview on.
+int viewImageWindow(const ViewOptions& options, const ImageViewOptions& image, ImageFeed& feed);
 
 }  // namespace iso::viewer

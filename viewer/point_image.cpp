@@ -334,7 +334,7 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
       if (size <= 0) {
         const float across = 2.0f * spread * glm::length(center - at);
         size = int(std::clamp(across / (kShadowPixelSpacings * scene.largestSpacing()), 256.0f,
-                              4096.0f));
+                              float(std::max(settings.maxShadowResolution, 256))));
       }
       ImageParams v = viewParams(at, forward, up, 2.0f * std::atan(spread * 1.01f), size, size, lo, hi);
       v.layer.x = gap * v.eye.w;

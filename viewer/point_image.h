@@ -55,6 +55,7 @@ struct ImageSettings {
   bool shadows = false;        // shadow textures for every light
   bool reuseShadows = true;    // keep the last frame's shadow textures while the lights stay
   int shadowResolution = 0;    // the lights' square images, pixels across (0: from the spacing)
+  int maxShadowResolution = 4096;  // ... at most this many when chosen from the spacing
   int maxFillRadius = 8;       // the masks' largest radius (pixels, ≤ kImageMaxFillRadius)
   int maxFillPasses = 24;      // a guard: filling stops when nothing changes, long before
   glm::vec3 ambient{0.15f};

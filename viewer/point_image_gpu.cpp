@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstring>
 
 #include "iso/error.h"
@@ -120,6 +121,20 @@ GpuPointImage::~GpuPointImage() {
   if (!gpu_.device) return;
   vkDeviceWaitIdle(gpu_.device);
   vkFreeCommandBuffers(gpu_.device, gpu_.commandPool, 1, &cb_);
+}
+
+ImageBudget imageBudget(uint64_t vram, uint64_t points, uint32_t width, uint32_t height,
+                        size_t lights) {
+  const uint64_t picture =
+      uint64_t(width) * height * (kImageLayerPixelBytes + kImagePicturePixelBytes) + (16u << 20);
+  const uint64_t left = vram > picture ? vram - picture : 0;
+  const uint64_t perPoint = kImagePointBytes + kImageLitBytes * std::max<size_t>(lights, 1);
+  ImageBudget b;
+  b.points = std::min(points, left / 4 * 3 / perPoint);
+  const double shadowBytes = double(left - b.points * perPoint);
+  b.shadowResolution =
+      int(std::clamp(std::sqrt(shadowBytes / kImageLayerPixelBytes), 256.0, 4096.0));
+  return b;
 }
 
 uint64_t GpuPointImage::memoryBytes() const {

@@ -28,6 +28,23 @@ inline constexpr std::array<const char*, size_t(ImageStep::Count)> kImageStepNam
     "wait", "clear", "project", "resolve", "fill", "control", "shade", "smooth",
     "antialias", "blend", "finish", "lit"};
 
+// GPU bytes of a point (position, normal and color, a vec4 each), of its shadow texture for one
+// light, of a pixel's layers (the eye's or a light's image: keys, two layers and the resolved
+// one, 8 bytes each) and of a pixel of the eye's picture (two layers' and the blended colors, and
+// the sRGB word).
+inline constexpr uint64_t kImagePointBytes = 48, kImageLitBytes = 4;
+inline constexpr uint64_t kImageLayerPixelBytes = 32, kImagePicturePixelBytes = 52;
+
+// What fits in `vram` bytes for a picture of width × height: the points drawn (all `points`, or a
+// subsample of at most three quarters of what is left after the picture) and the lights' images'
+// largest size across (what is left after the points).
+struct ImageBudget {
+  uint64_t points = 0;
+  int shadowResolution = 4096;
+};
+ImageBudget imageBudget(uint64_t vram, uint64_t points, uint32_t width, uint32_t height,
+                        size_t lights);
+
 struct GpuImageFrame {
   std::vector<uint32_t> pixels;  // sRGB8 RGBA words, row after row
   ImageStats stats;
@@ -49,6 +66,8 @@ class GpuPointImage {
                        const ImageSettings& settings);
 
   uint64_t memoryBytes() const;  // device memory of its buffers
+  // The last frame's picture (sRGB8 RGBA words), on the device, until the next frame.
+  const Buffer& picture() const { return pixels_; }
   // Filling rounds recorded between two looks at their counts (default kFillRoundsPerSubmit).
   void setRoundsPerSubmit(int rounds) { roundsPerSubmit_ = std::max(rounds, 1); }
 

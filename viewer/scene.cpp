@@ -129,6 +129,39 @@ LightSpec parseLight(const std::string& text) {
 
 namespace {
 
+// A whole number from lo to hi.
+int wholeNumber(const Fields& f, const json& j, const std::string& key, int lo, int hi) {
+  const double v = f.number(j, key);
+  if (v < lo || v > hi || v != std::floor(v))
+    f.fail(key, fmt::format("a whole number from {} to {}", lo, hi));
+  return int(v);
+}
+
+// The scene file's image-space points: layers, layer gap, opacity (one number, or one an input),
+// shadow samples and eye-dome shading.
+void readImage(const Fields& f, const json& j, ImageScene& image) {
+  f.known(j, "image", {"layers", "layer_gap", "opacity", "shadow_samples", "eye_dome"});
+  if (j.contains("layers"))
+    image.layers = wholeNumber(f, j["layers"], "image.layers", 1, kMaxImageLayers);
+  if (j.contains("layer_gap")) {
+    image.layerGap = f.number(j["layer_gap"], "image.layer_gap");
+    if (!(image.layerGap > 0)) f.fail("image.layer_gap", "a positive distance (world units)");
+  }
+  if (j.contains("opacity")) {
+    const json& o = j["opacity"];
+    image.opacity.clear();
+    for (const json& v : o.is_array() ? o : json::array({o})) {
+      const double a = f.number(v, "image.opacity");
+      if (!(a > 0 && a <= 1)) f.fail("image.opacity", "each from 0 (excluded) to 1");
+      image.opacity.push_back(float(a));
+    }
+  }
+  if (j.contains("shadow_samples"))
+    image.shadowSamples =
+        wholeNumber(f, j["shadow_samples"], "image.shadow_samples", 1, kMaxImageShadowSamples);
+  if (j.contains("eye_dome")) image.eyeDome = f.boolean(j["eye_dome"], "image.eye_dome");
+}
+
 // The scene file's camera: eye and target, up and fov optional.
 void readCamera(const Fields& f, const json& c, Scene& scene) {
   f.known(c, "camera", {"eye", "target", "up", "fov"});
@@ -279,11 +312,12 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
            "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color",
-           "caustics"});
+           "caustics", "image"});
   if (j.contains("camera")) readCamera(f, j["camera"], scene);
   if (j.contains("lights")) readLights(f, j["lights"], scene);
   if (j.contains("material")) readMaterial(f, j["material"], scene.material);
   readRendering(f, j, path, scene);
+  if (j.contains("image")) readImage(f, j["image"], scene.image);
 }
 
 Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {

@@ -59,6 +59,18 @@ inline constexpr NameTable<Draw, 3> kDrawNames{
 // Caustic photons a light at most (all lights' photons are counted in 32 bits).
 inline constexpr uint32_t kMaxCausticPhotons = 256u << 20;
 
+// Image-space points (iso view --draw image): the scene file's "image" object, then the command
+// line.
+struct ImageScene {
+  int layers = 1;              // depth-peeled layers blended front to back
+  double layerGap = 0.0;       // d̃ in world units (0: a few point spacings, from the data)
+  std::vector<float> opacity;  // one an input file, in (0, 1] (empty: opaque)
+  int shadowSamples = 0;       // samples of each light for soft shadows (0: the lights' own)
+  bool eyeDome = false;        // normal-free shading from the depth alone
+};
+inline constexpr int kMaxImageLayers = 64;
+inline constexpr int kMaxImageShadowSamples = 64;
+
 struct Scene {
   std::optional<Camera> camera;      // none: framed on the surface's bounds
   std::optional<double> fovDegrees;  // overrides the camera's field of view
@@ -84,6 +96,7 @@ struct Scene {
   // scene with caustics and no ground gets one under the surface (completeScene).
   uint32_t caustics = 0;
   std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
+  ImageScene image;
 };
 
 // Read a scene file over `scene` (keys it does not set stay). Throws iso::FileError naming the

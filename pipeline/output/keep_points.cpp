@@ -8,6 +8,7 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <limits>
+#include <queue>
 #include <stdexcept>
 
 #include "iso/reader.h"
@@ -361,28 +362,79 @@ KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& 
   return out.stats();
 }
 
+PointCloud decodeKeptPoints(const Reader& reader, uint32_t id) {
+  const Frame& frame = reader.header().frame;
+  const ChunkInfo& info = reader.chunks()[id];
+  const PointsChunk chunk = decodePointsChunk(reader, id);
+  PointCloud points;
+  points.positions.resize(chunk.size());
+  for (size_t i = 0; i < chunk.size(); ++i) {
+    const std::array<double, 3> u =
+        pointFramePosition(info.level, info.key, chunk.stepBits, chunk.offsets[i]);
+    points.positions[i] = toWorld(glm::dvec3(u[0], u[1], u[2]), frame);
+  }
+  for (const std::array<uint16_t, 3>& c : chunk.colors)
+    points.colors.emplace_back(srgbToLinear(float(c[0]) / 65535.0f),
+                               srgbToLinear(float(c[1]) / 65535.0f),
+                               srgbToLinear(float(c[2]) / 65535.0f));
+  for (const std::array<int16_t, 3>& n : chunk.normals)
+    points.normals.emplace_back(decodeSnorm16(n[0]), decodeSnorm16(n[1]), decodeSnorm16(n[2]));
+  return points;
+}
+
 void forEachKeptPoints(const Reader& reader,
                        const std::function<void(const PointCloud& points)>& f) {
-  const Frame& frame = reader.header().frame;
   const std::vector<bool> subsample = subsampleChunks(reader);
-  for (const ChunkInfo& info : reader.chunks()) {
-    if (info.kind != kPointsKind || subsample[info.id]) continue;
-    const PointsChunk chunk = decodePointsChunk(reader, info.id);
-    PointCloud points;
-    points.positions.resize(chunk.size());
-    for (size_t i = 0; i < chunk.size(); ++i) {
-      const std::array<double, 3> u =
-          pointFramePosition(info.level, info.key, chunk.stepBits, chunk.offsets[i]);
-      points.positions[i] = toWorld(glm::dvec3(u[0], u[1], u[2]), frame);
-    }
-    for (const std::array<uint16_t, 3>& c : chunk.colors)
-      points.colors.emplace_back(srgbToLinear(float(c[0]) / 65535.0f),
-                                 srgbToLinear(float(c[1]) / 65535.0f),
-                                 srgbToLinear(float(c[2]) / 65535.0f));
-    for (const std::array<int16_t, 3>& n : chunk.normals)
-      points.normals.emplace_back(decodeSnorm16(n[0]), decodeSnorm16(n[1]), decodeSnorm16(n[2]));
-    f(points);
+  for (const ChunkInfo& info : reader.chunks())
+    if (info.kind == kPointsKind && !subsample[info.id]) f(decodeKeptPoints(reader, info.id));
+}
+
+std::vector<uint32_t> keptPointsCut(const Reader& reader, uint64_t maxPoints) {
+  const auto& chunks = reader.chunks();
+  std::vector<std::vector<uint32_t>> children(chunks.size());
+  std::vector<uint32_t> roots;
+  for (const ChunkInfo& c : chunks) {
+    if (c.kind != kPointsKind) continue;
+    if (c.parent == kNoParent || c.parent >= chunks.size() || chunks[c.parent].kind != kPointsKind)
+      roots.push_back(c.id);
+    else
+      children[c.parent].push_back(c.id);
   }
+  // Coarsest first: a chunk gives way to its children while the points still fit.
+  const auto coarser = [&](uint32_t a, uint32_t b) {
+    return std::pair(chunks[a].level, a) > std::pair(chunks[b].level, b);
+  };
+  std::priority_queue<uint32_t, std::vector<uint32_t>, decltype(coarser)> open(coarser);
+  std::vector<uint32_t> cut;
+  uint64_t total = 0;
+  for (uint32_t r : roots) {
+    total += chunks[r].pointCount;
+    open.push(r);
+  }
+  std::vector<bool> replaced(chunks.size(), false);
+  while (!open.empty()) {
+    const uint32_t c = open.top();
+    open.pop();
+    if (children[c].empty()) continue;
+    uint64_t more = 0;
+    for (uint32_t k : children[c]) more += chunks[k].pointCount;
+    if (total - chunks[c].pointCount + more > maxPoints) continue;
+    total = total - chunks[c].pointCount + more;
+    replaced[c] = true;
+    for (uint32_t k : children[c]) open.push(k);
+  }
+  // The cut: the chunks reached and not replaced, in file order.
+  std::vector<bool> reached(chunks.size(), false);
+  std::vector<uint32_t> stack = roots;
+  while (!stack.empty()) {
+    const uint32_t c = stack.back();
+    stack.pop_back();
+    reached[c] = true;
+    if (replaced[c]) stack.insert(stack.end(), children[c].begin(), children[c].end());
+  }
+  for (uint32_t id = 0; id < chunks.size(); ++id)
+    if (reached[id] && !replaced[id]) cut.push_back(id);
+  return cut;
 }
 
 KeptPointsInfo keptPointsInfo(const Reader& reader) {

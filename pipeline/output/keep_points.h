@@ -131,6 +131,16 @@ KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& 
                            const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
                            uint32_t perChunk = kPointsPerChunk, const PointSet* prepared = nullptr);
 
+// Points chunk `id` of a file, decoded: world positions, unit normals and linear colors (when
+// kept).
+PointCloud decodeKeptPoints(const Reader& reader, uint32_t id);
+
+// The points chunks to draw at most maxPoints points (a level of detail under a memory budget):
+// from the coarsest, a subsample chunk gives way to the chunks it thins out, coarser chunks
+// first, while the sum of the chunks' points stays within maxPoints; the roots when even they
+// do not fit. Chunk ids in file order.
+std::vector<uint32_t> keptPointsCut(const Reader& reader, uint64_t maxPoints);
+
 // Every points chunk of a file but its subsamples, decoded, in file order: world positions, unit normals and linear
 // colors (when kept). Calls f once per chunk.
 void forEachKeptPoints(const Reader& reader,

@@ -194,6 +194,58 @@ TEST(KeptPoints, subsampleChunksFormATreeOfThinnedPointsOverTheChunks) {
   }
 }
 
+// A level of detail of the kept points under a budget: every chunk that is not a subsample is
+// drawn exactly once (itself or through one ancestor), the points stay within the budget, no
+// chunk of the cut could give way to its children within it, and the whole budget draws every
+// kept point.
+TEST(KeptPoints, aCutUnderABudgetCoversEveryChunkOnceWithinIt) {
+  const PointCloud cloud = hardCloud();
+  test::TempDir dir;
+  writeKeptPoints(dir / "points.iso", cloud, chooseFrame(cloud), 20, 250);
+  const Reader reader = Reader::open(dir / "points.iso");
+  const std::vector<bool> subsample = subsampleChunks(reader);
+  const auto& chunks = reader.chunks();
+  const uint64_t rootPoints = [&] {
+    uint64_t n = 0;
+    for (const ChunkInfo& c : chunks) n += c.parent == kNoParent ? c.pointCount : 0;
+    return n;
+  }();
+  for (const uint64_t budget : {uint64_t(1), rootPoints, uint64_t(cloud.size() / 4),
+                                uint64_t(cloud.size() / 2), uint64_t(cloud.size())}) {
+    const std::vector<uint32_t> cut = keptPointsCut(reader, budget);
+    std::vector<bool> inCut(chunks.size(), false);
+    uint64_t points = 0;
+    for (uint32_t id : cut) {
+      inCut[id] = true;
+      points += chunks[id].pointCount;
+    }
+    for (const ChunkInfo& c : chunks) {
+      if (subsample[c.id]) continue;
+      int drawn = 0;  // c or an ancestor in the cut
+      for (uint32_t a = c.id; a != kNoParent; a = chunks[a].parent) drawn += inCut[a];
+      EXPECT_EQ(drawn, 1) << "budget " << budget << ", chunk " << c.id;
+    }
+    if (budget >= rootPoints) {
+      EXPECT_LE(points, budget);
+    }
+    std::vector<uint64_t> childPoints(chunks.size(), 0);
+    for (const ChunkInfo& c : chunks)
+      if (c.parent != kNoParent) childPoints[c.parent] += c.pointCount;
+    for (uint32_t id : cut) {
+      if (childPoints[id] > 0) {
+        EXPECT_GT(points - chunks[id].pointCount + childPoints[id], budget) << "chunk " << id;
+      }
+    }
+    if (budget == cloud.size()) {
+      EXPECT_EQ(points, cloud.size());
+      // Decoded, they are the scan's points.
+      uint64_t decoded = 0;
+      for (uint32_t id : cut) decoded += decodeKeptPoints(reader, id).size();
+      EXPECT_EQ(decoded, cloud.size());
+    }
+  }
+}
+
 TEST(KeptPoints, aFarOutlierGetsACoarserStepInItsOwnChunkOnly) {
   PointCloud cloud = test::scanOf("sphere", 5000, false, 0.0, 3);
   cloud.positions.push_back(glm::dvec3(1.0e4, -2.0, 1.0));  // removed as an outlier, still kept

@@ -950,6 +950,21 @@ TEST(ViewerScene, sceneFilesSetEverythingAndNameWhatTheyCannotUse) {
   EXPECT_EQ(drawn.draw, Draw::Both);
   EXPECT_EQ(drawn.groundHeight, -1.5);
   EXPECT_FLOAT_EQ(drawn.groundColor[2], 0.3f);
+  // Image-space points: layers, the layer gap d̃, opacity one an input, shadow samples.
+  std::ofstream(file) << R"({"image": {"layers": 3, "layer_gap": 0.02, "opacity": [1, 0.4],
+    "shadow_samples": 10, "eye_dome": true}})";
+  Scene image;
+  loadScene(file, image);
+  EXPECT_EQ(image.image.layers, 3);
+  EXPECT_DOUBLE_EQ(image.image.layerGap, 0.02);
+  EXPECT_EQ(image.image.opacity, (std::vector<float>{1.0f, 0.4f}));
+  EXPECT_EQ(image.image.shadowSamples, 10);
+  EXPECT_TRUE(image.image.eyeDome);
+  fails(R"({"image": {"layers": 0}})", "image.layers");
+  fails(R"({"image": {"layer_gap": -1}})", "image.layer_gap");
+  fails(R"({"image": {"opacity": [1, 1.5]}})", "image.opacity");
+  fails(R"({"image": {"shadow_samples": 2.5}})", "image.shadow_samples");
+  fails(R"({"image": {"peel": 2}})", "'image.peel': unknown key");
   EXPECT_THROW(parseLight("spot:1,2,3"), std::invalid_argument);
   EXPECT_THROW(parseLight("point:1,2"), std::invalid_argument);
   const LightSpec l = parseLight("area:1,2,3:1,0,0:0,1,0:9:1,1,1:3");

@@ -2,7 +2,10 @@
 // or a benchmark (--bench), streaming its chunks under a GPU memory budget (specs/viewer.md).
 #include <fmt/core.h>
 
+#include <atomic>
 #include <fstream>
+#include <sstream>
+#include <thread>
 
 #include "iso/error.h"
 #include "pipeline/base/files.h"
@@ -11,6 +14,7 @@
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
 #include "tools/iso/view_points.h"
+#include "viewer/point_image_gpu.h"
 #include "viewer/renderer.h"
 #include "viewer/view.h"
 
@@ -35,48 +39,72 @@ struct ViewArgs {
   std::vector<std::string> files;
   viewer::ImageViewOptions image;
   std::string antialias = "silhouettes", opacity;
-  bool noSmooth = false;
+  std::optional<int> layers, shadowSamples;
+  std::optional<double> layerGap;
+  bool noSmooth = false, eyeDome = false;
 };
 
-// Whether a file is an .iso file (its header's magic), not a raw scan.
-bool isIsoFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::array<char, 8> magic{};
-  in.read(magic.data(), magic.size());
-  return in.gcount() == 8 && std::equal(magic.begin(), magic.end(), kHeaderMagic.begin(),
-                                        [](char a, uint8_t b) { return uint8_t(a) == b; });
-}
-
-// Raw scans, or --draw image: every file read whole and drawn as image-space points.
+// Raw scans, or --draw image: the point files read (a uniform subsample of them beyond what fits
+// --vram) and drawn as image-space points; the window opens at once and draws what is read so
+// far.
 int viewImage(ViewArgs& a) {
-  for (const std::string& f : a.files)
-    if (isIsoFile(f))
-      throw UsageError(f + ": --draw image draws point files (raw scans); .iso files are drawn "
-                           "by the tracer");
   viewer::ImageSettings& s = a.image.settings;
   s.antialias = a.antialias == "off"     ? viewer::ImageAntialias::Off
                 : a.antialias == "edges" ? viewer::ImageAntialias::Edges
                                          : viewer::ImageAntialias::Silhouettes;
   s.smooth = !a.noSmooth;
   s.shadows = true;  // unless --no-shadows (the scene's)
-  viewer::ImageInputs inputs = loadImageInputs({a.files.begin(), a.files.end()});
-  if (!a.opacity.empty()) {
-    const std::vector<double> v = viewer::parseNumbers(a.opacity, inputs.objects.size(),
-                                                       "--opacity (one a file)");
-    for (size_t i = 0; i < v.size(); ++i) {
-      if (!(v[i] > 0.0 && v[i] <= 1.0)) throw UsageError("--opacity: each in (0, 1]");
-      inputs.objects[i].opacity = float(v[i]);
+  const auto& opacity = a.view.scene.image.opacity;
+  if (opacity.size() > 1 && opacity.size() != a.files.size())
+    throw UsageError(fmt::format("--opacity: one number, or one for each of the {} files",
+                                 a.files.size()));
+  const size_t lights = std::max<size_t>(a.view.scene.lights.size(), 1);
+  ImageLoad load;
+  load.maxPoints =
+      viewer::imageBudget(a.view.vram, UINT64_MAX, a.view.width, a.view.height, lights).points;
+  ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, load.maxPoints);
+  const auto finish = [&](viewer::ImageInputs& inputs) {
+    if (a.view.scene.material.color != viewer::Material{}.color)
+      for (auto& o : inputs.objects)
+        if (o.colors.empty())
+          o.color = glm::vec3(a.view.scene.material.color[0], a.view.scene.material.color[1],
+                              a.view.scene.material.color[2]);
+  };
+  if (!a.cpu && !a.headless && !a.bench) {
+    // The window: reading goes on beside it, previews first.
+    viewer::ImageFeed feed;
+    std::atomic<bool> stop = false;
+    load.preview = [&](viewer::ImageInputs&& preview) {
+      finish(preview);
+      feed.publish(std::move(preview));
+    };
+    load.stop = &stop;
+    std::thread reader([&] {
+      try {
+        viewer::ImageInputs inputs = readImageInputs(files, load);
+        finish(inputs);
+        if (!stop) feed.publish(std::move(inputs));
+      } catch (...) {
+        feed.fail(std::current_exception());
+      }
+    });
+    int code = 0;
+    try {
+      code = viewer::viewImageWindow(a.view, a.image, feed);
+    } catch (...) {
+      stop = true;
+      reader.join();
+      throw;
     }
+    stop = true;
+    reader.join();
+    return code;
   }
-  if (a.view.scene.material.color != viewer::Material{}.color)
-    for (auto& o : inputs.objects)
-      if (o.colors.empty())
-        o.color = glm::vec3(a.view.scene.material.color[0], a.view.scene.material.color[1],
-                            a.view.scene.material.color[2]);
+  viewer::ImageInputs inputs = readImageInputs(files, load);
+  finish(inputs);
   if (a.cpu) return viewer::viewImageCpu(a.view, a.image, inputs);
   if (a.headless) return viewer::viewImageHeadless(a.view, a.image, inputs);
-  if (a.bench) return viewer::viewImageBench(a.view, a.image, inputs);
-  throw UsageError("--draw image: the window is not built yet; use --headless, --cpu or --bench");
+  return viewer::viewImageBench(a.view, a.image, inputs);
 }
 
 viewer::Vec3d parseUp(const std::string& text) {
@@ -142,6 +170,19 @@ void buildScene(ViewArgs& a) {
   if (a.groundHeight) s.groundHeight = *a.groundHeight;
   if (a.caustics) s.caustics = *a.caustics;
   if (!a.draw.empty()) s.draw = *valueNamed(viewer::kDrawNames, a.draw);
+  if (a.layers) s.image.layers = *a.layers;
+  if (a.layerGap) s.image.layerGap = *a.layerGap;
+  if (a.shadowSamples) s.image.shadowSamples = *a.shadowSamples;
+  if (a.eyeDome) s.image.eyeDome = true;
+  if (!a.opacity.empty()) {
+    s.image.opacity.clear();
+    std::stringstream in(a.opacity);
+    for (std::string item; std::getline(in, item, ',');) {
+      const double v = viewer::parseNumbers(item, 1, "--opacity (one a file, or one for all)")[0];
+      if (!(v > 0.0 && v <= 1.0)) throw UsageError("--opacity: each in (0, 1]");
+      s.image.opacity.push_back(float(v));
+    }
+  }
 }
 
 // The pictures to write (--out, --screenshot), checked before the file is opened: in a directory
@@ -242,19 +283,21 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "default for raw scans)")
       ->check(CLI::IsMember(drawNames))
       ->excludes(points);
-  c->add_option("--layers", a->image.settings.layers,
-                "--draw image: surface layers peeled and blended front to back (transparency)")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 64));
-  c->add_option("--layer-gap", a->image.settings.layerGap,
+  c->add_option("--layers", a->layers,
+                "--draw image: surface layers peeled and blended front to back (transparency; "
+                "default 1)")
+      ->check(CLI::Range(1, viewer::kMaxImageLayers));
+  c->add_option("--layer-gap", a->layerGap,
                 "--draw image: the least distance between two surface layers (world units; "
                 "default 3 point spacings)")
       ->check(CLI::PositiveNumber);
-  c->add_option("--opacity", a->opacity, "--draw image: each input's opacity, A[,A...] (0 to 1]");
-  c->add_option("--shadow-samples", a->image.shadowSamples,
+  c->add_option("--opacity", a->opacity,
+                "--draw image: the inputs' opacity, A (all) or A,B,... (one a file), each in "
+                "(0, 1]");
+  c->add_option("--shadow-samples", a->shadowSamples,
                 "--draw image: samples of each light for soft shadows (a point light becomes a "
                 "small square light)")
-      ->check(CLI::Range(1, 64));
+      ->check(CLI::Range(1, viewer::kMaxImageShadowSamples));
   c->add_option("--shadow-resolution", a->image.settings.shadowResolution,
                 "--draw image: the lights' images, pixels across (default: pixels about as wide "
                 "as the points' spacing)")
@@ -268,7 +311,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "--draw image, GPU: filling rounds submitted before the host looks whether one "
                 "changed nothing (default 2); for measurements")
       ->check(CLI::Range(1, 64));
-  c->add_flag("--eye-dome", a->image.settings.eyeDome,
+  c->add_flag("--eye-dome", a->eyeDome,
               "--draw image: normal-free shading from the depth alone (eye-dome style)");
   c->add_flag("--ground", a->ground,
              "A diffuse ground plane under the surface, across the up axis (the scene file's "
@@ -283,7 +326,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
   c->add_flag("--no-shadows", a->noShadows, "No shadow rays");
   c->add_flag("--no-reflections", a->noReflections, "No reflection rays");
   c->add_flag("--no-refractions", a->noRefractions, "No refraction rays");
-  c->add_option("--frames", a->view.frames, "Window: quit after this many frames");
+  c->add_option("--frames", a->view.frames,
+                "Window: quit after this many frames (--draw image: frames of all the points, "
+                "once read)");
   c->add_option("--screenshot", a->view.screenshot, "Window: save the last frame here on quitting");
   c->add_option("--max-frames", a->view.maxFrames,
                 "Headless: frames at most for streaming to bring in what the view needs")

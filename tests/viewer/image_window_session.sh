@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Drives `iso view SCAN` (image-space points) in a window on a virtual display (run under
+# xvfb-run): presses M (eye-dome shading) and L (two layers), P for a screenshot, makes the scan
+# half transparent in the scene file the window watches, and closes it with Escape.
+# Usage: image_window_session.sh ISO_BINARY SCAN WORKDIR
+set -euo pipefail
+iso=$1 file=$2 work=$3
+cd "$work"
+echo '{"image": {"opacity": 1}}' >scene.json
+"$iso" view "$file" --scene scene.json --width 300 --height 200 --frames 20000 \
+  --screenshot final.png >out.txt 2>err.txt &
+pid=$!
+window=
+for _ in $(seq 100); do
+  window=$(xdotool search --name "iso view" 2>/dev/null | head -1 || true)
+  [ -n "$window" ] && break
+  sleep 0.1
+done
+[ -n "$window" ] || { echo "no window appeared" >&2; kill $pid; exit 1; }
+sleep 2
+xdotool windowfocus --sync "$window" 2>/dev/null || true
+xdotool mousemove --window "$window" 150 100
+xdotool key p                       # screenshot: iso-screenshot-1.png, lit, one layer
+sleep 1
+xdotool key m l                     # eye-dome shading, two layers
+sleep 1
+echo '{"image": {"opacity": 0.5}}' >scene.json.new
+mv scene.json.new scene.json
+sleep 2
+xdotool key Escape
+wait $pid

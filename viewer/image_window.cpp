@@ -1,0 +1,283 @@
+// `iso view SCAN...` in a window (image_view.h): image-space points drawn on the GPU from the
+// first batch read on, the points replaced as more arrive, each frame's picture copied to the
+// swapchain.
+//
+// Mouse and W A S D Q E move the camera as in the tracer's window. Keys: M shading (lit, or
+// eye-dome from the depth alone), L layers (1, 2, 3, 6), 1 shadows, + and - shadow samples,
+// P screenshot, R reloads the scene file (it also reloads by itself when the file changes), Esc
+// quits.
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <optional>
+
+#include "viewer/image.h"
+#include "viewer/image_view.h"
+#include "viewer/point_image_gpu.h"
+#include "viewer/window_parts.h"
+
+namespace iso::viewer {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+constexpr int kLayerSteps[] = {1, 2, 3, 6};
+
+// What keys M, L, 1, + and - changed: kept over the scene file when it is reloaded.
+struct ImageKeys {
+  std::optional<bool> shadows, eyeDome;
+  std::optional<int> layers, shadowSamples;
+
+  void apply(Scene& scene) const {
+    if (shadows) scene.shadows = *shadows;
+    if (eyeDome) scene.image.eyeDome = *eyeDome;
+    if (layers) scene.image.layers = *layers;
+    if (shadowSamples) scene.image.shadowSamples = *shadowSamples;
+  }
+};
+
+void applyImageSwitches(Input& input, Scene& scene, ImageViewOptions& image, ImageKeys& keys) {
+  if (input.toggled == 1) keys.shadows = !scene.shadows;
+  if (input.toggled == 7) {
+    keys.eyeDome = !(scene.image.eyeDome || image.settings.eyeDome);
+    image.settings.eyeDome = false;  // the key decides from now on
+  }
+  if (input.toggled == 8) {
+    const int* next = std::upper_bound(std::begin(kLayerSteps), std::end(kLayerSteps),
+                                       scene.image.layers);
+    keys.layers = next == std::end(kLayerSteps) ? kLayerSteps[0] : *next;
+  }
+  input.toggled = 0;
+  if (input.samples != 0)
+    keys.shadowSamples = std::clamp(std::max(scene.image.shadowSamples, 1) + input.samples, 1,
+                                    kMaxImageShadowSamples);
+  input.samples = 0;
+  keys.apply(scene);
+}
+
+// The points being drawn: the feed's latest inputs on the device.
+struct Drawn {
+  std::shared_ptr<const ImageInputs> inputs;
+  std::unique_ptr<PointImageScene> scene;
+  std::unique_ptr<GpuPointImage> renderer;
+};
+
+// The device side of the window: the swapchain, a host-visible copy of the picture for it, and
+// what orders a frame's copy and presentation.
+struct ImageWindowGpu {
+  Gpu gpu;
+  Owned<VkSurfaceKHR> surface;
+  Swapchain swapchain;
+  Buffer staging;  // the picture in the swapchain's byte order
+  VkCommandBuffer cb = VK_NULL_HANDLE;
+  Owned<VkFence> copied;
+  Owned<VkSemaphore> acquired;
+  std::vector<Owned<VkSemaphore>> rendered;  // per swapchain image
+
+  ImageWindowGpu(GLFWwindow* window, const ViewOptions& o)
+      : gpu(createGpu(windowGpuOptions(o))),
+        surface(surfaceOf(gpu, window)),
+        swapchain(createSwapchain(gpu, surface, o.width, o.height)),
+        cb(allocateCommandBuffer(gpu)),
+        copied(createFence(gpu, false)),
+        acquired(createSemaphore(gpu)),
+        rendered(semaphores(gpu, swapchain.images.size())) {}
+
+  bool bgra() const { return swapchain.format == VK_FORMAT_B8G8R8A8_UNORM; }
+
+  void resize(uint32_t width, uint32_t height) {
+    ISO_VK(vkDeviceWaitIdle(gpu.device));
+    swapchain = createSwapchain(gpu, surface, width, height, swapchain.swapchain);
+    rendered = semaphores(gpu, swapchain.images.size());
+  }
+
+  // Show a picture of the swapchain's size (RGBA words). Returns whether the swapchain no
+  // longer matches the window.
+  bool show(const std::vector<uint32_t>& rgba) {
+    const VkDeviceSize bytes = rgba.size() * 4;
+    if (staging.size < bytes)
+      staging = createBuffer(gpu, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, true);
+    const std::vector<uint32_t> words = toRgba(rgba, bgra());
+    std::memcpy(staging.mapped, words.data(), bytes);
+    uint32_t index = 0;
+    const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
+                                                   acquired.get(), VK_NULL_HANDLE, &index);
+    if (acquire == VK_ERROR_OUT_OF_DATE_KHR) return true;
+    if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
+      checkVk(acquire, "vkAcquireNextImageKHR");
+    ISO_VK(vkResetCommandBuffer(cb, 0));
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    ISO_VK(vkBeginCommandBuffer(cb, &begin));
+    recordCopyToSwapchain(cb, staging.buffer, swapchain.extent.width, swapchain.extent.height,
+                          swapchain.images[index]);
+    ISO_VK(vkEndCommandBuffer(cb));
+    const VkSemaphore wait = acquired.get(), signal = rendered[index].get();
+    const VkPipelineStageFlags stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    submit.waitSemaphoreCount = 1;
+    submit.pWaitSemaphores = &wait;
+    submit.pWaitDstStageMask = &stage;
+    submit.commandBufferCount = 1;
+    submit.pCommandBuffers = &cb;
+    submit.signalSemaphoreCount = 1;
+    submit.pSignalSemaphores = &signal;
+    VkFence fence = copied.get();
+    ISO_VK(vkResetFences(gpu.device, 1, &fence));
+    ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
+    const bool stale = present(gpu, swapchain, index, signal);
+    // The staging buffer and the command buffer are the next frame's: wait for the copy.
+    ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
+    return stale || acquire == VK_SUBOPTIMAL_KHR;
+  }
+};
+
+// The scene file, reloaded on R or when it changes; the camera and what keys changed stay, and a
+// file that fails keeps the scene as it was.
+void reloadImageScene(const ViewOptions& options, const ImageKeys& keys, Input& input,
+                      Scene& scene, std::filesystem::file_time_type& sceneTime) {
+  if (options.sceneFile.empty()) return;
+  std::error_code ec;
+  const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
+  if (input.reload || (!ec && t != sceneTime)) {
+    sceneTime = t;
+    Scene next = options.scene;
+    try {
+      loadScene(options.sceneFile, next);
+      next.camera = scene.camera;
+      keys.apply(next);
+      scene = next;
+      fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
+    }
+  }
+  input.reload = false;
+}
+
+}  // namespace
+
+int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOptions,
+                    ImageFeed& feed) {
+  const auto opened = Clock::now();
+  const std::string title = "iso view " + options.file.filename().string();
+  const GlfwWindow glfw(options.width, options.height, title);
+  GLFWwindow* window = glfw.window();
+  ImageWindowGpu w(window, options);
+  Scene scene = options.scene;
+  ImageViewOptions image = imageOptions;
+  ImageKeys keys;
+  Drawn drawn;
+  std::vector<float> drawnOpacity;
+  uint64_t version = 0;
+  bool cameraMoved = false, final = false;
+  std::optional<double> firstPicture;
+
+  Input input;
+  listen(window, input);
+  std::filesystem::file_time_type sceneTime{};
+  if (!options.sceneFile.empty()) sceneTime = std::filesystem::last_write_time(options.sceneFile);
+  bool stale = false;
+  Mouse mouse;
+  glfwGetCursorPos(window, &mouse.x, &mouse.y);
+  auto last = Clock::now(), titleTime = last;
+  uint32_t frames = 0, titleFrames = 0, screenshots = 0;
+  double frameSeconds = 0.0;
+  std::vector<uint32_t> lastPicture;
+  while (!glfwWindowShouldClose(window)) {
+    glfwPollEvents();
+    const auto now = Clock::now();
+    const double dt = seconds(now - last);
+    last = now;
+    // New points (a preview, or all of them): on the device in place of the last.
+    std::shared_ptr<const ImageInputs> next = feed.since(version);
+    if (next || (drawn.inputs && drawnOpacity != scene.image.opacity)) {
+      if (!next) next = drawn.inputs;
+      ISO_VK(vkDeviceWaitIdle(w.gpu.device));
+      drawn.renderer.reset();
+      drawn.scene = std::make_unique<PointImageScene>(withOpacity(next->objects, scene.image));
+      drawn.renderer = std::make_unique<GpuPointImage>(w.gpu, *drawn.scene);
+      drawnOpacity = scene.image.opacity;
+      if (!cameraMoved && !options.scene.camera) scene.camera = sceneCamera(options.scene, *next);
+      drawn.inputs = next;
+      final = !next->preview;
+      fmt::print("iso view: {} {} points of {} read ({:.2f} s after opening)\n",
+                 final ? "drawing" : "drawing a preview of", drawn.scene->size(), next->pointsRead,
+                 seconds(Clock::now() - opened));
+    }
+    if (!drawn.inputs) {
+      glfwWaitEventsTimeout(0.02);  // nothing read yet
+      continue;
+    }
+    if (moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height))
+      cameraMoved = true;
+    applyImageSwitches(input, scene, image, keys);
+    reloadImageScene(options, keys, input, scene, sceneTime);
+    int fbWidth = 0, fbHeight = 0;
+    glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
+    if (fbWidth == 0 || fbHeight == 0) {  // minimized
+      glfwWaitEvents();
+      continue;
+    }
+    if (stale || uint32_t(fbWidth) != w.swapchain.extent.width ||
+        uint32_t(fbHeight) != w.swapchain.extent.height)
+      w.resize(uint32_t(fbWidth), uint32_t(fbHeight));
+    const ImageInputs& in = *drawn.inputs;
+    const auto lights = lightsOf(scene, in, *scene.camera);
+    ViewOptions sized = options;
+    sized.width = w.swapchain.extent.width;
+    sized.height = w.swapchain.extent.height;
+    const ImageSettings settings =
+        budgeted(settingsOf(scene, image), sized, drawn.scene->size(), lights.size());
+    const auto t0 = Clock::now();
+    GpuImageFrame frame = drawn.renderer->render(
+        cameraOf(in, *scene.camera, sized.width, sized.height), lights, settings);
+    frameSeconds += seconds(Clock::now() - t0);
+    stale = w.show(frame.pixels);
+    lastPicture = std::move(frame.pixels);
+    if (!firstPicture) {
+      firstPicture = seconds(Clock::now() - opened);
+      fmt::print("iso view: first picture {:.2f} s after opening\n", *firstPicture);
+    }
+    ++titleFrames;
+    if (final) ++frames;  // --frames counts the frames of all the points
+    const bool lastFrame =
+        (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
+    const auto save = [&](const std::filesystem::path& file) {
+      writeImage(file, sized.width, sized.height, lastPicture);
+      fmt::print("iso view: saved {}\n", file.string());
+    };
+    if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));
+    input.screenshot = false;
+    if (lastFrame && !options.screenshot.empty()) save(options.screenshot);
+    const double sinceTitle = seconds(Clock::now() - titleTime);
+    if (sinceTitle > 0.5 || lastFrame) {
+      const std::string text = fmt::format(
+          "{} | {:.1f} ms ({:.0f} fps) | {} points{} | {} | {} layer{} | shadows {} | GPU memory "
+          "{:.1f} MiB",
+          title, frameSeconds / titleFrames * 1e3, titleFrames / sinceTitle, drawn.scene->size(),
+          final ? "" : " (loading)", settings.eyeDome ? "eye-dome" : "lit", settings.layers,
+          settings.layers == 1 ? "" : "s",
+          !settings.shadows ? std::string("off")
+                            : fmt::format("{} sample{}", lights.front().samples,
+                                          lights.front().samples == 1 ? "" : "s"),
+          double(w.gpu.memoryInUse) / (1 << 20));
+      glfwSetWindowTitle(window, text.c_str());
+      if (lastFrame) fmt::print("{}\n", text);
+      titleTime = Clock::now();
+      titleFrames = 0;
+      frameSeconds = 0.0;
+    }
+    if (lastFrame) break;
+  }
+  vkDeviceWaitIdle(w.gpu.device);
+  drawn.renderer.reset();
+  if (*w.gpu.validationErrors == 0) return 0;
+  fmt::print(stderr, "iso view: {} Vulkan validation errors\n", w.gpu.validationErrors->load());
+  return 1;
+}
+
+}  // namespace iso::viewer

@@ -1,0 +1,88 @@
+// What the windows of `iso view` share (window.cpp draws the tracer's frames, image_window.cpp
+// image-space points): GLFW, the swapchain, input, the camera's mouse and keys, and the copy of a
+// picture buffer to the screen.
+#pragma once
+
+#define GLFW_INCLUDE_VULKAN
+#include <GLFW/glfw3.h>
+
+#include <string>
+#include <vector>
+
+#include "viewer/scene.h"
+#include "viewer/view.h"
+#include "viewer/vulkan.h"
+
+namespace iso::viewer {
+
+struct Input {
+  double wheel = 0;
+  bool screenshot = false, reload = false;
+  // 1 shadows, 2 reflections, 3 refractions, 4 back faces (next mode), 5 draw (K), 6 caustics,
+  // 7 shading mode (M), 8 layers (L)
+  int toggled = 0;
+  int samples = 0;  // +1 / -1
+};
+
+struct Swapchain {
+  Owned<VkSwapchainKHR> swapchain;
+  VkFormat format = VK_FORMAT_UNDEFINED;
+  VkExtent2D extent{};
+  std::vector<VkImage> images;
+};
+
+// A swapchain for the surface at the window's size (width × height when the surface leaves it
+// to us), replacing `old` when given.
+Swapchain createSwapchain(Gpu& gpu, VkSurfaceKHR surface, uint32_t width, uint32_t height,
+                          VkSwapchainKHR old = VK_NULL_HANDLE);
+
+// Record the copy of a picture (`buffer`, width × height words) into a swapchain image, with the
+// image's layout changes around it (undefined before, presentable after).
+void recordCopyToSwapchain(VkCommandBuffer cb, VkBuffer buffer, uint32_t width, uint32_t height,
+                           VkImage image);
+
+// Present swapchain image `index` once `rendered` is signalled. Returns whether the swapchain no
+// longer matches the window.
+bool present(Gpu& gpu, const Swapchain& swapchain, uint32_t index, VkSemaphore rendered);
+
+// RGBA words as the swapchain's BGRA, or back (the same swap).
+std::vector<uint32_t> toRgba(std::vector<uint32_t> pixels, bool bgra);
+
+// The window's callbacks write what was pressed into `input` (the window's user pointer).
+void listen(GLFWwindow* window, Input& input);
+
+struct Mouse {
+  double x = 0, y = 0;  // where it was at the last frame
+};
+
+// The camera after dt seconds of mouse and keys: left drag orbits, right or middle drag pans (a
+// pixel of a picture `height` pixels high), the wheel zooms, W A S D Q E fly. Returns whether it
+// moved.
+bool moveCamera(GLFWwindow* window, Camera& cam, Input& input, Mouse& mouse, double dt,
+                uint32_t height);
+
+// A semaphore per frame slot (an image acquired for the slot's frame) or per swapchain image
+// (its frame rendered, for the presentation to wait on).
+std::vector<Owned<VkSemaphore>> semaphores(Gpu& gpu, size_t count);
+
+// The window's surface, which the device must be able to present to.
+Owned<VkSurfaceKHR> surfaceOf(Gpu& gpu, GLFWwindow* window);
+
+// The options of a device that presents to GLFW windows.
+GpuOptions windowGpuOptions(const ViewOptions& o);
+
+// GLFW, initialized, and one window without a graphics API (Vulkan draws into it), for as long
+// as this lives.
+class GlfwWindow {
+ public:
+  GlfwWindow(uint32_t width, uint32_t height, const std::string& title);
+  ~GlfwWindow();
+  GlfwWindow(const GlfwWindow&) = delete;
+  GlfwWindow& operator=(const GlfwWindow&) = delete;
+  GLFWwindow* window() const { return window_; }
+
+ private:
+  GLFWwindow* window_ = nullptr;
+};
+
+}  // namespace iso::viewer
