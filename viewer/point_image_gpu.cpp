@@ -98,7 +98,7 @@ Buffer upload(Gpu& gpu, const std::vector<glm::vec4>& data) {
 
 }  // namespace
 
-GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu), scene_(scene) {
+GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu), scene_(&scene) {
   if (!gpu.int64Atomics)
     throw UsageError(std::string("image-space points need 64-bit buffer atomics, which ") +
                      gpu.properties.deviceName + " lacks: draw them with --cpu");
@@ -106,15 +106,23 @@ GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu)
   for (const auto& c : kVariantConstants) variants.push_back({c[0], c[1]});
   const std::array<uint32_t, 13> counts = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
   pipeline_ = createComputePipeline(gpu, kImageSpirv, counts, variants, kSets);
-  positions_ = upload(gpu, scene.positions());
-  normals_ = upload(gpu, scene.normals());
-  colors_ = upload(gpu, scene.colors());
+  setScene(scene);
   params_ = createBuffer(gpu, kParamsStride * kSlots, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
   control_ = createBuffer(gpu, (kStatsWord + 2 * kMaxLayers) * 4,
                          kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, true);
   cb_ = allocateCommandBuffer(gpu);
   fence_ = createFence(gpu, false);
   if (gpu.timestampValidBits > 0) queries_ = createTimestampQueries(gpu, kMaxStamps);
+}
+
+void GpuPointImage::setScene(const PointImageScene& scene) {
+  if (gpu_.device) ISO_VK(vkDeviceWaitIdle(gpu_.device));
+  scene_ = &scene;
+  positions_ = upload(gpu_, scene.positions());
+  normals_ = upload(gpu_, scene.normals());
+  colors_ = upload(gpu_, scene.colors());
+  pointsChanged_ = true;
+  shadowKey_.clear();
 }
 
 GpuPointImage::~GpuPointImage() {
@@ -149,8 +157,9 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   size_t pixels = size_t(plan.eye.image.x) * plan.eye.image.y;
   for (const ImageParams& q : plan.samples) pixels = std::max(pixels, size_t(q.image.x) * q.image.y);
   const size_t eyePixels = size_t(plan.eye.image.x) * plan.eye.image.y;
-  const size_t litWords = std::max<size_t>(scene_.size() * lights, 1);
-  bool changed = false;
+  const size_t litWords = std::max<size_t>(scene_->size() * lights, 1);
+  bool changed = pointsChanged_;
+  pointsChanged_ = false;
   if (pixels > pixelCapacity_) {
     keys_ = createBuffer(gpu_, pixels * 8, kStorage, false);
     layerA_ = createBuffer(gpu_, pixels * 8, kStorage, false);
@@ -202,7 +211,7 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
 
 GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const ImageLight> lights,
                                     const ImageSettings& settings) {
-  const ImagePlan plan = planImage(scene_, camera, lights, settings);
+  const ImagePlan plan = planImage(*scene_, camera, lights, settings);
   if (plan.samples.size() > kSlots - 2)
     throw UsageError("image-space shadows: at most " + std::to_string(kMaxSamples) +
                      " samples a light");
@@ -263,7 +272,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     barrier(cb);
     stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
   };
-  const uint64_t n = scene_.size();
+  const uint64_t n = scene_->size();
   // Projection into fresh keys, then layer A.
   auto project = [&](uint32_t set, uint64_t pixels) {
     vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);

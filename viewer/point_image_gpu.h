@@ -65,9 +65,10 @@ class GpuPointImage {
   GpuImageFrame render(const ImageCamera& camera, std::span<const ImageLight> lights,
                        const ImageSettings& settings);
 
+  // Draws another scene's points from now on (uploaded; the pipelines stay).
+  void setScene(const PointImageScene& scene);
+
   uint64_t memoryBytes() const;  // device memory of its buffers
-  // The last frame's picture (sRGB8 RGBA words), on the device, until the next frame.
-  const Buffer& picture() const { return pixels_; }
   // Filling rounds recorded between two looks at their counts (default kFillRoundsPerSubmit).
   void setRoundsPerSubmit(int rounds) { roundsPerSubmit_ = std::max(rounds, 1); }
 
@@ -75,7 +76,7 @@ class GpuPointImage {
   void prepare(const ImagePlan& plan, size_t lights);  // buffers and sets sized for the plan
 
   Gpu& gpu_;
-  const PointImageScene& scene_;
+  const PointImageScene* scene_;
   ComputePipeline pipeline_;
   Buffer positions_, normals_, colors_;
   Buffer params_, keys_, layerA_, layerB_, layerR_, colorA_, colorB_, blended_, lit_, control_,
@@ -86,6 +87,7 @@ class GpuPointImage {
   size_t sets_ = 0, pixelCapacity_ = 0, eyePixels_ = 0, litCapacity_ = 0;
   std::vector<float> shadowKey_;
   int roundsPerSubmit_ = kFillRoundsPerSubmit;
+  bool pointsChanged_ = false;  // the descriptor sets name the old point buffers
 };
 
 }  // namespace iso::viewer

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "pipeline/io/readers.h"
+#include "pipeline/points/knn.h"
 #include "pipeline/points/viewing.h"
 #include "tests/pipeline/pipeline_support.h"
 #include "viewer/asset.h"
@@ -23,6 +24,10 @@ struct Agreement {
   double iou = 0.0;          // covered by either: by both
   double depthWithin = 0.0;  // of those by both: depths within a spacing
   size_t both = 0;
+  // The referee's own error: of the tracer's hits, those within a spacing of a scan point; and
+  // the depths' agreement on the pixels both cover where the hit is.
+  double hitsNearPoints = 0.0;
+  double depthWithinNearPoints = 0.0;
 };
 
 Agreement agree(const std::filesystem::path& scan) {
@@ -74,12 +79,25 @@ Agreement agree(const std::filesystem::path& scan) {
   const ImageResult image = renderer.render(c, {}, settings);
 
   Agreement a;
-  size_t either = 0, close = 0;
+  size_t either = 0, close = 0, traced = 0, tracedNear = 0, bothNear = 0, closeNear = 0;
+  const PointIndex index(o.positions);
   for (size_t i = 0; i < rays.size(); ++i) {
-    const bool traced = hits[i].has_value(), drawn = image.points[i] != gpu::kImageNoPoint;
-    either += traced || drawn;
-    if (!(traced && drawn)) continue;
+    const bool drawn = image.points[i] != gpu::kImageNoPoint;
+    bool near = false;
+    if (hits[i]) {
+      const glm::dvec3 at = glm::dvec3(rays[i].origin) +
+                            glm::dvec3(rays[i].direction) * double(hits[i]->t);
+      uint32_t nearest = 0;
+      float squared = 0.0f;
+      index.nearest(glm::vec3(origin + at * frame.size - center), 1, &nearest, &squared);
+      near = squared <= o.spacing * o.spacing;
+      ++traced;
+      tracedNear += near;
+    }
+    either += hits[i] || drawn;
+    if (!(hits[i] && drawn)) continue;
     ++a.both;
+    bothNear += near;
     const double tracedDepth = hits[i]->t * frame.size;
     // A spacing, or where the points are denser than the pixels the pixel's footprint: a pixel
     // shows the nearest of the points in it, anywhere across it.
@@ -87,39 +105,51 @@ Agreement agree(const std::filesystem::path& scan) {
     // close differ in depth by as much over the cosine.
     const double footprint = tracedDepth * 2.0 * t / kSize;
     const double cosine = std::max(std::abs(double(glm::dot(hits[i]->normal, rays[i].direction))), 0.1);
-    close += std::abs(tracedDepth - image.depth[i]) <= std::max<double>(v.spacing, footprint) / cosine;
+    const bool within =
+        std::abs(tracedDepth - image.depth[i]) <= std::max<double>(o.spacing, footprint) / cosine;
+    close += within;
+    closeNear += within && near;
   }
   a.iou = double(a.both) / double(std::max<size_t>(either, 1));
   a.depthWithin = double(close) / double(std::max<size_t>(a.both, 1));
-  std::printf("%s: silhouette IoU %.4f, depth within a spacing on %.2f %% of %zu pixels\n",
-              scan.filename().c_str(), a.iou, 100.0 * a.depthWithin, a.both);
+  a.hitsNearPoints = double(tracedNear) / double(std::max<size_t>(traced, 1));
+  a.depthWithinNearPoints = double(closeNear) / double(std::max<size_t>(bothNear, 1));
+  std::printf("%s: silhouette IoU %.4f, depth within a spacing on %.2f %% of %zu pixels; the "
+              "tracer's hits within a spacing of a scan point %.1f %%, and where they are the "
+              "depth within a spacing on %.2f %%\n",
+              scan.filename().c_str(), a.iou, 100.0 * a.depthWithin, a.both,
+              100.0 * a.hitsNearPoints, 100.0 * a.depthWithinNearPoints);
   return a;
 }
 
 // The targets are a silhouette IoU of 0.97 and depths within a spacing on 95 % of the
 // pixels both cover. Measured at 384² (specs/viewer.md, "Image-space points"): the kitten 0.966
 // and 99.5 %, the bunny 0.974 and 97.3 %, the lion 0.813 and 70.3 %. The kitten falls short by
-// its rim and the gap under its chin, which the filling closes (a gap narrower than the masks);
-// the lion's converted surface covers parts of the open scan where it has no points, which the
-// tracer draws and the points cannot. These bounds keep what was measured.
-void expectAgreement(const std::filesystem::path& scan, double iou, double depthWithin) {
+// its rim and the gap under its chin, which the filling closes (a gap narrower than the masks).
+// The lion's referee is off: 99.9 % of the kitten's and the bunny's hits lie within a spacing
+// of a scan point, 47 % of the lion's (its converted surface is smoothed through a noisy
+// photogrammetric scan and covers parts where it has no points); where the hits are that near,
+// the depths agree on 91 % of the pixels. These bounds keep what was measured.
+void expectAgreement(const std::filesystem::path& scan, double iou, double depthWithin,
+                     double depthWithinNearPoints) {
   const Agreement a = agree(scan);
   EXPECT_GT(a.both, 10000u) << scan;
   EXPECT_GE(a.iou, iou) << scan;
   EXPECT_GE(a.depthWithin, depthWithin) << scan;
+  EXPECT_GE(a.depthWithinNearPoints, depthWithinNearPoints) << scan;
 }
 
 TEST(ImageAgreement, theKittenAsPointsHasTheTracersSilhouetteAndDepth) {
   expectAgreement(builtPath("ISO_TEST_DATA_DIR", ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 0.96,
-                  0.95);
+                  0.95, 0.95);
 }
 
 TEST(ImageAgreement, theBunnyAndTheLionAsPointsHaveTheTracersSilhouettesAndDepths) {
   const std::filesystem::path data = builtPath("ISO_SHARED_DATA_DIR", ISO_SHARED_DATA_DIR);
   if (!std::filesystem::exists(data / "bunny_zipper.ply"))
     GTEST_SKIP() << "needs ../shared/data (the bunny and the lion)";
-  expectAgreement(data / "bunny_zipper.ply", 0.97, 0.95);
-  expectAgreement(data / "lion_rgb.las", 0.80, 0.65);
+  expectAgreement(data / "bunny_zipper.ply", 0.97, 0.95, 0.95);
+  expectAgreement(data / "lion_rgb.las", 0.80, 0.65, 0.90);
 }
 
 }  // namespace
