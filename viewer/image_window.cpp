@@ -50,17 +50,20 @@ struct ImageKeys {
 };
 
 void applyImageSwitches(Input& input, Scene& scene, ImageViewOptions& image, ImageKeys& keys) {
-  if (input.toggled == 1) keys.shadows = !scene.shadows;
-  if (input.toggled == 7) {
-    keys.eyeDome = !(scene.image.eyeDome || image.settings.eyeDome);
-    image.settings.eyeDome = false;  // the key decides from now on
+  for (const int toggled : input.toggled) {
+    if (toggled == 1) keys.shadows = !scene.shadows;
+    if (toggled == 7) {
+      keys.eyeDome = !(scene.image.eyeDome || image.settings.eyeDome);
+      image.settings.eyeDome = false;  // the key decides from now on
+    }
+    if (toggled == 8) {
+      const int* next = std::upper_bound(std::begin(kLayerSteps), std::end(kLayerSteps),
+                                         scene.image.layers);
+      keys.layers = next == std::end(kLayerSteps) ? kLayerSteps[0] : *next;
+    }
+    keys.apply(scene);
   }
-  if (input.toggled == 8) {
-    const int* next = std::upper_bound(std::begin(kLayerSteps), std::end(kLayerSteps),
-                                       scene.image.layers);
-    keys.layers = next == std::end(kLayerSteps) ? kLayerSteps[0] : *next;
-  }
-  input.toggled = 0;
+  input.toggled.clear();
   if (input.samples != 0)
     keys.shadowSamples = std::clamp(std::max(scene.image.shadowSamples, 1) + input.samples, 1,
                                     kMaxImageShadowSamples);

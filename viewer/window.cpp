@@ -27,15 +27,17 @@ using Clock = std::chrono::steady_clock;
 
 // Keys 1, 2, 3, B, K, C, + and -. C turns the caustics of --caustics N off and on.
 void applySwitches(Input& input, Scene& scene, uint32_t photons) {
-  if (input.toggled == 1) scene.shadows = !scene.shadows;
-  if (input.toggled == 2) scene.reflections = !scene.reflections;
-  if (input.toggled == 3) scene.refractions = !scene.refractions;
-  if (input.toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
-  if (input.toggled == 5) scene.draw = Draw((int(scene.draw) + 1) % 3);
-  if (input.toggled == 6 && photons == 0)
-    fmt::print("iso view: no caustics to show (start with --caustics N)\n");
-  if (input.toggled == 6) scene.caustics = scene.caustics > 0 ? 0 : photons;
-  input.toggled = 0;
+  for (const int toggled : input.toggled) {
+    if (toggled == 1) scene.shadows = !scene.shadows;
+    if (toggled == 2) scene.reflections = !scene.reflections;
+    if (toggled == 3) scene.refractions = !scene.refractions;
+    if (toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
+    if (toggled == 5) scene.draw = Draw((int(scene.draw) + 1) % 3);
+    if (toggled == 6 && photons == 0)
+      fmt::print("iso view: no caustics to show (start with --caustics N)\n");
+    if (toggled == 6) scene.caustics = scene.caustics > 0 ? 0 : photons;
+  }
+  input.toggled.clear();
   if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);
   input.samples = 0;
 }

@@ -87,14 +87,14 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
     if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
     if (key == GLFW_KEY_R) in.reload = true;
-    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled = key - GLFW_KEY_0;
-    if (key == GLFW_KEY_B) in.toggled = 4;
-    if (key == GLFW_KEY_K) in.toggled = 5;
-    if (key == GLFW_KEY_C) in.toggled = 6;
-    if (key == GLFW_KEY_M) in.toggled = 7;
-    if (key == GLFW_KEY_L) in.toggled = 8;
-    if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples = 1;
-    if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples = -1;
+    if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled.push_back(key - GLFW_KEY_0);
+    if (key == GLFW_KEY_B) in.toggled.push_back(4);
+    if (key == GLFW_KEY_K) in.toggled.push_back(5);
+    if (key == GLFW_KEY_C) in.toggled.push_back(6);
+    if (key == GLFW_KEY_M) in.toggled.push_back(7);
+    if (key == GLFW_KEY_L) in.toggled.push_back(8);
+    if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples += 1;
+    if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples -= 1;
   });
 }
 

@@ -18,9 +18,9 @@ namespace iso::viewer {
 struct Input {
   double wheel = 0;
   bool screenshot = false, reload = false;
-  // 1 shadows, 2 reflections, 3 refractions, 4 back faces (next mode), 5 draw (K), 6 caustics,
-  // 7 shading mode (M), 8 layers (L)
-  int toggled = 0;
+  // Switches pressed since the last frame, in order: 1 shadows, 2 reflections, 3 refractions,
+  // 4 back faces (next mode), 5 draw (K), 6 caustics, 7 shading mode (M), 8 layers (L)
+  std::vector<int> toggled;
   int samples = 0;  // +1 / -1
 };
 
