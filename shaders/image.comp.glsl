@@ -40,6 +40,13 @@ layout(std430, binding = 11) buffer Lit { uint lit[]; };
 layout(std430, binding = 12) buffer Control { uint control[]; };
 // The picture: sRGB8 RGBA words; the background in the scene's color.
 layout(std430, binding = 13) writeonly buffer Pixels { uint pixels[]; };
+// Filling's tiles (kImageFillTile pixels square), T of the image: two arrays of marks (a word a
+// tile), then two lists of tiles (T words each). Round r runs over list r % 2 (round 0 over every
+// tile) and wakes the tiles near a pixel it changed for round r + 1: the first to set a tile's
+// mark in array (r + 1) % 2 to r + 1 appends it to list (r + 1) % 2. A tile left out did not
+// change in the round before, nor did any pixel within the masks' reach: both layer buffers
+// already hold its values.
+layout(std430, binding = 14) buffer Tiles { uint tiles[]; };
 
 bool inside(ivec2 p) { return p.x >= 0 && p.y >= 0 && p.x < int(Q.image.x) && p.y < int(Q.image.y); }
 uint at(ivec2 p) { return uint(p.y) * Q.image.x + uint(p.x); }
@@ -61,7 +68,42 @@ vec4 layerColor(ivec2 p) {
 
 #include "image.h"
 
+// A filling round over a tile (this workgroup's), a pixel an invocation.
+void fillTile() {
+  uint pass = control[kImageControlRound];
+  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
+  uint listed = pass == 0u ? tileCount : control[kImageControlTiles + (pass & 1u)];
+  if (group >= listed) return;
+  uint t = pass == 0u ? group : tiles[2u * tileCount + (pass & 1u) * tileCount + group];
+  ivec2 tile = ivec2(int(t % tilesX), int(t / tilesX));
+  ivec2 p = tile * int(kImageFillTile) +
+            ivec2(int(gl_LocalInvocationID.x % kImageFillTile), int(gl_LocalInvocationID.x / kImageFillTile));
+  if (!inside(p)) return;
+  float self = layerDepth(p);
+  float depth = self;
+  uint index = layerIndex(p);
+  if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index)) {
+    atomicAdd(control[kImageControlChanged], 1u);
+    uint next = (pass + 1u) & 1u;
+    int tilesY = int(tileCount / tilesX);
+    for (int ty = max(tile.y - 1, 0); ty <= min(tile.y + 1, tilesY - 1); ++ty)
+      for (int tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, int(tilesX) - 1); ++tx) {
+        uint u = uint(ty) * tilesX + uint(tx);
+        if (atomicExchange(tiles[next * tileCount + u], pass + 1u) != pass + 1u)
+          tiles[2u * tileCount + next * tileCount +
+                atomicAdd(control[kImageControlTiles + next], 1u)] = u;
+      }
+  }
+  layerB[at(p)] = uvec2(floatBitsToUint(depth), index);
+}
+
 void main() {
+  if (kStage == kImageStageFill) {
+    fillTile();
+    return;
+  }
   // Dispatches wider than a row of workgroups continue on the next rows (gl_NumWorkGroups.y).
   uint id = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
   if (kStage == kImageStageProject || kStage == kImageStageLit) {
@@ -80,12 +122,19 @@ void main() {
     return;
   }
   if (kStage == kImageStageControl) {
-    // After a fill pass: the next ones run only where this one changed something.
+    // After a fill pass: the next runs over the tiles it woke (none once one changed nothing).
     if (id != 0u) return;
     bool changed = control[kImageControlChanged] != 0u;
     if (changed) control[kImageControlPasses + kKind] += 1u;
-    else control[0] = 0u;
+    uint next = control[kImageControlRound] + 1u;
+    uint listed = changed ? control[kImageControlTiles + (next & 1u)] : 0u;
+    uint x = min(listed, 65535u);
+    control[0] = x;
+    control[1] = x == 0u ? 1u : (listed + x - 1u) / x;
+    control[2] = 1u;
+    control[kImageControlTiles + ((next + 1u) & 1u)] = 0u;  // the list round next + 1 gets
     control[kImageControlChanged] = 0u;
+    control[kImageControlRound] = next;
     return;
   }
   if (id >= Q.image.x * Q.image.y) return;
@@ -94,13 +143,6 @@ void main() {
     uint64_t key = keys[id];
     bool none = key == ~0ul;
     layerA[id] = none ? uvec2(0u, kImageNoPoint) : uvec2(uint(key >> 32), uint(key));
-  } else if (kStage == kImageStageFill) {
-    float self = layerDepth(p);
-    float depth = self;
-    uint index = layerIndex(p);
-    if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index))
-      atomicAdd(control[kImageControlChanged], 1u);
-    layerB[id] = uvec2(floatBitsToUint(depth), index);
   } else if (kStage == kImageStageShade) {
     colorA[id] = imageShade(p);
   } else if (kStage == kImageStageSmooth) {

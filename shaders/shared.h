@@ -224,9 +224,17 @@ ISO_CONST uint kImageStageFinish = 8u;     // over the background, into sRGB8 pi
 ISO_CONST uint kImageStageLit = 9u;        // a point of a light's first layer counts as lit
 ISO_CONST uint kImageStages = 10u;
 // Words of the control buffer: the filling pass's indirect dispatch (x, y, z), the pixels the
-// last pass changed, then the passes that changed something, of each kind.
+// last pass changed, then the passes that changed something, of each kind, then the round of
+// the filling under way (from 0).
 ISO_CONST uint kImageControlChanged = 3u;
 ISO_CONST uint kImageControlPasses = 4u;
+ISO_CONST uint kImageControlRound = 6u;
+ISO_CONST uint kImageControlTiles = 8u;  // 8 and 9: the tiles listed for rounds of each parity
+// Filling on the GPU runs over tiles of this many pixels square (a workgroup a tile): the first
+// round over all, each later one over the tiles where something within the masks' reach changed
+// in the round before (at least kImageMaxFillRadius: a changed pixel wakes its tile and the
+// eight around it).
+ISO_CONST uint kImageFillTile = 8u;
 ISO_CONST uint kImageControlWords = 8u;
 
 // One pass of the image-space point renderer: the camera (the eye's or a light's), the image and

@@ -18,6 +18,11 @@ const uint32_t kImageSpirv[] =
 
 using gpu::ImageParams;
 
+static_assert(gpu::kImageFillTile >= gpu::kImageMaxFillRadius,
+              "a changed pixel wakes only the tiles next to its own");
+static_assert(gpu::kImageFillTile * gpu::kImageFillTile == 64, "a tile a workgroup");
+static_assert(gpu::kImageControlTiles + 2 <= 16, "control words before the statistics");
+
 constexpr uint32_t kGroup = 64;           // invocations a workgroup (image.comp.glsl)
 constexpr uint32_t kMaxSamples = 64;      // samples of an area light at most
 constexpr uint32_t kSlots = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peeled, samples
@@ -104,7 +109,7 @@ GpuPointImage::GpuPointImage(Gpu& gpu, const PointImageScene& scene) : gpu_(gpu)
                      gpu.properties.deviceName + " lacks: draw them with --cpu");
   std::vector<std::vector<uint32_t>> variants;
   for (const auto& c : kVariantConstants) variants.push_back({c[0], c[1]});
-  const std::array<uint32_t, 13> counts = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+  const std::array<uint32_t, 14> counts = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
   pipeline_ = createComputePipeline(gpu, kImageSpirv, counts, variants, kSets);
   setScene(scene);
   params_ = createBuffer(gpu, kParamsStride * kSlots, VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
@@ -148,7 +153,8 @@ ImageBudget imageBudget(uint64_t vram, uint64_t points, uint32_t width, uint32_t
 uint64_t GpuPointImage::memoryBytes() const {
   uint64_t sum = 0;
   for (const Buffer* b : {&positions_, &normals_, &colors_, &params_, &keys_, &layerA_, &layerB_,
-                          &layerR_, &colorA_, &colorB_, &blended_, &lit_, &control_, &pixels_})
+                          &layerR_, &colorA_, &colorB_, &blended_, &lit_, &control_, &pixels_,
+                          &tiles_})
     sum += b->allocated;
   return sum;
 }
@@ -156,6 +162,12 @@ uint64_t GpuPointImage::memoryBytes() const {
 void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   size_t pixels = size_t(plan.eye.image.x) * plan.eye.image.y;
   for (const ImageParams& q : plan.samples) pixels = std::max(pixels, size_t(q.image.x) * q.image.y);
+  const auto tilesOf = [](const ImageParams& q) {
+    const size_t t = gpu::kImageFillTile;
+    return (size_t(q.image.x) + t - 1) / t * ((size_t(q.image.y) + t - 1) / t);
+  };
+  size_t tiles = tilesOf(plan.eye);
+  for (const ImageParams& q : plan.samples) tiles = std::max(tiles, tilesOf(q));
   const size_t eyePixels = size_t(plan.eye.image.x) * plan.eye.image.y;
   const size_t litWords = std::max<size_t>(scene_->size() * lights, 1);
   bool changed = pointsChanged_;
@@ -176,6 +188,11 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
     eyePixels_ = eyePixels;
     changed = true;
   }
+  if (tiles > tileCapacity_) {
+    tiles_ = createBuffer(gpu_, tiles * 4 * 4, kStorage, false);
+    tileCapacity_ = tiles;
+    changed = true;
+  }
   if (litWords > litCapacity_) {
     lit_ = createBuffer(gpu_, litWords * 4, kStorage, false);
     litCapacity_ = litWords;
@@ -184,24 +201,24 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   }
   if (!changed && sets_ == kSets) return;
   std::vector<VkDescriptorBufferInfo> infos;
-  infos.reserve(kSets * 14);
+  infos.reserve(kSets * 15);
   std::vector<VkWriteDescriptorSet> writes;
   for (uint32_t set = 0; set < kSets; ++set) {
     const uint32_t slot = set / 2, side = set % 2;
     const Buffer* storage[] = {&positions_, &normals_, &colors_, &keys_,
                                side == 0 ? &layerA_ : &layerB_, side == 0 ? &layerB_ : &layerA_,
                                &layerR_,    &colorA_,  &colorB_, &blended_,
-                               &lit_,       &control_, &pixels_};
+                               &lit_,       &control_, &pixels_, &tiles_};
     infos.push_back({params_.buffer, slot * kParamsStride, sizeof(ImageParams)});
     for (const Buffer* b : storage) infos.push_back({b->buffer, 0, VK_WHOLE_SIZE});
-    for (uint32_t binding = 0; binding < 14; ++binding) {
+    for (uint32_t binding = 0; binding < 15; ++binding) {
       VkWriteDescriptorSet w{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
       w.dstSet = pipeline_.sets[set];
       w.dstBinding = binding;
       w.descriptorCount = 1;
       w.descriptorType =
           binding == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-      w.pBufferInfo = &infos[set * 14 + binding];
+      w.pBufferInfo = &infos[set * 15 + binding];
       writes.push_back(w);
     }
   }
@@ -306,10 +323,17 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   // or plan.fillPasses ran: empty dispatches cost lavapipe about a millisecond each, and filling
   // takes a few passes.
   const auto* control = static_cast<const uint32_t*>(control_.mapped);
-  auto fill = [&](uint32_t set, uint64_t pixels, uint32_t kind) {
-    const auto g = groups(pixels);
-    const uint32_t start[4] = {g[0], g[1], g[2], 0};
+  auto fill = [&](uint32_t set, uint32_t kind) {
+    // Round 0 over every tile (a workgroup each), no tile marked or listed.
+    const ImageParams& q = set == 0 || set == 1 ? plan.eye : plan.samples[set - 2];
+    const uint64_t t = gpu::kImageFillTile;
+    const uint64_t tiles = (q.image.x + t - 1) / t * ((q.image.y + t - 1) / t);
+    const auto g = groups(tiles * kGroup);
+    const uint32_t start[4] = {g[0], g[1], g[2], 0}, round = 0, listed[2] = {0, 0};
     vkCmdUpdateBuffer(cb, control_.buffer, 0, sizeof start, start);
+    vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlRound * 4, sizeof round, &round);
+    vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlTiles * 4, sizeof listed, listed);
+    vkCmdFillBuffer(cb, tiles_.buffer, 0, tiles * 2 * 4, 0xFFFFFFFFu);
     barrier(cb);
     const int rounds = kind == 0 ? plan.fillPasses : plan.occludedPasses;
     for (int round = 0; round < rounds;) {
@@ -332,7 +356,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
       const uint32_t set = uint32_t(2 + s);
       const uint64_t pixels = uint64_t(plan.samples[s].image.x) * plan.samples[s].image.y;
       project(set, pixels);
-      fill(set, pixels, 1);  // occluded pixels only (point_image.cpp, computeShadows)
+      fill(set, 1);  // occluded pixels only (point_image.cpp, computeShadows)
       dispatch(kLit, set, n);
       frame.stats.projected += 2 * n;
     }
@@ -344,8 +368,8 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     const uint32_t zero[2] = {0, 0};
     vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlPasses * 4, sizeof zero, zero);
     project(set, pixels);
-    fill(set, pixels, 0);
-    fill(set, pixels, 1);
+    fill(set, 0);
+    fill(set, 1);
     VkBufferCopy copy{gpu::kImageControlPasses * 4, (kStatsWord + 2 * uint64_t(k)) * 4, 8};
     vkCmdCopyBuffer(cb, control_.buffer, control_.buffer, 1, &copy);
     dispatch(kShade, set, pixels);

@@ -80,11 +80,11 @@ class GpuPointImage {
   ComputePipeline pipeline_;
   Buffer positions_, normals_, colors_;
   Buffer params_, keys_, layerA_, layerB_, layerR_, colorA_, colorB_, blended_, lit_, control_,
-      pixels_;
+      pixels_, tiles_;
   Owned<VkQueryPool> queries_;
   VkCommandBuffer cb_ = VK_NULL_HANDLE;
   Owned<VkFence> fence_;
-  size_t sets_ = 0, pixelCapacity_ = 0, eyePixels_ = 0, litCapacity_ = 0;
+  size_t sets_ = 0, pixelCapacity_ = 0, eyePixels_ = 0, litCapacity_ = 0, tileCapacity_ = 0;
   std::vector<float> shadowKey_;
   int roundsPerSubmit_ = kFillRoundsPerSubmit;
   bool pointsChanged_ = false;  // the descriptor sets name the old point buffers
