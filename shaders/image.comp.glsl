@@ -12,7 +12,8 @@
 
 // The stages (kImageStage...: shared.h).
 layout(constant_id = 0) const uint kStage = 0u;
-// The fill stage's kind: 0 background pixels, 1 occluded pixels.
+// The fill and control stages' kind: 0 background pixels, 1 occluded pixels; 2 for control: the
+// start of filling.
 layout(constant_id = 1) const uint kKind = 0u;
 
 layout(local_size_x = 64) in;
@@ -41,11 +42,14 @@ layout(std430, binding = 12) buffer Control { uint control[]; };
 // The picture: sRGB8 RGBA words; the background in the scene's color.
 layout(std430, binding = 13) writeonly buffer Pixels { uint pixels[]; };
 // Filling's tiles (kImageFillTile pixels square), T of the image: two arrays of marks (a word a
-// tile), then two lists of tiles (T words each). Round r runs over list r % 2 (round 0 over every
-// tile) and wakes the tiles near a pixel it changed for round r + 1: the first to set a tile's
-// mark in array (r + 1) % 2 to r + 1 appends it to list (r + 1) % 2. A tile left out did not
-// change in the round before, nor did any pixel within the masks' reach: both layer buffers
-// already hold its values.
+// tile), then three lists of tiles (T words each). Round r runs over list r % 2 and wakes the
+// tiles near a pixel it changed for round r + 1: the first to set a tile's mark in array
+// (r + 1) % 2 to r + 1 appends it to list (r + 1) % 2. A tile left out did not change in the
+// round before, nor did any pixel within the masks' reach: both layer buffers already hold its
+// values. Round 0 runs over list 2, the tiles that resolving found a point in or next to (mark
+// 0 in array 0; array 1 marks 0 the tiles with a point): no pixel elsewhere is a candidate of
+// either kind, before or after filling the background (a filled pixel lies next to a covered
+// one).
 layout(std430, binding = 14) buffer Tiles { uint tiles[]; };
 
 bool inside(ivec2 p) { return p.x >= 0 && p.y >= 0 && p.x < int(Q.image.x) && p.y < int(Q.image.y); }
@@ -68,15 +72,30 @@ vec4 layerColor(ivec2 p) {
 
 #include "image.h"
 
+// Wake pixel p's tile and the eight around it: mark them `mark` in array mark % 2 and list them
+// in list `list`, once each.
+void wakeTiles(ivec2 p, uint mark, uint list) {
+  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+  uint tilesY = (Q.image.y + kImageFillTile - 1u) / kImageFillTile;
+  uint tileCount = tilesX * tilesY;
+  ivec2 tile = p / int(kImageFillTile);
+  for (int ty = max(tile.y - 1, 0); ty <= min(tile.y + 1, int(tilesY) - 1); ++ty)
+    for (int tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, int(tilesX) - 1); ++tx) {
+      uint u = uint(ty) * tilesX + uint(tx);
+      if (atomicExchange(tiles[(mark & 1u) * tileCount + u], mark) != mark)
+        tiles[(2u + list) * tileCount + atomicAdd(control[kImageControlTiles + list], 1u)] = u;
+    }
+}
+
 // A filling round over a tile (this workgroup's), a pixel an invocation.
 void fillTile() {
   uint pass = control[kImageControlRound];
   uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
   uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
   uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-  uint listed = pass == 0u ? tileCount : control[kImageControlTiles + (pass & 1u)];
-  if (group >= listed) return;
-  uint t = pass == 0u ? group : tiles[2u * tileCount + (pass & 1u) * tileCount + group];
+  uint list = pass == 0u ? 2u : (pass & 1u);
+  if (group >= control[kImageControlTiles + list]) return;
+  uint t = tiles[2u * tileCount + list * tileCount + group];
   ivec2 tile = ivec2(int(t % tilesX), int(t / tilesX));
   ivec2 p = tile * int(kImageFillTile) +
             ivec2(int(gl_LocalInvocationID.x % kImageFillTile), int(gl_LocalInvocationID.x / kImageFillTile));
@@ -86,15 +105,7 @@ void fillTile() {
   uint index = layerIndex(p);
   if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index)) {
     atomicAdd(control[kImageControlChanged], 1u);
-    uint next = (pass + 1u) & 1u;
-    int tilesY = int(tileCount / tilesX);
-    for (int ty = max(tile.y - 1, 0); ty <= min(tile.y + 1, tilesY - 1); ++ty)
-      for (int tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, int(tilesX) - 1); ++tx) {
-        uint u = uint(ty) * tilesX + uint(tx);
-        if (atomicExchange(tiles[next * tileCount + u], pass + 1u) != pass + 1u)
-          tiles[2u * tileCount + next * tileCount +
-                atomicAdd(control[kImageControlTiles + next], 1u)] = u;
-      }
+    wakeTiles(p, pass + 1u, (pass + 1u) & 1u);
   }
   layerB[at(p)] = uvec2(floatBitsToUint(depth), index);
 }
@@ -123,7 +134,20 @@ void main() {
   }
   if (kStage == kImageStageControl) {
     // After a fill pass: the next runs over the tiles it woke (none once one changed nothing).
+    // Kind 2 starts filling: round 0 over the tiles resolving listed.
     if (id != 0u) return;
+    if (kKind == 2u) {
+      uint first = control[kImageControlTiles + 2u];
+      uint x = min(first, 65535u);
+      control[0] = x;
+      control[1] = x == 0u ? 1u : (first + x - 1u) / x;
+      control[2] = 1u;
+      control[kImageControlChanged] = 0u;
+      control[kImageControlRound] = 0u;
+      control[kImageControlTiles] = 0u;
+      control[kImageControlTiles + 1u] = 0u;
+      return;
+    }
     bool changed = control[kImageControlChanged] != 0u;
     if (changed) control[kImageControlPasses + kKind] += 1u;
     uint next = control[kImageControlRound] + 1u;
@@ -143,6 +167,12 @@ void main() {
     uint64_t key = keys[id];
     bool none = key == ~0ul;
     layerA[id] = none ? uvec2(0u, kImageNoPoint) : uvec2(uint(key >> 32), uint(key));
+    // The first point of a tile (marked 0 in array 1) wakes it and the tiles around.
+    uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+    uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+    uint own = uint(p.y) / kImageFillTile * tilesX + uint(p.x) / kImageFillTile;
+    if (!none && tiles[tileCount + own] != 0u && atomicExchange(tiles[tileCount + own], 0u) != 0u)
+      wakeTiles(p, 0u, 2u);
   } else if (kStage == kImageStageShade) {
     colorA[id] = imageShade(p);
   } else if (kStage == kImageStageSmooth) {

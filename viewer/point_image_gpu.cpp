@@ -18,11 +18,6 @@ const uint32_t kImageSpirv[] =
 
 using gpu::ImageParams;
 
-static_assert(gpu::kImageFillTile >= gpu::kImageMaxFillRadius,
-              "a changed pixel wakes only the tiles next to its own");
-static_assert(gpu::kImageFillTile * gpu::kImageFillTile == 64, "a tile a workgroup");
-static_assert(gpu::kImageControlTiles + 2 <= 16, "control words before the statistics");
-
 constexpr uint32_t kGroup = 64;           // invocations a workgroup (image.comp.glsl)
 constexpr uint32_t kMaxSamples = 64;      // samples of an area light at most
 constexpr uint32_t kSlots = 2 + gpu::kMaxLights * kMaxSamples;  // eye, eye peeled, samples
@@ -34,6 +29,11 @@ constexpr uint32_t kStatsWord = 16;       // control words: per layer the passes
 constexpr uint32_t kMaxLayers = 64;
 constexpr uint32_t kMaxStamps = 4096;  // timestamps a frame: one after each step
 
+static_assert(gpu::kImageFillTile >= gpu::kImageMaxFillRadius,
+              "a changed pixel wakes only the tiles next to its own");
+static_assert(gpu::kImageFillTile * gpu::kImageFillTile == 64, "a tile a workgroup");
+static_assert(gpu::kImageControlTiles + 3 <= kStatsWord, "control words before the statistics");
+
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
   kProject,
@@ -42,6 +42,7 @@ enum Variant : uint32_t {
   kFillOccluded,
   kControlBackground,
   kControlOccluded,
+  kControlStart,
   kShade,
   kSmooth,
   kAntialias,
@@ -52,7 +53,8 @@ enum Variant : uint32_t {
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
     ImageStep::Project, ImageStep::Resolve, ImageStep::Fill,      ImageStep::Fill,
-    ImageStep::Control, ImageStep::Control, ImageStep::Shade,     ImageStep::Smooth,
+    ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Shade,
+    ImageStep::Smooth,
     ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,    ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
@@ -61,6 +63,7 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageFill, 1},
     {gpu::kImageStageControl, 0},
     {gpu::kImageStageControl, 1},
+    {gpu::kImageStageControl, 2},
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
     {gpu::kImageStageAntialias, 0},
@@ -189,7 +192,7 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
     changed = true;
   }
   if (tiles > tileCapacity_) {
-    tiles_ = createBuffer(gpu_, tiles * 4 * 4, kStorage, false);
+    tiles_ = createBuffer(gpu_, tiles * 5 * 4, kStorage, false);
     tileCapacity_ = tiles;
     changed = true;
   }
@@ -291,8 +294,17 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   };
   const uint64_t n = scene_->size();
   // Projection into fresh keys, then layer A.
+  // The tiles of slot `set`'s image (kImageFillTile pixels square).
+  auto tilesOf = [&](uint32_t set) {
+    const ImageParams& q = set < 2 ? plan.eye : plan.samples[set - 2];
+    const uint64_t t = gpu::kImageFillTile;
+    return (q.image.x + t - 1) / t * ((q.image.y + t - 1) / t);
+  };
   auto project = [&](uint32_t set, uint64_t pixels) {
     vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);
+    vkCmdFillBuffer(cb, tiles_.buffer, 0, tilesOf(set) * 2 * 4, 0xFFFFFFFFu);
+    const uint32_t none = 0;
+    vkCmdUpdateBuffer(cb, control_.buffer, (gpu::kImageControlTiles + 2) * 4, 4, &none);
     barrier(cb);
     stamp(ImageStep::Clear, VK_PIPELINE_STAGE_TRANSFER_BIT);
     dispatch(kProject, set, n);
@@ -324,17 +336,10 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   // takes a few passes.
   const auto* control = static_cast<const uint32_t*>(control_.mapped);
   auto fill = [&](uint32_t set, uint32_t kind) {
-    // Round 0 over every tile (a workgroup each), no tile marked or listed.
-    const ImageParams& q = set == 0 || set == 1 ? plan.eye : plan.samples[set - 2];
-    const uint64_t t = gpu::kImageFillTile;
-    const uint64_t tiles = (q.image.x + t - 1) / t * ((q.image.y + t - 1) / t);
-    const auto g = groups(tiles * kGroup);
-    const uint32_t start[4] = {g[0], g[1], g[2], 0}, round = 0, listed[2] = {0, 0};
-    vkCmdUpdateBuffer(cb, control_.buffer, 0, sizeof start, start);
-    vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlRound * 4, sizeof round, &round);
-    vkCmdUpdateBuffer(cb, control_.buffer, gpu::kImageControlTiles * 4, sizeof listed, listed);
-    vkCmdFillBuffer(cb, tiles_.buffer, 0, tiles * 2 * 4, 0xFFFFFFFFu);
+    // Round 0 over the tiles resolving listed, no tile marked for later rounds.
+    vkCmdFillBuffer(cb, tiles_.buffer, 0, tilesOf(set) * 2 * 4, 0xFFFFFFFFu);
     barrier(cb);
+    dispatch(kControlStart, set, 1);
     const int rounds = kind == 0 ? plan.fillPasses : plan.occludedPasses;
     for (int round = 0; round < rounds;) {
       for (int k = 0; k < roundsPerSubmit_ && round < rounds; ++k, ++round) {
