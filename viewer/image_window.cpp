@@ -148,29 +148,6 @@ struct ImageWindowGpu {
   }
 };
 
-// The scene file, reloaded on R or when it changes; the camera and what keys changed stay, and a
-// file that fails keeps the scene as it was.
-void reloadImageScene(const ViewOptions& options, const ImageKeys& keys, Input& input,
-                      Scene& scene, std::filesystem::file_time_type& sceneTime) {
-  if (options.sceneFile.empty()) return;
-  std::error_code ec;
-  const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
-  if (input.reload || (!ec && t != sceneTime)) {
-    sceneTime = t;
-    Scene next = options.scene;
-    try {
-      loadScene(options.sceneFile, next);
-      next.camera = scene.camera;
-      keys.apply(next);
-      scene = next;
-      fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
-    } catch (const std::exception& e) {
-      fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
-    }
-  }
-  input.reload = false;
-}
-
 }  // namespace
 
 int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOptions,
@@ -230,7 +207,7 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
     if (moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height))
       cameraMoved = true;
     applyImageSwitches(input, scene, image, keys);
-    reloadImageScene(options, keys, input, scene, sceneTime);
+    reloadScene(options, input, scene, sceneTime, [&](Scene& next) { keys.apply(next); });
     int fbWidth = 0, fbHeight = 0;
     glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
     if (fbWidth == 0 || fbHeight == 0) {  // minimized

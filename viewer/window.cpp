@@ -42,30 +42,6 @@ void applySwitches(Input& input, Scene& scene, uint32_t photons) {
   input.samples = 0;
 }
 
-// The scene file: reloaded on R or when it changes (its time was `sceneTime`); the camera stays
-// where it is, and a file that fails keeps the scene as it was.
-void reloadScene(const ViewOptions& options, const Asset& asset, Input& input, Scene& scene,
-                 std::filesystem::file_time_type& sceneTime) {
-  if (options.sceneFile.empty()) return;
-  std::error_code ec;
-  const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
-  if (input.reload || (!ec && t != sceneTime)) {
-    sceneTime = t;
-    Scene next = options.scene;
-    try {
-      loadScene(options.sceneFile, next);
-      next.camera = scene.camera;
-      if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset.bounds));
-      placeGround(next, asset);
-      scene = next;
-      fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
-    } catch (const std::exception& e) {
-      fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
-    }
-  }
-  input.reload = false;
-}
-
 // Record the copy of the prepared frame's picture into swapchain image `index` (acquired,
 // signalling `acquired`), submit the frame (signalling `rendered`) and present the image. The
 // host does not wait for it. Returns whether the swapchain no longer matches the window.
@@ -215,7 +191,10 @@ int viewWindow(const ViewOptions& options) {
     last = now;
     moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height);
     applySwitches(input, scene, options.scene.caustics);
-    reloadScene(options, *asset, input, scene, sceneTime);
+    reloadScene(options, input, scene, sceneTime, [&](Scene& next) {
+      if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset->bounds));
+      placeGround(next, *asset);
+    });
     int fbWidth = 0, fbHeight = 0;
     glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
     if (fbWidth == 0 || fbHeight == 0) {  // minimized

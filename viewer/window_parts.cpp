@@ -1,6 +1,7 @@
 // What the windows of `iso view` share (window_parts.h).
 #include "viewer/window_parts.h"
 
+#include <fmt/core.h>
 #include <glm/geometric.hpp>
 
 #include <algorithm>
@@ -159,6 +160,28 @@ Owned<VkSurfaceKHR> surfaceOf(Gpu& gpu, GLFWwindow* window) {
   ISO_VK(vkGetPhysicalDeviceSurfaceSupportKHR(gpu.physical, gpu.queueFamily, handle, &canPresent));
   if (!canPresent) throw std::runtime_error("the Vulkan device cannot present to the window");
   return surface;
+}
+
+void reloadScene(const ViewOptions& options, Input& input, Scene& scene,
+                 std::filesystem::file_time_type& sceneTime,
+                 const std::function<void(Scene& next)>& complete) {
+  if (options.sceneFile.empty()) return;
+  std::error_code ec;
+  const auto t = std::filesystem::last_write_time(options.sceneFile, ec);
+  if (input.reload || (!ec && t != sceneTime)) {
+    sceneTime = t;
+    Scene next = options.scene;
+    try {
+      loadScene(options.sceneFile, next);
+      next.camera = scene.camera;
+      complete(next);
+      scene = next;
+      fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
+    }
+  }
+  input.reload = false;
 }
 
 GpuOptions windowGpuOptions(const ViewOptions& o) {

@@ -6,6 +6,8 @@
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
 
+#include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -67,6 +69,13 @@ std::vector<Owned<VkSemaphore>> semaphores(Gpu& gpu, size_t count);
 
 // The window's surface, which the device must be able to present to.
 Owned<VkSurfaceKHR> surfaceOf(Gpu& gpu, GLFWwindow* window);
+
+// The scene file, reloaded on R or when it changes on disk (its time was `sceneTime`): the
+// command line's scene, the file over it, then `complete` (the camera kept, what the window
+// adds); a file that fails keeps the scene as it was.
+void reloadScene(const ViewOptions& options, Input& input, Scene& scene,
+                 std::filesystem::file_time_type& sceneTime,
+                 const std::function<void(Scene& next)>& complete);
 
 // The options of a device that presents to GLFW windows.
 GpuOptions windowGpuOptions(const ViewOptions& o);

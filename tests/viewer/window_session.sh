@@ -6,18 +6,10 @@
 # Usage: window_session.sh ISO_BINARY FILE.iso WORKDIR
 set -euo pipefail
 iso=$1 file=$2 work=$3
+source "$(dirname "$0")/session_common.sh"
 cd "$work"
 echo '{"material": {"color": [0.7, 0.7, 0.7]}}' >scene.json
-"$iso" view "$file" --scene scene.json --width 300 --height 200 --frames 20000 \
-  --screenshot final.png >out.txt 2>err.txt &
-pid=$!
-window=
-for _ in $(seq 100); do
-  window=$(xdotool search --name "iso view" 2>/dev/null | head -1 || true)
-  [ -n "$window" ] && break
-  sleep 0.1
-done
-[ -n "$window" ] || { echo "no window appeared" >&2; kill $pid; exit 1; }
+open_window "$file" --scene scene.json --width 300 --height 200
 sleep 1
 xdotool windowsize "$window" 480 260
 sleep 1
