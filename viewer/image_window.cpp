@@ -208,15 +208,7 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
       cameraMoved = true;
     applyImageSwitches(input, scene, image, keys);
     reloadScene(options, input, scene, sceneTime, [&](Scene& next) { keys.apply(next); });
-    int fbWidth = 0, fbHeight = 0;
-    glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
-    if (fbWidth == 0 || fbHeight == 0) {  // minimized
-      glfwWaitEvents();
-      continue;
-    }
-    if (stale || uint32_t(fbWidth) != w.swapchain.extent.width ||
-        uint32_t(fbHeight) != w.swapchain.extent.height)
-      w.resize(uint32_t(fbWidth), uint32_t(fbHeight));
+    if (!fitToWindow(window, w, stale)) continue;  // minimized
     const ImageInputs& in = *drawn.inputs;
     const auto lights = lightsOf(scene, in, *scene.camera);
     ViewOptions sized = options;

@@ -195,15 +195,7 @@ int viewWindow(const ViewOptions& options) {
       if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset->bounds));
       placeGround(next, *asset);
     });
-    int fbWidth = 0, fbHeight = 0;
-    glfwGetFramebufferSize(window, &fbWidth, &fbHeight);
-    if (fbWidth == 0 || fbHeight == 0) {  // minimized
-      glfwWaitEvents();
-      continue;
-    }
-    if (stale || uint32_t(fbWidth) != w.swapchain.extent.width ||
-        uint32_t(fbHeight) != w.swapchain.extent.height)
-      w.resize(uint32_t(fbWidth), uint32_t(fbHeight));
+    if (!fitToWindow(window, w, stale)) continue;  // minimized
     renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
     stale = w.draw();
     ++frames;

@@ -77,6 +77,23 @@ void reloadScene(const ViewOptions& options, Input& input, Scene& scene,
                  std::filesystem::file_time_type& sceneTime,
                  const std::function<void(Scene& next)>& complete);
 
+// A window's device side `w` (its `swapchain` and `resize(width, height)`) fitted to the
+// window: false while it is minimized (after waiting for events); otherwise true, with the
+// swapchain made again when the window's size changed or it is `stale`.
+template <class WindowGpu>
+bool fitToWindow(GLFWwindow* window, WindowGpu& w, bool stale) {
+  int width = 0, height = 0;
+  glfwGetFramebufferSize(window, &width, &height);
+  if (width == 0 || height == 0) {
+    glfwWaitEvents();
+    return false;
+  }
+  if (stale || uint32_t(width) != w.swapchain.extent.width ||
+      uint32_t(height) != w.swapchain.extent.height)
+    w.resize(uint32_t(width), uint32_t(height));
+  return true;
+}
+
 // The options of a device that presents to GLFW windows.
 GpuOptions windowGpuOptions(const ViewOptions& o);
 
