@@ -12,8 +12,8 @@
 
 // The stages (kImageStage...: shared.h).
 layout(constant_id = 0) const uint kStage = 0u;
-// The fill and control stages' kind: 0 background pixels, 1 occluded pixels; 2 for control: the
-// start of filling.
+// The fill and control stages' kind: 0 background pixels, 1 occluded pixels; for control also 2,
+// the start of filling, and 3, the start of shading.
 layout(constant_id = 1) const uint kKind = 0u;
 
 layout(local_size_x = 64) in;
@@ -42,14 +42,17 @@ layout(std430, binding = 12) buffer Control { uint control[]; };
 // The picture: sRGB8 RGBA words; the background in the scene's color.
 layout(std430, binding = 13) writeonly buffer Pixels { uint pixels[]; };
 // Filling's tiles (kImageFillTile pixels square), T of the image: two arrays of marks (a word a
-// tile), then three lists of tiles (T words each). Round r runs over list r % 2 and wakes the
+// tile), four lists of tiles (T words each, from word 2T), and the shading's marks (from word
+// 6T). Round r runs over list r % 2 and wakes the
 // tiles near a pixel it changed for round r + 1: the first to set a tile's mark in array
 // (r + 1) % 2 to r + 1 appends it to list (r + 1) % 2. A tile left out did not change in the
 // round before, nor did any pixel within the masks' reach: both layer buffers already hold its
 // values. Round 0 runs over list 2, the tiles that resolving found a point in or next to (mark
 // 0 in array 0; array 1 marks 0 the tiles with a point): no pixel elsewhere is a candidate of
 // either kind, before or after filling the background (a filled pixel lies next to a covered
-// one).
+// one). Every tile listed is also listed once in list 3 (the shading's marks), which the
+// shading stages run over: every covered pixel's tile and the tiles around it, beyond which
+// shading, smoothing and anti-aliasing give nothing to blend.
 layout(std430, binding = 14) buffer Tiles { uint tiles[]; };
 
 bool inside(ivec2 p) { return p.x >= 0 && p.y >= 0 && p.x < int(Q.image.x) && p.y < int(Q.image.y); }
@@ -82,24 +85,34 @@ void wakeTiles(ivec2 p, uint mark, uint list) {
   for (int ty = max(tile.y - 1, 0); ty <= min(tile.y + 1, int(tilesY) - 1); ++ty)
     for (int tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, int(tilesX) - 1); ++tx) {
       uint u = uint(ty) * tilesX + uint(tx);
-      if (atomicExchange(tiles[(mark & 1u) * tileCount + u], mark) != mark)
+      if (atomicExchange(tiles[(mark & 1u) * tileCount + u], mark) != mark) {
         tiles[(2u + list) * tileCount + atomicAdd(control[kImageControlTiles + list], 1u)] = u;
+        if (atomicExchange(tiles[6u * tileCount + u], 0u) != 0u)
+          tiles[5u * tileCount + atomicAdd(control[kImageControlTiles + 3u], 1u)] = u;
+      }
     }
+}
+
+// The pixel of this invocation in the tile of this workgroup, the tiles taken from `list`
+// (kImageControlTiles + list counts them); false past the list or the image.
+bool tilePixel(uint list, out ivec2 p) {
+  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
+  p = ivec2(0);
+  if (group >= control[kImageControlTiles + list]) return false;
+  uint t = tiles[(2u + list) * tileCount + group];
+  p = ivec2(int(t % tilesX), int(t / tilesX)) * int(kImageFillTile) +
+      ivec2(int(gl_LocalInvocationID.x % kImageFillTile),
+            int(gl_LocalInvocationID.x / kImageFillTile));
+  return inside(p);
 }
 
 // A filling round over a tile (this workgroup's), a pixel an invocation.
 void fillTile() {
   uint pass = control[kImageControlRound];
-  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
-  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
-  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-  uint list = pass == 0u ? 2u : (pass & 1u);
-  if (group >= control[kImageControlTiles + list]) return;
-  uint t = tiles[2u * tileCount + list * tileCount + group];
-  ivec2 tile = ivec2(int(t % tilesX), int(t / tilesX));
-  ivec2 p = tile * int(kImageFillTile) +
-            ivec2(int(gl_LocalInvocationID.x % kImageFillTile), int(gl_LocalInvocationID.x / kImageFillTile));
-  if (!inside(p)) return;
+  ivec2 p;
+  if (!tilePixel(pass == 0u ? 2u : (pass & 1u), p)) return;
   float self = layerDepth(p);
   float depth = self;
   uint index = layerIndex(p);
@@ -110,9 +123,32 @@ void fillTile() {
   layerB[at(p)] = uvec2(floatBitsToUint(depth), index);
 }
 
+// A shading stage over a tile of list 3.
+void shadeTile() {
+  ivec2 p;
+  if (!tilePixel(3u, p)) return;
+  uint id = at(p);
+  if (kStage == kImageStageShade) {
+    colorA[id] = imageShade(p);
+  } else if (kStage == kImageStageSmooth) {
+    colorB[id] = imageSmooth(p);
+  } else if (kStage == kImageStageAntialias) {
+    colorA[id] = imageAntialias(p);
+  } else {  // kImageStageBlend
+    vec4 sum = blended[id];
+    blended[id] = sum + (1.0f - sum.a) * colorA[id];
+    layerR[id] = layerA[id];
+  }
+}
+
 void main() {
   if (kStage == kImageStageFill) {
     fillTile();
+    return;
+  }
+  if (kStage == kImageStageShade || kStage == kImageStageSmooth ||
+      kStage == kImageStageAntialias || kStage == kImageStageBlend) {
+    shadeTile();
     return;
   }
   // Dispatches wider than a row of workgroups continue on the next rows (gl_NumWorkGroups.y).
@@ -136,8 +172,8 @@ void main() {
     // After a fill pass: the next runs over the tiles it woke (none once one changed nothing).
     // Kind 2 starts filling: round 0 over the tiles resolving listed.
     if (id != 0u) return;
-    if (kKind == 2u) {
-      uint first = control[kImageControlTiles + 2u];
+    if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
+      uint first = control[kImageControlTiles + kKind];
       uint x = min(first, 65535u);
       control[0] = x;
       control[1] = x == 0u ? 1u : (first + x - 1u) / x;
@@ -173,16 +209,6 @@ void main() {
     uint own = uint(p.y) / kImageFillTile * tilesX + uint(p.x) / kImageFillTile;
     if (!none && tiles[tileCount + own] != 0u && atomicExchange(tiles[tileCount + own], 0u) != 0u)
       wakeTiles(p, 0u, 2u);
-  } else if (kStage == kImageStageShade) {
-    colorA[id] = imageShade(p);
-  } else if (kStage == kImageStageSmooth) {
-    colorB[id] = imageSmooth(p);
-  } else if (kStage == kImageStageAntialias) {
-    colorA[id] = imageAntialias(p);
-  } else if (kStage == kImageStageBlend) {
-    vec4 sum = blended[id];
-    blended[id] = sum + (1.0f - sum.a) * colorA[id];
-    layerR[id] = layerA[id];
   } else if (kStage == kImageStageFinish) {
     vec4 sum = blended[id];
     vec3 c = clamp(vec3(sum) + (1.0f - sum.a) * vec3(Q.background), 0.0f, 1.0f);

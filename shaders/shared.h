@@ -230,7 +230,8 @@ ISO_CONST uint kImageControlChanged = 3u;
 ISO_CONST uint kImageControlPasses = 4u;
 ISO_CONST uint kImageControlRound = 6u;
 ISO_CONST uint kImageControlTiles = 8u;  // 8 and 9: the tiles listed for rounds of each parity,
-                                         // 10: those the projection left a point in or next to
+                                         // 10: those the projection left a point in or next to,
+                                         // 11: every tile any of them listed (for shading)
 // Filling on the GPU runs over tiles of this many pixels square (a workgroup a tile): the first
 // round over all, each later one over the tiles where something within the masks' reach changed
 // in the round before (at least kImageMaxFillRadius: a changed pixel wakes its tile and the

@@ -32,7 +32,7 @@ constexpr uint32_t kMaxStamps = 4096;  // timestamps a frame: one after each ste
 static_assert(gpu::kImageFillTile >= gpu::kImageMaxFillRadius,
               "a changed pixel wakes only the tiles next to its own");
 static_assert(gpu::kImageFillTile * gpu::kImageFillTile == 64, "a tile a workgroup");
-static_assert(gpu::kImageControlTiles + 3 <= kStatsWord, "control words before the statistics");
+static_assert(gpu::kImageControlTiles + 4 <= kStatsWord, "control words before the statistics");
 
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
@@ -43,6 +43,7 @@ enum Variant : uint32_t {
   kControlBackground,
   kControlOccluded,
   kControlStart,
+  kControlShading,
   kShade,
   kSmooth,
   kAntialias,
@@ -53,7 +54,8 @@ enum Variant : uint32_t {
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
     ImageStep::Project, ImageStep::Resolve, ImageStep::Fill,      ImageStep::Fill,
-    ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Shade,
+    ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Control,
+    ImageStep::Shade,
     ImageStep::Smooth,
     ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,    ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
@@ -64,6 +66,7 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageControl, 0},
     {gpu::kImageStageControl, 1},
     {gpu::kImageStageControl, 2},
+    {gpu::kImageStageControl, 3},
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
     {gpu::kImageStageAntialias, 0},
@@ -192,7 +195,7 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
     changed = true;
   }
   if (tiles > tileCapacity_) {
-    tiles_ = createBuffer(gpu_, tiles * 5 * 4, kStorage, false);
+    tiles_ = createBuffer(gpu_, tiles * 7 * 4, kStorage, false);
     tileCapacity_ = tiles;
     changed = true;
   }
@@ -302,9 +305,12 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   };
   auto project = [&](uint32_t set, uint64_t pixels) {
     vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);
-    vkCmdFillBuffer(cb, tiles_.buffer, 0, tilesOf(set) * 2 * 4, 0xFFFFFFFFu);
-    const uint32_t none = 0;
-    vkCmdUpdateBuffer(cb, control_.buffer, (gpu::kImageControlTiles + 2) * 4, 4, &none);
+    // No tile marked (arrays 0, 1 and the shading's), none listed for round 0 or shading.
+    const uint64_t t = tilesOf(set);
+    vkCmdFillBuffer(cb, tiles_.buffer, 0, t * 2 * 4, 0xFFFFFFFFu);
+    vkCmdFillBuffer(cb, tiles_.buffer, t * 6 * 4, t * 4, 0xFFFFFFFFu);
+    const uint32_t none[2] = {0, 0};
+    vkCmdUpdateBuffer(cb, control_.buffer, (gpu::kImageControlTiles + 2) * 4, sizeof none, none);
     barrier(cb);
     stamp(ImageStep::Clear, VK_PIPELINE_STAGE_TRANSFER_BIT);
     dispatch(kProject, set, n);
@@ -377,10 +383,14 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     fill(set, 1);
     VkBufferCopy copy{gpu::kImageControlPasses * 4, (kStatsWord + 2 * uint64_t(k)) * 4, 8};
     vkCmdCopyBuffer(cb, control_.buffer, control_.buffer, 1, &copy);
-    dispatch(kShade, set, pixels);
-    dispatch(kSmooth, set, pixels);
-    dispatch(kAntialias, set, pixels);
-    dispatch(kBlend, set, pixels);
+    // Shading over the tiles any filling round listed (every covered pixel's and those around).
+    dispatch(kControlShading, set, 1);
+    indirect(kShade, set);
+    indirect(kSmooth, set);
+    indirect(kAntialias, set);
+    vkCmdFillBuffer(cb, layerR_.buffer, 0, pixels * 8, 0);  // blending keeps the layer as R
+    barrier(cb);
+    indirect(kBlend, set);
     frame.stats.projected += n;
   }
   dispatch(kFinish, 0, pixels);
