@@ -132,11 +132,10 @@ void shadeTile() {
     colorA[id] = imageShade(p);
   } else if (kStage == kImageStageSmooth) {
     colorB[id] = imageSmooth(p);
-  } else if (kStage == kImageStageAntialias) {
-    colorA[id] = imageAntialias(p);
-  } else {  // kImageStageBlend
+  } else {  // anti-aliasing, and blending its color under the layers before (A kept as R)
+    vec4 c = imageAntialias(p);
     vec4 sum = blended[id];
-    blended[id] = sum + (1.0f - sum.a) * colorA[id];
+    blended[id] = sum + (1.0f - sum.a) * c;
     layerR[id] = layerA[id];
   }
 }
@@ -147,7 +146,7 @@ void main() {
     return;
   }
   if (kStage == kImageStageShade || kStage == kImageStageSmooth ||
-      kStage == kImageStageAntialias || kStage == kImageStageBlend) {
+      kStage == kImageStageAntialias) {
     shadeTile();
     return;
   }

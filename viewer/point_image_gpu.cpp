@@ -47,7 +47,6 @@ enum Variant : uint32_t {
   kShade,
   kSmooth,
   kAntialias,
-  kBlend,
   kFinish,
   kLit,
   kVariants
@@ -55,9 +54,8 @@ enum Variant : uint32_t {
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
     ImageStep::Project, ImageStep::Resolve, ImageStep::Fill,      ImageStep::Fill,
     ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Control,
-    ImageStep::Shade,
-    ImageStep::Smooth,
-    ImageStep::Antialias, ImageStep::Blend, ImageStep::Finish,    ImageStep::Lit};
+    ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Antialias, ImageStep::Finish,
+    ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
     {gpu::kImageStageResolve, 0},
@@ -70,7 +68,6 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
     {gpu::kImageStageAntialias, 0},
-    {gpu::kImageStageBlend, 0},
     {gpu::kImageStageFinish, 0},
     {gpu::kImageStageLit, 0},
 }};
@@ -387,10 +384,9 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     dispatch(kControlShading, set, 1);
     indirect(kShade, set);
     indirect(kSmooth, set);
-    indirect(kAntialias, set);
     vkCmdFillBuffer(cb, layerR_.buffer, 0, pixels * 8, 0);  // blending keeps the layer as R
     barrier(cb);
-    indirect(kBlend, set);
+    indirect(kAntialias, set);  // and blending
     frame.stats.projected += n;
   }
   dispatch(kFinish, 0, pixels);
