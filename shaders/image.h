@@ -94,10 +94,22 @@ bool imageFill(ivec2 p, ISO_INOUT(float) depth, ISO_INOUT(uint) index) {
   int r = imageFillRadius(point, best);
   // Bits: 1 north (dy < 0), 2 south, 4 west (dx < 0), 8 east, 16 north-west, 32 north-east,
   // 64 south-west, 128 south-east.
+  // Ring after ring outward (the pixels at distance k = 1 to r), so that a pixel inside a hole,
+  // whose masks the nearest ring already fills, stops early; the bits do not depend on the order.
   uint found = 0u;
-  for (int dy = -r; dy <= r && found != 255u; ++dy) {
-    for (int dx = -r; dx <= r; ++dx) {
-      if ((dx == 0 && dy == 0) || !imageCovers(layerDepth(p + ivec2(dx, dy)), self)) continue;
+  for (int k = 1; k <= r && found != 255u; ++k) {
+    for (int i = 0; i < 8 * k; ++i) {
+      // The ring's pixels: its top and bottom rows (2k + 1 each), then its sides between them.
+      int dx = 0, dy = 0;
+      if (i < 4 * k + 2) {
+        dy = i < 2 * k + 1 ? -k : k;
+        dx = i % (2 * k + 1) - k;
+      } else {
+        int j = i - (4 * k + 2);
+        dx = (j & 1) == 0 ? -k : k;
+        dy = j / 2 - k + 1;
+      }
+      if (!imageCovers(layerDepth(p + ivec2(dx, dy)), self)) continue;
       uint bits = 0u;
       if (dy < 0) bits |= 1u;
       if (dy > 0) bits |= 2u;
