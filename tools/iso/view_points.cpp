@@ -19,22 +19,22 @@ constexpr size_t kBatch = size_t(1) << 20;  // points read at a time
 using Clock = std::chrono::steady_clock;
 
 // Every `stride`-th point of `clouds` (counting across them), as objects of one view: bounds,
-// origin, spacings and normals.
-viewer::ImageInputs prepare(const std::vector<PointCloud>& clouds, const ImageFiles& files,
-                            uint64_t stride, Clock::time_point start) {
+// origin, spacings and normals. With `take` and a stride of 1 the clouds are moved, not copied.
+viewer::ImageInputs prepare(std::vector<PointCloud>& clouds, const ImageFiles& files,
+                            uint64_t stride, Clock::time_point start, bool take) {
   viewer::ImageInputs in;
   glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
   std::vector<PointCloud> kept(clouds.size());
   uint64_t counter = 0;
   for (size_t f = 0; f < clouds.size(); ++f) {
-    const PointCloud& cloud = clouds[f];
+    PointCloud& cloud = clouds[f];
     for (size_t i = 0; i < cloud.size(); ++i, ++counter) {
       if (counter % stride != 0) continue;
-      appendPoint(kept[f], cloud, i);
       lo = glm::min(lo, cloud.positions[i]);
       hi = glm::max(hi, cloud.positions[i]);
+      if (!(take && stride == 1)) appendPoint(kept[f], cloud, i);
     }
-    in.pointsRead += cloud.size();
+    if (take && stride == 1) kept[f] = std::move(cloud);
   }
   for (const auto& reader : files.readers) {
     const std::string format = reader->info().format;
@@ -163,7 +163,7 @@ viewer::ImageInputs readImageInputs(ImageFiles& files, const ImageLoad& load) {
       if (load.preview && (lastPreview == 0 || kept >= 2 * lastPreview)) {
         lastPreview = kept;
         viewer::ImageInputs p =
-            prepare(clouds, files, (kept + kPreviewPoints - 1) / kPreviewPoints, start);
+            prepare(clouds, files, (kept + kPreviewPoints - 1) / kPreviewPoints, start, false);
         p.pointsRead = read;
         p.preview = true;
         load.preview(std::move(p));
@@ -173,7 +173,8 @@ viewer::ImageInputs readImageInputs(ImageFiles& files, const ImageLoad& load) {
   kept = 0;
   for (const PointCloud& c : clouds) kept += c.size();
   viewer::ImageInputs in =
-      prepare(clouds, files, kept > maxPoints ? (kept + maxPoints - 1) / maxPoints : 1, start);
+      prepare(clouds, files, kept > maxPoints ? (kept + maxPoints - 1) / maxPoints : 1, start,
+              true);
   in.pointsRead = read;
   return in;
 }
