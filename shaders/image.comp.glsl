@@ -22,10 +22,12 @@ layout(std140, binding = 0) uniform Pass { ImageParams Q; };
 layout(std430, binding = 1) readonly buffer Positions { vec4 positions[]; };  // xyz, spacing
 layout(std430, binding = 2) readonly buffer Normals { vec4 normals[]; };
 layout(std430, binding = 3) readonly buffer Colors { vec4 colors[]; };
-// Per pixel the least (depth bits << 32 | point) of the points projected there.
+// Layers: per pixel (point, depth bits), the two words of a 64-bit key (depth bits << 32 |
+// point); background: no point, and depth bits 0 or all ones. A the layer, B the fill stage's
+// output (the host swaps the two buffers' bindings after each filling pass), R the previous
+// layer (depth peeling). Keys is layer A's buffer seen as keys: projection leaves there, per
+// pixel, the least key of the points projected into it (the host fills it with all ones).
 layout(std430, binding = 4) buffer Keys { uint64_t keys[]; };
-// Layers: per pixel (depth bits, point). A the layer, B the fill stage's output (the host swaps
-// the two buffers' bindings after each filling pass), R the previous layer (depth peeling).
 layout(std430, binding = 5) buffer LayerA { uvec2 layerA[]; };
 layout(std430, binding = 6) buffer LayerB { uvec2 layerB[]; };
 layout(std430, binding = 7) buffer LayerR { uvec2 layerR[]; };
@@ -42,12 +44,12 @@ layout(std430, binding = 12) buffer Control { uint control[]; };
 // The picture: sRGB8 RGBA words; the background in the scene's color.
 layout(std430, binding = 13) writeonly buffer Pixels { uint pixels[]; };
 // Filling's tiles (kImageFillTile pixels square), T of the image: two arrays of marks (a word a
-// tile), four lists of tiles (T words each, from word 2T), and the shading's marks (from word
-// 6T). Round r runs over list r % 2 and wakes the
-// tiles near a pixel it changed for round r + 1: the first to set a tile's mark in array
+// tile), four lists of tiles (T words each, from word 2T; a tile listed as its x | y << 16), and
+// the shading's marks (from word 6T). Round r runs over list r % 2 and wakes the tiles near a
+// pixel it changed for round r + 1: the first to set a tile's mark in array
 // (r + 1) % 2 to r + 1 appends it to list (r + 1) % 2. A tile left out did not change in the
 // round before, nor did any pixel within the masks' reach: both layer buffers already hold its
-// values. Round 0 runs over list 2, the tiles that resolving found a point in or next to (mark
+// values. Round 0 runs over list 2, the tiles that projection left a point in or next to (mark
 // 0 in array 0; array 1 marks 0 the tiles with a point): no pixel elsewhere is a candidate of
 // either kind, before or after filling the background (a filled pixel lies next to a covered
 // one). Every tile listed is also listed once in list 3 (the shading's marks), which the
@@ -65,9 +67,11 @@ float pointSpacing(uint i) { return positions[i].w; }
 float pointShadow(uint i, uint light) {
   return float(lit[i * uint(Q.ambient.w) + light]) / Q.lights[light].color.w;
 }
-float layerDepth(ivec2 p) { return inside(p) ? uintBitsToFloat(layerA[at(p)].x) : 0.0f; }
-uint layerIndex(ivec2 p) { return inside(p) ? layerA[at(p)].y : kImageNoPoint; }
-float referenceDepth(ivec2 p) { return inside(p) ? uintBitsToFloat(layerR[at(p)].x) : 0.0f; }
+// A layer's depth word as a depth (0: background).
+float depthOf(uint bits) { return bits == 0xFFFFFFFFu ? 0.0f : uintBitsToFloat(bits); }
+float layerDepth(ivec2 p) { return inside(p) ? depthOf(layerA[at(p)].y) : 0.0f; }
+uint layerIndex(ivec2 p) { return inside(p) ? layerA[at(p)].x : kImageNoPoint; }
+float referenceDepth(ivec2 p) { return inside(p) ? depthOf(layerR[at(p)].y) : 0.0f; }
 vec4 layerColor(ivec2 p) {
   if (!inside(p)) return vec4(0.0f);
   return kStage == kImageStageSmooth ? colorA[at(p)] : colorB[at(p)];
@@ -86,9 +90,10 @@ void wakeTiles(ivec2 p, uint mark, uint list) {
     for (int tx = max(tile.x - 1, 0); tx <= min(tile.x + 1, int(tilesX) - 1); ++tx) {
       uint u = uint(ty) * tilesX + uint(tx);
       if (atomicExchange(tiles[(mark & 1u) * tileCount + u], mark) != mark) {
-        tiles[(2u + list) * tileCount + atomicAdd(control[kImageControlTiles + list], 1u)] = u;
+        uint xy = uint(tx) | uint(ty) << 16;  // listed as coordinates: no division to undo
+        tiles[(2u + list) * tileCount + atomicAdd(control[kImageControlTiles + list], 1u)] = xy;
         if (atomicExchange(tiles[6u * tileCount + u], 0u) != 0u)
-          tiles[5u * tileCount + atomicAdd(control[kImageControlTiles + 3u], 1u)] = u;
+          tiles[5u * tileCount + atomicAdd(control[kImageControlTiles + 3u], 1u)] = xy;
       }
     }
 }
@@ -102,7 +107,7 @@ bool tilePixel(uint list, out ivec2 p) {
   p = ivec2(0);
   if (group >= control[kImageControlTiles + list]) return false;
   uint t = tiles[(2u + list) * tileCount + group];
-  p = ivec2(int(t % tilesX), int(t / tilesX)) * int(kImageFillTile) +
+  p = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile) +
       ivec2(int(gl_LocalInvocationID.x % kImageFillTile),
             int(gl_LocalInvocationID.x / kImageFillTile));
   return inside(p);
@@ -116,11 +121,11 @@ void fillTile() {
   float self = layerDepth(p);
   float depth = self;
   uint index = layerIndex(p);
-  if ((kKind == 0u) == (self == 0.0f) && imageFill(p, depth, index)) {
+  if ((kKind == 0u) == (self == 0.0f) && imageFill(p, int(pass), depth, index)) {
     atomicAdd(control[kImageControlChanged], 1u);
     wakeTiles(p, pass + 1u, (pass + 1u) & 1u);
   }
-  layerB[at(p)] = uvec2(floatBitsToUint(depth), index);
+  layerB[at(p)] = uvec2(index, floatBitsToUint(depth));
 }
 
 // A shading stage over a tile of list 3.
@@ -138,6 +143,17 @@ void shadeTile() {
     blended[id] = sum + (1.0f - sum.a) * c;
     layerR[id] = layerA[id];
   }
+}
+
+// A linear color as an sRGB8 RGBA word (alpha 255).
+uint pixelWord(vec3 linear) {
+  vec3 c = clamp(linear, 0.0f, 1.0f);
+  uint word = 0xFF000000u;
+  for (int k = 0; k < 3; ++k) {
+    float s = c[k] <= 0.0031308f ? 12.92f * c[k] : 1.055f * pow(c[k], 1.0f / 2.4f) - 0.055f;
+    word |= uint(round(s * 255.0f)) << (8 * k);
+  }
+  return word;
 }
 
 void main() {
@@ -164,12 +180,20 @@ void main() {
     ivec2 pixel = ivec2(0);
     float depth = 0.0f;
     if (!imageProject(p, n, pixel, depth) || !imageBehindLast(pixel, depth)) return;
-    atomicMin(keys[at(pixel)], (uint64_t(floatBitsToUint(depth)) << 32) | uint64_t(id));
+    uint64_t key = (uint64_t(floatBitsToUint(depth)) << 32) | uint64_t(id);
+    if (atomicMin(keys[at(pixel)], key) != ~0ul) return;
+    // The first point of its pixel; the first of its tile (marked 0 in array 1) wakes the tile
+    // and the tiles around for round 0 of filling.
+    uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+    uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+    uint own = uint(pixel.y) / kImageFillTile * tilesX + uint(pixel.x) / kImageFillTile;
+    if (tiles[tileCount + own] != 0u && atomicExchange(tiles[tileCount + own], 0u) != 0u)
+      wakeTiles(pixel, 0u, 2u);
     return;
   }
   if (kStage == kImageStageControl) {
     // After a fill pass: the next runs over the tiles it woke (none once one changed nothing).
-    // Kind 2 starts filling: round 0 over the tiles resolving listed.
+    // Kind 2 starts filling: round 0 over the tiles projection listed.
     if (id != 0u) return;
     if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
       uint first = control[kImageControlTiles + kKind];
@@ -196,26 +220,14 @@ void main() {
     control[kImageControlRound] = next;
     return;
   }
-  if (id >= Q.image.x * Q.image.y) return;
-  ivec2 p = ivec2(int(id % Q.image.x), int(id / Q.image.x));
-  if (kStage == kImageStageResolve) {
-    uint64_t key = keys[id];
-    bool none = key == ~0ul;
-    layerA[id] = none ? uvec2(0u, kImageNoPoint) : uvec2(uint(key >> 32), uint(key));
-    // The first point of a tile (marked 0 in array 1) wakes it and the tiles around.
-    uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
-    uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
-    uint own = uint(p.y) / kImageFillTile * tilesX + uint(p.x) / kImageFillTile;
-    if (!none && tiles[tileCount + own] != 0u && atomicExchange(tiles[tileCount + own], 0u) != 0u)
-      wakeTiles(p, 0u, 2u);
-  } else if (kStage == kImageStageFinish) {
-    vec4 sum = blended[id];
-    vec3 c = clamp(vec3(sum) + (1.0f - sum.a) * vec3(Q.background), 0.0f, 1.0f);
-    uint word = 0xFF000000u;
-    for (int k = 0; k < 3; ++k) {
-      float s = c[k] <= 0.0031308f ? 12.92f * c[k] : 1.055f * pow(c[k], 1.0f / 2.4f) - 0.055f;
-      word |= uint(round(s * 255.0f)) << (8 * k);
+  if (kStage == kImageStageFinish) {  // four pixels an invocation
+    uint background = pixelWord(vec3(Q.background));
+    for (uint k = 0u; k < 4u; ++k) {
+      uint i = id * 4u + k;
+      if (i >= Q.image.x * Q.image.y) return;
+      vec4 sum = blended[i];
+      pixels[i] = sum == vec4(0.0f) ? background
+                                    : pixelWord(vec3(sum) + (1.0f - sum.a) * vec3(Q.background));
     }
-    pixels[id] = word;
   }
 }

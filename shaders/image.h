@@ -74,7 +74,10 @@ bool imageCovers(float d, float self) {
 // ((r + 1)², p's row and column included, p excluded). The paper's test, the product of the
 // masks' depth sums being zero, is the same as one mask holding no covering pixel; here each
 // mask's "holds one" is a bit. Returns whether the pixel changed; depth and index are its values.
-bool imageFill(ivec2 p, ISO_INOUT(float) depth, ISO_INOUT(uint) index) {
+// An occluded pixel is a candidate only in the first r passes (`round` counts from 0): a hole in
+// a front layer whose points lie r pixels apart closes within them, and what later passes would
+// still take is a crease deeper than d̃, flattened a pixel a pass.
+bool imageFill(ivec2 p, int round, ISO_INOUT(float) depth, ISO_INOUT(uint) index) {
   float self = layerDepth(p);
   depth = self;
   index = layerIndex(p);
@@ -92,22 +95,26 @@ bool imageFill(ivec2 p, ISO_INOUT(float) depth, ISO_INOUT(uint) index) {
   if (best > 1.0f) return false;
   uint point = layerIndex(from);
   int r = imageFillRadius(point, best);
+  if (self > 0.0f && round >= r) return false;
   // Bits: 1 north (dy < 0), 2 south, 4 west (dx < 0), 8 east, 16 north-west, 32 north-east,
   // 64 south-west, 128 south-east.
   // Ring after ring outward (the pixels at distance k = 1 to r), so that a pixel inside a hole,
   // whose masks the nearest ring already fills, stops early; the bits do not depend on the order.
   uint found = 0u;
   for (int k = 1; k <= r && found != 255u; ++k) {
+    // The ring's pixels: its top and bottom rows (2k + 1 each), then its sides between them.
     for (int i = 0; i < 8 * k; ++i) {
-      // The ring's pixels: its top and bottom rows (2k + 1 each), then its sides between them.
       int dx = 0, dy = 0;
-      if (i < 4 * k + 2) {
-        dy = i < 2 * k + 1 ? -k : k;
-        dx = i % (2 * k + 1) - k;
+      if (i < 2 * k + 1) {
+        dx = i - k;
+        dy = -k;
+      } else if (i < 4 * k + 2) {
+        dx = i - 3 * k - 1;
+        dy = k;
       } else {
         int j = i - (4 * k + 2);
         dx = (j & 1) == 0 ? -k : k;
-        dy = j / 2 - k + 1;
+        dy = (j >> 1) - k + 1;
       }
       if (!imageCovers(layerDepth(p + ivec2(dx, dy)), self)) continue;
       uint bits = 0u;

@@ -212,8 +212,7 @@ ISO_CONST uint kImageSmoothOff = 64u;  // no smoothing
 ISO_CONST uint kImageNoPoint = 0xFFFFFFFFu;  // a pixel no point covers
 ISO_CONST uint kImageMaxFillRadius = 8u;
 // The stages of shaders/image.comp.glsl (its specialization constant 0).
-ISO_CONST uint kImageStageProject = 0u;    // a point into the keys (64-bit atomic minimum)
-ISO_CONST uint kImageStageResolve = 1u;    // the keys into layer A
+ISO_CONST uint kImageStageProject = 0u;    // a point into layer A (64-bit atomic minimum)
 ISO_CONST uint kImageStageFill = 2u;       // one filling pass, layer A into layer B (ping-pong)
 ISO_CONST uint kImageStageControl = 3u;    // whether the next filling pass runs
 ISO_CONST uint kImageStageShade = 4u;      // layer A's pixels shaded
@@ -231,7 +230,7 @@ ISO_CONST uint kImageControlChanged = 3u;
 ISO_CONST uint kImageControlPasses = 4u;
 ISO_CONST uint kImageControlRound = 6u;
 ISO_CONST uint kImageControlTiles = 8u;  // 8 and 9: the tiles listed for rounds of each parity,
-                                         // 10: those the projection left a point in or next to,
+                                         // 10: those projection left a point in or next to,
                                          // 11: every tile any of them listed (for shading)
 // Filling on the GPU runs over tiles of this many pixels square (a workgroup a tile): the first
 // round over all, each later one over the tiles where something within the masks' reach changed

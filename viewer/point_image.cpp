@@ -164,7 +164,7 @@ std::pair<int, int> fill(Pass& pass, Layer& layer, int maxPasses, int maxOcclude
                 float depth = self;
                 uint32_t index = layer.index[k];
                 // The background pass looks at background pixels, the occluded one at the others.
-                if ((kind == 0) == (self == 0.0f) && pass.imageFill(p, depth, index)) ++sum;
+                if ((kind == 0) == (self == 0.0f) && pass.imageFill(p, round, depth, index)) ++sum;
                 next.depth[k] = depth;
                 next.index[k] = index;
               }
@@ -264,8 +264,9 @@ ImagePlan planImage(const PointImageScene& scene, const ImageCamera& camera,
   plan.layers = settings.layers;
   plan.fillPasses = std::max(settings.maxFillPasses, 0);
   // A hole in a front layer is about a point spacing wide, which the masks' radius follows (at
-  // most maxFillRadius): it closes in as many passes. More occluded passes only go on flattening
-  // creases deeper than d̃, a pixel a pass.
+  // most maxFillRadius): it closes in as many passes, and an occluded pixel is a candidate only
+  // in the first r passes (imageFill). More would only go on flattening creases deeper than d̃,
+  // a pixel a pass.
   plan.occludedPasses = std::min(plan.fillPasses, std::clamp(settings.maxFillRadius, 1,
                                                              int(gpu::kImageMaxFillRadius)));
   plan.shadows = settings.shadows && !lights.empty();

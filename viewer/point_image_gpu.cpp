@@ -37,7 +37,6 @@ static_assert(gpu::kImageControlTiles + 4 <= kStatsWord, "control words before t
 // The pipelines: a stage, and for filling and control a kind.
 enum Variant : uint32_t {
   kProject,
-  kResolve,
   kFillBackground,
   kFillOccluded,
   kControlBackground,
@@ -52,13 +51,12 @@ enum Variant : uint32_t {
   kVariants
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
-    ImageStep::Project, ImageStep::Resolve, ImageStep::Fill,      ImageStep::Fill,
+    ImageStep::Project, ImageStep::Fill,      ImageStep::Fill,
     ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Control,
     ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Antialias, ImageStep::Finish,
     ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
-    {gpu::kImageStageResolve, 0},
     {gpu::kImageStageFill, 0},
     {gpu::kImageStageFill, 1},
     {gpu::kImageStageControl, 0},
@@ -155,7 +153,7 @@ ImageBudget imageBudget(uint64_t vram, uint64_t points, uint32_t width, uint32_t
 
 uint64_t GpuPointImage::memoryBytes() const {
   uint64_t sum = 0;
-  for (const Buffer* b : {&positions_, &normals_, &colors_, &params_, &keys_, &layerA_, &layerB_,
+  for (const Buffer* b : {&positions_, &normals_, &colors_, &params_, &layerA_, &layerB_,
                           &layerR_, &colorA_, &colorB_, &blended_, &lit_, &control_, &pixels_,
                           &tiles_})
     sum += b->allocated;
@@ -176,7 +174,6 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   bool changed = pointsChanged_;
   pointsChanged_ = false;
   if (pixels > pixelCapacity_) {
-    keys_ = createBuffer(gpu_, pixels * 8, kStorage, false);
     layerA_ = createBuffer(gpu_, pixels * 8, kStorage, false);
     layerB_ = createBuffer(gpu_, pixels * 8, kStorage, false);
     layerR_ = createBuffer(gpu_, pixels * 8, kStorage, false);
@@ -208,7 +205,8 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   std::vector<VkWriteDescriptorSet> writes;
   for (uint32_t set = 0; set < kSets; ++set) {
     const uint32_t slot = set / 2, side = set % 2;
-    const Buffer* storage[] = {&positions_, &normals_, &colors_, &keys_,
+    // Binding 4, the keys, is layer A's buffer (shaders/image.comp.glsl).
+    const Buffer* storage[] = {&positions_, &normals_, &colors_, side == 0 ? &layerA_ : &layerB_,
                                side == 0 ? &layerA_ : &layerB_, side == 0 ? &layerB_ : &layerA_,
                                &layerR_,    &colorA_,  &colorB_, &blended_,
                                &lit_,       &control_, &pixels_, &tiles_};
@@ -293,7 +291,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     stamp(kVariantSteps[v], VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT);
   };
   const uint64_t n = scene_->size();
-  // Projection into fresh keys, then layer A.
+  // Projection into layer A, cleared.
   // The tiles of slot `set`'s image (kImageFillTile pixels square).
   auto tilesOf = [&](uint32_t set) {
     const ImageParams& q = set < 2 ? plan.eye : plan.samples[set - 2];
@@ -301,7 +299,8 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     return (q.image.x + t - 1) / t * ((q.image.y + t - 1) / t);
   };
   auto project = [&](uint32_t set, uint64_t pixels) {
-    vkCmdFillBuffer(cb, keys_.buffer, 0, pixels * 8, 0xFFFFFFFFu);
+    // Layer A (this side's) holds the keys: none yet.
+    vkCmdFillBuffer(cb, (side == 0 ? layerA_ : layerB_).buffer, 0, pixels * 8, 0xFFFFFFFFu);
     // No tile marked (arrays 0, 1 and the shading's), none listed for round 0 or shading.
     const uint64_t t = tilesOf(set);
     vkCmdFillBuffer(cb, tiles_.buffer, 0, t * 2 * 4, 0xFFFFFFFFu);
@@ -311,7 +310,6 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     barrier(cb);
     stamp(ImageStep::Clear, VK_PIPELINE_STAGE_TRANSFER_BIT);
     dispatch(kProject, set, n);
-    dispatch(kResolve, set, pixels);
   };
   // Filling passes of one kind until one changes nothing (its indirect dispatch then empties
   // the rest), at most plan.fillPasses.
@@ -339,7 +337,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   // takes a few passes.
   const auto* control = static_cast<const uint32_t*>(control_.mapped);
   auto fill = [&](uint32_t set, uint32_t kind) {
-    // Round 0 over the tiles resolving listed, no tile marked for later rounds.
+    // Round 0 over the tiles projection listed, no tile marked for later rounds.
     vkCmdFillBuffer(cb, tiles_.buffer, 0, tilesOf(set) * 2 * 4, 0xFFFFFFFFu);
     barrier(cb);
     dispatch(kControlStart, set, 1);
@@ -389,7 +387,7 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     indirect(kAntialias, set);  // and blending
     frame.stats.projected += n;
   }
-  dispatch(kFinish, 0, pixels);
+  dispatch(kFinish, 0, (pixels + 3) / 4);
   submitAndWait();
   if (shadows) shadowKey_ = std::move(key);
 

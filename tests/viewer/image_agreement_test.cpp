@@ -28,16 +28,19 @@ struct Agreement {
   // the depths' agreement on the pixels both cover where the hit is.
   double hitsNearPoints = 0.0;
   double depthWithinNearPoints = 0.0;
+  // The other way: of the pixels only the points cover, those whose point lies farther than two
+  // spacings from every hit of the tracer (where its surface does not reach the scan).
+  double drawnOnlyOffSurface = 0.0;
 };
 
-Agreement agree(const std::filesystem::path& scan) {
+Agreement agree(const std::filesystem::path& scan, int size) {
   TempDir dir;
   const PointCloud cloud = readPointFile(scan);
   const auto file = dir / "scan.iso";
   convertToIso(cloud, file, BuildOptions{});
   const auto asset = Asset::open(file);
   const Camera camera = frameCamera(asset->bounds, asset->up, 40.0);
-  constexpr int kSize = 384;
+  const int kSize = size;
 
   // The tracer's first hits, one ray a pixel center.
   const Frame& frame = asset->reader.header().frame;
@@ -110,29 +113,57 @@ Agreement agree(const std::filesystem::path& scan) {
     close += within;
     closeNear += within && near;
   }
+  // The hits as points, for the points that only the image-space drawing shows.
+  std::vector<glm::vec3> surface;
+  for (size_t i = 0; i < rays.size(); ++i)
+    if (hits[i])
+      surface.push_back(glm::vec3(
+          origin + (glm::dvec3(rays[i].origin) + glm::dvec3(rays[i].direction) * double(hits[i]->t)) *
+                       frame.size -
+          center));
+  const PointIndex hitIndex(surface);
+  size_t drawnOnly = 0, drawnOnlyOff = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (hits[i] || image.points[i] == gpu::kImageNoPoint) continue;
+    uint32_t nearest = 0;
+    float squared = 0.0f;
+    hitIndex.nearest(o.positions[image.points[i]], 1, &nearest, &squared);
+    ++drawnOnly;
+    drawnOnlyOff += squared > 4.0f * o.spacing * o.spacing;
+  }
+  a.drawnOnlyOffSurface = double(drawnOnlyOff) / double(std::max<size_t>(drawnOnly, 1));
   a.iou = double(a.both) / double(std::max<size_t>(either, 1));
   a.depthWithin = double(close) / double(std::max<size_t>(a.both, 1));
   a.hitsNearPoints = double(tracedNear) / double(std::max<size_t>(traced, 1));
   a.depthWithinNearPoints = double(closeNear) / double(std::max<size_t>(bothNear, 1));
-  std::printf("%s: silhouette IoU %.4f, depth within a spacing on %.2f %% of %zu pixels; the "
-              "tracer's hits within a spacing of a scan point %.1f %%, and where they are the "
-              "depth within a spacing on %.2f %%\n",
-              scan.filename().c_str(), a.iou, 100.0 * a.depthWithin, a.both,
-              100.0 * a.hitsNearPoints, 100.0 * a.depthWithinNearPoints);
+  std::printf("%s at %d²: silhouette IoU %.4f, depth within a spacing on %.2f %% of %zu pixels; "
+              "the tracer's hits within a spacing of a scan point %.1f %%, and where they are the "
+              "depth within a spacing on %.2f %%; of the %zu pixels only the points cover, those "
+              "farther than two spacings from the traced surface %.1f %%\n",
+              scan.filename().c_str(), size, a.iou, 100.0 * a.depthWithin, a.both,
+              100.0 * a.hitsNearPoints, 100.0 * a.depthWithinNearPoints, drawnOnly,
+              100.0 * a.drawnOnlyOffSurface);
   return a;
 }
 
 // The targets are a silhouette IoU of 0.97 and depths within a spacing on 95 % of the
-// pixels both cover. Measured at 384² (specs/viewer.md, "Image-space points"): the kitten 0.966
-// and 99.5 %, the bunny 0.974 and 97.3 %, the lion 0.813 and 70.3 %. The kitten falls short by
-// its rim and the gap under its chin, which the filling closes (a gap narrower than the masks).
-// The lion's referee is off: 99.9 % of the kitten's and the bunny's hits lie within a spacing
-// of a scan point, 47 % of the lion's (its converted surface is smoothed through a noisy
-// photogrammetric scan and covers parts where it has no points); where the hits are that near,
-// the depths agree on 91 % of the pixels. These bounds keep what was measured.
-void expectAgreement(const std::filesystem::path& scan, double iou, double depthWithin,
+// pixels both cover. The kitten's disagreement is a rim of pixels only its points cover, on the
+// outer side of the silhouette. Part of it is a pixel wide: a point covers the whole pixel it
+// lands in, whose centre the traced surface may miss; this part's share shrinks as the
+// resolution grows (specs/viewer.md, "Image-space points", at 256², 384², 512² and 768²: the
+// kitten 0.961, 0.966, 0.969, 0.971, the bunny 0.963, 0.974, 0.979, 0.984). The rest does not:
+// the gap under the kitten's chin, narrower than the masks, which filling closes, and points
+// that lie up to two spacings outside the converted surface (every pixel only the kitten's
+// points cover shows a point within two spacings of the traced surface). The lion's referee is off: 47 % of its
+// hits lie within a spacing of a scan point (99.9 % of the kitten's and the bunny's; its
+// converted surface is smoothed through a noisy photogrammetric scan and covers parts where it
+// has no points), and most of the pixels only its points cover lie farther than two spacings
+// from the traced surface (67 %); where the hits are that near, the depths agree on 94 %. The
+// kitten and the bunny are measured at 768², the lion at 384². These bounds keep what was
+// measured.
+void expectAgreement(const std::filesystem::path& scan, int size, double iou, double depthWithin,
                      double depthWithinNearPoints) {
-  const Agreement a = agree(scan);
+  const Agreement a = agree(scan, size);
   EXPECT_GT(a.both, 10000u) << scan;
   EXPECT_GE(a.iou, iou) << scan;
   EXPECT_GE(a.depthWithin, depthWithin) << scan;
@@ -140,16 +171,16 @@ void expectAgreement(const std::filesystem::path& scan, double iou, double depth
 }
 
 TEST(ImageAgreement, theKittenAsPointsHasTheTracersSilhouetteAndDepth) {
-  expectAgreement(builtPath("ISO_TEST_DATA_DIR", ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 0.96,
-                  0.95, 0.95);
+  expectAgreement(builtPath("ISO_TEST_DATA_DIR", ISO_TEST_DATA_DIR) / "kitten_normals.xyz", 768,
+                  0.97, 0.95, 0.95);
 }
 
 TEST(ImageAgreement, theBunnyAndTheLionAsPointsHaveTheTracersSilhouettesAndDepths) {
   const std::filesystem::path data = builtPath("ISO_SHARED_DATA_DIR", ISO_SHARED_DATA_DIR);
   if (!std::filesystem::exists(data / "bunny_zipper.ply"))
     GTEST_SKIP() << "needs ../shared/data (the bunny and the lion)";
-  expectAgreement(data / "bunny_zipper.ply", 0.97, 0.95, 0.95);
-  expectAgreement(data / "lion_rgb.las", 0.80, 0.65, 0.90);
+  expectAgreement(data / "bunny_zipper.ply", 768, 0.97, 0.95, 0.95);
+  expectAgreement(data / "lion_rgb.las", 384, 0.80, 0.65, 0.90);
 }
 
 }  // namespace

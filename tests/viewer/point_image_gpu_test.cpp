@@ -30,10 +30,12 @@ double differing(const std::vector<uint32_t>& gpu, const ImageResult& cpu) {
 
 void expectSame(std::vector<ImageObject> objects, const ImageCamera& camera,
                 std::span<const ImageLight> lights, const ImageSettings& settings,
-                const char* what) {
+                const char* what, const ImageCamera* before = nullptr) {
   PointImageRenderer cpu(objects);
   const ImageResult reference = cpu.render(camera, lights, settings);
   GpuPointImage gpu(imageGpu(), cpu.scene());
+  // A frame drawn before from elsewhere leaves nothing in the next.
+  if (before) gpu.render(*before, lights, settings);
   const GpuImageFrame frame = gpu.render(camera, lights, settings);
   ASSERT_EQ(frame.pixels.size(), size_t(camera.width) * camera.height);
   const double share = differing(frame.pixels, reference);
@@ -61,6 +63,22 @@ TEST(ImageGolden, aSparseSphereIsFilledAlikeOnTheGpu) {
   const ImageLight light{vec3(3.0f, 4.0f, 5.0f)};
   expectSame({sphere(vec3(0.0f), 1.0f, n)}, camera, std::span(&light, 1), ImageSettings{},
              "sparse sphere");
+}
+
+TEST(ImageGolden, aFrameOwesNothingToTheFrameBefore) {
+  // The sparse sphere from afar, after a frame that filled most of the image from close by.
+  ImageCamera camera;
+  camera.eye = vec3(0.3f, 0.4f, 6.0f);
+  camera.width = 200;
+  camera.height = 160;
+  ImageCamera close = camera;
+  close.eye = vec3(0.1f, -0.2f, 1.8f);
+  const float pixel = 2.0f * std::tan(glm::radians(20.0f)) / 160.0f;
+  const float spacing = 3.5f * pixel * 5.0f;
+  const size_t n = size_t(4.0f * std::numbers::pi_v<float> / (spacing * spacing));
+  const ImageLight light{vec3(3.0f, 4.0f, 5.0f)};
+  expectSame({sphere(vec3(0.0f), 1.0f, n)}, camera, std::span(&light, 1), ImageSettings{},
+             "sparse sphere after a close view", &close);
 }
 
 TEST(ImageGolden, peeledNestedSpheresBlendAlikeOnTheGpu) {
