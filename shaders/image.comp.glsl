@@ -113,19 +113,64 @@ bool tilePixel(uint list, out ivec2 p) {
   return inside(p);
 }
 
-// A filling round over a tile (this workgroup's), a pixel an invocation.
-void fillTile() {
+// A filling round: a workgroup eight tiles, an invocation a row of a tile (kImageFillTile
+// pixels). The row and the rows above and below it, a pixel beyond at each end, are read once
+// (lavapipe pays for every load, lane by lane), and each pixel's 3×3 neighbours are taken from
+// them; the masks' rings beyond, for the few pixels that get that far, from the layer.
+void fillRow() {
   uint pass = control[kImageControlRound];
-  ivec2 p;
-  if (!tilePixel(pass == 0u ? 2u : (pass & 1u), p)) return;
-  float self = layerDepth(p);
-  float depth = self;
-  uint index = layerIndex(p);
-  if ((kKind == 0u) == (self == 0.0f) && imageFill(p, int(pass), depth, index)) {
-    atomicAdd(control[kImageControlChanged], 1u);
-    wakeTiles(p, pass + 1u, (pass + 1u) & 1u);
+  uint list = pass == 0u ? 2u : (pass & 1u);
+  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
+  uint listed = group * (64u / kImageFillTile) + gl_LocalInvocationID.x / kImageFillTile;
+  if (listed >= control[kImageControlTiles + list]) return;
+  uint t = tiles[(2u + list) * tileCount + listed];
+  ivec2 origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
+  int y = origin.y + int(gl_LocalInvocationID.x % kImageFillTile);
+  if (y >= int(Q.image.y)) return;
+  const int kWide = int(kImageFillTile) + 2;
+  float depths[3 * kWide];
+  uint points[3 * kWide];
+  for (int row = 0; row < 3; ++row)
+    for (int c = 0; c < kWide; ++c) {
+      ivec2 q = ivec2(origin.x - 1 + c, y - 1 + row);
+      uvec2 v = inside(q) ? layerA[at(q)] : uvec2(kImageNoPoint, 0u);
+      depths[row * kWide + c] = depthOf(v.y);
+      points[row * kWide + c] = v.x;
+    }
+  uint changed = 0u;
+  for (int i = 0; i < int(kImageFillTile); ++i) {
+    ivec2 p = ivec2(origin.x + i, y);
+    if (p.x >= int(Q.image.x)) break;
+    float self = depths[kWide + i + 1];
+    float depth = self;
+    uint index = points[kWide + i + 1];
+    if ((kKind == 0u) == (self == 0.0f)) {
+      // imageFill's 3×3 part, in its order
+      float best = 2.0f;
+      uint from = kImageNoPoint;
+      uint ring = 0u;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          float d = depths[(dy + 1) * kWide + i + 1 + dx];
+          if ((dx == 0 && dy == 0) || !imageCovers(d, self)) continue;
+          ring |= imageMaskBits(dx, dy);
+          if (d < best) {
+            best = d;
+            from = points[(dy + 1) * kWide + i + 1 + dx];
+          }
+        }
+      if (best <= 1.0f && imageFillBeyond(p, int(pass), self, best, from, ring, depth, index))
+        ++changed;
+    }
+    layerB[at(p)] = uvec2(index, floatBitsToUint(depth));
   }
-  layerB[at(p)] = uvec2(index, floatBitsToUint(depth));
+  // The tiles a changed pixel wakes are its tile's and those around: once for the row.
+  if (changed != 0u) {
+    atomicAdd(control[kImageControlChanged], changed);
+    wakeTiles(ivec2(origin.x, y), pass + 1u, (pass + 1u) & 1u);
+  }
 }
 
 // A shading stage over a tile of list 3.
@@ -158,7 +203,7 @@ uint pixelWord(vec3 linear) {
 
 void main() {
   if (kStage == kImageStageFill) {
-    fillTile();
+    fillRow();
     return;
   }
   if (kStage == kImageStageShade || kStage == kImageStageSmooth ||
@@ -196,10 +241,12 @@ void main() {
     // Kind 2 starts filling: round 0 over the tiles projection listed.
     if (id != 0u) return;
     if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
+      // Filling takes 64 / kImageFillTile tiles a workgroup (fillRow), shading one.
       uint first = control[kImageControlTiles + kKind];
-      uint x = min(first, 65535u);
+      uint groups = kKind == 3u ? first : (first + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
+      uint x = min(groups, 65535u);
       control[0] = x;
-      control[1] = x == 0u ? 1u : (first + x - 1u) / x;
+      control[1] = x == 0u ? 1u : (groups + x - 1u) / x;
       control[2] = 1u;
       control[kImageControlChanged] = 0u;
       control[kImageControlRound] = 0u;
@@ -211,9 +258,10 @@ void main() {
     if (changed) control[kImageControlPasses + kKind] += 1u;
     uint next = control[kImageControlRound] + 1u;
     uint listed = changed ? control[kImageControlTiles + (next & 1u)] : 0u;
-    uint x = min(listed, 65535u);
+    uint groups = (listed + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
+    uint x = min(groups, 65535u);
     control[0] = x;
-    control[1] = x == 0u ? 1u : (listed + x - 1u) / x;
+    control[1] = x == 0u ? 1u : (groups + x - 1u) / x;
     control[2] = 1u;
     control[kImageControlTiles + ((next + 1u) & 1u)] = 0u;  // the list round next + 1 gets
     control[kImageControlChanged] = 0u;

@@ -66,6 +66,57 @@ bool imageCovers(float d, float self) {
   return d > 0.0f && d < self - Q.layer.x;
 }
 
+// The masks (below) that a covering pixel at (dx, dy) from p lies in, as bits: 1 north (dy < 0),
+// 2 south, 4 west (dx < 0), 8 east, 16 north-west, 32 north-east, 64 south-west, 128 south-east.
+uint imageMaskBits(int dx, int dy) {
+  uint bits = 0u;
+  if (dy < 0) bits |= 1u;
+  if (dy > 0) bits |= 2u;
+  if (dx < 0) bits |= 4u;
+  if (dx > 0) bits |= 8u;
+  if (dx <= 0 && dy <= 0) bits |= 16u;
+  if (dx >= 0 && dy <= 0) bits |= 32u;
+  if (dx <= 0 && dy >= 0) bits |= 64u;
+  if (dx >= 0 && dy >= 0) bits |= 128u;
+  return bits;
+}
+
+// The rest of a filling pass at pixel p (imageFill) once its 3×3 neighbours are known: `self`
+// its depth, `best` the least depth of its covering neighbours (≤ 1) and `point` that
+// neighbour's point, `ring` the masks those neighbours fill. Whether p takes that neighbour's
+// values (then depth and index are set to them).
+bool imageFillBeyond(ivec2 p, int round, float self, float best, uint point, uint ring,
+                     ISO_INOUT(float) depth, ISO_INOUT(uint) index) {
+  int r = imageFillRadius(point, best);
+  if (self > 0.0f && round >= r) return false;
+  // Ring after ring outward (the pixels at distance k = 2 to r after the 3×3), so that a pixel
+  // inside a hole, whose masks the nearest ring already fills, stops early; the bits do not
+  // depend on the order.
+  uint found = ring;
+  for (int k = 2; k <= r && found != 255u; ++k) {
+    // The ring's pixels: its top and bottom rows (2k + 1 each), then its sides between them.
+    for (int i = 0; i < 8 * k; ++i) {
+      int dx = 0, dy = 0;
+      if (i < 2 * k + 1) {
+        dx = i - k;
+        dy = -k;
+      } else if (i < 4 * k + 2) {
+        dx = i - 3 * k - 1;
+        dy = k;
+      } else {
+        int j = i - (4 * k + 2);
+        dx = (j & 1) == 0 ? -k : k;
+        dy = (j >> 1) - k + 1;
+      }
+      if (imageCovers(layerDepth(p + ivec2(dx, dy)), self)) found |= imageMaskBits(dx, dy);
+    }
+  }
+  if (found != 255u) return false;
+  depth = best;
+  index = point;
+  return true;
+}
+
 // One pass of hole filling at pixel p (the paper's sections 3.2 and 3.3, with masks of radius r):
 // a background pixel (or, for the occluded pass, a pixel showing a layer behind the front one)
 // with a covering 3×3 neighbour takes the values of its covering neighbour of least depth unless
@@ -83,56 +134,20 @@ bool imageFill(ivec2 p, int round, ISO_INOUT(float) depth, ISO_INOUT(uint) index
   index = layerIndex(p);
   float best = 2.0f;
   ivec2 from = p;
+  uint ring = 0u;
   for (int dy = -1; dy <= 1; ++dy) {
     for (int dx = -1; dx <= 1; ++dx) {
       float d = layerDepth(p + ivec2(dx, dy));
-      if ((dx != 0 || dy != 0) && imageCovers(d, self) && d < best) {
+      if ((dx == 0 && dy == 0) || !imageCovers(d, self)) continue;
+      ring |= imageMaskBits(dx, dy);
+      if (d < best) {
         best = d;
         from = p + ivec2(dx, dy);
       }
     }
   }
   if (best > 1.0f) return false;
-  uint point = layerIndex(from);
-  int r = imageFillRadius(point, best);
-  if (self > 0.0f && round >= r) return false;
-  // Bits: 1 north (dy < 0), 2 south, 4 west (dx < 0), 8 east, 16 north-west, 32 north-east,
-  // 64 south-west, 128 south-east.
-  // Ring after ring outward (the pixels at distance k = 1 to r), so that a pixel inside a hole,
-  // whose masks the nearest ring already fills, stops early; the bits do not depend on the order.
-  uint found = 0u;
-  for (int k = 1; k <= r && found != 255u; ++k) {
-    // The ring's pixels: its top and bottom rows (2k + 1 each), then its sides between them.
-    for (int i = 0; i < 8 * k; ++i) {
-      int dx = 0, dy = 0;
-      if (i < 2 * k + 1) {
-        dx = i - k;
-        dy = -k;
-      } else if (i < 4 * k + 2) {
-        dx = i - 3 * k - 1;
-        dy = k;
-      } else {
-        int j = i - (4 * k + 2);
-        dx = (j & 1) == 0 ? -k : k;
-        dy = (j >> 1) - k + 1;
-      }
-      if (!imageCovers(layerDepth(p + ivec2(dx, dy)), self)) continue;
-      uint bits = 0u;
-      if (dy < 0) bits |= 1u;
-      if (dy > 0) bits |= 2u;
-      if (dx < 0) bits |= 4u;
-      if (dx > 0) bits |= 8u;
-      if (dx <= 0 && dy <= 0) bits |= 16u;
-      if (dx >= 0 && dy <= 0) bits |= 32u;
-      if (dx <= 0 && dy >= 0) bits |= 64u;
-      if (dx >= 0 && dy >= 0) bits |= 128u;
-      found |= bits;
-    }
-  }
-  if (found != 255u) return false;
-  depth = best;
-  index = point;
-  return true;
+  return imageFillBeyond(p, round, self, best, layerIndex(from), ring, depth, index);
 }
 
 // The color of point i lit by the pass's lights (Phong: ambient, diffuse, specular; the diffuse

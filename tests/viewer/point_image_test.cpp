@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <glm/glm.hpp>
 #include <numbers>
 #include <random>
@@ -111,6 +112,8 @@ TEST(PointImage, FrontSheetCoversTheDenseSheetBehindIt) {
       showsFront += point != kNone && point < frontCount;
     }
   ASSERT_GT(inside, 5000u);
+  std::printf("the front sheet shows on %.2f %% of its silhouette, after %d occluded passes\n",
+              100.0 * double(showsFront) / double(inside), result.stats.occludedPasses.at(0));
   EXPECT_GE(double(showsFront) / double(inside), 0.99);
   EXPECT_GE(result.stats.occludedPasses.at(0), 1);
 }
