@@ -173,23 +173,6 @@ void fillRow() {
   }
 }
 
-// A shading stage over a tile of list 3.
-void shadeTile() {
-  ivec2 p;
-  if (!tilePixel(3u, p)) return;
-  uint id = at(p);
-  if (kStage == kImageStageShade) {
-    colorA[id] = imageShade(p);
-  } else if (kStage == kImageStageSmooth) {
-    colorB[id] = imageSmooth(p);
-  } else {  // anti-aliasing, and blending its color under the layers before (A kept as R)
-    vec4 c = imageAntialias(p);
-    vec4 sum = blended[id];
-    blended[id] = sum + (1.0f - sum.a) * c;
-    layerR[id] = layerA[id];
-  }
-}
-
 // A linear color as an sRGB8 RGBA word (alpha 255).
 uint pixelWord(vec3 linear) {
   vec3 c = clamp(linear, 0.0f, 1.0f);
@@ -199,6 +182,27 @@ uint pixelWord(vec3 linear) {
     word |= uint(round(s * 255.0f)) << (8 * k);
   }
   return word;
+}
+
+// A shading stage over a tile of list 3.
+void shadeTile() {
+  ivec2 p;
+  if (!tilePixel(3u, p)) return;
+  uint id = at(p);
+  if (kStage == kImageStageShade) {
+    colorA[id] = imageShade(p);
+  } else if (kStage == kImageStageSmooth) {
+    colorB[id] = imageSmooth(p);
+  } else {
+    // Anti-aliasing, and blending its color under the layers before (A kept as R); the
+    // picture's pixel over the background (the host filled the picture with the background).
+    vec4 c = imageAntialias(p);
+    vec4 sum = blended[id];
+    sum += (1.0f - sum.a) * c;
+    blended[id] = sum;
+    layerR[id] = layerA[id];
+    pixels[id] = pixelWord(vec3(sum) + (1.0f - sum.a) * vec3(Q.background));
+  }
 }
 
 void main() {
@@ -216,7 +220,9 @@ void main() {
   if (kStage == kImageStageProject || kStage == kImageStageLit) {
     if (id >= uint(positions.length())) return;
     vec3 p = pointPosition(id);
-    vec3 n = pointNormal(id);
+    // Projection reads the normal only to cull (lavapipe pays for every load).
+    bool normal = kStage == kImageStageLit || (Q.image.w & kImageCull) != 0u;
+    vec3 n = normal ? pointNormal(id) : vec3(0.0f);
     if (kStage == kImageStageLit) {
       // The light's first layer, filled, is layer A; material.w names the pass's light.
       if (imageLit(p, n)) atomicAdd(lit[id * uint(Q.ambient.w) + uint(Q.material.w)], 1u);
@@ -267,15 +273,5 @@ void main() {
     control[kImageControlChanged] = 0u;
     control[kImageControlRound] = next;
     return;
-  }
-  if (kStage == kImageStageFinish) {  // four pixels an invocation
-    uint background = pixelWord(vec3(Q.background));
-    for (uint k = 0u; k < 4u; ++k) {
-      uint i = id * 4u + k;
-      if (i >= Q.image.x * Q.image.y) return;
-      vec4 sum = blended[i];
-      pixels[i] = sum == vec4(0.0f) ? background
-                                    : pixelWord(vec3(sum) + (1.0f - sum.a) * vec3(Q.background));
-    }
   }
 }

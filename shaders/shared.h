@@ -220,7 +220,6 @@ ISO_CONST uint kImageStageSmooth = 5u;
 ISO_CONST uint kImageStageAntialias = 6u;
 ISO_CONST uint kImageStageBlend = 7u;      // the layer under the ones before; A kept as R
                                            // (the GPU blends in its anti-aliasing stage)
-ISO_CONST uint kImageStageFinish = 8u;     // over the background, into sRGB8 pixels
 ISO_CONST uint kImageStageLit = 9u;        // a point of a light's first layer counts as lit
 ISO_CONST uint kImageStages = 10u;
 // Words of the control buffer: the filling pass's indirect dispatch (x, y, z), the pixels the

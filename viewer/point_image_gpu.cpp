@@ -46,14 +46,13 @@ enum Variant : uint32_t {
   kShade,
   kSmooth,
   kAntialias,
-  kFinish,
   kLit,
   kVariants
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
     ImageStep::Project, ImageStep::Fill,      ImageStep::Fill,
     ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Control,
-    ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Antialias, ImageStep::Finish,
+    ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Antialias,
     ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
@@ -66,7 +65,6 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
     {gpu::kImageStageAntialias, 0},
-    {gpu::kImageStageFinish, 0},
     {gpu::kImageStageLit, 0},
 }};
 
@@ -369,6 +367,8 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
   }
   const uint64_t pixels = eyePixels_;
   vkCmdFillBuffer(cb, blended_.buffer, 0, VK_WHOLE_SIZE, 0);
+  // The picture: the background, where anti-aliasing writes no pixel.
+  vkCmdFillBuffer(cb, pixels_.buffer, 0, VK_WHOLE_SIZE, imagePixelWord(settings.background));
   for (int k = 0; k < plan.layers; ++k) {
     const uint32_t set = k == 0 ? 0 : 1;
     const uint32_t zero[2] = {0, 0};
@@ -387,7 +387,6 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     indirect(kAntialias, set);  // and blending
     frame.stats.projected += n;
   }
-  dispatch(kFinish, 0, (pixels + 3) / 4);
   submitAndWait();
   if (shadows) shadowKey_ = std::move(key);
 

@@ -21,12 +21,12 @@ inline constexpr int kFillRoundsPerSubmit = 2;
 // The steps of a frame on the GPU, as its timestamps count them (GpuImageFrame::stepSeconds).
 enum class ImageStep : uint8_t {
   Wait,  // the GPU between two submits: the host looked at the filling's counts
-  Clear, Project, Fill, Control, Shade, Smooth, Antialias, Blend, Finish, Lit,
+  Clear, Project, Fill, Control, Shade, Smooth, Antialias, Blend, Lit,
   Count
 };
 inline constexpr std::array<const char*, size_t(ImageStep::Count)> kImageStepNames = {
     "wait", "clear", "project", "fill", "control", "shade", "smooth",
-    "antialias", "blend", "finish", "lit"};
+    "antialias", "blend", "lit"};
 
 // GPU bytes of a point (position, normal and color, a vec4 each), of its shadow texture for one
 // light, of a pixel's layers (the eye's or a light's image: the two filling alternates, the
