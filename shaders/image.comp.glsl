@@ -31,9 +31,8 @@ layout(std430, binding = 4) buffer Keys { uint64_t keys[]; };
 layout(std430, binding = 5) buffer LayerA { uvec2 layerA[]; };
 layout(std430, binding = 6) buffer LayerB { uvec2 layerB[]; };
 layout(std430, binding = 7) buffer LayerR { uvec2 layerR[]; };
-// Shaded colors (premultiplied RGBA): shade writes A, smooth A to B, anti-aliasing B to A.
+// Shaded colors (premultiplied RGBA), which smoothing reads (binding 9 is unused).
 layout(std430, binding = 8) buffer ColorA { vec4 colorA[]; };
-layout(std430, binding = 9) buffer ColorB { vec4 colorB[]; };
 // The layers blended so far, front to back (premultiplied RGBA).
 layout(std430, binding = 10) buffer Blend { vec4 blended[]; };
 // Per point and light, the samples of the light that reach it (shadow textures).
@@ -69,12 +68,31 @@ float pointShadow(uint i, uint light) {
 }
 // A layer's depth word as a depth (0: background).
 float depthOf(uint bits) { return bits == 0xFFFFFFFFu ? 0.0f : uintBitsToFloat(bits); }
-float layerDepth(ivec2 p) { return inside(p) ? depthOf(layerA[at(p)].y) : 0.0f; }
+// The smoothing stage (smoothTile) reads a tile's neighbourhood once into windows: the depths
+// and shaded colors of the tile and two pixels around (windowDepth, windowColor), then the
+// smoothed colors of the tile and a pixel around (windowSmooth), which anti-aliasing reads.
+const int kWindow = int(kImageFillTile) + 4, kSmoothed = int(kImageFillTile) + 2;
+float windowDepth[kWindow * kWindow];
+vec4 windowColor[kWindow * kWindow];
+vec4 windowSmooth[kSmoothed * kSmoothed];
+ivec2 windowOrigin = ivec2(0);  // the tile's first pixel
+bool windowSmoothed = false;    // layerColor reads the smoothed colors
+float layerDepth(ivec2 p) {
+  if (kStage == kImageStageSmooth) {
+    ivec2 q = p - windowOrigin + 2;
+    return windowDepth[q.y * kWindow + q.x];
+  }
+  return inside(p) ? depthOf(layerA[at(p)].y) : 0.0f;
+}
 uint layerIndex(ivec2 p) { return inside(p) ? layerA[at(p)].x : kImageNoPoint; }
 float referenceDepth(ivec2 p) { return inside(p) ? depthOf(layerR[at(p)].y) : 0.0f; }
 vec4 layerColor(ivec2 p) {
-  if (!inside(p)) return vec4(0.0f);
-  return kStage == kImageStageSmooth ? colorA[at(p)] : colorB[at(p)];
+  if (windowSmoothed) {
+    ivec2 q = p - windowOrigin + 1;
+    return windowSmooth[q.y * kSmoothed + q.x];
+  }
+  ivec2 q = p - windowOrigin + 2;
+  return windowColor[q.y * kWindow + q.x];
 }
 
 #include "image.h"
@@ -96,21 +114,6 @@ void wakeTiles(ivec2 p, uint mark, uint list) {
           tiles[5u * tileCount + atomicAdd(control[kImageControlTiles + 3u], 1u)] = xy;
       }
     }
-}
-
-// The pixel of this invocation in the tile of this workgroup, the tiles taken from `list`
-// (kImageControlTiles + list counts them); false past the list or the image.
-bool tilePixel(uint list, out ivec2 p) {
-  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
-  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
-  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-  p = ivec2(0);
-  if (group >= control[kImageControlTiles + list]) return false;
-  uint t = tiles[(2u + list) * tileCount + group];
-  p = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile) +
-      ivec2(int(gl_LocalInvocationID.x % kImageFillTile),
-            int(gl_LocalInvocationID.x / kImageFillTile));
-  return inside(p);
 }
 
 // A filling round: a workgroup eight tiles, an invocation a row of a tile (kImageFillTile
@@ -184,18 +187,50 @@ uint pixelWord(vec3 linear) {
   return word;
 }
 
-// A shading stage over a tile of list 3.
+// The tile of list 3 of this invocation (64 a workgroup): its first pixel, or false past the list.
+bool shadingTile(out ivec2 origin) {
+  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
+  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
+  uint listed = (gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x) * 64u +
+                gl_LocalInvocationID.x;
+  origin = ivec2(0);
+  if (listed >= control[kImageControlTiles + 3u]) return false;
+  uint t = tiles[5u * tileCount + listed];
+  origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
+  return true;
+}
+
+// Shading: an invocation a tile of list 3, pixel after pixel.
 void shadeTile() {
-  ivec2 p;
-  if (!tilePixel(3u, p)) return;
-  uint id = at(p);
-  if (kStage == kImageStageShade) {
-    colorA[id] = imageShade(p);
-  } else if (kStage == kImageStageSmooth) {
-    colorB[id] = imageSmooth(p);
-  } else {
-    // Anti-aliasing, and blending its color under the layers before (A kept as R); the
-    // picture's pixel over the background (the host filled the picture with the background).
+  ivec2 origin;
+  if (!shadingTile(origin)) return;
+  for (int k = 0; k < int(kImageFillTile * kImageFillTile); ++k) {
+    ivec2 p = origin + ivec2(k % int(kImageFillTile), k / int(kImageFillTile));
+    if (inside(p)) colorA[at(p)] = imageShade(p);
+  }
+}
+
+// Smoothing, anti-aliasing and blending: an invocation a tile of list 3. Its neighbourhood is
+// read once into the windows (lavapipe pays for every load, lane by lane), smoothed, then each
+// pixel anti-aliased and blended under the layers before (layer A kept as R), and the picture's
+// pixel written over the background (the host filled the picture with the background).
+void smoothTile() {
+  ivec2 origin;
+  if (!shadingTile(origin)) return;
+  windowOrigin = origin;
+  for (int k = 0; k < kWindow * kWindow; ++k) {
+    ivec2 q = origin - 2 + ivec2(k % kWindow, k / kWindow);
+    bool within = inside(q);
+    windowDepth[k] = within ? depthOf(layerA[at(q)].y) : 0.0f;
+    windowColor[k] = within ? colorA[at(q)] : vec4(0.0f);
+  }
+  for (int k = 0; k < kSmoothed * kSmoothed; ++k)
+    windowSmooth[k] = imageSmooth(origin - 1 + ivec2(k % kSmoothed, k / kSmoothed));
+  windowSmoothed = true;
+  for (int k = 0; k < int(kImageFillTile * kImageFillTile); ++k) {
+    ivec2 p = origin + ivec2(k % int(kImageFillTile), k / int(kImageFillTile));
+    if (!inside(p)) continue;
+    uint id = at(p);
     vec4 c = imageAntialias(p);
     vec4 sum = blended[id];
     sum += (1.0f - sum.a) * c;
@@ -210,9 +245,12 @@ void main() {
     fillRow();
     return;
   }
-  if (kStage == kImageStageShade || kStage == kImageStageSmooth ||
-      kStage == kImageStageAntialias) {
+  if (kStage == kImageStageShade) {
     shadeTile();
+    return;
+  }
+  if (kStage == kImageStageSmooth) {
+    smoothTile();
     return;
   }
   // Dispatches wider than a row of workgroups continue on the next rows (gl_NumWorkGroups.y).
@@ -247,9 +285,10 @@ void main() {
     // Kind 2 starts filling: round 0 over the tiles projection listed.
     if (id != 0u) return;
     if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
-      // Filling takes 64 / kImageFillTile tiles a workgroup (fillRow), shading one.
+      // Filling takes 64 / kImageFillTile tiles a workgroup (fillRow), shading 64.
       uint first = control[kImageControlTiles + kKind];
-      uint groups = kKind == 3u ? first : (first + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
+      uint groups = kKind == 3u ? (first + 63u) / 64u
+                                : (first + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
       uint x = min(groups, 65535u);
       control[0] = x;
       control[1] = x == 0u ? 1u : (groups + x - 1u) / x;

@@ -216,10 +216,8 @@ ISO_CONST uint kImageStageProject = 0u;    // a point into layer A (64-bit atomi
 ISO_CONST uint kImageStageFill = 2u;       // one filling pass, layer A into layer B (ping-pong)
 ISO_CONST uint kImageStageControl = 3u;    // whether the next filling pass runs
 ISO_CONST uint kImageStageShade = 4u;      // layer A's pixels shaded
-ISO_CONST uint kImageStageSmooth = 5u;
-ISO_CONST uint kImageStageAntialias = 6u;
-ISO_CONST uint kImageStageBlend = 7u;      // the layer under the ones before; A kept as R
-                                           // (the GPU blends in its anti-aliasing stage)
+ISO_CONST uint kImageStageSmooth = 5u;     // smoothed, anti-aliased, blended under the layers
+                                           // before (A kept as R), into the picture's pixels
 ISO_CONST uint kImageStageLit = 9u;        // a point of a light's first layer counts as lit
 ISO_CONST uint kImageStages = 10u;
 // Words of the control buffer: the filling pass's indirect dispatch (x, y, z), the pixels the

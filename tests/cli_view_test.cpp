@@ -325,7 +325,7 @@ TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
   // A budget with room for about 1,900 points: a uniform subsample (the kitten's kept points are
   // one chunk, with no coarser one: keep_points_test tests the cut of finer files).
   for (const std::string& input : {kitten, quoted(kept)}) {
-    run = iso("view " + input + " --draw image --cpu --vram 19340000 --out " + quoted(small) +
+    run = iso("view " + input + " --draw image --cpu --vram 18829000 --out " + quoted(small) +
               size);
     ASSERT_EQ(run.exitCode, 0) << run.err;
     const size_t drawn = std::stoul(run.out);

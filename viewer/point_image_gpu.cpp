@@ -45,15 +45,13 @@ enum Variant : uint32_t {
   kControlShading,
   kShade,
   kSmooth,
-  kAntialias,
   kLit,
   kVariants
 };
 constexpr std::array<ImageStep, kVariants> kVariantSteps = {
     ImageStep::Project, ImageStep::Fill,      ImageStep::Fill,
     ImageStep::Control, ImageStep::Control, ImageStep::Control,   ImageStep::Control,
-    ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Antialias,
-    ImageStep::Lit};
+    ImageStep::Shade,   ImageStep::Smooth,  ImageStep::Lit};
 constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageProject, 0},
     {gpu::kImageStageFill, 0},
@@ -64,7 +62,6 @@ constexpr std::array<std::array<uint32_t, 2>, kVariants> kVariantConstants = {{
     {gpu::kImageStageControl, 3},
     {gpu::kImageStageShade, 0},
     {gpu::kImageStageSmooth, 0},
-    {gpu::kImageStageAntialias, 0},
     {gpu::kImageStageLit, 0},
 }};
 
@@ -152,7 +149,7 @@ ImageBudget imageBudget(uint64_t vram, uint64_t points, uint32_t width, uint32_t
 uint64_t GpuPointImage::memoryBytes() const {
   uint64_t sum = 0;
   for (const Buffer* b : {&positions_, &normals_, &colors_, &params_, &layerA_, &layerB_,
-                          &layerR_, &colorA_, &colorB_, &blended_, &lit_, &control_, &pixels_,
+                          &layerR_, &colorA_, &blended_, &lit_, &control_, &pixels_,
                           &tiles_})
     sum += b->allocated;
   return sum;
@@ -180,7 +177,6 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
   }
   if (eyePixels != eyePixels_) {
     colorA_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
-    colorB_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
     blended_ = createBuffer(gpu_, eyePixels * 16, kStorage, false);
     pixels_ = createBuffer(gpu_, eyePixels * 4, kStorage, true);
     eyePixels_ = eyePixels;
@@ -206,7 +202,7 @@ void GpuPointImage::prepare(const ImagePlan& plan, size_t lights) {
     // Binding 4, the keys, is layer A's buffer (shaders/image.comp.glsl).
     const Buffer* storage[] = {&positions_, &normals_, &colors_, side == 0 ? &layerA_ : &layerB_,
                                side == 0 ? &layerA_ : &layerB_, side == 0 ? &layerB_ : &layerA_,
-                               &layerR_,    &colorA_,  &colorB_, &blended_,
+                               &layerR_,    &colorA_,  &colorA_, &blended_,
                                &lit_,       &control_, &pixels_, &tiles_};
     infos.push_back({params_.buffer, slot * kParamsStride, sizeof(ImageParams)});
     for (const Buffer* b : storage) infos.push_back({b->buffer, 0, VK_WHOLE_SIZE});
@@ -381,10 +377,9 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     // Shading over the tiles any filling round listed (every covered pixel's and those around).
     dispatch(kControlShading, set, 1);
     indirect(kShade, set);
-    indirect(kSmooth, set);
     vkCmdFillBuffer(cb, layerR_.buffer, 0, pixels * 8, 0);  // blending keeps the layer as R
     barrier(cb);
-    indirect(kAntialias, set);  // and blending
+    indirect(kSmooth, set);  // smoothing, anti-aliasing and blending
     frame.stats.projected += n;
   }
   submitAndWait();

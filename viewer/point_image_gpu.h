@@ -21,19 +21,20 @@ inline constexpr int kFillRoundsPerSubmit = 2;
 // The steps of a frame on the GPU, as its timestamps count them (GpuImageFrame::stepSeconds).
 enum class ImageStep : uint8_t {
   Wait,  // the GPU between two submits: the host looked at the filling's counts
-  Clear, Project, Fill, Control, Shade, Smooth, Antialias, Blend, Lit,
+  Clear, Project, Fill, Control, Shade,
+  Smooth,  // smoothing, anti-aliasing and blending (one stage)
+  Lit,
   Count
 };
 inline constexpr std::array<const char*, size_t(ImageStep::Count)> kImageStepNames = {
-    "wait", "clear", "project", "fill", "control", "shade", "smooth",
-    "antialias", "blend", "lit"};
+    "wait", "clear", "project", "fill", "control", "shade", "smooth+aa", "lit"};
 
 // GPU bytes of a point (position, normal and color, a vec4 each), of its shadow texture for one
 // light, of a pixel's layers (the eye's or a light's image: the two filling alternates, the
-// first also holding the projection's keys, and the previous layer, 8 bytes each) and of a pixel of the eye's picture (two layers' and the blended colors, and
-// the sRGB word).
+// first also holding the projection's keys, and the previous layer, 8 bytes each) and of a
+// pixel of the eye's picture (the shaded and the blended colors, and the sRGB word).
 inline constexpr uint64_t kImagePointBytes = 48, kImageLitBytes = 4;
-inline constexpr uint64_t kImageLayerPixelBytes = 24, kImagePicturePixelBytes = 52;
+inline constexpr uint64_t kImageLayerPixelBytes = 24, kImagePicturePixelBytes = 36;
 
 // What fits in `vram` bytes for a picture of width × height: the points drawn (all `points`, or a
 // subsample of at most three quarters of what is left after the picture) and the lights' images'
@@ -79,7 +80,7 @@ class GpuPointImage {
   const PointImageScene* scene_;
   ComputePipeline pipeline_;
   Buffer positions_, normals_, colors_;
-  Buffer params_, layerA_, layerB_, layerR_, colorA_, colorB_, blended_, lit_, control_,
+  Buffer params_, layerA_, layerB_, layerR_, colorA_, blended_, lit_, control_,
       pixels_, tiles_;
   Owned<VkQueryPool> queries_;
   VkCommandBuffer cb_ = VK_NULL_HANDLE;
