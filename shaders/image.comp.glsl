@@ -116,39 +116,44 @@ void wakeTiles(ivec2 p, uint mark, uint list) {
     }
 }
 
-// A filling round: a workgroup eight tiles, an invocation a row of a tile (kImageFillTile
-// pixels). The row and the rows above and below it, a pixel beyond at each end, are read once
-// (lavapipe pays for every load, lane by lane), and each pixel's 3×3 neighbours are taken from
-// them; the masks' rings beyond, for the few pixels that get that far, from the layer.
-void fillRow() {
+// A filling round: an invocation kFillRows rows of a tile (kImageFillTile pixels wide),
+// kFillTiles tiles a workgroup. Its rows and the rows above and below them, a pixel beyond at
+// each end, are read once (lavapipe pays for every load, lane by lane), and each pixel's 3×3
+// neighbours are taken from them; the masks' rings beyond, for the few pixels that get that
+// far, from the layer.
+const int kFillRows = 8;
+const uint kFillTiles = 64u / (kImageFillTile / uint(kFillRows));
+void fillRows() {
   uint pass = control[kImageControlRound];
   uint list = pass == 0u ? 2u : (pass & 1u);
   uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
   uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
   uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-  uint listed = group * (64u / kImageFillTile) + gl_LocalInvocationID.x / kImageFillTile;
+  uint perTile = kImageFillTile / uint(kFillRows);
+  uint listed = group * kFillTiles + gl_LocalInvocationID.x / perTile;
   if (listed >= control[kImageControlTiles + list]) return;
   uint t = tiles[(2u + list) * tileCount + listed];
   ivec2 origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
-  int y = origin.y + int(gl_LocalInvocationID.x % kImageFillTile);
-  if (y >= int(Q.image.y)) return;
+  int top = origin.y + int(gl_LocalInvocationID.x % perTile) * kFillRows;
   const int kWide = int(kImageFillTile) + 2;
-  float depths[3 * kWide];
-  uint points[3 * kWide];
-  for (int row = 0; row < 3; ++row)
+  float depths[(kFillRows + 2) * kWide];
+  uint points[(kFillRows + 2) * kWide];
+  for (int row = 0; row < kFillRows + 2; ++row)
     for (int c = 0; c < kWide; ++c) {
-      ivec2 q = ivec2(origin.x - 1 + c, y - 1 + row);
+      ivec2 q = ivec2(origin.x - 1 + c, top - 1 + row);
       uvec2 v = inside(q) ? layerA[at(q)] : uvec2(kImageNoPoint, 0u);
       depths[row * kWide + c] = depthOf(v.y);
       points[row * kWide + c] = v.x;
     }
   uint changed = 0u;
-  for (int i = 0; i < int(kImageFillTile); ++i) {
-    ivec2 p = ivec2(origin.x + i, y);
-    if (p.x >= int(Q.image.x)) break;
-    float self = depths[kWide + i + 1];
+  for (int k = 0; k < kFillRows * int(kImageFillTile); ++k) {
+    int i = k % int(kImageFillTile), j = k / int(kImageFillTile);
+    ivec2 p = ivec2(origin.x + i, top + j);
+    if (!inside(p)) continue;
+    int centre = (j + 1) * kWide + i + 1;
+    float self = depths[centre];
     float depth = self;
-    uint index = points[kWide + i + 1];
+    uint index = points[centre];
     if ((kKind == 0u) == (self == 0.0f)) {
       // imageFill's 3×3 part, in its order
       float best = 2.0f;
@@ -156,12 +161,12 @@ void fillRow() {
       uint ring = 0u;
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
-          float d = depths[(dy + 1) * kWide + i + 1 + dx];
+          float d = depths[centre + dy * kWide + dx];
           if ((dx == 0 && dy == 0) || !imageCovers(d, self)) continue;
           ring |= imageMaskBits(dx, dy);
           if (d < best) {
             best = d;
-            from = points[(dy + 1) * kWide + i + 1 + dx];
+            from = points[centre + dy * kWide + dx];
           }
         }
       if (best <= 1.0f && imageFillBeyond(p, int(pass), self, best, from, ring, depth, index))
@@ -169,10 +174,10 @@ void fillRow() {
     }
     layerB[at(p)] = uvec2(index, floatBitsToUint(depth));
   }
-  // The tiles a changed pixel wakes are its tile's and those around: once for the row.
+  // The tiles a changed pixel wakes are its tile's and those around: once for the rows.
   if (changed != 0u) {
     atomicAdd(control[kImageControlChanged], changed);
-    wakeTiles(ivec2(origin.x, y), pass + 1u, (pass + 1u) & 1u);
+    wakeTiles(origin, pass + 1u, (pass + 1u) & 1u);
   }
 }
 
@@ -242,7 +247,7 @@ void smoothTile() {
 
 void main() {
   if (kStage == kImageStageFill) {
-    fillRow();
+    fillRows();
     return;
   }
   if (kStage == kImageStageShade) {
@@ -285,10 +290,9 @@ void main() {
     // Kind 2 starts filling: round 0 over the tiles projection listed.
     if (id != 0u) return;
     if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
-      // Filling takes 64 / kImageFillTile tiles a workgroup (fillRow), shading 64.
+      // Filling takes kFillTiles tiles a workgroup (fillRows), shading 64.
       uint first = control[kImageControlTiles + kKind];
-      uint groups = kKind == 3u ? (first + 63u) / 64u
-                                : (first + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
+      uint groups = kKind == 3u ? (first + 63u) / 64u : (first + kFillTiles - 1u) / kFillTiles;
       uint x = min(groups, 65535u);
       control[0] = x;
       control[1] = x == 0u ? 1u : (groups + x - 1u) / x;
@@ -303,7 +307,7 @@ void main() {
     if (changed) control[kImageControlPasses + kKind] += 1u;
     uint next = control[kImageControlRound] + 1u;
     uint listed = changed ? control[kImageControlTiles + (next & 1u)] : 0u;
-    uint groups = (listed + 64u / kImageFillTile - 1u) / (64u / kImageFillTile);
+    uint groups = (listed + kFillTiles - 1u) / kFillTiles;
     uint x = min(groups, 65535u);
     control[0] = x;
     control[1] = x == 0u ? 1u : (groups + x - 1u) / x;
