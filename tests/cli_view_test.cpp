@@ -297,6 +297,42 @@ TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
   EXPECT_GT(changed, lit.size() / 20);
 }
 
+// The tracer's window: K steps through the surface, the kept points as splats, both, and the
+// kept points as image-space points (read when first asked for), then back to the surface.
+TEST(CliView, theTracersWindowDrawsTheKeptPointsInImageSpaceOnKeyK) {
+  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
+    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  const auto kept = dir / "kept.iso";
+  const CommandResult run =
+      iso("convert --quiet --keep-points " + quoted(data / "kitten_normals.xyz") + " -o " +
+          quoted(kept));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const std::string command =
+      "xvfb-run -a -s '-screen 0 800x600x24' " +
+      quoted(data / ".." / "viewer" / "mode_window_session.sh") + " " + std::string(ISO_BINARY) +
+      " " + quoted(kept) + " " + quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
+  const int status = std::system(command.c_str());
+  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
+      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  const std::string out = slurp(dir / "out.txt");
+  EXPECT_NE(out.find("drawing 5210 kept points as image-space points"), std::string::npos) << out;
+  expectPicture(dir / "iso-screenshot-1.png", 240, 180);
+  expectPicture(dir / "iso-screenshot-2.png", 240, 180);
+  uint32_t w = 0, h = 0;
+  const auto points = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
+  const auto surface = viewer::readImage(dir / "iso-screenshot-2.png", w, h);
+  // Image-space points over their black background, a fifth of the picture or so; the surface
+  // again under the tracer's sky.
+  size_t drawn = 0;
+  for (uint32_t p : points) drawn += p != points[0];
+  EXPECT_EQ(points[0] & 0xFFFFFF, 0u);
+  EXPECT_GT(drawn, points.size() / 20);
+  EXPECT_LT(drawn, points.size() / 2);
+  EXPECT_NE(surface[0] & 0xFFFFFF, 0u);
+}
+
 // The kept points of an .iso file drawn as image-space points: the level of detail that fits
 // --vram (all of the kitten's here, or a subsample under a small budget), as the raw scan draws.
 TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {

@@ -84,20 +84,15 @@ struct ImageWindowGpu {
   Gpu gpu;
   Owned<VkSurfaceKHR> surface;
   Swapchain swapchain;
-  Buffer staging;  // the picture in the swapchain's byte order
-  VkCommandBuffer cb = VK_NULL_HANDLE;
-  Owned<VkFence> copied;
-  Owned<VkSemaphore> acquired;
   std::vector<Owned<VkSemaphore>> rendered;  // per swapchain image
+  PictureShow picture;
 
   ImageWindowGpu(GLFWwindow* window, const ViewOptions& o)
       : gpu(createGpu(windowGpuOptions(o))),
         surface(surfaceOf(gpu, window)),
         swapchain(createSwapchain(gpu, surface, o.width, o.height)),
-        cb(allocateCommandBuffer(gpu)),
-        copied(createFence(gpu, false)),
-        acquired(createSemaphore(gpu)),
-        rendered(semaphores(gpu, swapchain.images.size())) {}
+        rendered(semaphores(gpu, swapchain.images.size())),
+        picture(gpu) {}
 
   bool bgra() const { return swapchain.format == VK_FORMAT_B8G8R8A8_UNORM; }
 
@@ -109,43 +104,7 @@ struct ImageWindowGpu {
 
   // Show a picture of the swapchain's size (RGBA words). Returns whether the swapchain no
   // longer matches the window.
-  bool show(const std::vector<uint32_t>& rgba) {
-    const VkDeviceSize bytes = rgba.size() * 4;
-    if (staging.size < bytes)
-      staging = createBuffer(gpu, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, true);
-    const std::vector<uint32_t> words = toRgba(rgba, bgra());
-    std::memcpy(staging.mapped, words.data(), bytes);
-    uint32_t index = 0;
-    const VkResult acquire = vkAcquireNextImageKHR(gpu.device, swapchain.swapchain, UINT64_MAX,
-                                                   acquired.get(), VK_NULL_HANDLE, &index);
-    if (acquire == VK_ERROR_OUT_OF_DATE_KHR) return true;
-    if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
-      checkVk(acquire, "vkAcquireNextImageKHR");
-    ISO_VK(vkResetCommandBuffer(cb, 0));
-    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    ISO_VK(vkBeginCommandBuffer(cb, &begin));
-    recordCopyToSwapchain(cb, staging.buffer, swapchain.extent.width, swapchain.extent.height,
-                          swapchain.images[index]);
-    ISO_VK(vkEndCommandBuffer(cb));
-    const VkSemaphore wait = acquired.get(), signal = rendered[index].get();
-    const VkPipelineStageFlags stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
-    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
-    submit.waitSemaphoreCount = 1;
-    submit.pWaitSemaphores = &wait;
-    submit.pWaitDstStageMask = &stage;
-    submit.commandBufferCount = 1;
-    submit.pCommandBuffers = &cb;
-    submit.signalSemaphoreCount = 1;
-    submit.pSignalSemaphores = &signal;
-    VkFence fence = copied.get();
-    ISO_VK(vkResetFences(gpu.device, 1, &fence));
-    ISO_VK(vkQueueSubmit(gpu.queue, 1, &submit, fence));
-    const bool stale = present(gpu, swapchain, index, signal);
-    // The staging buffer and the command buffer are the next frame's: wait for the copy.
-    ISO_VK(vkWaitForFences(gpu.device, 1, &fence, VK_TRUE, UINT64_MAX));
-    return stale || acquire == VK_SUBOPTIMAL_KHR;
-  }
+  bool show(const std::vector<uint32_t>& rgba) { return picture.show(swapchain, rendered, rgba); }
 };
 
 }  // namespace

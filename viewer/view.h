@@ -4,6 +4,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
+#include <memory>
 #include <string>
 
 #include "viewer/scene.h"
@@ -55,6 +57,15 @@ void placeGround(Scene& scene, const Asset& asset);
 int viewHeadless(const ViewOptions& options);
 int viewCpu(const ViewOptions& options);
 int viewBench(const ViewOptions& options);
-int viewWindow(const ViewOptions& options);
+struct ImageInputs;
+struct ImageViewOptions;
+// The window's image-space mode (key K after surface, points and both; image_view.h): the .iso
+// file's kept points, read the first time the mode is asked for (an error, for a file that keeps
+// none, leaves the window as it was), drawn with `options`. Without `read`, K has three steps.
+struct WindowImageMode {
+  std::function<std::shared_ptr<const ImageInputs>()> read;
+  std::shared_ptr<const ImageViewOptions> options;
+};
+int viewWindow(const ViewOptions& options, const WindowImageMode& image = {});
 
 }  // namespace iso::viewer

@@ -3,7 +3,8 @@
 //
 // Mouse: left drag orbits, right or middle drag pans, the wheel zooms. Keys: W A S D fly, Q E
 // down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden),
-// K what is drawn (surface, kept points as splats, both), + and - samples per pixel, P
+// K what is drawn (surface, kept points as splats, both, and the kept points as image-space
+// points: image_window.cpp's drawing, in this window), + and - samples per pixel, P
 // screenshot, R reloads the scene file (it also reloads by itself
 // when the file changes), Esc quits.
 #include <fmt/core.h>
@@ -16,6 +17,8 @@
 
 #include "viewer/asset.h"
 #include "viewer/image.h"
+#include "viewer/image_view.h"
+#include "viewer/point_image_gpu.h"
 #include "viewer/renderer.h"
 #include "viewer/view.h"
 #include "viewer/window_parts.h"
@@ -25,14 +28,22 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Keys 1, 2, 3, B, K, C, + and -. C turns the caustics of --caustics N off and on.
-void applySwitches(Input& input, Scene& scene, uint32_t photons) {
+// Keys 1, 2, 3, B, K, C, + and -. C turns the caustics of --caustics N off and on. K steps
+// through what is drawn, the image-space mode last when the window has one (`image`).
+void applySwitches(Input& input, Scene& scene, uint32_t photons, bool* image) {
   for (const int toggled : input.toggled) {
     if (toggled == 1) scene.shadows = !scene.shadows;
     if (toggled == 2) scene.reflections = !scene.reflections;
     if (toggled == 3) scene.refractions = !scene.refractions;
     if (toggled == 4) scene.backFaces = BackFaces((int(scene.backFaces) + 1) % 3);
-    if (toggled == 5) scene.draw = Draw((int(scene.draw) + 1) % 3);
+    if (toggled == 5 && image && *image) {
+      *image = false;
+      scene.draw = Draw::Surface;
+    } else if (toggled == 5 && image && scene.draw == Draw::Both) {
+      *image = true;
+    } else if (toggled == 5) {
+      scene.draw = Draw((int(scene.draw) + 1) % 3);
+    }
     if (toggled == 6 && photons == 0)
       fmt::print("iso view: no caustics to show (start with --caustics N)\n");
     if (toggled == 6) scene.caustics = scene.caustics > 0 ? 0 : photons;
@@ -146,6 +157,59 @@ struct WindowGpu {
   }
 };
 
+// The window's image-space mode: the kept points, read and put on the device the first time the
+// mode is asked for, and shown as pictures.
+struct ImageMode {
+  const WindowImageMode* mode = nullptr;
+  bool failed = false;  // the file has no points to draw that way (said once)
+  std::shared_ptr<const ImageInputs> inputs;
+  std::unique_ptr<PointImageScene> scene;
+  std::unique_ptr<GpuPointImage> renderer;  // draws *scene
+  std::unique_ptr<PictureShow> show;
+  std::vector<uint32_t> lastPicture;  // RGBA, the swapchain's size
+  double frameSeconds = 0.0;          // drawing, since the title changed
+  uint32_t frames = 0;                // since the title changed
+
+  // Ready to draw; false (the reader's error printed) when there is nothing to draw.
+  bool ready(Gpu& gpu, const Scene& sceneNow) {
+    if (renderer) return true;
+    if (failed) return false;
+    try {
+      inputs = mode->read();
+      scene = std::make_unique<PointImageScene>(withOpacity(inputs->objects, sceneNow.image));
+      renderer = std::make_unique<GpuPointImage>(gpu, *scene);
+      show = std::make_unique<PictureShow>(gpu);
+    } catch (const std::exception& e) {
+      fmt::print(stderr, "iso view: {}\n", e.what());
+      failed = true;
+      return false;
+    }
+    fmt::print("iso view: drawing {} kept points as image-space points (K again: the surface)\n",
+               scene->size());
+    return true;
+  }
+
+  // Draws the kept points from the scene's camera into the window. Returns whether the
+  // swapchain no longer matches the window.
+  bool draw(const ViewOptions& options, const Scene& sceneNow, const Swapchain& swapchain,
+            const std::vector<Owned<VkSemaphore>>& rendered) {
+    const auto lights = lightsOf(sceneNow, *inputs, *sceneNow.camera);
+    ViewOptions sized = options;
+    sized.width = swapchain.extent.width;
+    sized.height = swapchain.extent.height;
+    const ImageSettings settings =
+        budgeted(settingsOf(sceneNow, *mode->options), sized, scene->size(), lights.size());
+    const auto t0 = Clock::now();
+    GpuImageFrame frame = renderer->render(
+        cameraOf(*inputs, *sceneNow.camera, sized.width, sized.height), lights, settings);
+    frameSeconds += std::chrono::duration<double>(Clock::now() - t0).count();
+    ++frames;
+    const bool stale = show->show(swapchain, rendered, frame.pixels);
+    lastPicture = std::move(frame.pixels);
+    return stale;
+  }
+};
+
 // Save the last frame drawn (this waits for the frames in flight).
 void saveScreenshot(const std::filesystem::path& file, Renderer& renderer, bool bgra) {
   const std::vector<uint32_t> pixels = toRgba(renderer.pixels(), bgra);
@@ -155,7 +219,7 @@ void saveScreenshot(const std::filesystem::path& file, Renderer& renderer, bool 
 
 }  // namespace
 
-int viewWindow(const ViewOptions& options) {
+int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
   const auto asset = Asset::open(options.file);
   Scene scene = completeScene(options, *asset);
   std::optional<Environment> env;
@@ -184,38 +248,62 @@ int viewWindow(const ViewOptions& options) {
   auto last = Clock::now(), titleTime = last;
   uint32_t frames = 0, screenshots = 0;
   const auto header = asset->reader.header();
+  ImageMode drawImage;
+  drawImage.mode = &image;
+  bool imageOn = false, imageWasOn = false;
   while (!glfwWindowShouldClose(window)) {
     glfwPollEvents();
     const auto now = Clock::now();
     const double dt = std::chrono::duration<double>(now - last).count();
     last = now;
     moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height);
-    applySwitches(input, scene, options.scene.caustics);
+    applySwitches(input, scene, options.scene.caustics, image.read ? &imageOn : nullptr);
     reloadScene(options, input, scene, sceneTime, [&](Scene& next) {
       if (next.lights.empty()) next.lights.push_back(defaultLight(*next.camera, asset->bounds));
       placeGround(next, *asset);
     });
     if (!fitToWindow(window, w, stale)) continue;  // minimized
-    renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
-    stale = w.draw();
+    if (imageOn && !imageWasOn) {
+      renderer.finish();  // the traced frames in flight present before the pictures
+      if (!drawImage.ready(w.gpu, scene)) {
+        imageOn = false;
+        scene.draw = Draw::Surface;
+      }
+    }
+    imageWasOn = imageOn;
+    if (imageOn) {
+      stale = drawImage.draw(options, scene, w.swapchain, w.rendered);
+    } else {
+      renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
+      stale = w.draw();
+    }
     ++frames;
     // The last frame: --frames reached, or the window asked to close (Escape, its close button)
     // while this one was prepared.
     const bool lastFrame =
         (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
-    if (input.screenshot)
-      saveScreenshot(fmt::format("iso-screenshot-{}.png", ++screenshots), renderer, bgra);
+    const auto save = [&](const std::filesystem::path& file) {
+      if (!imageOn) return saveScreenshot(file, renderer, bgra);
+      writeImage(file, w.swapchain.extent.width, w.swapchain.extent.height, drawImage.lastPicture);
+      fmt::print("iso view: saved {}\n", file.string());
+    };
+    if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));
     input.screenshot = false;
-    if (lastFrame && !options.screenshot.empty())
-      saveScreenshot(options.screenshot, renderer, bgra);
+    if (lastFrame && !options.screenshot.empty()) save(options.screenshot);
     if (lastFrame) renderer.finish();
     const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
     if (sinceTitle > 0.5 || lastFrame) {
-      const std::string text = titleText(title, shownStats, sinceTitle, renderer.stats());
+      const std::string text =
+          !imageOn ? titleText(title, shownStats, sinceTitle, renderer.stats())
+                   : fmt::format("{} | image-space points | {:.1f} ms a frame | {} points", title,
+                                 drawImage.frameSeconds * 1e3 / std::max(drawImage.frames, 1u),
+                                 drawImage.scene->size());
       glfwSetWindowTitle(window, text.c_str());
       if (lastFrame) fmt::print("{}\n", text);
       titleTime = Clock::now();
       shownStats = {};
+      drawImage.frames = 0;
+      drawImage.frameSeconds = 0.0;
     }
     if (lastFrame) break;
   }

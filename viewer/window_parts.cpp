@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace iso::viewer {
@@ -242,6 +243,54 @@ GlfwWindow::GlfwWindow(uint32_t width, uint32_t height, const std::string& title
 GlfwWindow::~GlfwWindow() {
   glfwDestroyWindow(window_);
   glfwTerminate();
+}
+
+PictureShow::PictureShow(Gpu& gpu)
+    : gpu_(gpu),
+      cb_(allocateCommandBuffer(gpu)),
+      copied_(createFence(gpu, false)),
+      acquired_(createSemaphore(gpu)) {}
+
+bool PictureShow::show(const Swapchain& swapchain,
+                       const std::vector<Owned<VkSemaphore>>& rendered,
+                       const std::vector<uint32_t>& rgba) {
+  const VkDeviceSize bytes = rgba.size() * 4;
+  if (staging_.size < bytes)
+    staging_ = createBuffer(gpu_, bytes, VK_BUFFER_USAGE_TRANSFER_SRC_BIT, true);
+  const bool bgra = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
+  const std::vector<uint32_t> words = toRgba(rgba, bgra);
+  std::memcpy(staging_.mapped, words.data(), bytes);
+  uint32_t index = 0;
+  const VkResult acquire = vkAcquireNextImageKHR(gpu_.device, swapchain.swapchain.get(),
+                                                 UINT64_MAX, acquired_.get(), VK_NULL_HANDLE,
+                                                 &index);
+  if (acquire == VK_ERROR_OUT_OF_DATE_KHR) return true;
+  if (acquire != VK_SUCCESS && acquire != VK_SUBOPTIMAL_KHR)
+    checkVk(acquire, "vkAcquireNextImageKHR");
+  ISO_VK(vkResetCommandBuffer(cb_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  ISO_VK(vkBeginCommandBuffer(cb_, &begin));
+  recordCopyToSwapchain(cb_, staging_.buffer, swapchain.extent.width, swapchain.extent.height,
+                        swapchain.images[index]);
+  ISO_VK(vkEndCommandBuffer(cb_));
+  const VkSemaphore wait = acquired_.get(), signal = rendered[index].get();
+  const VkPipelineStageFlags stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  submit.waitSemaphoreCount = 1;
+  submit.pWaitSemaphores = &wait;
+  submit.pWaitDstStageMask = &stage;
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &cb_;
+  submit.signalSemaphoreCount = 1;
+  submit.pSignalSemaphores = &signal;
+  VkFence fence = copied_.get();
+  ISO_VK(vkResetFences(gpu_.device, 1, &fence));
+  ISO_VK(vkQueueSubmit(gpu_.queue, 1, &submit, fence));
+  const bool stale = present(gpu_, swapchain, index, signal);
+  // The staging buffer and the command buffer are the next picture's: wait for the copy.
+  ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
+  return stale || acquire == VK_SUBOPTIMAL_KHR;
 }
 
 }  // namespace iso::viewer

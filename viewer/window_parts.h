@@ -94,6 +94,25 @@ bool fitToWindow(GLFWwindow* window, WindowGpu& w, bool stale) {
   return true;
 }
 
+// Shows pictures made on the host (RGBA words, the swapchain's size): each is copied into a
+// host-visible buffer, from there into an acquired swapchain image, and presented; the host
+// waits for the copy, so nothing of it is in flight afterwards.
+class PictureShow {
+ public:
+  explicit PictureShow(Gpu& gpu);
+  // `rendered`: a semaphore per swapchain image, which the presentation waits on. Returns
+  // whether the swapchain no longer matches the window.
+  bool show(const Swapchain& swapchain, const std::vector<Owned<VkSemaphore>>& rendered,
+            const std::vector<uint32_t>& rgba);
+
+ private:
+  Gpu& gpu_;
+  Buffer staging_;  // the picture in the swapchain's byte order
+  VkCommandBuffer cb_ = VK_NULL_HANDLE;
+  Owned<VkFence> copied_;
+  Owned<VkSemaphore> acquired_;
+};
+
 // The options of a device that presents to GLFW windows.
 GpuOptions windowGpuOptions(const ViewOptions& o);
 

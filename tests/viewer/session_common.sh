@@ -1,4 +1,5 @@
-# Sourced by the window sessions (window_session.sh, image_window_session.sh): `open_window
+# Sourced by the window sessions (window_session.sh, image_window_session.sh,
+# mode_window_session.sh): `open_window
 # ARGS...` starts `iso view ARGS... --frames 20000 --screenshot final.png` in the background
 # (out.txt, err.txt), sets $pid and $window once its window appears, and fails when none does.
 # --frames only bounds a session that hangs: the session closes the window with Escape.

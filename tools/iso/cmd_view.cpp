@@ -44,32 +44,58 @@ struct ViewArgs {
   bool noSmooth = false, eyeDome = false;
 };
 
-// Raw scans, or --draw image: the point files read (a uniform subsample of them beyond what fits
-// --vram) and drawn as image-space points; the window opens at once and draws what is read so
-// far.
-int viewImage(ViewArgs& a) {
+// The image-space settings of the command line (the rest come from the scene).
+void setImageOptions(ViewArgs& a) {
   viewer::ImageSettings& s = a.image.settings;
   s.antialias = a.antialias == "off"     ? viewer::ImageAntialias::Off
                 : a.antialias == "edges" ? viewer::ImageAntialias::Edges
                                          : viewer::ImageAntialias::Silhouettes;
   s.smooth = !a.noSmooth;
   s.shadows = true;  // unless --no-shadows (the scene's)
+}
+
+// The points read, in the scene's material color where they have none.
+void colorPoints(const ViewArgs& a, viewer::ImageInputs& inputs) {
+  if (a.view.scene.material.color != viewer::Material{}.color)
+    for (auto& o : inputs.objects)
+      if (o.colors.empty())
+        o.color = glm::vec3(a.view.scene.material.color[0], a.view.scene.material.color[1],
+                            a.view.scene.material.color[2]);
+}
+
+// The most points --vram holds beside the picture.
+uint64_t imagePointBudget(const ViewArgs& a) {
+  const size_t lights = std::max<size_t>(a.view.scene.lights.size(), 1);
+  return viewer::imageBudget(a.view.vram, UINT64_MAX, a.view.width, a.view.height, lights).points;
+}
+
+// The tracer window's image-space mode (key K): the .iso file's kept points, read when asked.
+viewer::WindowImageMode windowImageMode(ViewArgs& a) {
+  setImageOptions(a);
+  viewer::WindowImageMode mode;
+  mode.options = std::make_shared<viewer::ImageViewOptions>(a.image);
+  mode.read = [&a] {
+    ImageFiles files = openImageFiles({a.view.file}, imagePointBudget(a));
+    auto inputs = std::make_shared<viewer::ImageInputs>(readImageInputs(files));
+    colorPoints(a, *inputs);
+    return std::shared_ptr<const viewer::ImageInputs>(std::move(inputs));
+  };
+  return mode;
+}
+
+// Raw scans, or --draw image: the point files read (a uniform subsample of them beyond what fits
+// --vram) and drawn as image-space points; the window opens at once and draws what is read so
+// far.
+int viewImage(ViewArgs& a) {
+  setImageOptions(a);
   const auto& opacity = a.view.scene.image.opacity;
   if (opacity.size() > 1 && opacity.size() != a.files.size())
     throw UsageError(fmt::format("--opacity: one number, or one for each of the {} files",
                                  a.files.size()));
-  const size_t lights = std::max<size_t>(a.view.scene.lights.size(), 1);
   ImageLoad load;
-  load.maxPoints =
-      viewer::imageBudget(a.view.vram, UINT64_MAX, a.view.width, a.view.height, lights).points;
+  load.maxPoints = imagePointBudget(a);
   ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, load.maxPoints);
-  const auto finish = [&](viewer::ImageInputs& inputs) {
-    if (a.view.scene.material.color != viewer::Material{}.color)
-      for (auto& o : inputs.objects)
-        if (o.colors.empty())
-          o.color = glm::vec3(a.view.scene.material.color[0], a.view.scene.material.color[1],
-                              a.view.scene.material.color[2]);
-  };
+  const auto finish = [&](viewer::ImageInputs& inputs) { colorPoints(a, inputs); };
   if (!a.cpu && !a.headless && !a.bench) {
     // The window: reading goes on beside it, previews first.
     viewer::ImageFeed feed;
@@ -410,7 +436,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       if (a->cpu) return viewer::viewCpu(a->view);
       if (a->headless) return viewer::viewHeadless(a->view);
       if (a->bench) return viewer::viewBench(a->view);
-      return viewer::viewWindow(a->view);
+      return viewer::viewWindow(a->view, windowImageMode(*a));
     });
   });
 }
