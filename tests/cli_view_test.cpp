@@ -31,9 +31,11 @@ const std::filesystem::path& kittenIso() {
 
 // A picture of the expected size that shows something: many colors, and much of it unlike its
 // top-left pixel (the sky).
-void expectPicture(const std::filesystem::path& png, uint32_t width, uint32_t height) {
+// Returns its pixels.
+std::vector<uint32_t> expectPicture(const std::filesystem::path& png, uint32_t width,
+                                    uint32_t height) {
   uint32_t w = 0, h = 0;
-  const auto pixels = viewer::readImage(png, w, h);
+  auto pixels = viewer::readImage(png, w, h);
   EXPECT_EQ(w, width);
   EXPECT_EQ(h, height);
   const std::set<uint32_t> colors(pixels.begin(), pixels.end());
@@ -41,6 +43,7 @@ void expectPicture(const std::filesystem::path& png, uint32_t width, uint32_t he
   for (uint32_t p : pixels) unlike += p != pixels[0];
   EXPECT_GT(colors.size(), 50u);
   EXPECT_GT(double(unlike) / pixels.size(), 0.1);
+  return pixels;
 }
 
 TEST(CliView, headlessAndCpuWritePicturesOfTheSurface) {
@@ -121,6 +124,26 @@ TEST(CliView, theKernelsFollowTheDeviceUnlessNamed) {
   EXPECT_TRUE(twoPasses("--wavefront").first);
 }
 
+// Runs the window session tests/viewer/SCRIPT on FILE under xvfb-run in DIR (its out.txt and
+// err.txt there); whether it ended well (else a failure with what it said).
+bool windowSession(const std::string& script, const std::filesystem::path& file,
+                   const std::filesystem::path& dir) {
+  const std::string command =
+      "xvfb-run -a -s '-screen 0 800x600x24' " +
+      quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" / script) + " " +
+      std::string(ISO_BINARY) + " " + quoted(file) + " " + quoted(dir) + " 2>" +
+      quoted(dir / "session.txt");
+  const int status = std::system(command.c_str());
+  const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  EXPECT_TRUE(ok) << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  return ok;
+}
+
+// Window sessions need xvfb-run and xdotool.
+#define SKIP_WITHOUT_XDOTOOL()                                                                \
+  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1")) \
+  GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)"
+
 TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
   if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0)
     GTEST_SKIP() << "xvfb-run is not installed (tools/run setup installs it)";
@@ -137,17 +160,9 @@ TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
 }
 
 TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
-  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
-    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  SKIP_WITHOUT_XDOTOOL();
   TempDir dir;
-  const std::string command =
-      "xvfb-run -a -s '-screen 0 800x600x24' " +
-      quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" / "window_session.sh") +
-      " " + std::string(ISO_BINARY) + " " + quoted(kittenIso()) + " " + quoted(dir.path()) + " 2>" +
-      quoted(dir / "session.txt");
-  const int status = std::system(command.c_str());
-  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
-      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  ASSERT_TRUE(windowSession("window_session.sh", kittenIso(), dir.path()));
   EXPECT_NE(slurp(dir / "out.txt").find("saved"), std::string::npos) << slurp(dir / "out.txt");
   // Both pictures are at the new size; the orbit between them turned the view.
   expectPicture(dir / "iso-screenshot-1.png", 480, 260);
@@ -270,28 +285,17 @@ TEST(CliView, rawScansDrawAsImageSpacePoints) {
 // A raw scan in a window: the first picture as soon as points are read; M, L and the scene file
 // change the shading, the layers and the opacity while it is open.
 TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
-  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
-    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  SKIP_WITHOUT_XDOTOOL();
   TempDir dir;
   const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
-  const std::string command =
-      "xvfb-run -a -s '-screen 0 800x600x24' " +
-      quoted(data / ".." / "viewer" / "image_window_session.sh") + " " +
-      std::string(ISO_BINARY) + " " + quoted(data / "kitten_normals.xyz") + " " +
-      quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
-  const int status = std::system(command.c_str());
-  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
-      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  ASSERT_TRUE(windowSession("image_window_session.sh", data / "kitten_normals.xyz", dir.path()));
   const std::string out = slurp(dir / "out.txt");
   EXPECT_NE(out.find("first picture"), std::string::npos) << out;
   EXPECT_NE(out.find("reloaded"), std::string::npos) << out;
   // The last title: eye-dome shading of two layers.
   EXPECT_NE(out.find("5210 points | eye-dome | 2 layers"), std::string::npos) << out;
-  expectPicture(dir / "iso-screenshot-1.png", 300, 200);
-  expectPicture(dir / "final.png", 300, 200);
-  uint32_t w = 0, h = 0;
-  const auto lit = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
-  const auto seeThrough = viewer::readImage(dir / "final.png", w, h);
+  const auto lit = expectPicture(dir / "iso-screenshot-1.png", 300, 200);
+  const auto seeThrough = expectPicture(dir / "final.png", 300, 200);
   size_t changed = 0;
   for (size_t i = 0; i < lit.size(); ++i) changed += lit[i] != seeThrough[i];
   EXPECT_GT(changed, lit.size() / 20);
@@ -300,8 +304,7 @@ TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
 // The tracer's window: K steps through the surface, the kept points as splats, both, and the
 // kept points as image-space points (read when first asked for), then back to the surface.
 TEST(CliView, theTracersWindowDrawsTheKeptPointsInImageSpaceOnKeyK) {
-  if (std::system("command -v xvfb-run >/dev/null 2>&1 && command -v xdotool >/dev/null 2>&1"))
-    GTEST_SKIP() << "xvfb-run or xdotool is not installed (tools/run setup installs them)";
+  SKIP_WITHOUT_XDOTOOL();
   TempDir dir;
   const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
   const auto kept = dir / "kept.iso";
@@ -309,20 +312,11 @@ TEST(CliView, theTracersWindowDrawsTheKeptPointsInImageSpaceOnKeyK) {
       iso("convert --quiet --keep-points " + quoted(data / "kitten_normals.xyz") + " -o " +
           quoted(kept));
   ASSERT_EQ(run.exitCode, 0) << run.err;
-  const std::string command =
-      "xvfb-run -a -s '-screen 0 800x600x24' " +
-      quoted(data / ".." / "viewer" / "mode_window_session.sh") + " " + std::string(ISO_BINARY) +
-      " " + quoted(kept) + " " + quoted(dir.path()) + " 2>" + quoted(dir / "session.txt");
-  const int status = std::system(command.c_str());
-  ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0)
-      << slurp(dir / "session.txt") << slurp(dir / "err.txt");
+  ASSERT_TRUE(windowSession("mode_window_session.sh", kept, dir.path()));
   const std::string out = slurp(dir / "out.txt");
   EXPECT_NE(out.find("drawing 5210 kept points as image-space points"), std::string::npos) << out;
-  expectPicture(dir / "iso-screenshot-1.png", 240, 180);
-  expectPicture(dir / "iso-screenshot-2.png", 240, 180);
-  uint32_t w = 0, h = 0;
-  const auto points = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
-  const auto surface = viewer::readImage(dir / "iso-screenshot-2.png", w, h);
+  const auto points = expectPicture(dir / "iso-screenshot-1.png", 240, 180);
+  const auto surface = expectPicture(dir / "iso-screenshot-2.png", 240, 180);
   // Image-space points over their black background, a fifth of the picture or so; the surface
   // again under the tracer's sky.
   size_t drawn = 0;
