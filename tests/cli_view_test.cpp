@@ -127,11 +127,11 @@ TEST(CliView, theKernelsFollowTheDeviceUnlessNamed) {
 // Runs the window session tests/viewer/SCRIPT on FILE under xvfb-run in DIR (its out.txt and
 // err.txt there); whether it ended well (else a failure with what it said).
 bool windowSession(const std::string& script, const std::filesystem::path& file,
-                   const std::filesystem::path& dir) {
+                   const std::filesystem::path& dir, const std::string& more = "") {
   const std::string command =
       "xvfb-run -a -s '-screen 0 800x600x24' " +
       quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" / script) + " " +
-      std::string(ISO_BINARY) + " " + quoted(file) + " " + quoted(dir) + " 2>" +
+      std::string(ISO_BINARY) + " " + quoted(file) + " " + quoted(dir) + " " + more + " 2>" +
       quoted(dir / "session.txt");
   const int status = std::system(command.c_str());
   const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
@@ -325,6 +325,13 @@ TEST(CliView, theTracersWindowDrawsTheKeptPointsInImageSpaceOnKeyK) {
   EXPECT_GT(drawn, points.size() / 20);
   EXPECT_LT(drawn, points.size() / 2);
   EXPECT_NE(surface[0] & 0xFFFFFF, 0u);
+  // A file that keeps no points: the window says so and goes on drawing the surface.
+  TempDir none;
+  ASSERT_TRUE(windowSession("mode_window_session.sh", kittenIso(), none.path(), "none"));
+  EXPECT_NE(slurp(none / "err.txt").find("keeps no points"), std::string::npos)
+      << slurp(none / "err.txt");
+  const auto still = expectPicture(none / "iso-screenshot-1.png", 240, 180);
+  EXPECT_NE(still[0] & 0xFFFFFF, 0u);  // the tracer's sky
 }
 
 // The kept points of an .iso file drawn as image-space points: the level of detail that fits

@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <future>
 
 #include "viewer/asset.h"
 #include "viewer/image.h"
@@ -162,6 +163,7 @@ struct WindowGpu {
 struct ImageMode {
   const WindowImageMode* mode = nullptr;
   bool failed = false;  // the file has no points to draw that way (said once)
+  std::future<std::shared_ptr<const ImageInputs>> reading;  // beside the window
   std::shared_ptr<const ImageInputs> inputs;
   std::unique_ptr<PointImageScene> scene;
   std::unique_ptr<GpuPointImage> renderer;  // draws *scene
@@ -170,12 +172,19 @@ struct ImageMode {
   double frameSeconds = 0.0;          // drawing, since the title changed
   uint32_t frames = 0;                // since the title changed
 
-  // Ready to draw; false (the reader's error printed) when there is nothing to draw.
+  // Whether the kept points are on the device. The first call starts reading them beside the
+  // window (which goes on drawing the surface); false until they are read, and for good when
+  // that failed (`failed`, the reader's error printed).
   bool ready(Gpu& gpu, const Scene& sceneNow) {
     if (renderer) return true;
     if (failed) return false;
+    if (!reading.valid()) {
+      fmt::print("iso view: reading the kept points\n");
+      reading = std::async(std::launch::async, mode->read);
+    }
+    if (reading.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
     try {
-      inputs = mode->read();
+      inputs = reading.get();
       scene = std::make_unique<PointImageScene>(withOpacity(inputs->objects, sceneNow.image));
       renderer = std::make_unique<GpuPointImage>(gpu, *scene);
       show = std::make_unique<PictureShow>(gpu);
@@ -250,7 +259,7 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
   const auto header = asset->reader.header();
   ImageMode drawImage;
   drawImage.mode = &image;
-  bool imageOn = false, imageWasOn = false;
+  bool imageOn = false, pointsShown = false;
   while (!glfwWindowShouldClose(window)) {
     glfwPollEvents();
     const auto now = Clock::now();
@@ -263,15 +272,15 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
       placeGround(next, *asset);
     });
     if (!fitToWindow(window, w, stale)) continue;  // minimized
-    if (imageOn && !imageWasOn) {
-      renderer.finish();  // the traced frames in flight present before the pictures
-      if (!drawImage.ready(w.gpu, scene)) {
-        imageOn = false;
-        scene.draw = Draw::Surface;
-      }
+    // Image-space points once they are read; the surface meanwhile.
+    const bool points = imageOn && drawImage.ready(w.gpu, scene);
+    if (imageOn && drawImage.failed) {
+      imageOn = false;
+      scene.draw = Draw::Surface;
     }
-    imageWasOn = imageOn;
-    if (imageOn) {
+    if (points && !pointsShown) renderer.finish();  // the traced frames in flight go first
+    pointsShown = points;
+    if (points) {
       stale = drawImage.draw(options, scene, w.swapchain, w.rendered);
     } else {
       renderer.prepare(frameParams(scene, header.frame, header.maxLevel, renderer.setup()));
@@ -283,7 +292,7 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
     const bool lastFrame =
         (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
     const auto save = [&](const std::filesystem::path& file) {
-      if (!imageOn) return saveScreenshot(file, renderer, bgra);
+      if (!points) return saveScreenshot(file, renderer, bgra);
       writeImage(file, w.swapchain.extent.width, w.swapchain.extent.height, drawImage.lastPicture);
       fmt::print("iso view: saved {}\n", file.string());
     };
@@ -294,7 +303,7 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
     const double sinceTitle = std::chrono::duration<double>(Clock::now() - titleTime).count();
     if (sinceTitle > 0.5 || lastFrame) {
       const std::string text =
-          !imageOn ? titleText(title, shownStats, sinceTitle, renderer.stats())
+          !points ? titleText(title, shownStats, sinceTitle, renderer.stats())
                    : fmt::format("{} | image-space points | {:.1f} ms a frame | {} points", title,
                                  drawImage.frameSeconds * 1e3 / std::max(drawImage.frames, 1u),
                                  drawImage.scene->size());
