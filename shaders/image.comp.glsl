@@ -116,41 +116,43 @@ void wakeTiles(ivec2 p, uint mark, uint list) {
     }
 }
 
-// A filling round: an invocation kFillRows rows of a tile (kImageFillTile pixels wide),
-// kFillTiles tiles a workgroup. Its rows and the rows above and below them, a pixel beyond at
-// each end, are read once (lavapipe pays for every load, lane by lane), and each pixel's 3×3
-// neighbours are taken from them; the masks' rings beyond, for the few pixels that get that
-// far, from the layer.
-const int kFillRows = 8;
-const uint kFillTiles = 64u / (kImageFillTile / uint(kFillRows));
-void fillRows() {
-  uint pass = control[kImageControlRound];
-  uint list = pass == 0u ? 2u : (pass & 1u);
+// The tile of this invocation (64 a workgroup) from `list` (kImageControlTiles + list counts
+// them): its first pixel, or false past the list.
+bool invocationTile(uint list, out ivec2 origin) {
   uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
   uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
-  uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
-  uint perTile = kImageFillTile / uint(kFillRows);
-  uint listed = group * kFillTiles + gl_LocalInvocationID.x / perTile;
-  if (listed >= control[kImageControlTiles + list]) return;
+  uint listed = (gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x) * 64u +
+                gl_LocalInvocationID.x;
+  origin = ivec2(0);
+  if (listed >= control[kImageControlTiles + list]) return false;
   uint t = tiles[(2u + list) * tileCount + listed];
-  ivec2 origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
-  int top = origin.y + int(gl_LocalInvocationID.x % perTile) * kFillRows;
+  origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
+  return true;
+}
+
+// A filling round: an invocation a tile. Its pixels and those a pixel around are read once
+// (lavapipe pays for every load, lane by lane), and each pixel's 3×3 neighbours are taken from
+// them, as imageFill takes them; the masks' rings beyond, for the few pixels that get that far,
+// are read from the layer (imageFillBeyond). Reading the 3×3 through layerDepth from the window
+// measured a third slower.
+void fillTile() {
+  uint pass = control[kImageControlRound];
+  ivec2 origin;
+  if (!invocationTile(pass == 0u ? 2u : (pass & 1u), origin)) return;
   const int kWide = int(kImageFillTile) + 2;
-  float depths[(kFillRows + 2) * kWide];
-  uint points[(kFillRows + 2) * kWide];
-  for (int row = 0; row < kFillRows + 2; ++row)
-    for (int c = 0; c < kWide; ++c) {
-      ivec2 q = ivec2(origin.x - 1 + c, top - 1 + row);
-      uvec2 v = inside(q) ? layerA[at(q)] : uvec2(kImageNoPoint, 0u);
-      depths[row * kWide + c] = depthOf(v.y);
-      points[row * kWide + c] = v.x;
-    }
+  float depths[kWide * kWide];
+  uint points[kWide * kWide];
+  for (int k = 0; k < kWide * kWide; ++k) {
+    ivec2 q = origin - 1 + ivec2(k % kWide, k / kWide);
+    uvec2 v = inside(q) ? layerA[at(q)] : uvec2(kImageNoPoint, 0u);
+    depths[k] = depthOf(v.y);
+    points[k] = v.x;
+  }
   uint changed = 0u;
-  for (int k = 0; k < kFillRows * int(kImageFillTile); ++k) {
-    int i = k % int(kImageFillTile), j = k / int(kImageFillTile);
-    ivec2 p = ivec2(origin.x + i, top + j);
+  for (int k = 0; k < int(kImageFillTile * kImageFillTile); ++k) {
+    ivec2 p = origin + ivec2(k % int(kImageFillTile), k / int(kImageFillTile));
     if (!inside(p)) continue;
-    int centre = (j + 1) * kWide + i + 1;
+    int centre = (k / int(kImageFillTile) + 1) * kWide + k % int(kImageFillTile) + 1;
     float self = depths[centre];
     float depth = self;
     uint index = points[centre];
@@ -174,7 +176,7 @@ void fillRows() {
     }
     layerB[at(p)] = uvec2(index, floatBitsToUint(depth));
   }
-  // The tiles a changed pixel wakes are its tile's and those around: once for the rows.
+  // The tiles a changed pixel wakes are its tile's and those around: once for the tile.
   if (changed != 0u) {
     atomicAdd(control[kImageControlChanged], changed);
     wakeTiles(origin, pass + 1u, (pass + 1u) & 1u);
@@ -192,23 +194,10 @@ uint pixelWord(vec3 linear) {
   return word;
 }
 
-// The tile of list 3 of this invocation (64 a workgroup): its first pixel, or false past the list.
-bool shadingTile(out ivec2 origin) {
-  uint tilesX = (Q.image.x + kImageFillTile - 1u) / kImageFillTile;
-  uint tileCount = tilesX * ((Q.image.y + kImageFillTile - 1u) / kImageFillTile);
-  uint listed = (gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x) * 64u +
-                gl_LocalInvocationID.x;
-  origin = ivec2(0);
-  if (listed >= control[kImageControlTiles + 3u]) return false;
-  uint t = tiles[5u * tileCount + listed];
-  origin = ivec2(int(t & 0xFFFFu), int(t >> 16)) * int(kImageFillTile);
-  return true;
-}
-
 // Shading: an invocation a tile of list 3, pixel after pixel.
 void shadeTile() {
   ivec2 origin;
-  if (!shadingTile(origin)) return;
+  if (!invocationTile(3u, origin)) return;
   for (int k = 0; k < int(kImageFillTile * kImageFillTile); ++k) {
     ivec2 p = origin + ivec2(k % int(kImageFillTile), k / int(kImageFillTile));
     if (inside(p)) colorA[at(p)] = imageShade(p);
@@ -221,7 +210,7 @@ void shadeTile() {
 // pixel written over the background (the host filled the picture with the background).
 void smoothTile() {
   ivec2 origin;
-  if (!shadingTile(origin)) return;
+  if (!invocationTile(3u, origin)) return;
   windowOrigin = origin;
   for (int k = 0; k < kWindow * kWindow; ++k) {
     ivec2 q = origin - 2 + ivec2(k % kWindow, k / kWindow);
@@ -247,7 +236,7 @@ void smoothTile() {
 
 void main() {
   if (kStage == kImageStageFill) {
-    fillRows();
+    fillTile();
     return;
   }
   if (kStage == kImageStageShade) {
@@ -290,9 +279,9 @@ void main() {
     // Kind 2 starts filling: round 0 over the tiles projection listed.
     if (id != 0u) return;
     if (kKind >= 2u) {  // 3: the shading stages' dispatch, over list 3
-      // Filling takes kFillTiles tiles a workgroup (fillRows), shading 64.
+      // Filling and shading take 64 tiles a workgroup (an invocation a tile).
       uint first = control[kImageControlTiles + kKind];
-      uint groups = kKind == 3u ? (first + 63u) / 64u : (first + kFillTiles - 1u) / kFillTiles;
+      uint groups = (first + 63u) / 64u;
       uint x = min(groups, 65535u);
       control[0] = x;
       control[1] = x == 0u ? 1u : (groups + x - 1u) / x;
@@ -307,7 +296,7 @@ void main() {
     if (changed) control[kImageControlPasses + kKind] += 1u;
     uint next = control[kImageControlRound] + 1u;
     uint listed = changed ? control[kImageControlTiles + (next & 1u)] : 0u;
-    uint groups = (listed + kFillTiles - 1u) / kFillTiles;
+    uint groups = (listed + 63u) / 64u;
     uint x = min(groups, 65535u);
     control[0] = x;
     control[1] = x == 0u ? 1u : (groups + x - 1u) / x;

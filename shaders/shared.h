@@ -229,7 +229,7 @@ ISO_CONST uint kImageControlRound = 6u;
 ISO_CONST uint kImageControlTiles = 8u;  // 8 and 9: the tiles listed for rounds of each parity,
                                          // 10: those projection left a point in or next to,
                                          // 11: every tile any of them listed (for shading)
-// Filling on the GPU runs over tiles of this many pixels square (a workgroup a tile): the first
+// Filling on the GPU runs over tiles of this many pixels square (an invocation a tile): the first
 // round over all, each later one over the tiles where something within the masks' reach changed
 // in the round before (at least kImageMaxFillRadius: a changed pixel wakes its tile and the
 // eight around it).

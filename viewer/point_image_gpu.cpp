@@ -31,7 +31,6 @@ constexpr uint32_t kMaxStamps = 4096;  // timestamps a frame: one after each ste
 
 static_assert(gpu::kImageFillTile >= gpu::kImageMaxFillRadius,
               "a changed pixel wakes only the tiles next to its own");
-static_assert(gpu::kImageFillTile * gpu::kImageFillTile == 64, "a tile a workgroup");
 static_assert(gpu::kImageControlTiles + 4 <= kStatsWord, "control words before the statistics");
 
 // The pipelines: a stage, and for filling and control a kind.
