@@ -3,6 +3,7 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <set>
 
 #include "iso/reader.h"
@@ -301,6 +302,42 @@ TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
   EXPECT_GT(changed, lit.size() / 20);
 }
 
+// More read than fits --vram in a window: the points of the close view it opens at (part of
+// the scan out of sight), then, once the camera has flown back and rests, those of the view it
+// rests at (all of the scan in sight), each within the budget.
+TEST(CliView, aWindowDrawsThePointsOfEachViewTheCameraRestsAtWhenNotAllFit) {
+  SKIP_WITHOUT_XDOTOOL();
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  // Room for about 2,000 of the kitten's 5,210 points beside a 300 × 200 picture.
+  ASSERT_TRUE(windowSession("refine_window_session.sh", data / "kitten_normals.xyz", dir.path(),
+                            "20520000 0.1,0.25,1.0,0.1,0.25,0,0,1,0"));
+  const std::string out = slurp(dir / "out.txt");
+  const std::regex line(
+      R"(drawing (\d+) points of 5210 read, chosen for the view from 5210: (\d+) where it looks)");
+  std::vector<std::pair<size_t, size_t>> views;  // (drawn, where it looks)
+  for (auto it = std::sregex_iterator(out.begin(), out.end(), line); it != std::sregex_iterator();
+       ++it)
+    views.emplace_back(std::stoul((*it)[1]), std::stoul((*it)[2]));
+  ASSERT_EQ(views.size(), 2u) << out;
+  for (const auto& [drawn, seen] : views) {
+    EXPECT_GT(drawn, 1800u) << out;
+    EXPECT_LT(drawn, 2300u) << out;
+    EXPECT_LE(seen, drawn) << out;
+  }
+  EXPECT_LT(views[0].second, views[0].first) << out;  // the close view sees part of it
+  EXPECT_EQ(views[1].second, views[1].first) << out;  // the far one all of it
+  // The kitten fills more of the close view than of the far one.
+  const auto coverage = [](const std::vector<uint32_t>& pixels) {
+    size_t n = 0;
+    for (uint32_t p : pixels) n += (p & 0xFFFFFF) != (pixels[0] & 0xFFFFFF);
+    return double(n) / double(pixels.size());
+  };
+  const double close = coverage(expectPicture(dir / "iso-screenshot-1.png", 300, 200));
+  const double far = coverage(expectPicture(dir / "iso-screenshot-2.png", 300, 200));
+  EXPECT_GT(close, 2 * far) << close << " " << far;
+}
+
 // The tracer's window: K steps through the surface, the kept points as splats, both, and the
 // kept points as image-space points (read when first asked for), then back to the surface.
 TEST(CliView, theTracersWindowDrawsTheKeptPointsInImageSpaceOnKeyK) {
@@ -359,7 +396,7 @@ TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
     either += a[i] != sky || b[i] != sky;
   }
   EXPECT_GT(double(both) / double(either), 0.95) << both << " of " << either;
-  // A budget with room for about 1,900 points: a uniform subsample (the kitten's kept points are
+  // A budget with room for about 1,900 points: those the view needs (the kitten's kept points are
   // one chunk, with no coarser one: keep_points_test tests the cut of finer files).
   for (const std::string& input : {kitten, quoted(kept)}) {
     run = iso("view " + input + " --draw image --cpu --vram 18829000 --out " + quoted(small) +
@@ -369,7 +406,7 @@ TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
     EXPECT_LT(drawn, 2000u) << run.out;
     EXPECT_GT(drawn, 500u) << run.out;
     expectPicture(small, 200, 160);
-    EXPECT_NE(run.out.find("a uniform subsample of 5210"), std::string::npos) << run.out;
+    EXPECT_NE(run.out.find("chosen for the view from 5210"), std::string::npos) << run.out;
   }
 }
 

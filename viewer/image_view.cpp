@@ -117,9 +117,7 @@ std::vector<uint32_t> pixelsOf(const ImageResult& r) {
 void printInputs(const ImageInputs& in, size_t points) {
   fmt::print("{} point{} from {} file{}{}{}, read and prepared in {:.2f} s\n", points,
              points == 1 ? "" : "s", in.names.size(), in.names.size() == 1 ? "" : "s",
-             in.pointsRead > points
-                 ? fmt::format(" (a uniform subsample of {} that fits --vram)", in.pointsRead)
-                 : std::string(),
+             in.choice.empty() ? std::string() : " (" + in.choice + ")",
              in.normalsEstimated ? " (normals estimated)" : "", in.loadSeconds);
 }
 
@@ -274,6 +272,22 @@ void ImageFeed::publish(ImageInputs&& inputs) {
 void ImageFeed::fail(std::exception_ptr error) {
   const std::lock_guard lock(mutex_);
   error_ = error;
+}
+
+void ImageFeed::want(const View& view) {
+  {
+    const std::lock_guard lock(mutex_);
+    wanted_ = view;
+  }
+  viewChanged_.notify_one();
+}
+
+std::optional<ImageFeed::View> ImageFeed::wanted(std::chrono::milliseconds wait) {
+  std::unique_lock lock(mutex_);
+  viewChanged_.wait_for(lock, wait, [&] { return wanted_.has_value(); });
+  std::optional<View> view = std::move(wanted_);
+  wanted_.reset();
+  return view;
 }
 
 std::shared_ptr<const ImageInputs> ImageFeed::since(uint64_t& version) const {

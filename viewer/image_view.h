@@ -3,8 +3,11 @@
 // reads the inputs (tools/iso/view_points.cpp): this layer gets their points.
 #pragma once
 
+#include <chrono>
+#include <condition_variable>
 #include <exception>
 #include <memory>
+#include <optional>
 #include <mutex>
 #include <vector>
 
@@ -23,6 +26,7 @@ struct ImageInputs {
   bool normalsEstimated = false;     // some object's normals were estimated, not read
   double loadSeconds = 0.0;          // reading and preparing the points
   uint64_t pointsRead = 0;           // from the files (more than drawn: a subsample, --vram)
+  std::string choice;                // how the points drawn were chosen, when not all are
   bool preview = false;              // what was read so far (a window draws it while reading)
 };
 
@@ -56,7 +60,8 @@ int viewImageBench(const ViewOptions& options, const ImageViewOptions& image,
                    const ImageInputs& inputs);
 
 // Points arriving while a window is open: a loader publishes what it has read (previews, then
-// all of it), or its error; the window draws the latest.
+// all of it, then the points of each view the window asks for), or its error; the window draws
+// the latest.
 class ImageFeed {
  public:
   void publish(ImageInputs&& inputs);
@@ -65,11 +70,22 @@ class ImageFeed {
   // the loader's error.
   std::shared_ptr<const ImageInputs> since(uint64_t& version) const;
 
+  // The camera the window rests at, for a loader holding more points than it draws.
+  struct View {
+    Camera camera;
+    uint32_t width = 0, height = 0;
+  };
+  void want(const View& view);
+  // The latest view wanted and not yet taken, waiting at most `wait` for one.
+  std::optional<View> wanted(std::chrono::milliseconds wait);
+
  private:
   mutable std::mutex mutex_;
   std::shared_ptr<const ImageInputs> latest_;
   uint64_t version_ = 0;
   std::exception_ptr error_;
+  std::condition_variable viewChanged_;
+  std::optional<View> wanted_;
 };
 
 // The window (image_window.cpp): draws the feed's latest points from the first preview on.

@@ -1,6 +1,6 @@
 // `iso view SCAN...` in a window (image_view.h): image-space points drawn on the GPU from the
-// first batch read on, the points replaced as more arrive, each frame's picture copied to the
-// swapchain.
+// first batch read on, the points replaced as more arrive (and, when more were read than fit,
+// by those of each view the camera rests at), each frame's picture copied to the swapchain.
 //
 // Mouse and W A S D Q E move the camera as in the tracer's window. Keys: M shading (lit, or
 // eye-dome from the depth alone), L layers (1, 2, 3, 6), 1 shadows, + and - shadow samples,
@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <optional>
 
@@ -25,6 +26,13 @@ using Clock = std::chrono::steady_clock;
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
 constexpr int kLayerSteps[] = {1, 2, 3, 6};
+constexpr double kRest = 0.3;  // seconds the camera rests before its view's points are asked for
+
+bool sameView(const ImageFeed::View& a, const ImageFeed::View& b) {
+  return a.camera.eye == b.camera.eye && a.camera.target == b.camera.target &&
+         a.camera.up == b.camera.up && a.camera.fovDegrees == b.camera.fovDegrees &&
+         a.width == b.width && a.height == b.height;
+}
 
 // A picture `width` pixels wide shown `scale` times larger, cut to width × height.
 std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t from, uint32_t width,
@@ -126,6 +134,8 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
   std::vector<float> drawnOpacity;
   uint64_t version = 0;
   bool cameraMoved = false, final = false;
+  auto lastMove = Clock::now();
+  std::optional<ImageFeed::View> asked;  // the last view asked for
   std::optional<double> firstPicture;
 
   Input input;
@@ -155,16 +165,30 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
       if (!cameraMoved && !options.scene.camera) scene.camera = sceneCamera(options.scene, *next);
       drawn.inputs = next;
       final = !next->preview;
-      fmt::print("iso view: {} {} points of {} read ({:.2f} s after opening)\n",
+      // The first of all the points was chosen for the framed view.
+      if (final && !asked)
+        asked = ImageFeed::View{*scene.camera, w.swapchain.extent.width, w.swapchain.extent.height};
+      fmt::print("iso view: {} {} points of {} read{} ({:.2f} s after opening)\n",
                  final ? "drawing" : "drawing a preview of", drawn.scene->size(), next->pointsRead,
-                 seconds(Clock::now() - opened));
+                 next->choice.empty() ? "" : ", " + next->choice, seconds(Clock::now() - opened));
+      std::fflush(stdout);  // a session watching the output sees it now
     }
     if (!drawn.inputs) {
       glfwWaitEventsTimeout(0.02);  // nothing read yet
       continue;
     }
-    if (moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height))
+    if (moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height)) {
       cameraMoved = true;
+      lastMove = now;
+    }
+    // Points chosen for a view (more were read than fit): ask for the view the camera rests at.
+    const ImageFeed::View resting{*scene.camera, w.swapchain.extent.width,
+                                  w.swapchain.extent.height};
+    if (final && !drawn.inputs->choice.empty() && seconds(now - lastMove) > kRest &&
+        (!asked || !sameView(*asked, resting))) {
+      feed.want(resting);
+      asked = resting;
+    }
     applyImageSwitches(input, scene, image, keys);
     reloadScene(options, input, scene, sceneTime, [&](Scene& next) { keys.apply(next); });
     if (!fitToWindow(window, w, stale)) continue;  // minimized

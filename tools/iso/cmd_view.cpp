@@ -83,9 +83,9 @@ viewer::WindowImageMode windowImageMode(ViewArgs& a) {
   return mode;
 }
 
-// Raw scans, or --draw image: the point files read (a uniform subsample of them beyond what fits
-// --vram) and drawn as image-space points; the window opens at once and draws what is read so
-// far.
+// Raw scans, or --draw image: the point files read and drawn as image-space points (beyond
+// what fits --vram, those the view needs); the window opens at once, draws what is read so far,
+// and once all is read asks for the points of each view the camera rests at.
 int viewImage(ViewArgs& a) {
   setImageOptions(a);
   const auto& opacity = a.view.scene.image.opacity;
@@ -94,8 +94,16 @@ int viewImage(ViewArgs& a) {
                                  a.files.size()));
   ImageLoad load;
   load.maxPoints = imagePointBudget(a);
-  ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, load.maxPoints);
+  ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, load.hostPoints);
   const auto finish = [&](viewer::ImageInputs& inputs) { colorPoints(a, inputs); };
+  // The points for the scene's camera (framed on them when it has none).
+  const auto forCamera = [&](const ImagePoints& points, const viewer::Camera& camera,
+                             uint32_t width, uint32_t height) {
+    const PointView view = pointViewOf(camera, width, height);
+    viewer::ImageInputs inputs = imageInputs(points, load.maxPoints, &view);
+    finish(inputs);
+    return inputs;
+  };
   if (!a.cpu && !a.headless && !a.bench) {
     // The window: reading goes on beside it, previews first.
     viewer::ImageFeed feed;
@@ -107,9 +115,14 @@ int viewImage(ViewArgs& a) {
     load.stop = &stop;
     std::thread reader([&] {
       try {
-        viewer::ImageInputs inputs = readImageInputs(files, load);
-        finish(inputs);
-        if (!stop) feed.publish(std::move(inputs));
+        const ImagePoints points = readImagePoints(files, load);
+        if (stop) return;
+        const viewer::Camera framed = viewer::sceneCamera(a.view.scene, points.frame);
+        feed.publish(forCamera(points, framed, a.view.width, a.view.height));
+        if (points.store.size() <= load.maxPoints) return;  // all of them drawn
+        while (!stop)
+          if (const auto view = feed.wanted(std::chrono::milliseconds(50)))
+            feed.publish(forCamera(points, view->camera, view->width, view->height));
       } catch (...) {
         feed.fail(std::current_exception());
       }
@@ -126,11 +139,16 @@ int viewImage(ViewArgs& a) {
     reader.join();
     return code;
   }
-  viewer::ImageInputs inputs = readImageInputs(files, load);
-  finish(inputs);
+  const ImagePoints points = readImagePoints(files, load);
+  if (a.bench) {  // an orbit: the same points from every side
+    viewer::ImageInputs inputs = imageInputs(points, load.maxPoints);
+    finish(inputs);
+    return viewer::viewImageBench(a.view, a.image, inputs);
+  }
+  const viewer::Camera camera = viewer::sceneCamera(a.view.scene, points.frame);
+  const viewer::ImageInputs inputs = forCamera(points, camera, a.view.width, a.view.height);
   if (a.cpu) return viewer::viewImageCpu(a.view, a.image, inputs);
-  if (a.headless) return viewer::viewImageHeadless(a.view, a.image, inputs);
-  return viewer::viewImageBench(a.view, a.image, inputs);
+  return viewer::viewImageHeadless(a.view, a.image, inputs);
 }
 
 viewer::Vec3d parseUp(const std::string& text) {

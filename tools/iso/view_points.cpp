@@ -1,9 +1,15 @@
 // Raw scans for `iso view --draw image` (view_points.h).
 #include "tools/iso/view_points.h"
 
+#include <fmt/core.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <fstream>
+#include <glm/geometric.hpp>
+#include <glm/trigonometric.hpp>
 #include <nlohmann/json.hpp>
 
 #include "iso/error.h"
@@ -18,35 +24,28 @@ constexpr size_t kBatch = size_t(1) << 20;  // points read at a time
 
 using Clock = std::chrono::steady_clock;
 
-// Every `stride`-th point of `clouds` (counting across them), as objects of one view: bounds,
-// origin, spacings and normals. With `take` and a stride of 1 the clouds are moved, not copied.
-viewer::ImageInputs prepare(std::vector<PointCloud>& clouds, const ImageFiles& files,
-                            uint64_t stride, Clock::time_point start, bool take) {
+// The files' frame: the points' bounds and centre, the scene's up (z for LiDAR) and the names.
+viewer::ImageInputs frameOf(const PointStore& store, const ImageFiles& files) {
   viewer::ImageInputs in;
-  glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
-  std::vector<PointCloud> kept(clouds.size());
-  uint64_t counter = 0;
-  for (size_t f = 0; f < clouds.size(); ++f) {
-    PointCloud& cloud = clouds[f];
-    for (size_t i = 0; i < cloud.size(); ++i, ++counter) {
-      if (counter % stride != 0) continue;
-      lo = glm::min(lo, cloud.positions[i]);
-      hi = glm::max(hi, cloud.positions[i]);
-      if (!(take && stride == 1)) appendPoint(kept[f], cloud, i);
-    }
-    if (take && stride == 1) kept[f] = std::move(cloud);
-  }
   for (const auto& reader : files.readers) {
     const std::string format = reader->info().format;
     if (format.rfind("las", 0) == 0 || format.rfind("laz", 0) == 0 || format.rfind("e57", 0) == 0)
       in.up = {0, 0, 1};  // LiDAR: z up
   }
-  if (lo.x > hi.x) lo = hi = glm::dvec3(0.0);
-  in.bounds = {lo, hi};
-  in.origin = 0.5 * (lo + hi);
-  const float fallback = std::max(float(glm::length(hi - lo)) * 0.01f, 1e-6f);
-  for (size_t f = 0; f < kept.size(); ++f) {
-    ViewingPoints v = prepareForViewing(std::move(kept[f]), in.origin, fallback);
+  in.bounds = {store.lo(), store.hi()};
+  in.origin = 0.5 * (store.lo() + store.hi());
+  for (const auto& path : files.paths) in.names.push_back(path.string());
+  return in;
+}
+
+// `clouds` (one an object) prepared in `frame`: spacings and normals.
+viewer::ImageInputs prepare(std::vector<PointCloud>&& clouds, const viewer::ImageInputs& frame) {
+  viewer::ImageInputs in = frame;
+  in.objects.clear();
+  const glm::dvec3 extent = in.bounds.hi - in.bounds.lo;
+  const float fallback = std::max(float(glm::length(extent)) * 0.01f, 1e-6f);
+  for (PointCloud& cloud : clouds) {
+    ViewingPoints v = prepareForViewing(std::move(cloud), in.origin, fallback);
     viewer::ImageObject o;
     o.positions = std::move(v.positions);
     o.normals = std::move(v.normals);
@@ -56,9 +55,7 @@ viewer::ImageInputs prepare(std::vector<PointCloud>& clouds, const ImageFiles& f
     o.orientedNormals = !v.normalsEstimated;
     in.normalsEstimated |= v.normalsEstimated;
     in.objects.push_back(std::move(o));
-    in.names.push_back(files.paths[f].string());
   }
-  in.loadSeconds = std::chrono::duration<double>(Clock::now() - start).count();
   return in;
 }
 
@@ -124,6 +121,13 @@ bool isIsoFile(const std::filesystem::path& path) {
                                         [](char a, uint8_t b) { return uint8_t(a) == b; });
 }
 
+uint64_t hostPointBudget() {
+  const long pages = sysconf(_SC_PHYS_PAGES), pageSize = sysconf(_SC_PAGESIZE);
+  const uint64_t memory = pages > 0 && pageSize > 0 ? uint64_t(pages) * uint64_t(pageSize)
+                                                    : uint64_t(8) << 30;
+  return std::clamp<uint64_t>(memory / 4 / 40, 1'000'000, UINT32_MAX);
+}
+
 ImageFiles openImageFiles(const std::vector<std::filesystem::path>& files, uint64_t maxPoints) {
   ImageFiles out;
   uint64_t declared = 0;
@@ -142,41 +146,88 @@ ImageFiles openImageFiles(const std::vector<std::filesystem::path>& files, uint6
   return out;
 }
 
-viewer::ImageInputs readImageInputs(ImageFiles& files, const ImageLoad& load) {
+ImagePoints readImagePoints(ImageFiles& files, const ImageLoad& load) {
   const auto start = Clock::now();
-  const uint64_t maxPoints = std::max<uint64_t>(load.maxPoints, 1);
-  // Known counts subsample while reading (a 100M-point scan need not be held whole); unknown
-  // ones after.
+  const auto since = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  const uint64_t hostPoints = std::max<uint64_t>(load.hostPoints, 2);
+  // Known counts are thinned while reading (a scan larger than memory need not be held whole);
+  // unknown ones each time the points held reach hostPoints (every 2nd of them dropped).
   const uint64_t declared = files.declaredPoints.value_or(0);
-  const uint64_t readStride = declared > maxPoints ? (declared + maxPoints - 1) / maxPoints : 1;
-  std::vector<PointCloud> clouds(files.readers.size());
-  uint64_t read = 0, kept = 0, lastPreview = 0;
-  PointCloud batch;
+  uint64_t stride = declared > hostPoints ? (declared + hostPoints - 1) / hostPoints : 1;
+  ImagePoints points;
+  uint64_t lastPreview = 0;
+  PointCloud batch, kept;
   for (size_t f = 0; f < files.readers.size(); ++f) {
+    points.store.add(f, kept);  // the object, even when empty
     while (!(load.stop && load.stop->load())) {
       batch.clear();
       if (files.readers[f]->read(batch, kBatch) == 0) break;
-      for (size_t i = 0; i < batch.size(); ++i, ++read)
-        if (read % readStride == 0) appendPoint(clouds[f], batch, i);
-      kept = 0;
-      for (const PointCloud& c : clouds) kept += c.size();
-      if (load.preview && (lastPreview == 0 || kept >= 2 * lastPreview)) {
-        lastPreview = kept;
+      kept.clear();
+      for (size_t i = 0; i < batch.size(); ++i, ++points.pointsRead)
+        if (points.pointsRead % stride == 0) appendPoint(kept, batch, i);
+      points.store.add(f, kept);
+      if (points.store.size() >= hostPoints) {
+        points.store.thin();
+        stride *= 2;
+      }
+      const uint64_t held = points.store.size();
+      if (load.preview && (lastPreview == 0 || held >= 2 * lastPreview)) {
+        lastPreview = held;
         viewer::ImageInputs p =
-            prepare(clouds, files, (kept + kPreviewPoints - 1) / kPreviewPoints, start, false);
-        p.pointsRead = read;
+            prepare(points.store.every((held + kPreviewPoints - 1) / kPreviewPoints),
+                    frameOf(points.store, files));
+        p.pointsRead = points.pointsRead;
         p.preview = true;
+        p.loadSeconds = since();
         load.preview(std::move(p));
       }
     }
   }
-  kept = 0;
-  for (const PointCloud& c : clouds) kept += c.size();
-  viewer::ImageInputs in =
-      prepare(clouds, files, kept > maxPoints ? (kept + maxPoints - 1) / maxPoints : 1, start,
-              true);
-  in.pointsRead = read;
+  points.store.index();
+  points.frame = frameOf(points.store, files);
+  points.readSeconds = since();
+  return points;
+}
+
+viewer::ImageInputs imageInputs(const ImagePoints& points, uint64_t maxPoints,
+                                const PointView* view) {
+  const auto start = Clock::now();
+  const PointStore& store = points.store;
+  maxPoints = std::max<uint64_t>(maxPoints, 1);
+  std::string choice;
+  std::vector<PointCloud> clouds;
+  if (store.size() <= maxPoints) {
+    clouds = store.every(1);
+  } else if (view) {
+    PointStore::Choice c;
+    clouds = store.forView(*view, maxPoints, &c);
+    choice = fmt::format("chosen for the view from {}: {} where it looks, fitting --vram",
+                         points.pointsRead, c.seen);
+  } else {
+    clouds = store.every((store.size() + maxPoints - 1) / maxPoints);
+    choice = fmt::format("a uniform subsample of {} that fits --vram", points.pointsRead);
+  }
+  viewer::ImageInputs in = prepare(std::move(clouds), points.frame);
+  in.pointsRead = points.pointsRead;
+  in.choice = std::move(choice);
+  in.loadSeconds = points.readSeconds + std::chrono::duration<double>(Clock::now() - start).count();
   return in;
+}
+
+PointView pointViewOf(const viewer::Camera& camera, uint32_t width, uint32_t height) {
+  PointView v;
+  v.eye = camera.eye;
+  v.forward = glm::normalize(camera.target - camera.eye);
+  v.right = glm::normalize(glm::cross(v.forward, camera.up));
+  v.up = glm::cross(v.right, v.forward);
+  v.tanHalfHeight = std::tan(glm::radians(camera.fovDegrees) * 0.5);
+  v.aspect = double(width) / double(std::max<uint32_t>(height, 1));
+  v.height = std::max<uint32_t>(height, 1);
+  return v;
+}
+
+viewer::ImageInputs readImageInputs(ImageFiles& files, const ImageLoad& load) {
+  return imageInputs(readImagePoints(files, load), load.maxPoints);
 }
 
 }  // namespace iso::cli
