@@ -226,10 +226,12 @@ void smoothTile() {
     if (!inside(p)) continue;
     uint id = at(p);
     vec4 c = imageAntialias(p);
-    vec4 sum = blended[id];
-    sum += (1.0f - sum.a) * c;
-    blended[id] = sum;
-    layerR[id] = layerA[id];
+    // The first layer blends over nothing; the only one keeps nothing for a next.
+    vec4 sum = (Q.image.w & kImagePeel) == 0u ? c : blended[id] + (1.0f - blended[id].a) * c;
+    if ((Q.image.w & kImageOnlyLayer) == 0u) {
+      blended[id] = sum;
+      layerR[id] = layerA[id];
+    }
     pixels[id] = pixelWord(vec3(sum) + (1.0f - sum.a) * vec3(Q.background));
   }
 }

@@ -209,6 +209,7 @@ ISO_CONST uint kImageEyeDome = 8u;     // normal-free shading from the depth alo
 ISO_CONST uint kImageAaEdges = 16u;    // anti-aliasing also at the edges between layers
 ISO_CONST uint kImageAaOff = 32u;      // no anti-aliasing
 ISO_CONST uint kImageSmoothOff = 64u;  // no smoothing
+ISO_CONST uint kImageOnlyLayer = 128u;  // GPU: the one layer: blending keeps nothing for the next
 ISO_CONST uint kImageNoPoint = 0xFFFFFFFFu;  // a pixel no point covers
 ISO_CONST uint kImageMaxFillRadius = 8u;
 // The stages of shaders/image.comp.glsl (its specialization constant 0).

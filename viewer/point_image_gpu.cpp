@@ -232,9 +232,11 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
 
   // The parameters: set 0 the eye's first layer, 1 its later layers, 2 + s the light samples.
   auto* params = static_cast<std::byte*>(params_.mapped);
+  ImageParams first = plan.eye;
+  if (plan.layers == 1) first.image.w |= gpu::kImageOnlyLayer;
   ImageParams peeled = plan.eye;
   peeled.image.w |= gpu::kImagePeel;
-  std::memcpy(params, &plan.eye, sizeof(ImageParams));
+  std::memcpy(params, &first, sizeof(ImageParams));
   std::memcpy(params + kParamsStride, &peeled, sizeof(ImageParams));
   for (size_t s = 0; s < plan.samples.size(); ++s)
     std::memcpy(params + (2 + s) * kParamsStride, &plan.samples[s], sizeof(ImageParams));
@@ -361,7 +363,8 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     }
   }
   const uint64_t pixels = eyePixels_;
-  vkCmdFillBuffer(cb, blended_.buffer, 0, VK_WHOLE_SIZE, 0);
+  // Blending's sum and the layer kept for the next: only for several layers.
+  if (plan.layers > 1) vkCmdFillBuffer(cb, blended_.buffer, 0, VK_WHOLE_SIZE, 0);
   // The picture: the background, where anti-aliasing writes no pixel.
   vkCmdFillBuffer(cb, pixels_.buffer, 0, VK_WHOLE_SIZE, imagePixelWord(settings.background));
   for (int k = 0; k < plan.layers; ++k) {
@@ -376,8 +379,10 @@ GpuImageFrame GpuPointImage::render(const ImageCamera& camera, std::span<const I
     // Shading over the tiles any filling round listed (every covered pixel's and those around).
     dispatch(kControlShading, set, 1);
     indirect(kShade, set);
-    vkCmdFillBuffer(cb, layerR_.buffer, 0, pixels * 8, 0);  // blending keeps the layer as R
-    barrier(cb);
+    if (plan.layers > 1) {
+      vkCmdFillBuffer(cb, layerR_.buffer, 0, pixels * 8, 0);  // blending keeps the layer as R
+      barrier(cb);
+    }
     indirect(kSmooth, set);  // smoothing, anti-aliasing and blending
     frame.stats.projected += n;
   }
