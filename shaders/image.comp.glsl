@@ -214,9 +214,9 @@ void smoothTile() {
   windowOrigin = origin;
   for (int k = 0; k < kWindow * kWindow; ++k) {
     ivec2 q = origin - 2 + ivec2(k % kWindow, k / kWindow);
-    bool within = inside(q);
-    windowDepth[k] = within ? depthOf(layerA[at(q)].y) : 0.0f;
-    windowColor[k] = within ? colorA[at(q)] : vec4(0.0f);
+    float depth = inside(q) ? depthOf(layerA[at(q)].y) : 0.0f;
+    windowDepth[k] = depth;
+    windowColor[k] = depth > 0.0f ? colorA[at(q)] : vec4(0.0f);  // background: transparent
   }
   for (int k = 0; k < kSmoothed * kSmoothed; ++k)
     windowSmooth[k] = imageSmooth(origin - 1 + ivec2(k % kSmoothed, k / kSmoothed));
