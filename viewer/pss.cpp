@@ -12,10 +12,12 @@
 
 namespace iso::viewer {
 namespace pss_shader {
+namespace {
 using namespace glm;
 #define ISO_INOUT(T) T&
 #include "shaders/pss.h"
 #undef ISO_INOUT
+}  // namespace
 }  // namespace pss_shader
 
 namespace {

@@ -1,0 +1,173 @@
+// Point set surfaces (viewer/pss.h) against analytic shapes and brute force: the exact mode's
+// hits on a sampled sphere and torus lie within a tenth of a point spacing of the surface, the
+// fast mode's within the trust radius (its distribution printed), and the grid finds the same
+// first hit as every patch tested in turn, for rays from outside and from the surface (shadow and
+// refraction rays).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <glm/glm.hpp>
+#include <numbers>
+#include <random>
+
+#include "viewer/pss.h"
+
+namespace iso::viewer {
+namespace {
+
+using glm::vec3;
+
+struct Shape {
+  std::vector<vec3> positions, normals;
+  float spacing = 0.0f;
+};
+
+// n points on the unit sphere, a Fibonacci spiral (nearly uniform), with their normals.
+Shape sphere(size_t n) {
+  Shape s;
+  const float golden = std::numbers::pi_v<float> * (3.0f - std::sqrt(5.0f));
+  for (size_t i = 0; i < n; ++i) {
+    const float z = 1.0f - 2.0f * (float(i) + 0.5f) / float(n);
+    const float r = std::sqrt(1.0f - z * z), a = golden * float(i);
+    s.positions.push_back({r * std::cos(a), r * std::sin(a), z});
+    s.normals.push_back(s.positions.back());
+  }
+  s.spacing = std::sqrt(4.0f * std::numbers::pi_v<float> / float(n));
+  return s;
+}
+
+constexpr float kMajor = 1.0f, kMinor = 0.4f;
+
+// About n points on the torus of radii kMajor and kMinor around z, uniform by area (rejection).
+Shape torus(size_t n) {
+  Shape s;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 2.0f * std::numbers::pi_v<float>), w(0.0f, 1.0f);
+  while (s.positions.size() < n) {
+    const float a = u(rng), b = u(rng);
+    // Area grows with the distance from the axis: accept in proportion to it.
+    if (w(rng) * (kMajor + kMinor) > kMajor + kMinor * std::cos(b)) continue;
+    const vec3 ring(std::cos(a), std::sin(a), 0.0f);
+    const vec3 normal = std::cos(b) * ring + std::sin(b) * vec3(0, 0, 1);
+    s.positions.push_back(kMajor * ring + kMinor * normal);
+    s.normals.push_back(normal);
+  }
+  const float area = 4.0f * std::numbers::pi_v<float> * std::numbers::pi_v<float> * kMajor * kMinor;
+  s.spacing = std::sqrt(area / float(n));
+  return s;
+}
+
+float sphereDistance(const vec3& p) { return std::abs(glm::length(p) - 1.0f); }
+float torusDistance(const vec3& p) {
+  const float q = std::sqrt(p.x * p.x + p.y * p.y) - kMajor;
+  return std::abs(std::sqrt(q * q + p.z * p.z) - kMinor);
+}
+
+// The surface's points, h = 2 spacings.
+PssSurface surfaceOf(const Shape& s) {
+  return PssSurface(s.positions, s.normals, std::vector<float>(s.positions.size(), 2.0f * s.spacing));
+}
+
+// A ray from a random point 3 away towards a random point within 0.9 of `aim`'s region.
+struct Ray {
+  vec3 o, d;
+};
+std::vector<Ray> rays(size_t n, uint32_t seed, float spread) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<Ray> out;
+  while (out.size() < n) {
+    const vec3 o = 3.0f * glm::normalize(vec3(g(rng), g(rng), g(rng)));
+    const vec3 target = spread * vec3(u(rng), u(rng), u(rng));
+    out.push_back({o, glm::normalize(target - o)});
+  }
+  return out;
+}
+
+// The exact and fast modes' distances from the surface over `count` rays that hit.
+// `surely` (when given) says which rays must hit.
+void expectHitsOnTheSurface(const Shape& shape, float (*distance)(const vec3&), const char* name,
+                            float spread, bool (*surely)(const Ray&) = nullptr) {
+  const PssSurface surface = surfaceOf(shape);
+  std::vector<float> fast, exact;
+  size_t far = 0, misses = 0, projections = 0, wrongMisses = 0;
+  const auto all = rays(100'000, 17, spread);
+  for (const Ray& r : all) {
+    PssHit a, b;
+    const bool hitFast = surface.intersect(r.o, r.d, 0.0f, 10.0f, PssMode::Fast, a);
+    const bool hitExact = surface.intersect(r.o, r.d, 0.0f, 10.0f, PssMode::Exact, b);
+    if (!hitFast || !hitExact) {
+      ++misses;
+      wrongMisses += surely && surely(r);
+      continue;
+    }
+    fast.push_back(distance(r.o + a.t * r.d) / shape.spacing);
+    exact.push_back(distance(r.o + b.t * r.d) / shape.spacing);
+    far += exact.back() > 0.1f;
+    projections += size_t(b.projections);
+  }
+  ASSERT_GT(fast.size(), all.size() / 4) << name;
+  std::sort(fast.begin(), fast.end());
+  std::sort(exact.begin(), exact.end());
+  const auto at = [](const std::vector<float>& v, double q) { return v[size_t(q * (v.size() - 1))]; };
+  std::printf("%s: %zu hits (%zu rays missed): exact within 0.1 spacing on %.4f %% (median %.5f, "
+              "99.9 %% %.4f, max %.4f spacings; %.2f projections a hit); fast median %.4f, "
+              "99 %% %.4f, max %.4f spacings (trust radius %.2f)\n",
+              name, exact.size(), misses, 100.0 * (1.0 - double(far) / exact.size()),
+              at(exact, 0.5), at(exact, 0.999), exact.back(), double(projections) / exact.size(),
+              at(fast, 0.5), at(fast, 0.99), fast.back(), surface.options().trust * 2.0f);
+  EXPECT_LE(double(far), 0.001 * exact.size()) << name;
+  EXPECT_EQ(wrongMisses, 0u) << name;
+  EXPECT_LE(fast.back(), surface.options().trust * 2.0f) << name;  // in spacings (h = 2)
+}
+
+// Whether a ray passes within 0.98 of the unit sphere's centre (then it must hit).
+bool hitsTheSphere(const Ray& r) {
+  const vec3 closest = r.o - glm::dot(r.o, r.d) * r.d;
+  return glm::length(closest) < 0.98f;
+}
+
+TEST(Pss, exactHitsLieWithinATenthOfASpacingOfASphere) {
+  expectHitsOnTheSurface(sphere(20'000), sphereDistance, "sphere", 0.9f, hitsTheSphere);
+}
+
+TEST(Pss, exactHitsLieWithinATenthOfASpacingOfATorus) {
+  expectHitsOnTheSurface(torus(30'000), torusDistance, "torus", 1.3f);
+}
+
+TEST(Pss, theGridFindsTheFirstHitThatEveryPatchGives) {
+  const Shape shape = torus(8'000);
+  const PssSurface surface = surfaceOf(shape);
+  size_t same = 0, total = 0, hits = 0;
+  std::mt19937 rng(9);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  // Primary rays, then secondary ones from the surface: towards a light (shadow rays) and bent
+  // into it (refraction rays).
+  for (const Ray& r : rays(3'000, 23, 1.3f)) {
+    std::vector<Ray> batch = {r};
+    PssHit first;
+    if (surface.intersectAll(r.o, r.d, 0.0f, 10.0f, first)) {
+      const vec3 p = r.o + first.t * r.d;
+      batch.push_back({p, glm::normalize(vec3(2, 3, 4) - p)});
+      batch.push_back({p, glm::normalize(glm::refract(r.d, first.normal, 1.0f / 1.5f))});
+      batch.push_back({p, glm::normalize(vec3(g(rng), g(rng), g(rng)))});
+    }
+    for (const Ray& s : batch) {
+      const float start = &s == &batch[0] ? 0.0f : 1e-3f * shape.spacing;
+      PssHit a, b;
+      const bool grid = surface.intersect(s.o, s.d, start, 10.0f, PssMode::Fast, a);
+      const bool brute = surface.intersectAll(s.o, s.d, start, 10.0f, b);
+      ++total;
+      hits += brute;
+      same += grid == brute && (!grid || std::abs(a.t - b.t) <= 1e-5f * (1.0f + b.t));
+    }
+  }
+  std::printf("grid against every patch: %zu of %zu rays alike (%zu hit)\n", same, total, hits);
+  EXPECT_GT(hits, total / 3);
+  EXPECT_GE(double(same), 0.999 * double(total));
+}
+
+}  // namespace
+}  // namespace iso::viewer
