@@ -1,17 +1,27 @@
 // Point set surfaces (PSS; Adamson and Alexa's ray tracing of them, as in Tejada, Schafhitzel and
-// Ertl's GPU ray tracer, specs/viewer.md "Point set surfaces"): each point keeps a local bivariate
-// polynomial over its tangent plane, g(x, y) = A x² + B y² + C x y + D, valid inside its trust
-// region, a ball of radius b around the point. Compiled as GLSL and as C++ (the includer defines
-// ISO_INOUT and brings glm's names in).
+// Ertl's GPU ray tracer; specs/viewer.md, "Point set surfaces"): each point keeps a local
+// bivariate polynomial over its tangent plane, g(x, y) = A x² + B y² + C x y + D, valid inside
+// its trust region, a ball of radius b around the point; a uniform grid lists the points of each
+// cell and the trust regions reaching into it. Compiled as GLSL and as C++ (the includer defines
+// ISO_INOUT, brings glm's names in and provides the accessors below).
 //
 // A patch is four vec4s: (origin, b), (normal n, D), (tangent u, A), (B, C, 0, 0); the
 // bitangent is v = n × u, and a point origin + x u + y v + z n lies on the polynomial where
 // z = g(x, y).
+//
+// The includer's accessors:
+//   vec3 pssGridLo(); float pssGridSide(); ivec3 pssGridDims();
+//   uint pssPointStart(uint cell); uint pssPointAt(uint k);  // a cell's points: [start, next start)
+//   uint pssReachStart(uint cell); uint pssReachAt(uint k);  // the trust regions reaching in
+//   vec3 pssPosition(uint i); vec3 pssNormal(uint i); float pssH(uint i);
+//   vec4 pssPatch(uint i, int part);                         // part 0 to 3, as above
+//   vec4 pssSettings();  // (trust: b / h, reach: neighbours' distance / h, tolerance / h,
+//                        //  projections at most)
 
 // The height of the polynomial minus z, along the ray o + t d in the patch's frame: a t² + b t
 // + c. Returns whether the ray meets the polynomial at some t in (tMin, tMax) inside the trust
-// region; t is the nearest such, and `normal` the polynomial's unit normal there (world, on the
-// side of n).
+// region; t is the nearest such, and `hitNormal` the polynomial's unit normal there (world, on
+// the side of n).
 bool pssIntersect(vec4 origin, vec4 normal, vec4 tangent, vec4 coefficients, vec3 o, vec3 d,
                   float tMin, float tMax, ISO_INOUT(float) t, ISO_INOUT(vec3) hitNormal) {
   vec3 n = vec3(normal), u = vec3(tangent), v = cross(n, u);
@@ -53,4 +63,228 @@ bool pssIntersect(vec4 origin, vec4 normal, vec4 tangent, vec4 coefficients, vec
     return true;
   }
   return false;
+}
+
+ivec3 pssCellOf(vec3 p) {
+  return clamp(ivec3(floor((p - pssGridLo()) / pssGridSide())), ivec3(0), pssGridDims() - 1);
+}
+
+uint pssCellIndex(ivec3 c) {
+  ivec3 dims = pssGridDims();
+  return (uint(c.z) * uint(dims.y) + uint(c.y)) * uint(dims.x) + uint(c.x);
+}
+
+// The fast mode: the nearest hit of o + t d (d unit), t in (tMin, tMax), with a stored polynomial
+// inside its trust region, walking the grid's cells along the ray (Amanatides and Woo) and testing
+// the trust regions listed in each; `point` is the patch's point.
+bool pssFirstHit(vec3 o, vec3 d, float tMin, float tMax, ISO_INOUT(float) t,
+                 ISO_INOUT(vec3) hitNormal, ISO_INOUT(uint) point) {
+  vec3 lo = pssGridLo();
+  float side = pssGridSide();
+  ivec3 dims = pssGridDims();
+  vec3 hi = lo + vec3(dims) * side;
+  // The ray's span inside the grid's box.
+  float t0 = tMin, t1 = tMax;
+  for (int a = 0; a < 3; ++a) {
+    if (abs(d[a]) < 1e-30f) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
+      continue;
+    }
+    float near = (lo[a] - o[a]) / d[a], far = (hi[a] - o[a]) / d[a];
+    t0 = max(t0, min(near, far));
+    t1 = min(t1, max(near, far));
+  }
+  if (!(t0 <= t1)) return false;
+  ivec3 cell = pssCellOf(o + t0 * d);
+  ivec3 step = ivec3(0);
+  vec3 next = vec3(3.0e38f), delta = vec3(3.0e38f);
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] > 0.0f) {
+      step[a] = 1;
+      next[a] = (lo[a] + float(cell[a] + 1) * side - o[a]) / d[a];
+      delta[a] = side / d[a];
+    } else if (d[a] < 0.0f) {
+      step[a] = -1;
+      next[a] = (lo[a] + float(cell[a]) * side - o[a]) / d[a];
+      delta[a] = -side / d[a];
+    }
+  }
+  bool found = false;
+  float best = tMax;
+  for (;;) {
+    uint c = pssCellIndex(cell);
+    uint end = pssReachStart(c + 1u);
+    for (uint k = pssReachStart(c); k < end; ++k) {
+      uint i = pssReachAt(k);
+      float s = 0.0f;
+      vec3 normal = vec3(0.0f);
+      if (pssIntersect(pssPatch(i, 0), pssPatch(i, 1), pssPatch(i, 2), pssPatch(i, 3), o, d, tMin,
+                       best, s, normal)) {
+        best = s;
+        t = s;
+        hitNormal = normal;
+        point = i;
+        found = true;
+      }
+    }
+    int a = next.x < next.y ? (next.x < next.z ? 0 : 2) : (next.y < next.z ? 1 : 2);
+    // Every trust region reaching past this cell's exit was tested: a hit before it is the first.
+    if (found && best <= next[a]) return true;
+    if (next[a] > t1) return found;
+    cell[a] += step[a];
+    if (cell[a] < 0 || cell[a] >= dims[a]) return found;
+    next[a] += delta[a];
+  }
+  return found;
+}
+
+// The polynomial fitted at x by weighted least squares over the points within reach × h of it
+// (Gaussian weights of width h, the nearest point's): its plane H through their weighted centroid,
+// across their weighted normal, its frame's origin x's foot on H. False where no point is near.
+bool pssFit(vec3 x, ISO_INOUT(vec4) origin, ISO_INOUT(vec4) normal, ISO_INOUT(vec4) tangent,
+            ISO_INOUT(vec4) coefficients) {
+  vec4 settings = pssSettings();
+  float side = pssGridSide();
+  // The nearest point within a cell: its h.
+  float h = 0.0f, nearest = 3.0e38f;
+  vec3 reference = vec3(0.0f);
+  ivec3 a = pssCellOf(x - side), b = pssCellOf(x + side);
+  for (int cz = a.z; cz <= b.z; ++cz)
+    for (int cy = a.y; cy <= b.y; ++cy)
+      for (int cx = a.x; cx <= b.x; ++cx) {
+        uint c = pssCellIndex(ivec3(cx, cy, cz));
+        uint end = pssPointStart(c + 1u);
+        for (uint k = pssPointStart(c); k < end; ++k) {
+          uint i = pssPointAt(k);
+          vec3 r = pssPosition(i) - x;
+          float d = dot(r, r);
+          if (d < nearest) {
+            nearest = d;
+            h = pssH(i);
+            reference = pssNormal(i);
+          }
+        }
+      }
+  if (!(h > 0.0f)) return false;
+  float reach = settings.y * h, inv = 1.0f / (h * h);
+  a = pssCellOf(x - reach);
+  b = pssCellOf(x + reach);
+  // Pass 1: the weighted normal and centroid.
+  vec3 sumNormal = vec3(0.0f), sumPosition = vec3(0.0f);
+  float weights = 0.0f;
+  int count = 0;
+  for (int cz = a.z; cz <= b.z; ++cz)
+    for (int cy = a.y; cy <= b.y; ++cy)
+      for (int cx = a.x; cx <= b.x; ++cx) {
+        uint c = pssCellIndex(ivec3(cx, cy, cz));
+        uint end = pssPointStart(c + 1u);
+        for (uint k = pssPointStart(c); k < end; ++k) {
+          uint i = pssPointAt(k);
+          vec3 r = pssPosition(i) - x;
+          float d = dot(r, r);
+          if (d > reach * reach) continue;
+          float w = exp(-d * inv);
+          // Normals of either sign (estimated, unoriented) count on the side of the nearest's.
+          vec3 ni = pssNormal(i);
+          sumNormal += w * (dot(ni, reference) < 0.0f ? -ni : ni);
+          sumPosition += w * r;
+          weights += w;
+          ++count;
+        }
+      }
+  if (count < 3 || dot(sumNormal, sumNormal) < 1e-24f * weights * weights) return false;
+  vec3 n = normalize(sumNormal);
+  vec3 centroid = sumPosition / weights;  // from x
+  vec3 q = x + dot(centroid, n) * n;      // x's foot on H
+  vec3 u = normalize(cross(n, abs(n.x) < 0.6f ? vec3(1, 0, 0) : vec3(0, 1, 0)));
+  vec3 v = cross(n, u);
+  // Pass 2: the normal equations of g over H, in units of h (well conditioned in float).
+  float m[4][5];
+  for (int r = 0; r < 4; ++r)
+    for (int k = 0; k < 5; ++k) m[r][k] = 0.0f;
+  for (int cz = a.z; cz <= b.z; ++cz)
+    for (int cy = a.y; cy <= b.y; ++cy)
+      for (int cx = a.x; cx <= b.x; ++cx) {
+        uint c = pssCellIndex(ivec3(cx, cy, cz));
+        uint end = pssPointStart(c + 1u);
+        for (uint k = pssPointStart(c); k < end; ++k) {
+          uint i = pssPointAt(k);
+          vec3 p = pssPosition(i);
+          float d = dot(p - x, p - x);
+          if (d > reach * reach) continue;
+          float w = exp(-d * inv);
+          vec3 r = (p - q) / h;
+          float X = dot(r, u), Y = dot(r, v), F = dot(r, n);
+          float phi[4] = {X * X, Y * Y, X * Y, 1.0f};
+          for (int row = 0; row < 4; ++row) {
+            for (int col = 0; col < 4; ++col) m[row][col] += w * phi[row] * phi[col];
+            m[row][4] += w * phi[row] * F;
+          }
+        }
+      }
+  // A little ridge on the quadratic terms keeps too few or collinear points solvable (they
+  // then give nearly the plane).
+  for (int r = 0; r < 3; ++r) m[r][r] += 1e-4f * m[3][3];
+  // Gaussian elimination with partial pivoting.
+  for (int col = 0; col < 4; ++col) {
+    int pivot = col;
+    for (int r = col + 1; r < 4; ++r)
+      if (abs(m[r][col]) > abs(m[pivot][col])) pivot = r;
+    for (int k = 0; k < 5; ++k) {
+      float s = m[col][k];
+      m[col][k] = m[pivot][k];
+      m[pivot][k] = s;
+    }
+    if (abs(m[col][col]) < 1e-30f) return false;
+    for (int r = col + 1; r < 4; ++r) {
+      float f = m[r][col] / m[col][col];
+      for (int k = col; k < 5; ++k) m[r][k] -= f * m[col][k];
+    }
+  }
+  float g[4];
+  for (int r = 3; r >= 0; --r) {
+    float s = m[r][4];
+    for (int k = r + 1; k < 4; ++k) s -= m[r][k] * g[k];
+    g[r] = s / m[r][r];
+  }
+  // Back from units of h: A, B, C scale by 1 / h, D by h.
+  origin = vec4(q, settings.x * h);
+  normal = vec4(n, g[3] * h);
+  tangent = vec4(u, g[0] / h);
+  coefficients = vec4(g[1] / h, g[2] / h, 0.0f, 0.0f);
+  return true;
+}
+
+// A ray's first hit: the fast mode's, and in the exact mode (exact) that hit projected onto the
+// moving-least-squares surface (the fitted polynomial over the hit's foot) and the ray
+// intersected again with the polynomial fitted there, until the projection moves less than the
+// tolerance; outside that polynomial's trust region, the search goes on to the next stored
+// polynomial along the ray. `projections` counts the fits.
+bool pssHit(vec3 o, vec3 d, float tMin, float tMax, bool exact, ISO_INOUT(float) t,
+            ISO_INOUT(vec3) hitNormal, ISO_INOUT(uint) point, ISO_INOUT(int) projections) {
+  projections = 0;
+  if (!pssFirstHit(o, d, tMin, tMax, t, hitNormal, point)) return false;
+  if (!exact) return true;
+  vec4 settings = pssSettings();
+  for (int k = 0; k < int(settings.w); ++k) {
+    vec3 x = o + t * d;
+    vec4 P0, P1, P2, P3;
+    if (!pssFit(x, P0, P1, P2, P3)) return true;
+    ++projections;
+    vec3 onSurface = vec3(P0) + P1.w * vec3(P1);
+    float h = P0.w / settings.x;
+    if (length(onSurface - x) < settings.z * h) {
+      hitNormal = vec3(P1);  // the fitted polynomial's normal over its origin
+      return true;
+    }
+    float s = 0.0f;
+    vec3 normal = vec3(0.0f);
+    if (pssIntersect(P0, P1, P2, P3, o, d, tMin, tMax, s, normal)) {
+      t = s;
+      hitNormal = normal;
+      continue;
+    }
+    if (!pssFirstHit(o, d, t + 1e-4f * h, tMax, t, hitNormal, point)) return true;
+  }
+  return true;
 }

@@ -9,9 +9,14 @@
 #include <cstdint>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
+#include <memory>
 #include <vector>
 
 namespace iso::viewer {
+
+namespace pss_shader {
+class Env;
+}
 
 // A local polynomial and its trust region (shaders/pss.h): (origin, b), (n, D), (u, A), (B, C).
 struct PssPatch {
@@ -40,8 +45,24 @@ class PssSurface {
   // (the width of the Gaussian weights: e.g. the conversion's radii).
   PssSurface(std::vector<glm::vec3> positions, std::vector<glm::vec3> normals,
              std::vector<float> h, const PssOptions& options = {});
+  ~PssSurface();
+  PssSurface(const PssSurface&) = delete;
+  PssSurface& operator=(const PssSurface&) = delete;
+
+  // Cells of `side` from `lo`: each point once (points, from pointStart[cell]) and each trust
+  // region reaching in (reach, from reachStart[cell]); the GPU reads the same arrays.
+  struct Grid {
+    glm::vec3 lo{0.0f};
+    float side = 1.0f;
+    glm::ivec3 dims{1};
+    std::vector<uint32_t> pointStart, points, reachStart, reach;
+  };
+  const Grid& grid() const { return grid_; }
 
   size_t size() const { return positions_.size(); }
+  const std::vector<glm::vec3>& positions() const { return positions_; }
+  const std::vector<glm::vec3>& normals() const { return normals_; }
+  const std::vector<float>& h() const { return h_; }
   const std::vector<PssPatch>& patches() const { return patches_; }
   const PssOptions& options() const { return options_; }
 
@@ -59,23 +80,41 @@ class PssSurface {
   bool project(const glm::vec3& x, glm::vec3& onSurface) const;
 
  private:
-  // Cells: each point once (points_), and each trust region reaching in (reach_).
-  struct Grid {
-    glm::vec3 lo{0.0f};
-    float side = 1.0f;
-    glm::ivec3 dims{1};
-    std::vector<uint32_t> pointStart, points, reachStart, reach;
-  };
-  glm::ivec3 cellOf(const glm::vec3& p) const;
-  size_t cellIndex(const glm::ivec3& c) const;
-  bool fast(const glm::vec3& o, const glm::vec3& d, float tMin, float tMax, PssHit& hit) const;
-  void neighbours(const glm::vec3& x, float radius, std::vector<uint32_t>& out) const;
-
   std::vector<glm::vec3> positions_, normals_;
   std::vector<float> h_;
   PssOptions options_;
   std::vector<PssPatch> patches_;
   Grid grid_;
+  std::unique_ptr<pss_shader::Env> env_;  // shaders/pss.h over the members above
 };
+
+struct PssLight {
+  glm::vec3 position{0.0f};
+  float intensity = 1.0f;
+};
+
+// A picture of a point set surface (shaders/pss_trace.h): camera, lights, material.
+struct PssRender {
+  glm::vec3 eye{0.0f, 0.0f, 3.0f}, target{0.0f}, up{0.0f, 1.0f, 0.0f};
+  float fovDegrees = 40.0f;
+  int width = 512, height = 512;
+  std::vector<PssLight> lights;
+  glm::vec4 material{0.85f, 0.25f, 40.0f, 0.0f};  // diffuse, specular, shininess, transparency
+  glm::vec3 iors{1.5f};                           // of R, G and B (dispersion when they differ)
+  float ambient = 0.15f;
+  glm::vec3 color{0.75f, 0.75f, 0.72f};  // of points without a color
+  glm::vec3 background{0.0f};
+  bool exact = false;  // camera and refracted rays in the exact mode
+};
+
+// The first hit of o + t d (t > 0) and the ray leaving it by Snell's law for `ior`
+// (shaders/pss_trace.h): point, normal (against d) and direction.
+bool pssRefract(const PssSurface& surface, const glm::vec3& o, const glm::vec3& d, float ior,
+                bool exact, glm::vec3& point, glm::vec3& normal, glm::vec3& bent);
+
+// The picture's linear colors, rows from the top, on the CPU (every pixel with TBB); `colors` per
+// point, or empty.
+std::vector<glm::vec3> renderPss(const PssSurface& surface, const std::vector<glm::vec3>& colors,
+                                 const PssRender& render);
 
 }  // namespace iso::viewer

@@ -169,5 +169,63 @@ TEST(Pss, theGridFindsTheFirstHitThatEveryPatchGives) {
   EXPECT_GE(double(same), 0.999 * double(total));
 }
 
+// Dispersion: a glass sphere of points with indices (1.50, 1.52, 1.54) bends rays entering it at
+// 10° to 70° to the angles Snell's law gives each channel (against the analytic normal at the
+// analytic hit).
+TEST(Pss, aGlassSphereBendsEachChannelToSnellsAngle) {
+  const Shape shape = sphere(20'000);
+  const PssSurface surface = surfaceOf(shape);
+  const float iors[3] = {1.50f, 1.52f, 1.54f};
+  double worst = 0.0;
+  for (int degrees = 10; degrees <= 70; degrees += 5) {
+    // A ray in the xz-plane meeting the sphere at incidence `degrees` at azimuth 0.3.
+    const float incidence = glm::radians(float(degrees));
+    const vec3 normal = glm::normalize(vec3(std::cos(0.3f), std::sin(0.3f), 0.4f));
+    vec3 side = glm::normalize(glm::cross(normal, vec3(0, 0, 1)));
+    const vec3 d = -std::cos(incidence) * normal + std::sin(incidence) * side;
+    const vec3 o = normal - 3.0f * d;
+    for (int c = 0; c < 3; ++c) {
+      vec3 p, n, bent;
+      for (bool exact : {false, true}) {
+        ASSERT_TRUE(pssRefract(surface, o, d, iors[c], exact, p, n, bent)) << degrees;
+        const float expected = std::asin(std::sin(incidence) / iors[c]);
+        const float angle = std::acos(std::clamp(glm::dot(bent, -normal), -1.0f, 1.0f));
+        const double error = std::abs(angle - expected) / expected;
+        worst = std::max(worst, error);
+        EXPECT_LT(error, 0.005) << degrees << " degrees, channel " << c << (exact ? " exact" : " fast");
+      }
+    }
+  }
+  std::printf("refraction angles of R, G and B within %.4f %% of Snell's law\n", 100.0 * worst);
+}
+
+// A picture: the sphere's silhouette against the analytic one.
+TEST(Pss, aPictureOfASphereShowsItsSilhouette) {
+  const Shape shape = sphere(20'000);
+  const PssSurface surface = surfaceOf(shape);
+  PssRender render;
+  render.eye = vec3(0.4f, 0.3f, 3.0f);
+  render.width = render.height = 96;
+  render.lights.push_back({vec3(3, 4, 5), 1.0f});
+  const std::vector<vec3> pixels = renderPss(surface, {}, render);
+  const vec3 forward = glm::normalize(render.target - render.eye);
+  const vec3 right = glm::normalize(glm::cross(forward, render.up)), up = glm::cross(right, forward);
+  const float t = std::tan(glm::radians(20.0f));
+  size_t both = 0, either = 0;
+  for (int y = 0; y < render.height; ++y)
+    for (int x = 0; x < render.width; ++x) {
+      const float sx = ((x + 0.5f) / render.width * 2.0f - 1.0f) * t;
+      const float sy = (1.0f - (y + 0.5f) / render.height * 2.0f) * t;
+      const Ray r{render.eye, glm::normalize(forward + sx * right + sy * up)};
+      const vec3 closest = r.o - glm::dot(r.o, r.d) * r.d;
+      const bool analytic = glm::length(closest) < 1.0f;
+      const bool drawn = pixels[size_t(y) * render.width + x] != vec3(0.0f);
+      both += analytic && drawn;
+      either += analytic || drawn;
+    }
+  std::printf("sphere picture: silhouette IoU %.4f\n", double(both) / double(either));
+  EXPECT_GT(double(both) / double(either), 0.99);
+}
+
 }  // namespace
 }  // namespace iso::viewer
