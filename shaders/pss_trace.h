@@ -9,6 +9,7 @@
 //   vec3 pssColor(uint point);                     // the point's color (linear)
 //   vec3 pssBackground();
 //   bool pssExact();      // the exact mode for camera and refracted rays (shadow rays: fast)
+//   bool pssShadows();    // shadow rays
 
 const int kPssMaxBounces = 8;  // refractions along a path at most
 
@@ -27,7 +28,8 @@ vec3 pssShade(vec3 p, vec3 n, vec3 view, vec3 base, float scale) {
     float t = 0.0f;
     vec3 hitNormal = vec3(0.0f);
     uint point = 0u;
-    if (pssFirstHit(p, toLight, 1e-3f * scale, distance, t, hitNormal, point)) continue;
+    if (pssShadows() && pssFirstHit(p, toLight, 1e-3f * scale, distance, t, hitNormal, point))
+      continue;
     vec3 reflected = 2.0f * diffuse * n - toLight;
     float specular = pow(max(dot(reflected, -view), 0.0f), material.z);
     c += light.w * (material.x * diffuse * base + material.y * specular);

@@ -410,6 +410,41 @@ TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
   }
 }
 
+// --draw pss: the kitten's points as a point set surface on the CPU reference, in the same
+// silhouette as its image-space points; dispersion's three indices, and what is refused.
+TEST(CliView, pointsDrawAsAPointSetSurfaceOnTheCpu) {
+  TempDir dir;
+  const std::string kitten =
+      quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz");
+  const std::string size = " --width 160 --height 128";
+  const auto pss = dir / "pss.png", exact = dir / "exact.png", image = dir / "image.png";
+  CommandResult run = iso("view " + kitten + " --draw pss --cpu --out " + quoted(pss) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("point set surface (fast mode)"), std::string::npos) << run.out;
+  run = iso("view " + kitten + " --draw pss --pss exact --cpu --out " + quoted(exact) + size +
+            " --transparency 0.6 --ior 1.5,1.52,1.54");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("(exact mode)"), std::string::npos) << run.out;
+  ASSERT_EQ(iso("view " + kitten + " --cpu --out " + quoted(image) + size).exitCode, 0);
+  const auto a = expectPicture(pss, 160, 128), b = expectPicture(image, 160, 128);
+  expectPicture(exact, 160, 128);
+  size_t both = 0, either = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    const bool x = (a[i] & 0xFFFFFF) != 0, y = (b[i] & 0xFFFFFF) != 0;
+    both += x && y;
+    either += x || y;
+  }
+  std::printf("kitten: point set surface against image-space points, IoU %.4f\n",
+              double(both) / double(either));
+  EXPECT_GT(double(both) / double(either), 0.9);
+  // Three indices only for --draw pss; pss only on the CPU so far.
+  EXPECT_EQ(iso("view " + kitten + " --cpu --out x.png --ior 1.5,1.52,1.54").exitCode, 2);
+  const CommandResult gpu = iso("view " + kitten + " --draw pss --headless --out x.png");
+  EXPECT_EQ(gpu.exitCode, 2);
+  EXPECT_NE(gpu.err.find("--cpu"), std::string::npos) << gpu.err;
+  EXPECT_EQ(iso("view " + kitten + " --draw pss --cpu --out x.png --ior 5").exitCode, 2);
+}
+
 TEST(CliView, causticsPutAGroundUnderTheSurfaceAndSayHowManyPhotonsTheyTraced) {
   TempDir dir;
   const std::string file = quoted(kittenIso());

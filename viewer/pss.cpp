@@ -53,6 +53,7 @@ class Env {
   vec3 pssColor(uint point) const { return colors->empty() ? render->color : (*colors)[point]; }
   vec3 pssBackground() const { return render->background; }
   bool pssExact() const { return render->exact; }
+  bool pssShadows() const { return render->shadows; }
 
 #include "shaders/pss.h"
 #include "shaders/pss_trace.h"

@@ -105,6 +105,7 @@ struct PssRender {
   glm::vec3 color{0.75f, 0.75f, 0.72f};  // of points without a color
   glm::vec3 background{0.0f};
   bool exact = false;  // camera and refracted rays in the exact mode
+  bool shadows = true;
 };
 
 // The first hit of o + t d (t > 0) and the ray leaving it by Snell's law for `ior`

@@ -27,7 +27,10 @@ struct ViewArgs {
   std::string vram = "1G", upload = "16M", camera, up, color, ambient, environment, backFaces;
   double fov = 0;
   std::vector<std::string> lights;
-  std::optional<float> reflectivity, transparency, ior, shininess, environmentIntensity, lodPixels;
+  std::optional<float> reflectivity, transparency, shininess, environmentIntensity, lodPixels;
+  std::string ior;  // one index, or three (R, G, B: --draw pss)
+  std::string pss = "fast";
+  bool drawPss = false;  // --draw pss (cleared from `draw` before the scene is built)
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
   bool points = false, ground = false;
@@ -151,6 +154,39 @@ int viewImage(ViewArgs& a) {
   return viewer::viewImageHeadless(a.view, a.image, inputs);
 }
 
+// --ior: one index, or three (R, G, B) for --draw pss; each in [1, 4].
+std::vector<double> parseIors(const ViewArgs& a) {
+  const size_t count = std::count(a.ior.begin(), a.ior.end(), ',') + 1;
+  if (count != 1 && count != 3)
+    throw UsageError("--ior: one index of refraction, or three (R,G,B), not '" + a.ior + "'");
+  if (count == 3 && !a.drawPss)
+    throw UsageError("--ior R,G,B (one index a channel) goes with --draw pss");
+  const std::vector<double> iors = viewer::parseNumbers(a.ior, count, "--ior");
+  for (double v : iors)
+    if (!(v >= 1.0 && v <= 4.0)) throw UsageError("--ior: each index within 1 to 4");
+  return iors;
+}
+
+// --draw pss: the points (an .iso file's kept points, or point files) as a point set surface,
+// all of them, ray traced on the CPU reference.
+int viewPss(ViewArgs& a) {
+  if (!a.cpu)
+    throw UsageError("--draw pss draws on the CPU reference only (add --cpu --out FILE); the "
+                     "GPU's is not built yet");
+  viewer::PssViewOptions pss;
+  pss.exact = a.pss == "exact";
+  if (!a.ior.empty()) {
+    const std::vector<double> iors = parseIors(a);
+    pss.iors = iors.size() == 3 ? glm::vec3(iors[0], iors[1], iors[2]) : glm::vec3(iors[0]);
+  } else {
+    pss.iors = glm::vec3(a.view.scene.material.ior);
+  }
+  ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, hostPointBudget());
+  viewer::ImageInputs inputs = imageInputs(readImagePoints(files), UINT64_MAX);
+  colorPoints(a, inputs);
+  return viewer::viewPssCpu(a.view, pss, inputs);
+}
+
 viewer::Vec3d parseUp(const std::string& text) {
   if (text == "x") return {1, 0, 0};
   if (text == "y") return {0, 1, 0};
@@ -196,7 +232,10 @@ void buildScene(ViewArgs& a) {
   }
   if (a.reflectivity) s.material.reflectivity = *a.reflectivity;
   if (a.transparency) s.material.transparency = *a.transparency;
-  if (a.ior) s.material.ior = *a.ior;
+  if (!a.ior.empty()) {
+    const std::vector<double> iors = parseIors(a);
+    s.material.ior = float(iors[0]);
+  }
   if (a.shininess) s.material.shininess = *a.shininess;
   if (s.material.reflectivity + s.material.transparency > 1.0f)
     throw UsageError("--reflectivity + --transparency must be at most 1");
@@ -297,7 +336,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       ->check(CLI::Range(0.0, 1.0));
   c->add_option("--transparency", a->transparency, "Refraction, 0 to 1")
       ->check(CLI::Range(0.0, 1.0));
-  c->add_option("--ior", a->ior, "Index of refraction")->check(CLI::Range(1.0, 4.0));
+  c->add_option("--ior", a->ior,
+                "Index of refraction, 1 to 4; --draw pss: also R,G,B (each channel refracted "
+                "with its own: dispersion)");
   c->add_option("--shininess", a->shininess, "Phong exponent")->check(CLI::Range(1.0, 10000.0));
   c->add_option("--env", a->environment,
                 "Environment map: an equirectangular image OpenImageIO reads (PNG or PPM in builds "
@@ -321,12 +362,18 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                              "of the surface (--draw points); key K in the window cycles");
   auto drawNames = namesList(viewer::kDrawNames);
   drawNames.push_back("image");
+  drawNames.push_back("pss");
   c->add_option("--draw", a->draw,
                 "What rays meet: surface (the default), points (the kept points as splats), or "
                 "both (the nearer); or image: point files drawn as image-space points (the "
-                "default for raw scans)")
+                "default for raw scans); or pss: the points (an .iso file's kept points, or point "
+                "files) as a point set surface, on the CPU reference (--cpu)")
       ->check(CLI::IsMember(drawNames))
       ->excludes(points);
+  c->add_option("--pss", a->pss,
+                "--draw pss: fast (the nearest stored polynomial, the default) or exact (hits "
+                "projected onto the moving-least-squares surface)")
+      ->check(CLI::IsMember({"fast", "exact"}));
   c->add_option("--layers", a->layers,
                 "--draw image: surface layers peeled and blended front to back (transparency; "
                 "default 1)")
@@ -445,6 +492,12 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       a->view.flatTraversal = a->traversal == "flat";
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
       checkPictures(*a);
+      if (a->draw == "pss") {
+        a->drawPss = true;
+        a->draw.clear();
+        buildScene(*a);
+        return viewPss(*a);
+      }
       if (image) {
         a->draw.clear();
         buildScene(*a);
