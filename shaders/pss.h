@@ -33,11 +33,12 @@ bool pssIntersect(vec4 origin, vec4 normal, vec4 tangent, vec4 coefficients, vec
   float a = A * dx * dx + B * dy * dy + C * dx * dy;
   float b = 2.0f * A * ox * dx + 2.0f * B * oy * dy + C * (ox * dy + oy * dx) - dz;
   float c = A * ox * ox + B * oy * oy + C * ox * oy + D - oz;
-  float roots[2];
-  int count = 0;
+  // The roots, nearer first (one when a vanishes).
+  float r0 = 0.0f, r1 = 0.0f;
+  int count = 2;
   if (abs(a) < 1e-12f * max(abs(b), 1e-30f)) {
     if (b == 0.0f) return false;
-    roots[0] = -c / b;
+    r0 = -c / b;
     count = 1;
   } else {
     float disc = b * b - 4.0f * a * c;
@@ -46,13 +47,12 @@ bool pssIntersect(vec4 origin, vec4 normal, vec4 tangent, vec4 coefficients, vec
     float s = sqrt(disc);
     float q = -0.5f * (b + (b >= 0.0f ? s : -s));
     float t0 = q / a, t1 = q != 0.0f ? c / q : t0;
-    roots[0] = min(t0, t1);
-    roots[1] = max(t0, t1);
-    count = 2;
+    r0 = min(t0, t1);
+    r1 = max(t0, t1);
   }
   float b2 = origin.w * origin.w;
   for (int k = 0; k < count; ++k) {
-    float s = roots[k];
+    float s = k == 0 ? r0 : r1;
     if (!(s > tMin && s < tMax)) continue;
     vec3 local = vec3(ox + s * dx, oy + s * dy, oz + s * dz);
     if (dot(local, local) > b2) continue;  // outside the trust region
@@ -83,32 +83,20 @@ bool pssFirstHit(vec3 o, vec3 d, float tMin, float tMax, ISO_INOUT(float) t,
   float side = pssGridSide();
   ivec3 dims = pssGridDims();
   vec3 hi = lo + vec3(dims) * side;
-  // The ray's span inside the grid's box.
-  float t0 = tMin, t1 = tMax;
-  for (int a = 0; a < 3; ++a) {
-    if (abs(d[a]) < 1e-30f) {
-      if (o[a] < lo[a] || o[a] > hi[a]) return false;
-      continue;
-    }
-    float near = (lo[a] - o[a]) / d[a], far = (hi[a] - o[a]) / d[a];
-    t0 = max(t0, min(near, far));
-    t1 = min(t1, max(near, far));
-  }
+  // The ray's span inside the grid's box (slabs; a zero component divides to ±infinity).
+  vec3 inv = vec3(1.0f) / d;
+  vec3 ta = (lo - o) * inv, tb = (hi - o) * inv;
+  vec3 tNear = min(ta, tb), tFar = max(ta, tb);
+  float t0 = max(tMin, max(tNear.x, max(tNear.y, tNear.z)));
+  float t1 = min(tMax, min(tFar.x, min(tFar.y, tFar.z)));
   if (!(t0 <= t1)) return false;
+  // Amanatides and Woo's walk, without indexing a vector by a variable (costly in lavapipe).
   ivec3 cell = pssCellOf(o + t0 * d);
-  ivec3 step = ivec3(0);
-  vec3 next = vec3(3.0e38f), delta = vec3(3.0e38f);
-  for (int a = 0; a < 3; ++a) {
-    if (d[a] > 0.0f) {
-      step[a] = 1;
-      next[a] = (lo[a] + float(cell[a] + 1) * side - o[a]) / d[a];
-      delta[a] = side / d[a];
-    } else if (d[a] < 0.0f) {
-      step[a] = -1;
-      next[a] = (lo[a] + float(cell[a]) * side - o[a]) / d[a];
-      delta[a] = -side / d[a];
-    }
-  }
+  vec3 sign = vec3(greaterThan(d, vec3(0.0f))) - vec3(lessThan(d, vec3(0.0f)));
+  ivec3 step = ivec3(sign);
+  vec3 boundary = lo + (vec3(cell) + max(sign, vec3(0.0f))) * side;
+  vec3 next = mix(vec3(3.0e38f), (boundary - o) * inv, notEqual(sign, vec3(0.0f)));
+  vec3 delta = mix(vec3(3.0e38f), abs(vec3(side) * inv), notEqual(sign, vec3(0.0f)));
   bool found = false;
   float best = tMax;
   for (;;) {
@@ -127,19 +115,22 @@ bool pssFirstHit(vec3 o, vec3 d, float tMin, float tMax, ISO_INOUT(float) t,
         found = true;
       }
     }
-    int a = next.x < next.y ? (next.x < next.z ? 0 : 2) : (next.y < next.z ? 1 : 2);
+    float leave = min(next.x, min(next.y, next.z));
     // Every trust region reaching past this cell's exit was tested: a hit before it is the first.
-    if (found && best <= next[a]) return true;
-    if (next[a] > t1) return found;
-    cell[a] += step[a];
-    if (cell[a] < 0 || cell[a] >= dims[a]) return found;
-    next[a] += delta[a];
+    if (found && best <= leave) return true;
+    if (leave > t1) return found;
+    // The axis whose boundary comes first (x before y before z on ties).
+    vec3 axis = vec3(next.x == leave, next.x != leave && next.y == leave,
+                     next.x != leave && next.y != leave);
+    cell += ivec3(axis) * step;
+    if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, dims))) return found;
+    next += axis * delta;
   }
   return found;
 }
 
 // The polynomial fitted at x by weighted least squares over the points within reach × h of it
-// (Gaussian weights of width h, the nearest point's): its plane H through their weighted centroid,
+// (Gaussian weights of width h, the nearest point's): its plane H through their weighted mean,
 // across their weighted normal, its frame's origin x's foot on H. False where no point is near.
 bool pssFit(vec3 x, ISO_INOUT(vec4) origin, ISO_INOUT(vec4) normal, ISO_INOUT(vec4) tangent,
             ISO_INOUT(vec4) coefficients) {
@@ -169,7 +160,7 @@ bool pssFit(vec3 x, ISO_INOUT(vec4) origin, ISO_INOUT(vec4) normal, ISO_INOUT(ve
   float reach = settings.y * h, inv = 1.0f / (h * h);
   a = pssCellOf(x - reach);
   b = pssCellOf(x + reach);
-  // Pass 1: the weighted normal and centroid.
+  // Pass 1: the weighted normal and mean.
   vec3 sumNormal = vec3(0.0f), sumPosition = vec3(0.0f);
   float weights = 0.0f;
   int count = 0;
@@ -194,8 +185,8 @@ bool pssFit(vec3 x, ISO_INOUT(vec4) origin, ISO_INOUT(vec4) normal, ISO_INOUT(ve
       }
   if (count < 3 || dot(sumNormal, sumNormal) < 1e-24f * weights * weights) return false;
   vec3 n = normalize(sumNormal);
-  vec3 centroid = sumPosition / weights;  // from x
-  vec3 q = x + dot(centroid, n) * n;      // x's foot on H
+  vec3 mean = sumPosition / weights;  // from x
+  vec3 q = x + dot(mean, n) * n;      // x's foot on H
   vec3 u = normalize(cross(n, abs(n.x) < 0.6f ? vec3(1, 0, 0) : vec3(0, 1, 0)));
   vec3 v = cross(n, u);
   // Pass 2: the normal equations of g over H, in units of h (well conditioned in float).

@@ -255,6 +255,28 @@ struct ImageParams {
   Light lights[kMaxLights];  // in the renderer's world units; color.w: the light's samples
 };
 
+// Point set surfaces (shaders/pss.h, pss_trace.h, pss.comp.glsl): a picture's camera, grid,
+// material and lights. Positions are relative to the scene's origin.
+ISO_CONST uint kPssMaxLights = 8u;
+ISO_CONST uint kPssExact = 1u;    // image.z bits: camera and refracted rays in the exact mode
+ISO_CONST uint kPssShadows = 2u;  // shadow rays
+ISO_CONST uint kPssColors = 4u;   // the points have colors (else material color)
+struct PssParams {
+  vec4 eye;         // xyz: the viewpoint; w: the scene's size (ray offsets)
+  vec4 right;       // xyz: right · tan(fov/2) · aspect
+  vec4 up;          // xyz: up · tan(fov/2)
+  vec4 forward;     // xyz: the view direction, unit
+  vec4 gridLo;      // xyz: the grid's corner; w: its cells' side
+  uvec4 gridDims;   // xyz: cells across; w: the light count
+  uvec4 image;      // width, height, option bits (kPss...), 0
+  vec4 settings;    // trust (b / h), reach (/ h), tolerance (/ h), projections at most
+  vec4 material;    // diffuse, specular, shininess, transparency
+  vec4 iors;        // indices of refraction of R, G, B; w: ambient
+  vec4 color;       // rgb: the color of points without one
+  vec4 background;  // rgb: the background's linear color
+  vec4 lights[kPssMaxLights];  // xyz: position; w: intensity
+};
+
 // One chunk in the chunk table (binding 1).
 struct ChunkEntry {
   uvec4 state;  // x: first pool page or kNotResident; y: the chunk's level; z: float bits of its

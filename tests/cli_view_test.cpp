@@ -437,11 +437,25 @@ TEST(CliView, pointsDrawAsAPointSetSurfaceOnTheCpu) {
   std::printf("kitten: point set surface against image-space points, IoU %.4f\n",
               double(both) / double(either));
   EXPECT_GT(double(both) / double(either), 0.9);
-  // Three indices only for --draw pss; pss only on the CPU so far.
+  // The GPU's picture is the CPU's.
+  const auto gpu = dir / "gpu.png";
+  run = iso("view " + kitten + " --draw pss --headless --out " + quoted(gpu) + size);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto c = expectPicture(gpu, 160, 128);
+  size_t unlike = 0;
+  for (size_t i = 0; i < a.size(); ++i)
+    for (int k = 0; k < 24; k += 8) {
+      if (std::abs(int(a[i] >> k & 255) - int(c[i] >> k & 255)) > 8) {
+        ++unlike;
+        break;
+      }
+    }
+  EXPECT_LT(double(unlike) / double(a.size()), 0.005) << unlike;
+  // Three indices only for --draw pss; no window for it yet.
   EXPECT_EQ(iso("view " + kitten + " --cpu --out x.png --ior 1.5,1.52,1.54").exitCode, 2);
-  const CommandResult gpu = iso("view " + kitten + " --draw pss --headless --out x.png");
-  EXPECT_EQ(gpu.exitCode, 2);
-  EXPECT_NE(gpu.err.find("--cpu"), std::string::npos) << gpu.err;
+  const CommandResult window = iso("view " + kitten + " --draw pss");
+  EXPECT_EQ(window.exitCode, 2);
+  EXPECT_NE(window.err.find("--headless"), std::string::npos) << window.err;
   EXPECT_EQ(iso("view " + kitten + " --draw pss --cpu --out x.png --ior 5").exitCode, 2);
 }
 

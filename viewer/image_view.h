@@ -65,8 +65,12 @@ struct PssViewOptions {
   bool exact = false;          // --pss exact: camera and refracted rays projected onto the MLS surface
   glm::vec3 iors{1.5f};        // --ior: of R, G and B (dispersion when they differ)
 };
-// The points as a point set surface ray traced on the CPU reference (pss_view.cpp).
+// The points as a point set surface ray traced on the CPU reference, on the GPU, or timed along
+// an orbit (pss_view.cpp).
 int viewPssCpu(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);
+int viewPssHeadless(const ViewOptions& options, const PssViewOptions& pss,
+                    const ImageInputs& inputs);
+int viewPssBench(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);
 
 // Points arriving while a window is open: a loader publishes what it has read (previews, then
 // all of it, then the points of each view the window asks for), or its error; the window draws

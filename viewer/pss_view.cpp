@@ -1,21 +1,37 @@
-// `iso view FILE --draw pss --cpu` (image_view.h): the points as a point set surface, ray traced
-// on the CPU (viewer/pss.h).
+// `iso view FILE --draw pss` (image_view.h): the points as a point set surface, ray traced on the
+// CPU reference (viewer/pss.h) or the GPU (viewer/pss_gpu.h).
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <glm/geometric.hpp>
 
 #include "viewer/image.h"
 #include "viewer/image_view.h"
 #include "viewer/pss.h"
+#include "viewer/pss_gpu.h"
+#include "viewer/view.h"
 
 namespace iso::viewer {
+namespace {
 
-int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
-  using Clock = std::chrono::steady_clock;
+using Clock = std::chrono::steady_clock;
+double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+// The inputs' points as one surface (h: kPssSpacings of each point's spacing), their colors (none
+// when no input has any), and how long the fit took.
+struct PssScene {
+  std::unique_ptr<PssSurface> surface;
+  std::vector<glm::vec3> colors;
+  double fitSeconds = 0.0;
+};
+
+PssScene pssScene(const ImageInputs& in) {
   const auto t0 = Clock::now();
-  std::vector<glm::vec3> positions, normals, colors;
+  std::vector<glm::vec3> positions, normals;
   std::vector<float> h;
+  PssScene s;
   bool anyColors = false;
   for (const ImageObject& object : in.objects) anyColors |= !object.colors.empty();
   for (const ImageObject& object : in.objects)
@@ -23,14 +39,17 @@ int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInput
       positions.push_back(object.positions[i]);
       normals.push_back(object.normals.empty() ? glm::vec3(0.0f) : object.normals[i]);
       h.push_back(kPssSpacings * (object.spacings.empty() ? object.spacing : object.spacings[i]));
-      if (anyColors) colors.push_back(object.colors.empty() ? object.color : object.colors[i]);
+      if (anyColors) s.colors.push_back(object.colors.empty() ? object.color : object.colors[i]);
     }
-  const size_t points = positions.size();
-  const PssSurface surface(std::move(positions), std::move(normals), std::move(h));
-  const double fit = std::chrono::duration<double>(Clock::now() - t0).count();
+  s.surface = std::make_unique<PssSurface>(std::move(positions), std::move(normals), std::move(h));
+  s.fitSeconds = seconds(Clock::now() - t0);
+  return s;
+}
 
+// The picture's camera, lights and material from the scene, in the points' frame.
+PssRender pssRender(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in,
+                    const Camera& camera) {
   const Scene& s = o.scene;
-  const Camera camera = sceneCamera(s, in);
   PssRender r;
   r.eye = glm::vec3(camera.eye - in.origin);
   r.target = glm::vec3(camera.target - in.origin);
@@ -49,19 +68,86 @@ int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInput
   r.ambient = s.ambient[1];
   r.color = glm::vec3(s.material.color[0], s.material.color[1], s.material.color[2]);
   r.exact = pss.exact;
-  const auto t1 = Clock::now();
-  const std::vector<glm::vec3> linear = renderPss(surface, colors, r);
-  const double render = std::chrono::duration<double>(Clock::now() - t1).count();
+  return r;
+}
+
+void printScene(const ImageInputs& in, const PssScene& s) {
+  fmt::print("{} points from {} file{}{}, a point set surface fitted in {:.2f} s\n",
+             s.surface->size(), in.names.size(), in.names.size() == 1 ? "" : "s",
+             in.normalsEstimated ? " (normals estimated)" : "", s.fitSeconds);
+}
+
+const char* modeName(const PssViewOptions& pss) { return pss.exact ? "exact" : "fast"; }
+
+}  // namespace
+
+int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
+  const PssScene s = pssScene(in);
+  const PssRender r = pssRender(o, pss, in, sceneCamera(o.scene, in));
+  const auto t0 = Clock::now();
+  const std::vector<glm::vec3> linear = renderPss(*s.surface, s.colors, r);
+  const double render = seconds(Clock::now() - t0);
   std::vector<uint32_t> pixels(linear.size());
   for (size_t i = 0; i < linear.size(); ++i) pixels[i] = imagePixelWord(linear[i]);
   writeImage(o.out, o.width, o.height, pixels);
-  fmt::print("{} points from {} file{}{}, a point set surface fitted in {:.2f} s\n", points,
-             in.names.size(), in.names.size() == 1 ? "" : "s",
-             in.normalsEstimated ? " (normals estimated)" : "", fit);
+  printScene(in, s);
   fmt::print("{}: {}x{} point set surface ({} mode) on the CPU reference, {:.2f} s ({:.2f} M "
              "camera rays/s)\n",
-             o.out.string(), o.width, o.height, pss.exact ? "exact" : "fast", render,
+             o.out.string(), o.width, o.height, modeName(pss), render,
              double(o.width) * o.height / render * 1e-6);
+  return 0;
+}
+
+int viewPssHeadless(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
+  Gpu gpu = gpuFor(o);
+  const PssScene s = pssScene(in);
+  GpuPss renderer(gpu, *s.surface, s.colors);
+  double gpuSeconds = 0.0;
+  const std::vector<uint32_t> pixels =
+      renderer.render(pssRender(o, pss, in, sceneCamera(o.scene, in)), &gpuSeconds);
+  writeImage(o.out, o.width, o.height, pixels);
+  printScene(in, s);
+  fmt::print("{}: {}x{} point set surface ({} mode) on {}, {:.3f} s GPU, GPU memory {:.1f} MiB\n",
+             o.out.string(), o.width, o.height, modeName(pss), gpu.properties.deviceName,
+             gpuSeconds, double(renderer.memoryBytes()) / (1 << 20));
+  return 0;
+}
+
+int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
+  Gpu gpu = gpuFor(o);
+  const PssScene s = pssScene(in);
+  GpuPss renderer(gpu, *s.surface, s.colors);
+  const Camera start = sceneCamera(o.scene, in);
+  const uint32_t frames = std::max(o.benchFrames, 2u);
+  std::vector<double> wall, device;
+  for (uint32_t f = 0; f < frames; ++f) {
+    Camera c = start;
+    c.eye = c.target + rotated(c.eye - c.target, normalized(c.up), 2.0 * M_PI * f / frames);
+    const auto t = Clock::now();
+    double g = 0.0;
+    renderer.render(pssRender(o, pss, in, c), &g);
+    if (f == 0) continue;  // the first frame pays for the pipeline's first use
+    wall.push_back(seconds(Clock::now() - t));
+    device.push_back(g);
+  }
+  std::sort(wall.begin(), wall.end());
+  std::sort(device.begin(), device.end());
+  const double median = wall[wall.size() / 2], gpuMedian = device[device.size() / 2];
+  // The CPU reference on the first view.
+  const auto t0 = Clock::now();
+  renderPss(*s.surface, s.colors, pssRender(o, pss, in, start));
+  const double cpu = seconds(Clock::now() - t0);
+  printScene(in, s);
+  fmt::print("bench pss: {}x{} on {}, {} mode, {} points, {} frames orbiting\n", o.width,
+             o.height, gpu.properties.deviceName, modeName(pss), s.surface->size(), wall.size());
+  fmt::print("  ms/frame    median {:.2f} ({:.1f} frames/s), GPU {:.2f} ms (timestamps)\n",
+             median * 1e3, 1.0 / median, gpuMedian * 1e3);
+  fmt::print("  rays        {:.2f} M camera rays/s on the GPU, {:.2f} M on the CPU reference\n",
+             double(o.width) * o.height / median * 1e-6, double(o.width) * o.height / cpu * 1e-6);
+  fmt::print("  GPU memory  {:.1f} MiB\n", double(renderer.memoryBytes()) / (1 << 20));
+  fmt::print("  CPU         the first view in {:.2f} s on the CPU reference ({:.1f} times the "
+             "GPU's frame)\n",
+             cpu, cpu / median);
   return 0;
 }
 

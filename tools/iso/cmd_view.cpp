@@ -168,11 +168,11 @@ std::vector<double> parseIors(const ViewArgs& a) {
 }
 
 // --draw pss: the points (an .iso file's kept points, or point files) as a point set surface,
-// all of them, ray traced on the CPU reference.
+// all of them, ray traced on the CPU reference, the GPU, or timed.
 int viewPss(ViewArgs& a) {
-  if (!a.cpu)
-    throw UsageError("--draw pss draws on the CPU reference only (add --cpu --out FILE); the "
-                     "GPU's is not built yet");
+  if (!a.cpu && !a.headless && !a.bench)
+    throw UsageError("--draw pss draws with --headless, --cpu or --bench (its window is not "
+                     "built yet)");
   viewer::PssViewOptions pss;
   pss.exact = a.pss == "exact";
   if (!a.ior.empty()) {
@@ -184,7 +184,9 @@ int viewPss(ViewArgs& a) {
   ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, hostPointBudget());
   viewer::ImageInputs inputs = imageInputs(readImagePoints(files), UINT64_MAX);
   colorPoints(a, inputs);
-  return viewer::viewPssCpu(a.view, pss, inputs);
+  if (a.cpu) return viewer::viewPssCpu(a.view, pss, inputs);
+  if (a.headless) return viewer::viewPssHeadless(a.view, pss, inputs);
+  return viewer::viewPssBench(a.view, pss, inputs);
 }
 
 viewer::Vec3d parseUp(const std::string& text) {
@@ -367,7 +369,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "What rays meet: surface (the default), points (the kept points as splats), or "
                 "both (the nearer); or image: point files drawn as image-space points (the "
                 "default for raw scans); or pss: the points (an .iso file's kept points, or point "
-                "files) as a point set surface, on the CPU reference (--cpu)")
+                "files) as a point set surface (--headless, --cpu or --bench)")
       ->check(CLI::IsMember(drawNames))
       ->excludes(points);
   c->add_option("--pss", a->pss,
