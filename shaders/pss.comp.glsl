@@ -21,6 +21,10 @@ layout(std430, binding = 7) readonly buffer ReachStart { uint reachStart[]; };
 layout(std430, binding = 8) readonly buffer Reach { uint reach[]; };
 // The picture: sRGB8 RGBA words.
 layout(std430, binding = 9) writeonly buffer Pixels { uint pixels[]; };
+// The volume (PssVolume): its grid's cells' points and the points (position, value).
+layout(std430, binding = 10) readonly buffer VolumeStart { uint volumeStart[]; };
+layout(std430, binding = 11) readonly buffer VolumeOrder { uint volumeOrder[]; };
+layout(std430, binding = 12) readonly buffer VolumePoints { vec4 volumePoints[]; };
 
 vec3 pssGridLo() { return vec3(Q.gridLo); }
 float pssGridSide() { return Q.gridLo.w; }
@@ -44,6 +48,17 @@ vec3 pssColor(uint point) {
 vec3 pssBackground() { return vec3(Q.background); }
 bool pssExact() { return (Q.image.z & kPssExact) != 0u; }
 bool pssShadows() { return (Q.image.z & kPssShadows) != 0u; }
+bool pssVolume() { return Q.volumeDims.w != 0u; }
+vec4 pssVolumeSettings() { return Q.volumeSettings; }
+vec3 pssVolumeLo() { return vec3(Q.volumeLo); }
+float pssVolumeSide() { return Q.volumeLo.w; }
+ivec3 pssVolumeDims() { return ivec3(Q.volumeDims.xyz); }
+uint pssVolumeStart(uint c) { return volumeStart[c]; }
+uint pssVolumeAt(uint k) { return volumeOrder[k]; }
+vec4 pssVolumePoint(uint i) { return volumePoints[i]; }
+uint pssTransferCount() { return Q.volumeDims.w; }
+vec4 pssTransfer(uint k) { return Q.transfer[2u * k]; }
+vec4 pssTransferColor(uint k) { return Q.transfer[2u * k + 1u]; }
 
 #include "pss.h"
 #include "pss_trace.h"

@@ -258,6 +258,7 @@ struct ImageParams {
 // Point set surfaces (shaders/pss.h, pss_trace.h, pss.comp.glsl): a picture's camera, grid,
 // material and lights. Positions are relative to the scene's origin.
 ISO_CONST uint kPssMaxLights = 8u;
+ISO_CONST uint kPssMaxTransfer = 8u;  // a volume's transfer function's control points at most
 ISO_CONST uint kPssExact = 1u;    // image.z bits: camera and refracted rays in the exact mode
 ISO_CONST uint kPssShadows = 2u;  // shadow rays
 ISO_CONST uint kPssColors = 4u;   // the points have colors (else material color)
@@ -275,6 +276,10 @@ struct PssParams {
   vec4 color;       // rgb: the color of points without one
   vec4 background;  // rgb: the background's linear color
   vec4 lights[kPssMaxLights];  // xyz: position; w: intensity
+  vec4 volumeLo;        // the volume's grid: xyz its corner; w: its cells' side
+  uvec4 volumeDims;     // xyz: cells across; w: the transfer function's points (0: no volume)
+  vec4 volumeSettings;  // smoothing r, reach, step, 0
+  vec4 transfer[2u * kPssMaxTransfer];  // per control point (value, extinction, 0, 0), (color, 0)
 };
 
 // One chunk in the chunk table (binding 1).

@@ -54,6 +54,22 @@ class Env {
   vec3 pssBackground() const { return render->background; }
   bool pssExact() const { return render->exact; }
   bool pssShadows() const { return render->shadows; }
+  bool pssVolume() const { return render->volume != nullptr && !render->transfer.empty(); }
+  vec4 pssVolumeSettings() const {
+    const PssVolume& v = *render->volume;
+    return vec4(v.smoothing(), v.reach(), v.step(), 0.0f);
+  }
+  vec3 pssVolumeLo() const { return render->volume->lo(); }
+  float pssVolumeSide() const { return render->volume->side(); }
+  ivec3 pssVolumeDims() const { return render->volume->dims(); }
+  uint pssVolumeStart(uint c) const { return render->volume->start()[c]; }
+  uint pssVolumeAt(uint k) const { return render->volume->order()[k]; }
+  vec4 pssVolumePoint(uint i) const { return render->volume->points()[i]; }
+  uint pssTransferCount() const { return uint(render->transfer.size()); }
+  vec4 pssTransfer(uint k) const {
+    return vec4(render->transfer[k].value, render->transfer[k].extinction, 0.0f, 0.0f);
+  }
+  vec4 pssTransferColor(uint k) const { return vec4(render->transfer[k].color, 0.0f); }
 
 #include "shaders/pss.h"
 #include "shaders/pss_trace.h"
@@ -194,6 +210,56 @@ bool PssSurface::intersect(const glm::vec3& o, const glm::vec3& d, float tMin, f
   if (patches_.empty()) return false;
   return env_->pssHit(o, d, tMin, tMax, mode == PssMode::Exact, hit.t, hit.normal, hit.point,
                       hit.projections);
+}
+
+PssVolume::PssVolume(const std::vector<glm::vec3>& positions, const std::vector<float>& values,
+                     float smoothing, float step) {
+  ISO_CHECK(positions.size() == values.size());
+  const size_t n = positions.size();
+  glm::vec3 lo(std::numeric_limits<float>::max()), hi(-std::numeric_limits<float>::max());
+  for (const glm::vec3& p : positions) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  if (n == 0) lo = hi = glm::vec3(0.0f);
+  const glm::vec3 extent = glm::max(hi - lo, glm::vec3(1e-6f));
+  smoothing_ = smoothing > 0.0f
+                   ? smoothing
+                   : std::cbrt(extent.x * extent.y * extent.z / float(std::max<size_t>(n, 1)));
+  step_ = step > 0.0f ? step : smoothing_;
+  // Cells as wide as the reach (a sample's points lie in the 3 × 3 × 3 around it), at most
+  // kMaxCells of them.
+  float side = reach();
+  while (double(std::ceil(extent.x / side)) * std::ceil(extent.y / side) *
+             std::ceil(extent.z / side) > kMaxCells)
+    side *= 1.25f;
+  smoothing_ = side / 3.0f;  // the reach is the side
+  lo_ = lo;
+  dims_ = glm::max(glm::ivec3(glm::ceil(extent / side)), glm::ivec3(1));
+  const auto cellOf = [&](const glm::vec3& p) {
+    const glm::ivec3 c = glm::clamp(glm::ivec3(glm::floor((p - lo_) / side)), glm::ivec3(0),
+                                    dims_ - 1);
+    return (size_t(c.z) * dims_.y + size_t(c.y)) * dims_.x + size_t(c.x);
+  };
+  const size_t cells = size_t(dims_.x) * dims_.y * dims_.z;
+  start_.assign(cells + 1, 0);
+  for (const glm::vec3& p : positions) ++start_[cellOf(p) + 1];
+  for (size_t c = 0; c < cells; ++c) start_[c + 1] += start_[c];
+  order_.resize(n);
+  std::vector<uint32_t> next(start_.begin(), start_.end() - 1);
+  for (uint32_t i = 0; i < n; ++i) order_[next[cellOf(positions[i])]++] = i;
+  points_.resize(n);
+  for (size_t i = 0; i < n; ++i) points_[i] = glm::vec4(positions[i], values[i]);
+}
+
+glm::vec3 pssRay(const PssSurface& surface, const std::vector<glm::vec3>& colors,
+                 const PssRender& render, const glm::vec3& o, const glm::vec3& d) {
+  pss_shader::Env env(surface.grid(), surface.positions(), surface.normals(), surface.h(),
+                      surface.patches(), surface.options());
+  env.render = &render;
+  env.colors = &colors;
+  const PssSurface::Grid& grid = surface.grid();
+  return env.pssRayColor(o, d, glm::length(glm::vec3(grid.dims) * grid.side));
 }
 
 bool pssRefract(const PssSurface& surface, const glm::vec3& o, const glm::vec3& d, float ior,

@@ -88,6 +88,42 @@ class PssSurface {
   std::unique_ptr<pss_shader::Env> env_;  // shaders/pss.h over the members above
 };
 
+// Scattered data inside the surface (its material boundary): points with a value each, in a grid
+// of cells `reach` wide, read by Gaussian-weighted means (shaders/pss_trace.h).
+class PssVolume {
+ public:
+  // smoothing: the Gaussian's r (0: the points' typical spacing, (box volume / count)^(1/3));
+  // step: the integration's (0: r). Points farther than 3 r from a sample do not count.
+  PssVolume(const std::vector<glm::vec3>& positions, const std::vector<float>& values,
+            float smoothing = 0.0f, float step = 0.0f);
+  size_t size() const { return points_.size(); }
+  float smoothing() const { return smoothing_; }
+  float reach() const { return 3.0f * smoothing_; }
+  float step() const { return step_; }
+  glm::vec3 lo() const { return lo_; }
+  float side() const { return reach(); }
+  glm::ivec3 dims() const { return dims_; }
+  const std::vector<uint32_t>& start() const { return start_; }
+  const std::vector<uint32_t>& order() const { return order_; }
+  const std::vector<glm::vec4>& points() const { return points_; }  // position, value
+
+ private:
+  float smoothing_ = 1.0f, step_ = 1.0f;
+  glm::vec3 lo_{0.0f};
+  glm::ivec3 dims_{1};
+  std::vector<uint32_t> start_, order_;
+  std::vector<glm::vec4> points_;
+};
+
+// A transfer function's control point: a value's emitted color (linear) and extinction per unit
+// length.
+struct PssTransferPoint {
+  float value = 0.0f;
+  glm::vec3 color{1.0f};
+  float extinction = 0.0f;
+};
+inline constexpr size_t kPssMaxTransferPoints = 8;
+
 struct PssLight {
   glm::vec3 position{0.0f};
   float intensity = 1.0f;
@@ -106,12 +142,20 @@ struct PssRender {
   glm::vec3 background{0.0f};
   bool exact = false;  // camera and refracted rays in the exact mode
   bool shadows = true;
+  // The volume inside the surface (none: empty inside) and its transfer function (control points
+  // by increasing value, 1 to kPssMaxTransferPoints).
+  const PssVolume* volume = nullptr;
+  std::vector<PssTransferPoint> transfer;
 };
 
 // The first hit of o + t d (t > 0) and the ray leaving it by Snell's law for `ior`
 // (shaders/pss_trace.h): point, normal (against d) and direction.
 bool pssRefract(const PssSurface& surface, const glm::vec3& o, const glm::vec3& d, float ior,
                 bool exact, glm::vec3& point, glm::vec3& normal, glm::vec3& bent);
+
+// The linear color a ray brings (shaders/pss_trace.h, pssRayColor) from o along d.
+glm::vec3 pssRay(const PssSurface& surface, const std::vector<glm::vec3>& colors,
+                 const PssRender& render, const glm::vec3& o, const glm::vec3& d);
 
 // The picture's linear colors, rows from the top, on the CPU (every pixel with TBB); `colors` per
 // point, or empty.

@@ -19,7 +19,7 @@ const uint32_t kPssSpirv[] =
     ;
 
 constexpr uint32_t kGroup = 64;  // invocations a workgroup (pss.comp.glsl)
-constexpr uint32_t kBindings = 9;
+constexpr uint32_t kBindings = 12;
 constexpr VkBufferUsageFlags kStorage =
     VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 
@@ -57,7 +57,12 @@ GpuPss::GpuPss(Gpu& gpu, const PssSurface& surface, const std::vector<glm::vec3>
   reachStart_ = upload(gpu, grid.reachStart.data(), grid.reachStart.size());
   reach_ = upload(gpu, grid.reach.data(), grid.reach.size());
   params_ = createBuffer(gpu, sizeof(gpu::PssParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
-  const std::array<uint32_t, kBindings> counts = {1, 1, 1, 1, 1, 1, 1, 1, 1};
+  const uint32_t none = 0;
+  volumeStart_ = upload(gpu, &none, 1);
+  volumeOrder_ = upload(gpu, &none, 1);
+  volumePoints_ = upload(gpu, &none, 0);
+  std::array<uint32_t, kBindings> counts;
+  counts.fill(1);
   const std::vector<std::vector<uint32_t>> variants = {{}};
   pipeline_ = createComputePipeline(gpu, kPssSpirv, counts, variants, 1);
   cb_ = allocateCommandBuffer(gpu);
@@ -74,7 +79,8 @@ GpuPss::~GpuPss() {
 uint64_t GpuPss::memoryBytes() const {
   uint64_t sum = 0;
   for (const Buffer* b : {&params_, &positions_, &normals_, &colorBuffer_, &patches_,
-                          &pointStart_, &points_, &reachStart_, &reach_, &pixels_})
+                          &pointStart_, &points_, &reachStart_, &reach_, &pixels_, &volumeStart_,
+                          &volumeOrder_, &volumePoints_})
     sum += b->allocated;
   return sum;
 }
@@ -83,6 +89,16 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   if (r.lights.size() > gpu::kPssMaxLights)
     throw UsageError("point set surfaces: at most " + std::to_string(gpu::kPssMaxLights) +
                      " lights");
+  if (r.transfer.size() > gpu::kPssMaxTransfer)
+    throw UsageError("a transfer function: at most " + std::to_string(gpu::kPssMaxTransfer) +
+                     " points");
+  if (r.volume && r.volume != volume_) {
+    ISO_VK(vkDeviceWaitIdle(gpu_.device));
+    volumeStart_ = upload(gpu_, r.volume->start().data(), r.volume->start().size());
+    volumeOrder_ = upload(gpu_, r.volume->order().data(), r.volume->order().size());
+    volumePoints_ = upload(gpu_, r.volume->points().data(), r.volume->points().size());
+    volume_ = r.volume;
+  }
   const size_t pixels = size_t(r.width) * size_t(r.height);
   if (pixels_.size < pixels * 4) {
     ISO_VK(vkDeviceWaitIdle(gpu_.device));
@@ -116,12 +132,23 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   q.background = glm::vec4(r.background, 0.0f);
   for (size_t l = 0; l < r.lights.size(); ++l)
     q.lights[l] = glm::vec4(r.lights[l].position, r.lights[l].intensity);
+  if (r.volume && !r.transfer.empty()) {
+    q.volumeLo = glm::vec4(r.volume->lo(), r.volume->side());
+    q.volumeDims = glm::uvec4(glm::uvec3(r.volume->dims()), uint32_t(r.transfer.size()));
+    q.volumeSettings = glm::vec4(r.volume->smoothing(), r.volume->reach(), r.volume->step(), 0.0f);
+    for (size_t k = 0; k < r.transfer.size(); ++k) {
+      q.transfer[2 * k] = glm::vec4(r.transfer[k].value, r.transfer[k].extinction, 0.0f, 0.0f);
+      q.transfer[2 * k + 1] = glm::vec4(r.transfer[k].color, 0.0f);
+    }
+  }
   std::memcpy(params_.mapped, &q, sizeof q);
 
   std::array<VkDescriptorBufferInfo, kBindings + 1> infos{};
   infos[0] = {params_.buffer, 0, sizeof q};
-  const Buffer* storage[kBindings] = {&positions_,  &normals_, &colorBuffer_, &patches_, &pointStart_,
-                                      &points_, &reachStart_, &reach_, &pixels_};
+  const Buffer* storage[kBindings] = {&positions_,   &normals_,      &colorBuffer_,
+                                      &patches_,     &pointStart_,   &points_,
+                                      &reachStart_,  &reach_,        &pixels_,
+                                      &volumeStart_, &volumeOrder_,  &volumePoints_};
   for (uint32_t b = 0; b < kBindings; ++b) infos[b + 1] = {storage[b]->buffer, 0, VK_WHOLE_SIZE};
   std::array<VkWriteDescriptorSet, kBindings + 1> writes{};
   for (uint32_t b = 0; b <= kBindings; ++b) {

@@ -31,6 +31,9 @@ class GpuPss {
   ComputePipeline pipeline_;
   Buffer params_, positions_, normals_, colorBuffer_, patches_, pointStart_, points_,
       reachStart_, reach_, pixels_;
+  // The volume last drawn (its buffers), none: one-word placeholders.
+  const PssVolume* volume_ = nullptr;
+  Buffer volumeStart_, volumeOrder_, volumePoints_;
   Owned<VkQueryPool> queries_;
   VkCommandBuffer cb_ = VK_NULL_HANDLE;
   Owned<VkFence> fence_;

@@ -46,17 +46,35 @@ TEST(PssGolden, theGpuDrawsWhatTheCpuDraws) {
   r.height = 96;
   r.lights.push_back({vec3(-3, 4, 5), 0.9f});
   r.background = vec3(0.1f, 0.1f, 0.2f);
+  // A volume in the big sphere: values rising along x, emitting and absorbing.
+  std::vector<vec3> inside;
+  std::vector<float> values;
+  for (float z = -1.0f; z <= 1.0f; z += 0.08f)
+    for (float y = -1.0f; y <= 1.0f; y += 0.08f)
+      for (float x = -1.0f; x <= 1.0f; x += 0.08f)
+        if (x * x + y * y + z * z < 0.95f) {
+          inside.push_back({x, y, z});
+          values.push_back(0.5f + 0.5f * x);
+        }
+  const PssVolume volume(inside, values);
+  const std::vector<PssTransferPoint> transfer = {{0.0f, vec3(0.1f, 0.2f, 0.9f), 0.2f},
+                                                  {1.0f, vec3(1.0f, 0.8f, 0.1f), 2.0f}};
   struct Case {
     const char* what;
     bool exact;
     float transparency;
     vec3 iors;
+    bool volume;
   };
-  for (const Case& c : {Case{"fast", false, 0.0f, vec3(1.5f)}, Case{"exact", true, 0.0f, vec3(1.5f)},
-                        Case{"glass, dispersion", false, 0.7f, vec3(1.5f, 1.52f, 1.54f)}}) {
+  for (const Case& c : {Case{"fast", false, 0.0f, vec3(1.5f), false},
+                        Case{"exact", true, 0.0f, vec3(1.5f), false},
+                        Case{"glass, dispersion", false, 0.7f, vec3(1.5f, 1.52f, 1.54f), false},
+                        Case{"glass with a volume", false, 0.8f, vec3(1.3f), true}}) {
     r.exact = c.exact;
     r.material.w = c.transparency;
     r.iors = c.iors;
+    r.volume = c.volume ? &volume : nullptr;
+    r.transfer = c.volume ? transfer : std::vector<PssTransferPoint>{};
     const std::vector<vec3> cpu = renderPss(surface, colors, r);
     const std::vector<uint32_t> pixels = gpu.render(r);
     ASSERT_EQ(pixels.size(), cpu.size());
