@@ -459,6 +459,57 @@ TEST(CliView, pointsDrawAsAPointSetSurfaceOnTheCpu) {
   EXPECT_EQ(iso("view " + kitten + " --draw pss --cpu --out x.png --ior 5").exitCode, 2);
 }
 
+// --draw pss --volume-points: a blob of values inside the kitten, drawn as a volume through its
+// glass surface (the scene file's transfer function), and what is refused.
+TEST(CliView, scatteredValuesDrawAsAVolumeInsideAPointSetSurface) {
+  TempDir dir;
+  const std::string kitten =
+      quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz");
+  const auto blob = dir / "blob.ply";
+  {
+    std::ofstream out(blob);
+    std::vector<std::array<float, 4>> points;
+    for (int i = -12; i <= 12; ++i)
+      for (int j = -12; j <= 12; ++j)
+        for (int k = -12; k <= 12; ++k) {
+          const float x = 0.025f * i, y = 0.035f * j, z = 0.02f * k;
+          points.push_back({x, y, z, std::exp(-(x * x + y * y + z * z) / 0.05f)});
+        }
+    out << "ply\nformat ascii 1.0\nelement vertex " << points.size()
+        << "\nproperty float x\nproperty float y\nproperty float z\nproperty float value\n"
+           "property float other\nend_header\n";
+    for (const auto& p : points) out << p[0] << ' ' << p[1] << ' ' << p[2] << ' ' << p[3] << " 0\n";
+  }
+  const auto scene = dir / "scene.json";
+  std::ofstream(scene) << R"({"volume": {"transfer": [[0, 0, 0, 1, 0], [1, 1, 0.5, 0, 12]]}})";
+  const std::string common = " --draw pss --cpu --width 120 --height 120 --transparency 0.9 --ior 1.1";
+  const auto with = dir / "with.png", without = dir / "without.png";
+  CommandResult run = iso("view " + kitten + common + " --out " + quoted(with) + " --scene " +
+                          quoted(scene) + " --volume-points " + quoted(blob) + " --volume value");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("a volume of 15625 points inside it"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("a transfer function of 2 points"), std::string::npos) << run.out;
+  ASSERT_EQ(iso("view " + kitten + common + " --out " + quoted(without)).exitCode, 0);
+  const auto a = expectPicture(with, 120, 120), b = expectPicture(without, 120, 120);
+  size_t redder = 0;  // the blob emits red and green, absorbs the blue behind
+  for (size_t i = 0; i < a.size(); ++i) redder += (a[i] & 255) > (b[i] & 255) + 8;
+  EXPECT_GT(redder, a.size() / 50) << redder;
+  // A scalar it does not have, two without a name, a volume without points or without pss.
+  run = iso("view " + kitten + common + " --out x.png --volume-points " + quoted(blob) +
+            " --volume density");
+  EXPECT_NE(run.exitCode, 0);
+  EXPECT_NE(run.err.find("blob.ply"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("value, other"), std::string::npos) << run.err;
+  EXPECT_EQ(iso("view " + kitten + common + " --out x.png --volume-points " + quoted(blob)).exitCode, 2);
+  EXPECT_EQ(iso("view " + kitten + common + " --out x.png --volume value").exitCode, 2);
+  EXPECT_EQ(iso("view " + kitten + " --cpu --out x.png --volume-points " + quoted(blob)).exitCode, 2);
+  std::ofstream(scene) << R"({"volume": {"transfer": [[1, 0, 0, 1, 0], [0, 1, 1, 1, 1]]}})";
+  run = iso("view " + kitten + common + " --out x.png --scene " + quoted(scene) +
+            " --volume-points " + quoted(blob) + " --volume value");
+  EXPECT_NE(run.exitCode, 0);
+  EXPECT_NE(run.err.find("increasing value"), std::string::npos) << run.err;
+}
+
 TEST(CliView, causticsPutAGroundUnderTheSurfaceAndSayHowManyPhotonsTheyTraced) {
   TempDir dir;
   const std::string file = quoted(kittenIso());

@@ -64,6 +64,9 @@ inline constexpr float kPssSpacings = 2.0f;
 struct PssViewOptions {
   bool exact = false;          // --pss exact: camera and refracted rays projected onto the MLS surface
   glm::vec3 iors{1.5f};        // --ior: of R, G and B (dispersion when they differ)
+  // --volume-points: scattered values inside the surface (world positions), none: empty inside.
+  std::vector<glm::dvec3> volumePositions;
+  std::vector<float> volumeValues;
 };
 // The points as a point set surface ray traced on the CPU reference, on the GPU, or timed along
 // an orbit (pss_view.cpp).

@@ -24,10 +24,30 @@ double seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 struct PssScene {
   std::unique_ptr<PssSurface> surface;
   std::vector<glm::vec3> colors;
+  std::unique_ptr<PssVolume> volume;  // --volume-points, in the points' frame
+  std::vector<PssTransferPoint> transfer;
   double fitSeconds = 0.0;
 };
 
-PssScene pssScene(const ImageInputs& in) {
+// The scene's transfer function, or a ramp over the values' range: from dark blue and clear to
+// light yellow absorbing 4 over the volume's diagonal.
+std::vector<PssTransferPoint> volumeTransfer(const VolumeScene& scene, const PssVolume& volume) {
+  std::vector<PssTransferPoint> out;
+  for (const auto& p : scene.transfer)
+    out.push_back({p[0], glm::vec3(p[1], p[2], p[3]), p[4]});
+  if (!out.empty() || volume.size() == 0) return out;
+  float lo = volume.points()[0].w, hi = lo;
+  for (const glm::vec4& p : volume.points()) {
+    lo = std::min(lo, p.w);
+    hi = std::max(hi, p.w);
+  }
+  const float diagonal = glm::length(glm::vec3(volume.dims()) * volume.side());
+  out.push_back({lo, glm::vec3(0.05f, 0.1f, 0.6f), 0.0f});
+  out.push_back({std::max(hi, lo + 1e-6f), glm::vec3(1.0f, 0.85f, 0.3f), 4.0f / diagonal});
+  return out;
+}
+
+PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene) {
   const auto t0 = Clock::now();
   std::vector<glm::vec3> positions, normals;
   std::vector<float> h;
@@ -42,13 +62,20 @@ PssScene pssScene(const ImageInputs& in) {
       if (anyColors) s.colors.push_back(object.colors.empty() ? object.color : object.colors[i]);
     }
   s.surface = std::make_unique<PssSurface>(std::move(positions), std::move(normals), std::move(h));
+  if (!pss.volumePositions.empty()) {
+    std::vector<glm::vec3> local;
+    for (const glm::dvec3& p : pss.volumePositions) local.push_back(glm::vec3(p - in.origin));
+    s.volume = std::make_unique<PssVolume>(local, pss.volumeValues, float(scene.volume.smoothing),
+                                           float(scene.volume.step));
+    s.transfer = volumeTransfer(scene.volume, *s.volume);
+  }
   s.fitSeconds = seconds(Clock::now() - t0);
   return s;
 }
 
 // The picture's camera, lights and material from the scene, in the points' frame.
 PssRender pssRender(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in,
-                    const Camera& camera) {
+                    const PssScene& scene, const Camera& camera) {
   const Scene& s = o.scene;
   PssRender r;
   r.eye = glm::vec3(camera.eye - in.origin);
@@ -68,6 +95,8 @@ PssRender pssRender(const ViewOptions& o, const PssViewOptions& pss, const Image
   r.ambient = s.ambient[1];
   r.color = glm::vec3(s.material.color[0], s.material.color[1], s.material.color[2]);
   r.exact = pss.exact;
+  r.volume = scene.volume.get();
+  r.transfer = scene.transfer;
   return r;
 }
 
@@ -75,6 +104,10 @@ void printScene(const ImageInputs& in, const PssScene& s) {
   fmt::print("{} points from {} file{}{}, a point set surface fitted in {:.2f} s\n",
              s.surface->size(), in.names.size(), in.names.size() == 1 ? "" : "s",
              in.normalsEstimated ? " (normals estimated)" : "", s.fitSeconds);
+  if (s.volume)
+    fmt::print("a volume of {} points inside it: smoothing {:.4g}, step {:.4g}, a transfer "
+               "function of {} points\n",
+               s.volume->size(), s.volume->smoothing(), s.volume->step(), s.transfer.size());
 }
 
 const char* modeName(const PssViewOptions& pss) { return pss.exact ? "exact" : "fast"; }
@@ -82,8 +115,8 @@ const char* modeName(const PssViewOptions& pss) { return pss.exact ? "exact" : "
 }  // namespace
 
 int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
-  const PssScene s = pssScene(in);
-  const PssRender r = pssRender(o, pss, in, sceneCamera(o.scene, in));
+  const PssScene s = pssScene(in, pss, o.scene);
+  const PssRender r = pssRender(o, pss, in, s, sceneCamera(o.scene, in));
   const auto t0 = Clock::now();
   const std::vector<glm::vec3> linear = renderPss(*s.surface, s.colors, r);
   const double render = seconds(Clock::now() - t0);
@@ -100,11 +133,11 @@ int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInput
 
 int viewPssHeadless(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
   Gpu gpu = gpuFor(o);
-  const PssScene s = pssScene(in);
+  const PssScene s = pssScene(in, pss, o.scene);
   GpuPss renderer(gpu, *s.surface, s.colors);
   double gpuSeconds = 0.0;
   const std::vector<uint32_t> pixels =
-      renderer.render(pssRender(o, pss, in, sceneCamera(o.scene, in)), &gpuSeconds);
+      renderer.render(pssRender(o, pss, in, s, sceneCamera(o.scene, in)), &gpuSeconds);
   writeImage(o.out, o.width, o.height, pixels);
   printScene(in, s);
   fmt::print("{}: {}x{} point set surface ({} mode) on {}, {:.3f} s GPU, GPU memory {:.1f} MiB\n",
@@ -115,7 +148,7 @@ int viewPssHeadless(const ViewOptions& o, const PssViewOptions& pss, const Image
 
 int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
   Gpu gpu = gpuFor(o);
-  const PssScene s = pssScene(in);
+  const PssScene s = pssScene(in, pss, o.scene);
   GpuPss renderer(gpu, *s.surface, s.colors);
   const Camera start = sceneCamera(o.scene, in);
   const uint32_t frames = std::max(o.benchFrames, 2u);
@@ -125,7 +158,7 @@ int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInp
     c.eye = c.target + rotated(c.eye - c.target, normalized(c.up), 2.0 * M_PI * f / frames);
     const auto t = Clock::now();
     double g = 0.0;
-    renderer.render(pssRender(o, pss, in, c), &g);
+    renderer.render(pssRender(o, pss, in, s, c), &g);
     if (f == 0) continue;  // the first frame pays for the pipeline's first use
     wall.push_back(seconds(Clock::now() - t));
     device.push_back(g);
@@ -135,7 +168,7 @@ int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInp
   const double median = wall[wall.size() / 2], gpuMedian = device[device.size() / 2];
   // The CPU reference on the first view.
   const auto t0 = Clock::now();
-  renderPss(*s.surface, s.colors, pssRender(o, pss, in, start));
+  renderPss(*s.surface, s.colors, pssRender(o, pss, in, s, start));
   const double cpu = seconds(Clock::now() - t0);
   printScene(in, s);
   fmt::print("bench pss: {}x{} on {}, {} mode, {} points, {} frames orbiting\n", o.width,

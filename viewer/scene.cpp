@@ -162,6 +162,34 @@ void readImage(const Fields& f, const json& j, ImageScene& image) {
   if (j.contains("eye_dome")) image.eyeDome = f.boolean(j["eye_dome"], "image.eye_dome");
 }
 
+// The scene file's "volume": a transfer function of up to 8 points, smoothing and step.
+void readVolume(const Fields& f, const json& j, VolumeScene& volume) {
+  f.known(j, "volume", {"transfer", "smoothing", "step"});
+  if (j.contains("transfer")) {
+    const json& t = j["transfer"];
+    if (!t.is_array() || t.empty() || t.size() > 8)
+      f.fail("volume.transfer", "1 to 8 points [value, r, g, b, extinction]");
+    volume.transfer.clear();
+    for (const json& point : t) {
+      if (!point.is_array() || point.size() != 5)
+        f.fail("volume.transfer", "each point [value, r, g, b, extinction]");
+      std::array<float, 5> v{};
+      for (size_t k = 0; k < 5; ++k) v[k] = float(f.number(point[k], "volume.transfer"));
+      if (v[1] < 0 || v[2] < 0 || v[3] < 0 || v[4] < 0)
+        f.fail("volume.transfer", "colors and extinctions are not negative");
+      if (!volume.transfer.empty() && v[0] < volume.transfer.back()[0])
+        f.fail("volume.transfer", "points by increasing value");
+      volume.transfer.push_back(v);
+    }
+  }
+  for (const char* key : {"smoothing", "step"})
+    if (j.contains(key)) {
+      const double v = f.number(j[key], std::string("volume.") + key);
+      if (!(v > 0)) f.fail(std::string("volume.") + key, "a positive distance (world units)");
+      (std::string(key) == "smoothing" ? volume.smoothing : volume.step) = v;
+    }
+}
+
 // The scene file's camera: eye and target, up and fov optional.
 void readCamera(const Fields& f, const json& c, Scene& scene) {
   f.known(c, "camera", {"eye", "target", "up", "fov"});
@@ -312,12 +340,13 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
            "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color",
-           "caustics", "image"});
+           "caustics", "image", "volume"});
   if (j.contains("camera")) readCamera(f, j["camera"], scene);
   if (j.contains("lights")) readLights(f, j["lights"], scene);
   if (j.contains("material")) readMaterial(f, j["material"], scene.material);
   readRendering(f, j, path, scene);
   if (j.contains("image")) readImage(f, j["image"], scene.image);
+  if (j.contains("volume")) readVolume(f, j["volume"], scene.volume);
 }
 
 Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {

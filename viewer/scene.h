@@ -71,6 +71,16 @@ struct ImageScene {
 inline constexpr int kMaxImageLayers = 64;
 inline constexpr int kMaxImageShadowSamples = 64;
 
+// Volumes from scattered data inside a point set surface (iso view --draw pss
+// --volume-points): the scene file's "volume" object.
+struct VolumeScene {
+  // Control points (value, r, g, b, extinction per world unit), by increasing value; empty: a
+  // ramp over the values' range (volumeTransfer, pss_view.cpp).
+  std::vector<std::array<float, 5>> transfer;
+  double smoothing = 0.0;  // the Gaussian's r, world units (0: the points' typical spacing)
+  double step = 0.0;       // the integration's step (0: r)
+};
+
 struct Scene {
   std::optional<Camera> camera;      // none: framed on the surface's bounds
   std::optional<double> fovDegrees;  // overrides the camera's field of view
@@ -97,6 +107,7 @@ struct Scene {
   uint32_t caustics = 0;
   std::array<float, 3> backTint{1.0f, 0.45f, 0.35f};  // multiplies back faces' color (Tint)
   ImageScene image;
+  VolumeScene volume;
 };
 
 // Read a scene file over `scene` (keys it does not set stay). Throws iso::FileError naming the

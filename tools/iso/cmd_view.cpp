@@ -31,6 +31,7 @@ struct ViewArgs {
   std::string ior;  // one index, or three (R, G, B: --draw pss)
   std::string pss = "fast";
   bool drawPss = false;  // --draw pss (cleared from `draw` before the scene is built)
+  std::string volumePoints, volume;  // --draw pss: scattered values inside the surface
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
   bool points = false, ground = false;
@@ -167,6 +168,33 @@ std::vector<double> parseIors(const ViewArgs& a) {
   return iors;
 }
 
+// --volume-points FILE [--volume NAME]: the file's points and the scalar NAME of each (a PLY
+// vertex property, or LAS/LAZ/E57 intensity); without --volume, its one scalar.
+void readVolumePoints(const ViewArgs& a, viewer::PssViewOptions& pss) {
+  ReadOptions options;
+  options.keepExtras = true;
+  const PointCloud cloud = readPointFile(a.volumePoints, options);
+  const auto& names = cloud.extraNames;
+  std::string all;
+  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+  if (names.empty())
+    throw FileError(a.volumePoints, std::nullopt,
+                    "has no scalar for a volume (a PLY vertex property, or LAS intensity)");
+  if (a.volume.empty() && names.size() > 1)
+    throw UsageError("--volume-points " + a.volumePoints + " has several scalars (" + all +
+                     "): name one with --volume");
+  const std::string name = a.volume.empty() ? names[0] : a.volume;
+  const auto at = std::find(names.begin(), names.end(), name);
+  if (at == names.end())
+    throw FileError(a.volumePoints, std::nullopt,
+                    "has no scalar '" + name + "' (it has: " + all + ")");
+  const size_t k = size_t(at - names.begin());
+  for (size_t i = 0; i < cloud.size(); ++i) {
+    pss.volumePositions.push_back(cloud.positions[i]);
+    pss.volumeValues.push_back(cloud.extras[i * names.size() + k]);
+  }
+}
+
 // --draw pss: the points (an .iso file's kept points, or point files) as a point set surface,
 // all of them, ray traced on the CPU reference, the GPU, or timed.
 int viewPss(ViewArgs& a) {
@@ -181,6 +209,9 @@ int viewPss(ViewArgs& a) {
   } else {
     pss.iors = glm::vec3(a.view.scene.material.ior);
   }
+  if (!a.volume.empty() && a.volumePoints.empty())
+    throw UsageError("--volume names a scalar of the --volume-points file");
+  if (!a.volumePoints.empty()) readVolumePoints(a, pss);
   ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, hostPointBudget());
   viewer::ImageInputs inputs = imageInputs(readImagePoints(files), UINT64_MAX);
   colorPoints(a, inputs);
@@ -376,6 +407,12 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "--draw pss: fast (the nearest stored polynomial, the default) or exact (hits "
                 "projected onto the moving-least-squares surface)")
       ->check(CLI::IsMember({"fast", "exact"}));
+  c->add_option("--volume-points", a->volumePoints,
+                "--draw pss: a point file of scattered values (a PLY vertex property, or LAS "
+                "intensity) drawn as a volume inside the surface (the scene file's \"volume\": "
+                "transfer function, smoothing, step)");
+  c->add_option("--volume", a->volume,
+                "--draw pss: the scalar of --volume-points to draw (default: its only one)");
   c->add_option("--layers", a->layers,
                 "--draw image: surface layers peeled and blended front to back (transparency; "
                 "default 1)")
@@ -494,6 +531,10 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       a->view.flatTraversal = a->traversal == "flat";
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
       checkPictures(*a);
+      if ((!a->volumePoints.empty() || !a->volume.empty()) && a->draw != "pss") {
+        fmt::print(stderr, "iso view: --volume-points and --volume go with --draw pss\n");
+        return kExitUsage;
+      }
       if (a->draw == "pss") {
         a->drawPss = true;
         a->draw.clear();
