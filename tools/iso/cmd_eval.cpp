@@ -8,6 +8,7 @@
 #include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
+#include "pipeline/analysis/against_pss.h"
 #include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/measure.h"
 #include "pipeline/analysis/tiles.h"
@@ -43,6 +44,8 @@ struct Options {
   EvalOptions eval;
   double spacing = 0.0;
   bool keepOutliers = false;  // --keep-outliers: measure the strays too
+  bool againstPss = false;    // --against-pss
+  AgainstPssOptions pss;
 };
 
 // The points measured, without the strays the conversion removed (found again by its rule and
@@ -116,12 +119,14 @@ nlohmann::json visibilityOf(const Reader& reader, std::span<const glm::dvec3> po
 
 int run(Options& o) {
   const int truths = int(!o.shape.empty()) + int(!o.truth.mesh.empty()) + int(!o.points.empty()) +
-                     int(!o.against.empty()) + int(!o.tiles.empty());
+                     int(!o.against.empty()) + int(!o.tiles.empty()) + int(o.againstPss);
   if (truths != 1 && !(o.visibility && truths == 0))
     throw UsageError(
         "give exactly one of --shape NAME, --mesh FILE.ply, --points FILE..., --against B.iso, "
-        "--tiles DIR "
+        "--tiles DIR, --against-pss "
         "(or --visibility alone, on the file's kept points)");
+  if (o.againstPss && o.visibility) throw UsageError("--visibility does not go with --against-pss");
+  if (o.pss.size < 16 || o.pss.size > 4096) throw UsageError("--size: 16 to 4096 pixels");
   if (o.perLevel && o.points.empty()) throw UsageError("--per-level measures against --points");
   if (o.depth != -1 && o.tiles.empty()) throw UsageError("--depth picks a cut of --tiles");
   if (o.visibility && !o.tiles.empty())
@@ -146,6 +151,15 @@ int run(Options& o) {
     result["visibility"] =
         visibilityOf(reader, keptPoints(reader, o.visibilityPoints, o, result), spacing, o);
     result["spacing"] = spacing;
+    result["file"] = o.file;
+    fmt::print("{}\n", result.dump(2));
+    return kExitOk;
+  }
+  if (o.againstPss) {
+    const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
+    if (!(spacing > 0.0))
+      throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
+    result = evaluateAgainstPss(reader, o.file, spacing, o.pss);
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
     return kExitOk;
@@ -217,6 +231,12 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--against", o->against,
                 "Another .iso file: the distance between the two zero sets, both ways, and the "
                 "color PSNR between them");
+  c->add_flag("--against-pss", o->againstPss,
+              "Against the point set surface of the file's kept points (exact mode): both ray "
+              "traced on the CPU from the 6 views along the axes; silhouettes, depths, normals, "
+              "PSNR of one shading, rays/s of each");
+  c->add_option("--size", o->pss.size, "--against-pss: pixels across each view")
+      ->capture_default_str();
   c->add_option("--tiles", o->tiles,
                 "A tileset `iso export --tiles` wrote: the distance between what it draws and the "
                 "file's zero set, both ways (by default its finest tiles)");
