@@ -41,6 +41,7 @@ vec4 pssSettings() { return Q.settings; }
 uint pssLightCount() { return Q.gridDims.w; }
 vec4 pssLight(uint l) { return Q.lights[l]; }
 vec4 pssMaterial() { return Q.material; }
+float pssReflectivity() { return Q.color.w; }
 vec4 pssIors() { return Q.iors; }
 vec3 pssColor(uint point) {
   return (Q.image.z & kPssColors) != 0u ? vec3(colors[point]) : vec3(Q.color);

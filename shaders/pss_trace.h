@@ -5,6 +5,7 @@
 // provides:
 //   uint pssLightCount(); vec4 pssLight(uint l);   // position, intensity
 //   vec4 pssMaterial();   // diffuse, specular, shininess, transparency
+//   float pssReflectivity();
 //   vec4 pssIors();       // the indices of refraction of R, G and B; w: ambient
 //   vec3 pssColor(uint point);                     // the point's color (linear)
 //   vec3 pssBackground();
@@ -19,8 +20,6 @@
 //   uint pssTransferCount();     // the transfer function's control points, by value
 //   vec4 pssTransfer(uint k);    // (value, extinction per unit length, 0, 0)
 //   vec4 pssTransferColor(uint k);  // emitted color (linear)
-
-const int kPssMaxBounces = 8;  // refractions along a path at most
 
 // The light reaching p (normal n facing the viewer, seen along -view) from the lights, Phong,
 // each light's share cut by a shadow ray.
@@ -127,38 +126,67 @@ bool pssRefraction(vec3 o, vec3 d, float ior, float tMin, ISO_INOUT(vec3) p, ISO
   return true;
 }
 
+const int kPssStack = 8;     // rays waiting at most (a path's reflections and refractions)
+const int kPssMaxRays = 16;  // rays traced for one camera ray's channel at most
+
 // The color the ray o + t d brings, in channel `channel` (0 to 2) with that channel's index of
-// refraction, or in all three (channel 3) with the red one. `scale`: the scene's size (offsets).
-vec3 pssTrace(vec3 o, vec3 d, int channel, float scale) {
+// refraction, or in all three (channel 3) with the red one. At each surface: its own light
+// (1 − reflectivity − transparency of it), a reflected ray (reflectivity) and a refracted one
+// (transparency, through the volume inside when it enters), traced from a small stack, the
+// refracted first; rays beyond kPssMaxRays or the stack are dropped (dark). `scale`: the scene's
+// size (offsets).
+vec3 pssTrace(vec3 o0, vec3 d0, int channel, float scale) {
   vec4 material = pssMaterial();
+  float reflectivity = pssReflectivity();
   float ior = channel == 3 ? pssIors().x : pssIors()[channel];
+  vec3 stackO[kPssStack], stackD[kPssStack];
+  float stackWeight[kPssStack], stackMin[kPssStack];
+  stackO[0] = o0;
+  stackD[0] = d0;
+  stackWeight[0] = 1.0f;
+  stackMin[0] = 0.0f;
+  int top = 1;
   vec3 color = vec3(0.0f);
-  float through = 1.0f;  // what the surfaces crossed so far let through
-  float tMin = 0.0f;
-  for (int bounce = 0; bounce <= kPssMaxBounces; ++bounce) {
+  float offset = 1e-4f * scale;
+  for (int ray = 0; ray < kPssMaxRays && top > 0; ++ray) {
+    --top;
+    vec3 o = stackO[top], d = stackD[top];
+    float through = stackWeight[top], tMin = stackMin[top];
     vec3 p = vec3(0.0f), facing = vec3(0.0f), bent = vec3(0.0f);
     uint point = 0u;
     if (!pssRefraction(o, d, ior, tMin, p, facing, bent, point)) {
       color += through * pssBackground();
-      break;
+      continue;
     }
-    color += through * (1.0f - material.w) * pssShade(p, facing, d, pssColor(point), scale);
-    through *= material.w;
-    if (through <= 0.0f) break;
-    o = p;
-    d = bent;
-    tMin = 1e-4f * scale;
-    // Into the object (the ray now runs against the outward normal): through its volume to
-    // where it leaves.
-    if (pssVolume() && dot(bent, facing) < 0.0f) {
-      float t = 0.0f;
-      vec3 n = vec3(0.0f);
-      int projections = 0;
-      if (pssHit(o, d, tMin, 3.0e38f, pssExact(), t, n, point, projections)) {
-        float let = 1.0f;
-        color += through * pssIntegrate(o, d, t, let);
-        through *= let;
+    float own = max(1.0f - material.w - reflectivity, 0.0f);
+    if (own > 0.0f) color += through * own * pssShade(p, facing, d, pssColor(point), scale);
+    if (reflectivity > 0.0f && top < kPssStack) {
+      stackO[top] = p;
+      stackD[top] = reflect(d, facing);
+      stackWeight[top] = through * reflectivity;
+      stackMin[top] = offset;
+      ++top;
+    }
+    if (material.w > 0.0f && top < kPssStack) {
+      float weight = through * material.w;
+      // Into the object (the ray now runs against the outward normal): through its volume to
+      // where it leaves.
+      if (pssVolume() && dot(bent, facing) < 0.0f) {
+        float t = 0.0f;
+        vec3 n = vec3(0.0f);
+        int projections = 0;
+        uint other = 0u;
+        if (pssHit(p, bent, offset, 3.0e38f, pssExact(), t, n, other, projections)) {
+          float let = 1.0f;
+          color += weight * pssIntegrate(p, bent, t, let);
+          weight *= let;
+        }
       }
+      stackO[top] = p;
+      stackD[top] = bent;
+      stackWeight[top] = weight;
+      stackMin[top] = offset;
+      ++top;
     }
   }
   return color;

@@ -273,7 +273,7 @@ struct PssParams {
   vec4 settings;    // trust (b / h), reach (/ h), tolerance (/ h), projections at most
   vec4 material;    // diffuse, specular, shininess, transparency
   vec4 iors;        // indices of refraction of R, G, B; w: ambient
-  vec4 color;       // rgb: the color of points without one
+  vec4 color;       // rgb: the color of points without one; w: reflectivity
   vec4 background;  // rgb: the background's linear color
   vec4 lights[kPssMaxLights];  // xyz: position; w: intensity
   vec4 volumeLo;        // the volume's grid: xyz its corner; w: its cells' side

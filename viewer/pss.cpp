@@ -49,6 +49,7 @@ class Env {
     return vec4(render->lights[l].position, render->lights[l].intensity);
   }
   vec4 pssMaterial() const { return render->material; }
+  float pssReflectivity() const { return render->reflectivity; }
   vec4 pssIors() const { return vec4(render->iors, render->ambient); }
   vec3 pssColor(uint point) const { return colors->empty() ? render->color : (*colors)[point]; }
   vec3 pssBackground() const { return render->background; }

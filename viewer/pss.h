@@ -136,6 +136,7 @@ struct PssRender {
   int width = 512, height = 512;
   std::vector<PssLight> lights;
   glm::vec4 material{0.85f, 0.25f, 40.0f, 0.0f};  // diffuse, specular, shininess, transparency
+  float reflectivity = 0.0f;                      // of the surface (mirror rays)
   glm::vec3 iors{1.5f};                           // of R, G and B (dispersion when they differ)
   float ambient = 0.15f;
   glm::vec3 color{0.75f, 0.75f, 0.72f};  // of points without a color

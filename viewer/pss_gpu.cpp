@@ -128,7 +128,7 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   q.settings = glm::vec4(o.trust, o.reach, o.tolerance, float(o.maxProjections));
   q.material = r.material;
   q.iors = glm::vec4(r.iors, r.ambient);
-  q.color = glm::vec4(r.color, 0.0f);
+  q.color = glm::vec4(r.color, r.reflectivity);
   q.background = glm::vec4(r.background, 0.0f);
   for (size_t l = 0; l < r.lights.size(); ++l)
     q.lights[l] = glm::vec4(r.lights[l].position, r.lights[l].intensity);

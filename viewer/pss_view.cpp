@@ -91,6 +91,7 @@ PssRender pssRender(const ViewOptions& o, const PssViewOptions& pss, const Image
   r.shadows = s.shadows;
   r.material = glm::vec4(s.material.diffuse, s.material.specular, s.material.shininess,
                          s.refractions ? s.material.transparency : 0.0f);
+  r.reflectivity = s.reflections ? s.material.reflectivity : 0.0f;
   r.iors = pss.iors;
   r.ambient = s.ambient[1];
   r.color = glm::vec3(s.material.color[0], s.material.color[1], s.material.color[2]);

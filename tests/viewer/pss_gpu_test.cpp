@@ -1,6 +1,6 @@
 // Point set surfaces on the GPU (lavapipe in CI) against the CPU reference from the same source
-// (shaders/pss_trace.h): a sphere and a torus-like pair of spheres, fast and exact, shadowed,
-// and a glass sphere whose channels refract apart.
+// (shaders/pss_trace.h): two spheres, one shadowing the other, fast and exact, in glass whose
+// channels refract apart, with a volume inside, and half mirror.
 #include <gtest/gtest.h>
 
 #include "tests/viewer/point_scenes.h"
@@ -65,13 +65,16 @@ TEST(PssGolden, theGpuDrawsWhatTheCpuDraws) {
     float transparency;
     vec3 iors;
     bool volume;
+    float reflectivity = 0.0f;
   };
   for (const Case& c : {Case{"fast", false, 0.0f, vec3(1.5f), false},
                         Case{"exact", true, 0.0f, vec3(1.5f), false},
                         Case{"glass, dispersion", false, 0.7f, vec3(1.5f, 1.52f, 1.54f), false},
-                        Case{"glass with a volume", false, 0.8f, vec3(1.3f), true}}) {
+                        Case{"glass with a volume", false, 0.8f, vec3(1.3f), true},
+                        Case{"mirror and glass", false, 0.4f, vec3(1.4f), false, 0.4f}}) {
     r.exact = c.exact;
     r.material.w = c.transparency;
+    r.reflectivity = c.reflectivity;
     r.iors = c.iors;
     r.volume = c.volume ? &volume : nullptr;
     r.transfer = c.volume ? transfer : std::vector<PssTransferPoint>{};

@@ -227,6 +227,48 @@ TEST(Pss, aPictureOfASphereShowsItsSilhouette) {
   EXPECT_GT(double(both) / double(either), 0.99);
 }
 
+// Reflection: a half-mirror plane of points under a red sphere of points (every surface of the
+// scene reflects half the light). A ray that meets the plane brings half of the plane's own light
+// (what it brings with no reflection) and half of what the analytically reflected ray from the
+// plane's point brings (the red sphere).
+TEST(Pss, aMirrorOfPointsShowsWhatTheReflectedRaySees) {
+  std::vector<vec3> positions, normals, colors;
+  std::vector<float> h;
+  for (int j = 0; j <= 200; ++j)
+    for (int i = 0; i <= 200; ++i) {
+      positions.push_back({-2.0f + 0.02f * i, -2.0f + 0.02f * j, 0.0f});
+      normals.push_back({0, 0, 1});
+      colors.push_back(vec3(0.5f));
+      h.push_back(0.04f);
+    }
+  const Shape ball = sphere(8'000);
+  for (size_t i = 0; i < ball.positions.size(); ++i) {
+    positions.push_back(vec3(0.0f, 0.0f, 1.0f) + 0.5f * ball.positions[i]);
+    normals.push_back(ball.normals[i]);
+    colors.push_back(vec3(1.0f, 0.0f, 0.0f));
+    h.push_back(2.0f * 0.5f * ball.spacing);
+  }
+  const PssSurface surface(positions, normals, h);
+  PssRender r;
+  r.lights.push_back({vec3(0.0f, -3.0f, 4.0f), 1.0f});
+  r.background = vec3(0.0f, 0.0f, 1.0f);
+  PssRender matte = r;
+  r.reflectivity = 0.5f;
+  // From above to the plane's point (0.3, 0, 0), whose reflection meets the ball.
+  const vec3 o(0.9f, 0.0f, 1.6f), m(0.3f, 0.0f, 0.0f);
+  const vec3 d = glm::normalize(m - o), reflected(d.x, d.y, -d.z);
+  const vec3 seen = pssRay(surface, colors, r, o, d);
+  const vec3 own = pssRay(surface, colors, matte, o, d);
+  const vec3 mirrored = pssRay(surface, colors, r, m + 1e-3f * vec3(0, 0, 1), reflected);
+  const vec3 expected = 0.5f * own + 0.5f * mirrored;
+  std::printf("half mirror: (%.4f %.4f %.4f) against half its own and half the reflected ray's "
+              "(%.4f %.4f %.4f)\n",
+              seen.r, seen.g, seen.b, expected.r, expected.g, expected.b);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(seen[k], expected[k], 5e-3f) << k;
+  EXPECT_GT(mirrored.r, 0.1f);                // the ball, lit
+  EXPECT_LT(mirrored.b, 0.5f * 0.5f + 0.05f);  // some of the background, through the ball's mirror
+}
+
 // A volume: points on a grid inside the unit sphere (the surface, made fully transparent, is its
 // boundary) carrying an analytic Gaussian blob, extinction proportional to the value and no
 // emission: the light let through along random chords is the analytic transmittance within
