@@ -259,8 +259,24 @@ glm::vec3 pssRay(const PssSurface& surface, const std::vector<glm::vec3>& colors
                       surface.patches(), surface.options());
   env.render = &render;
   env.colors = &colors;
+  return env.pssRayColor(o, d, pssScale(surface));
+}
+
+PssRays pssRays(const PssRender& render) {
+  PssRays rays;
+  rays.forward = glm::normalize(render.target - render.eye);
+  glm::vec3 right = glm::cross(rays.forward, render.up);
+  if (glm::dot(right, right) < 1e-12f) right = glm::cross(rays.forward, glm::vec3(1, 0, 0));
+  right = glm::normalize(right);
+  const float t = std::tan(glm::radians(render.fovDegrees) * 0.5f);
+  rays.right = right * (t * float(render.width) / float(render.height));
+  rays.up = glm::cross(right, rays.forward) * t;
+  return rays;
+}
+
+float pssScale(const PssSurface& surface) {
   const PssSurface::Grid& grid = surface.grid();
-  return env.pssRayColor(o, d, glm::length(glm::vec3(grid.dims) * grid.side));
+  return glm::length(glm::vec3(grid.dims) * grid.side);
 }
 
 bool pssRefract(const PssSurface& surface, const glm::vec3& o, const glm::vec3& d, float ior,
@@ -283,22 +299,15 @@ std::vector<glm::vec3> renderPss(const PssSurface& surface, const std::vector<gl
                       surface.patches(), surface.options());
   env.render = &render;
   env.colors = &colors;
-  const glm::vec3 forward = glm::normalize(render.target - render.eye);
-  glm::vec3 right = glm::cross(forward, render.up);
-  if (glm::dot(right, right) < 1e-12f) right = glm::cross(forward, glm::vec3(1, 0, 0));
-  right = glm::normalize(right);
-  const glm::vec3 up = glm::cross(right, forward);
-  const float t = std::tan(glm::radians(render.fovDegrees) * 0.5f);
-  const float aspect = float(render.width) / float(render.height);
-  const PssSurface::Grid& grid = surface.grid();
-  const float scale = glm::length(glm::vec3(grid.dims) * grid.side);
+  const PssRays rays = pssRays(render);
+  const float scale = pssScale(surface);
   std::vector<glm::vec3> pixels(size_t(render.width) * render.height);
   tbb::parallel_for(0, render.height, [&](int y) {
     for (int x = 0; x < render.width; ++x) {
-      // Through the pixel's centre.
-      const float sx = ((float(x) + 0.5f) / float(render.width) * 2.0f - 1.0f) * t * aspect;
-      const float sy = (1.0f - (float(y) + 0.5f) / float(render.height) * 2.0f) * t;
-      const glm::vec3 d = glm::normalize(forward + sx * right + sy * up);
+      // Through the pixel's centre, as pss.comp.glsl.
+      const float sx = (float(x) + 0.5f) / float(render.width) * 2.0f - 1.0f;
+      const float sy = 1.0f - (float(y) + 0.5f) / float(render.height) * 2.0f;
+      const glm::vec3 d = glm::normalize(rays.forward + sx * rays.right + sy * rays.up);
       pixels[size_t(y) * render.width + x] = env.pssRayColor(render.eye, d, scale);
     }
   });

@@ -154,6 +154,15 @@ struct PssRender {
 bool pssRefract(const PssSurface& surface, const glm::vec3& o, const glm::vec3& d, float ior,
                 bool exact, glm::vec3& point, glm::vec3& normal, glm::vec3& bent);
 
+// A picture's camera rays: through pixel (x, y) along forward + sx right + sy up, sx and sy from
+// -1 to 1 across the picture (right and up scaled by the field of view and the aspect).
+struct PssRays {
+  glm::vec3 forward{0.0f}, right{0.0f}, up{0.0f};
+};
+PssRays pssRays(const PssRender& render);
+// The scene's size (the grid's diagonal): rays leave a surface this much times 10⁻⁴ past it.
+float pssScale(const PssSurface& surface);
+
 // The linear color a ray brings (shaders/pss_trace.h, pssRayColor) from o along d.
 glm::vec3 pssRay(const PssSurface& surface, const std::vector<glm::vec3>& colors,
                  const PssRender& render, const glm::vec3& o, const glm::vec3& d);

@@ -106,18 +106,12 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   }
   // The parameters, as renderPss frames its rays.
   gpu::PssParams q{};
-  const glm::vec3 forward = glm::normalize(r.target - r.eye);
-  glm::vec3 right = glm::cross(forward, r.up);
-  if (glm::dot(right, right) < 1e-12f) right = glm::cross(forward, glm::vec3(1, 0, 0));
-  right = glm::normalize(right);
-  const glm::vec3 up = glm::cross(right, forward);
-  const float t = std::tan(glm::radians(r.fovDegrees) * 0.5f);
-  const float aspect = float(r.width) / float(r.height);
+  const PssRays rays = pssRays(r);
+  q.eye = glm::vec4(r.eye, pssScale(surface_));
+  q.right = glm::vec4(rays.right, 0.0f);
+  q.up = glm::vec4(rays.up, 0.0f);
+  q.forward = glm::vec4(rays.forward, 0.0f);
   const PssSurface::Grid& grid = surface_.grid();
-  q.eye = glm::vec4(r.eye, glm::length(glm::vec3(grid.dims) * grid.side));
-  q.right = glm::vec4(right * (t * aspect), 0.0f);
-  q.up = glm::vec4(up * t, 0.0f);
-  q.forward = glm::vec4(forward, 0.0f);
   q.gridLo = glm::vec4(grid.lo, grid.side);
   q.gridDims = glm::uvec4(glm::uvec3(grid.dims), uint32_t(r.lights.size()));
   q.image = glm::uvec4(uint32_t(r.width), uint32_t(r.height),
@@ -150,17 +144,7 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
                                       &reachStart_,  &reach_,        &pixels_,
                                       &volumeStart_, &volumeOrder_,  &volumePoints_};
   for (uint32_t b = 0; b < kBindings; ++b) infos[b + 1] = {storage[b]->buffer, 0, VK_WHOLE_SIZE};
-  std::array<VkWriteDescriptorSet, kBindings + 1> writes{};
-  for (uint32_t b = 0; b <= kBindings; ++b) {
-    writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-    writes[b].dstSet = pipeline_.sets[0];
-    writes[b].dstBinding = b;
-    writes[b].descriptorCount = 1;
-    writes[b].descriptorType =
-        b == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[b].pBufferInfo = &infos[b];
-  }
-  vkUpdateDescriptorSets(gpu_.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
+  writeComputeSet(gpu_, pipeline_.sets[0], infos);
 
   ISO_VK(vkResetCommandBuffer(cb_, 0));
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};

@@ -297,17 +297,7 @@ void Renderer::writeDescriptors(const Slot& slot) {
       {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE},
       {paths_.buffer, 0, VK_WHOLE_SIZE},        {pending_.buffer, 0, VK_WHOLE_SIZE},
       {caustics_.buffer, 0, VK_WHOLE_SIZE}};
-  constexpr uint32_t kBindings = std::size(infos);
-  std::vector<VkWriteDescriptorSet> writes(kBindings, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET});
-  for (uint32_t i = 0; i < kBindings; ++i) {
-    writes[i].dstSet = slot.set;
-    writes[i].dstBinding = i;
-    writes[i].descriptorCount = 1;
-    writes[i].descriptorType =
-        i == 0 ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[i].pBufferInfo = &infos[i];
-  }
-  vkUpdateDescriptorSets(gpu_.device, uint32_t(writes.size()), writes.data(), 0, nullptr);
+  writeComputeSet(gpu_, slot.set, infos);
 }
 
 Renderer::~Renderer() {

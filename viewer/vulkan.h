@@ -140,6 +140,10 @@ ComputePipeline createComputePipeline(Gpu& gpu, std::span<const uint32_t> spirv,
                                       std::span<const std::vector<uint32_t>> variants,
                                       uint32_t setCount = 1);
 
+// Points a set of such a pipeline's layout at buffers: infos[0] the uniform buffer (binding 0),
+// then one storage buffer a binding.
+void writeComputeSet(Gpu& gpu, VkDescriptorSet set, std::span<const VkDescriptorBufferInfo> infos);
+
 // From the Gpu's command pool (freed with it, or by vkFreeCommandBuffers).
 VkCommandBuffer allocateCommandBuffer(Gpu& gpu);
 // A pool of `count` timestamp queries.
