@@ -158,7 +158,7 @@ ImagePoints readImagePoints(ImageFiles& files, const ImageLoad& load) {
   uint64_t lastPreview = 0;
   PointCloud batch, kept;
   for (size_t f = 0; f < files.readers.size(); ++f) {
-    points.store.add(f, kept);  // the object, even when empty
+    points.store.add(f, PointCloud{});  // the object, even when it stays empty
     while (!(load.stop && load.stop->load())) {
       batch.clear();
       if (files.readers[f]->read(batch, kBatch) == 0) break;
