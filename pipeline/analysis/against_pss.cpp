@@ -9,8 +9,7 @@
 #include <glm/geometric.hpp>
 #include <optional>
 
-#include "iso/error.h"
-#include "pipeline/output/keep_points.h"
+#include "iso/check.h"
 #include "pipeline/points/viewing.h"
 #include "viewer/cpu_tracer.h"
 #include "viewer/pss.h"
@@ -34,15 +33,9 @@ double quantile(std::vector<double> v, double q) {
 
 }  // namespace
 
-nlohmann::json evaluateAgainstPss(const Reader& reader, const std::string& file, double spacing,
+nlohmann::json evaluateAgainstPss(const Reader& reader, PointCloud points, double spacing,
                                   const AgainstPssOptions& options) {
-  PointCloud points;
-  forEachKeptPoints(reader, [&](const PointCloud& chunk) {
-    for (size_t i = 0; i < chunk.size(); ++i) appendPoint(points, chunk, i);
-  });
-  if (points.size() == 0)
-    throw FileError(file, std::nullopt,
-                    "keeps no points to fit a point set surface to (convert with --keep-points)");
+  ISO_CHECK(points.size() > 0);
   glm::dvec3 lo = points.positions[0], hi = lo;
   for (const glm::dvec3& p : points.positions) {
     lo = glm::min(lo, p);

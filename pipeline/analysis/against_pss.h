@@ -6,9 +6,9 @@
 
 #include <cstdint>
 #include <nlohmann/json.hpp>
-#include <string>
 
 #include "iso/reader.h"
+#include "pipeline/io/point_cloud.h"
 
 namespace iso {
 
@@ -16,9 +16,9 @@ struct AgainstPssOptions {
   int size = 256;  // pixels across each view
 };
 
-// The six views along the axes, framing the kept points. Throws iso::FileError for a file that
-// keeps no points (iso convert --keep-points) or holds no surface.
-nlohmann::json evaluateAgainstPss(const Reader& reader, const std::string& file, double spacing,
+// The six views along the axes, framing `points` (the file's kept points, with their normals; at
+// least one). Throws iso::FileError for a file that holds no surface.
+nlohmann::json evaluateAgainstPss(const Reader& reader, PointCloud points, double spacing,
                                   const AgainstPssOptions& options = {});
 
 }  // namespace iso

@@ -159,7 +159,14 @@ int run(Options& o) {
     const double spacing = o.spacing > 0.0 ? o.spacing : reportedSpacing(reader);
     if (!(spacing > 0.0))
       throw FileError(o.file, std::nullopt, "has no reported spacing; give --spacing");
-    result = evaluateAgainstPss(reader, o.file, spacing, o.pss);
+    PointCloud kept;
+    forEachKeptPoints(reader, [&](const PointCloud& chunk) {
+      for (size_t i = 0; i < chunk.size(); ++i) appendPoint(kept, chunk, i);
+    });
+    if (kept.size() == 0)
+      throw FileError(o.file, std::nullopt,
+                      "keeps no points to fit a point set surface to (convert with --keep-points)");
+    result = evaluateAgainstPss(reader, std::move(kept), spacing, o.pss);
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
     return kExitOk;
