@@ -136,6 +136,10 @@ std::string_view chunkKindName(uint8_t kind) {
       return "surface";
     case ChunkKind::Points:
       return "points";
+    case ChunkKind::Values:
+      return "values";
+    case ChunkKind::VolumePoints:
+      return "volume points";
   }
   return "unknown";
 }

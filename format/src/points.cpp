@@ -130,25 +130,20 @@ std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed) {
   return data;
 }
 
-PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
-  const ChunkInfo& chunk = reader.chunk(id);
-  const auto fail = [&](const std::string& reason) {
-    throw FileError(reader.name(), chunk.offset, "chunk " + std::to_string(id) + ": " + reason);
-  };
-  if (chunk.kind != kPointsKind) fail("not a points chunk");
-  // The table entry's rules were checked when the file was opened. Draco decodes most damaged
-  // streams into other points without complaint: the payload's checksum, which payload() checks,
-  // is what tells.
-  const ChunkData payload = reader.payload(id);
-  const std::span<const std::byte> data = payload.bytes();
+namespace {
+
+// The points of a chunk's data, checked against the rules of "Points chunks"; `fail` throws.
+template <typename Fail>
+PointsChunk decodePointsData(std::span<const std::byte> data, uint64_t tableCount,
+                             const Fail& fail) {
   if (data.size() <= kPointsHeaderSize) fail("points data is shorter than its header");
   const uint32_t count = loadLE<uint32_t>(data.data());
   PointsChunk out;
   out.stepBits = loadLE<uint8_t>(data.data() + 4);
   const uint8_t attributes = loadLE<uint8_t>(data.data() + 5);
-  if (count != chunk.pointCount)
+  if (count != tableCount)
     fail("points header says " + std::to_string(count) + " points, the chunk table " +
-         std::to_string(chunk.pointCount));
+         std::to_string(tableCount));
   if (out.stepBits > kMaxPointStepBits)
     fail("step bits " + std::to_string(out.stepBits) + " above " +
          std::to_string(kMaxPointStepBits));
@@ -215,6 +210,157 @@ PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
   if (radii)
     for (const std::array<uint16_t, 1>& r : valuesOf<uint16_t, 1>(attribute(kRadius, 1), count))
       out.radii.push_back(r[0]);
+  return out;
+}
+
+// Points chunk rows compared attribute by attribute (the attributes a chunk lacks are empty).
+struct RowLess {
+  const PointsChunk& c;
+  bool operator()(uint32_t a, uint32_t b) const {
+    if (c.offsets[a] != c.offsets[b]) return c.offsets[a] < c.offsets[b];
+    if (!c.colors.empty() && c.colors[a] != c.colors[b]) return c.colors[a] < c.colors[b];
+    if (!c.normals.empty() && c.normals[a] != c.normals[b]) return c.normals[a] < c.normals[b];
+    if (!c.radii.empty()) return c.radii[a] < c.radii[b];
+    return false;
+  }
+};
+
+std::vector<uint32_t> rowOrder(const PointsChunk& c) {
+  std::vector<uint32_t> order(c.size());
+  for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), RowLess{c});
+  return order;
+}
+
+}  // namespace
+
+PointsChunk decodePointsChunk(const Reader& reader, uint32_t id) {
+  const ChunkInfo& chunk = reader.chunk(id);
+  const auto fail = [&](const std::string& reason) {
+    throw FileError(reader.name(), chunk.offset, "chunk " + std::to_string(id) + ": " + reason);
+  };
+  if (chunk.kind != kPointsKind && chunk.kind != kVolumePointsKind) fail("not a points chunk");
+  // The table entry's rules were checked when the file was opened. Draco decodes most damaged
+  // streams into other points without complaint: the payload's checksum, which payload() checks,
+  // is what tells.
+  const ChunkData payload = reader.payload(id);
+  return decodePointsData(payload.bytes(), chunk.pointCount, fail);
+}
+
+std::vector<uint32_t> decodedPointOrder(std::span<const std::byte> data,
+                                        const PointsChunk& points) {
+  const PointsChunk decoded = decodePointsData(data, points.size(), [](const std::string& why) {
+    throw InternalError("a points chunk just encoded does not decode: " + why);
+  });
+  const std::vector<uint32_t> byRowIn = rowOrder(points), byRowOut = rowOrder(decoded);
+  std::vector<uint32_t> order(points.size());
+  for (size_t i = 0; i < order.size(); ++i) order[byRowOut[i]] = byRowIn[i];
+  return order;
+}
+
+double PointValues::value(size_t i) const {
+  return codes[i] == kNoValue ? std::numeric_limits<double>::quiet_NaN()
+                              : offset + double(codes[i]) * step;
+}
+
+namespace {
+
+// Why a value name is not one the format allows; empty when it is.
+std::string nameProblem(std::string_view name) {
+  if (name.empty() || name.size() > kMaxValueNameBytes)
+    return "a value name has 1 to " + std::to_string(kMaxValueNameBytes) + " bytes";
+  if (name.find('\0') != std::string_view::npos) return "a value name has a zero byte";
+  return {};
+}
+
+}  // namespace
+
+PointValues quantizeValues(std::string name, uint32_t pointsChunk,
+                           std::span<const double> values) {
+  if (const std::string problem = nameProblem(name); !problem.empty())
+    throw InternalError(problem + ": '" + name + "'");
+  if (values.empty() || values.size() > kMaxPointsPerChunk)
+    throw InternalError("a values chunk holds 1 to 2^20 values");
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  bool integers = true;
+  for (double v : values) {
+    if (!std::isfinite(v)) continue;
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+    integers = integers && v == std::floor(v);
+  }
+  PointValues out;
+  out.name = std::move(name);
+  out.pointsChunk = pointsChunk;
+  out.codes.resize(values.size(), kNoValue);
+  if (!(lo <= hi)) return out;  // no finite value
+  if (!std::isfinite(hi - lo)) throw InternalError("values span more than a double holds");
+  const double top = double(kNoValue - 1);
+  out.offset = lo;
+  out.step = (integers && hi - lo <= top) || hi == lo ? 1.0 : (hi - lo) / top;
+  for (size_t i = 0; i < values.size(); ++i)
+    if (std::isfinite(values[i]))
+      out.codes[i] = uint16_t(std::clamp(std::round((values[i] - lo) / out.step), 0.0, top));
+  return out;
+}
+
+std::vector<std::byte> encodeValuesChunk(const PointValues& v) {
+  if (const std::string problem = nameProblem(v.name); !problem.empty())
+    throw InternalError(problem);
+  if (v.codes.empty() || v.codes.size() > kMaxPointsPerChunk || !std::isfinite(v.offset) ||
+      !(v.step > 0.0) || !std::isfinite(v.offset + double(kNoValue - 1) * v.step))
+    throw InternalError("values the format does not allow");
+  std::vector<std::byte> data(kValuesHeaderSize + 2 * v.codes.size());
+  storeLE<uint32_t>(data.data(), v.pointsChunk);
+  storeLE<uint32_t>(data.data() + 4, uint32_t(v.codes.size()));
+  storeLE<double>(data.data() + 8, v.offset);
+  storeLE<double>(data.data() + 16, v.step);
+  std::memcpy(data.data() + 32, v.name.data(), v.name.size());
+  for (size_t i = 0; i < v.codes.size(); ++i)
+    storeLE<uint16_t>(data.data() + kValuesHeaderSize + 2 * i, v.codes[i]);
+  return data;
+}
+
+PointValues decodeValuesChunk(const Reader& reader, uint32_t id) {
+  const ChunkInfo& chunk = reader.chunk(id);
+  const auto fail = [&](const std::string& reason) {
+    throw FileError(reader.name(), chunk.offset, "chunk " + std::to_string(id) + ": " + reason);
+  };
+  if (chunk.kind != kValuesKind) fail("not a values chunk");
+  const ChunkData payload = reader.payload(id);
+  const std::span<const std::byte> data = payload.bytes();
+  if (data.size() < kValuesHeaderSize) fail("values data is shorter than its header");
+  PointValues out;
+  out.pointsChunk = loadLE<uint32_t>(data.data());
+  const uint32_t count = loadLE<uint32_t>(data.data() + 4);
+  out.offset = loadLE<double>(data.data() + 8);
+  out.step = loadLE<double>(data.data() + 16);
+  for (size_t i = 24; i < 32; ++i)
+    if (data[i] != std::byte{0}) fail("reserved values header bytes are not zero");
+  const char* name = reinterpret_cast<const char*>(data.data() + 32);
+  out.name.assign(name, strnlen(name, kMaxValueNameBytes));
+  for (size_t i = 32 + out.name.size(); i < kValuesHeaderSize; ++i)
+    if (data[i] != std::byte{0}) fail("the value name's padding is not zero");
+  if (out.name.empty()) fail("the value name is empty");
+  if (out.pointsChunk >= reader.chunks().size() ||
+      (reader.chunk(out.pointsChunk).kind != kPointsKind &&
+       reader.chunk(out.pointsChunk).kind != kVolumePointsKind))
+    fail("values of chunk " + std::to_string(out.pointsChunk) + ", which is not a points chunk");
+  const ChunkInfo& points = reader.chunk(out.pointsChunk);
+  if (count != chunk.pointCount || count != points.pointCount)
+    fail("values header says " + std::to_string(count) + " values, the chunk table " +
+         std::to_string(chunk.pointCount) + ", its points chunk " +
+         std::to_string(points.pointCount));
+  if (chunk.level != points.level || chunk.key != points.key)
+    fail("the values chunk's cell is not its points chunk's");
+  if (data.size() != kValuesHeaderSize + 2 * uint64_t{count})
+    fail("values data is not its header and 2 bytes a value");
+  if (!std::isfinite(out.offset) || !(out.step > 0.0) ||
+      !std::isfinite(out.offset + double(kNoValue - 1) * out.step))
+    fail("the values' offset and step are not finite, or the step is not positive");
+  out.codes.resize(count);
+  for (size_t i = 0; i < count; ++i)
+    out.codes[i] = loadLE<uint16_t>(data.data() + kValuesHeaderSize + 2 * i);
   return out;
 }
 

@@ -152,19 +152,24 @@ class Parser {
       return detail::FieldProblem{e::kStoredSize, "payload runs into the chunk table"};
     if (!std::isfinite(c.geometricError) || c.geometricError < 0.0f)
       return detail::FieldProblem{e::kGeometricError, "geometric error is negative or not finite"};
-    if (c.kind == kPointsKind) return pointsEntryProblem(c);
+    if (c.kind == kPointsKind || c.kind == kVolumePointsKind || c.kind == kValuesKind)
+      return pointsEntryProblem(c);
     return std::nullopt;
   }
 
-  // The rule of "Points chunks" that the entry of a points chunk breaks.
+  // The rule of "Points chunks" (and, since 2.1, of "Volume points" and "Values chunks") that the
+  // entry of such a chunk breaks.
   static std::optional<detail::FieldProblem> pointsEntryProblem(const ChunkInfo& c) {
     namespace e = detail::entry;
+    const std::string what(c.kind == kValuesKind ? "a values chunk" : "a points chunk");
     if (c.pointCount == 0 || c.pointCount > kMaxPointsPerChunk)
-      return detail::FieldProblem{
-          e::kPointCount, "a points chunk holds 1 to " + std::to_string(kMaxPointsPerChunk) +
-                              " points, not " + std::to_string(c.pointCount)};
-    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, "a points chunk has nodes"};
-    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, "a points chunk has leaves"};
+      return detail::FieldProblem{e::kPointCount,
+                                  what + " holds 1 to " + std::to_string(kMaxPointsPerChunk) +
+                                      " points, not " + std::to_string(c.pointCount)};
+    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, what + " has nodes"};
+    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, what + " has leaves"};
+    if (c.kind != kPointsKind && c.parent != kNoParent)
+      return detail::FieldProblem{e::kParent, what + " of this kind has no parent"};
     return std::nullopt;
   }
 

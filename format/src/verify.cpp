@@ -35,14 +35,16 @@ VerifyProblem chunkProblem(const ChunkInfo& c, const FileError& error) {
 }
 
 // Check a chunk's data (its checksum, its zstd frame) and, for the kinds this version knows, the
-// rules of "Surface chunks" and "Points chunks"; the data of other kinds is decoded through a
+// rules of "Surface chunks", "Points chunks" and "Values chunks"; the data of other kinds is decoded through a
 // small buffer and dropped.
 void checkChunk(const Reader& reader, const ChunkInfo& c, VerifyResult& result) {
   try {
     if (c.kind == kSurfaceKind)
       decodeSurfaceChunk(reader, c.id);
-    else if (c.kind == kPointsKind)
+    else if (c.kind == kPointsKind || c.kind == kVolumePointsKind)
       decodePointsChunk(reader, c.id);
+    else if (c.kind == kValuesKind)
+      decodeValuesChunk(reader, c.id);
     else
       reader.checkPayload(c.id);
   } catch (const FileError& error) {

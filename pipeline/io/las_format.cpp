@@ -147,14 +147,20 @@ LasColorCoding probeLasColorCoding(const LasHeader& header, const std::byte* rec
   return lowBits == 0 ? LasColorCoding::kEightTimes256 : LasColorCoding::kSixteen;
 }
 
-LasRecordDecoder::LasRecordDecoder(const LasHeader& header, LasColorCoding coding,
-                                   bool keepIntensity)
+std::vector<std::string> lasExtraNames(int pointFormat) {
+  std::vector<std::string> names = {"intensity", "return_number", "classification"};
+  if (pointFormat != 0 && pointFormat != 2) names.push_back("gps_time");
+  return names;
+}
+
+LasRecordDecoder::LasRecordDecoder(const LasHeader& header, LasColorCoding coding, bool keepExtras)
     : scale_(header.scale),
       offset_(header.offset),
       recordLength_(header.recordLength),
       rgbAt_(kRgbAt[header.pointFormat]),
-      coding_(coding) {
-  if (keepIntensity) extraNames_ = {"intensity"};
+      coding_(coding),
+      extended_(header.pointFormat >= 6) {
+  if (keepExtras) extraNames_ = lasExtraNames(header.pointFormat);
 }
 
 size_t LasRecordDecoder::append(const std::byte* records, size_t count, PointCloud& out,
@@ -172,13 +178,13 @@ size_t LasRecordDecoder::append(const std::byte* records, size_t count, PointClo
     }
     return table[value];
   };
-  const bool keepIntensity = !extraNames_.empty();
-  if (keepIntensity) out.extraNames = extraNames_;
+  const size_t extras = extraNames_.size();
+  if (extras > 0) out.extraNames = extraNames_;
   const size_t first = out.positions.size();
   size_t written = first;
   out.positions.resize(first + count);
   if (rgbAt_ != 0) out.colors.resize(first + count);
-  if (keepIntensity) out.extras.resize(first + count);
+  out.extras.resize((first + count) * extras);
   for (size_t i = 0; i < count; ++i) {
     const std::byte* record = records + i * recordLength_;
     const glm::dvec3 integer{load<int32_t>(record), load<int32_t>(record + 4),
@@ -193,12 +199,21 @@ size_t LasRecordDecoder::append(const std::byte* records, size_t count, PointClo
       const std::byte* rgb = record + rgbAt_;
       out.colors[written] = {channel(rgb), channel(rgb + 2), channel(rgb + 4)};
     }
-    if (keepIntensity) out.extras[written] = float(load<uint16_t>(record + kIntensityAt));
+    if (extras > 0) {
+      // Formats 0-5: return number in bits 0-2 of byte 14, classification in bits 0-4 of byte 15,
+      // GPS time at 20; formats 6-10: bits 0-3 of byte 14, byte 16, at 22 (LAS 1.4 R15, 2.6-2.16).
+      double* e = out.extras.data() + written * extras;
+      const uint8_t returns = load<uint8_t>(record + 14);
+      e[0] = double(load<uint16_t>(record + kIntensityAt));
+      e[1] = double(extended_ ? returns & 15 : returns & 7);
+      e[2] = double(extended_ ? load<uint8_t>(record + 16) : load<uint8_t>(record + 15) & 31);
+      if (extras > 3) e[3] = load<double>(record + (extended_ ? 22 : 20));
+    }
     ++written;
   }
   out.positions.resize(written);
   if (rgbAt_ != 0) out.colors.resize(written);
-  if (keepIntensity) out.extras.resize(written);
+  out.extras.resize(written * extras);
   return written - first;
 }
 

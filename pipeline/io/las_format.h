@@ -56,12 +56,16 @@ LasColorCoding probeLasColorCoding(const LasHeader& header, const std::byte* rec
 inline constexpr const char* kLasColorsTimes256Note =
     "its colors are 8-bit codes times 256 (every low byte 0): read as 8-bit codes";
 
+// The extras a LAS point format gives (ReadOptions::keepExtras): "intensity", "return_number",
+// "classification" and, for formats with a GPS time (1, 3–10), "gps_time".
+std::vector<std::string> lasExtraNames(int pointFormat);
+
 // Point records to points: positions (integers times scale plus offset), colors decoded by the
-// coding, and the 16-bit intensity as the extra "intensity" when asked.
+// coding, and when asked the extras of lasExtraNames.
 class LasRecordDecoder {
  public:
-  LasRecordDecoder(const LasHeader& header, LasColorCoding coding, bool keepIntensity);
-  // The extras appended per point ({"intensity"} or none).
+  LasRecordDecoder(const LasHeader& header, LasColorCoding coding, bool keepExtras);
+  // The extras appended per point (lasExtraNames, or none).
   const std::vector<std::string>& extraNames() const { return extraNames_; }
   // Append `count` records to out, dropping (and counting in stats) non-finite positions;
   // returns the points appended.
@@ -72,6 +76,7 @@ class LasRecordDecoder {
   size_t recordLength_;
   size_t rgbAt_;
   LasColorCoding coding_;
+  bool extended_;  // formats 6-10
   std::vector<std::string> extraNames_;
 };
 

@@ -106,7 +106,7 @@ std::unique_ptr<PointReader> openPointFile(const std::filesystem::path& path,
     case Format::kE57:
       return io::makeE57Reader(std::move(in), options);
     case Format::kPcd:
-      return io::makePcdReader(std::move(in));
+      return io::makePcdReader(std::move(in), options.keepExtras);
     case Format::kText:
       break;
   }

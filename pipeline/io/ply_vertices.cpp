@@ -109,20 +109,14 @@ void decodeColumn(PlyType type, const std::byte* p, size_t count, size_t stride,
   });
 }
 
-// Decode one scalar property of `count` records into floats `outStride` apart (an extra).
+// Decode one scalar property of `count` records into doubles `outStride` apart (an extra).
 template <bool kBigEndian>
-void decodeExtraColumn(PlyType type, const std::byte* p, size_t count, size_t stride, float* out,
+void decodeExtraColumn(PlyType type, const std::byte* p, size_t count, size_t stride, double* out,
                        size_t outStride) {
   visitPlyType(type, [&](auto zero) {
     using T = decltype(zero);
-    for (size_t i = 0; i < count; ++i, p += stride, out += outStride) {
-      const T value = loadPlyRaw<kBigEndian, T>(p);
-      if constexpr (std::is_same_v<T, double>) {
-        *out = narrowToFloat(value);
-      } else {
-        *out = static_cast<float>(value);
-      }
-    }
+    for (size_t i = 0; i < count; ++i, p += stride, out += outStride)
+      *out = static_cast<double>(loadPlyRaw<kBigEndian, T>(p));
   });
 }
 
@@ -348,8 +342,13 @@ void PlyVertexDecoder::appendValues(const std::vector<double>& values, PointClou
     };
     out.colors.emplace_back(color(kRed), color(kGreen), color(kBlue));
   }
-  for (size_t extra = 0; extra < extraSources_.size(); ++extra)
-    out.extras.push_back(narrowToFloat(values[kSlotCount + extra]));
+  // A float property's text is rounded to float, as if it were binary.
+  for (size_t extra = 0; extra < extraSources_.size(); ++extra) {
+    const double value = values[kSlotCount + extra];
+    out.extras.push_back(extraSources_[extra].type == PlyType::Float32
+                             ? double(narrowToFloat(value))
+                             : value);
+  }
 }
 
 }  // namespace iso::io

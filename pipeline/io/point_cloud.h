@@ -18,7 +18,7 @@ struct PointCloud {
   std::vector<glm::vec3> colors;   // linear RGB in [0, 1] (inputs' sRGB is decoded on reading)
   // Further per-point scalars carried from the input (ReadOptions::keepExtras), by name.
   std::vector<std::string> extraNames;
-  std::vector<float> extras;  // extraNames.size() values per point, point-major
+  std::vector<double> extras;  // extraNames.size() values per point, point-major
 
   size_t size() const { return positions.size(); }
   bool hasNormals() const { return !normals.empty(); }

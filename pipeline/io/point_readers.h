@@ -16,7 +16,7 @@ std::unique_ptr<PointReader> makePlyReader(InputStream in, const ReadOptions& op
 // LAS, or LAZ for a file whose point format is marked compressed.
 std::unique_ptr<PointReader> makeLasReader(InputStream in, const ReadOptions& options);
 std::unique_ptr<PointReader> makeTextReader(InputStream in, const ReadOptions& options);
-std::unique_ptr<PointReader> makePcdReader(InputStream in);
+std::unique_ptr<PointReader> makePcdReader(InputStream in, bool keepExtras = false);
 // Whether the start of a stream (not consumed) is a text point file: after comments, a count
 // line and a line of column names, lines of 3 or more numbers, as many on each, separated by
 // blanks, commas or semicolons. nullopt when it is; otherwise why not ("line 3: 'abc' is not a

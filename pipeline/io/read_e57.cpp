@@ -375,7 +375,7 @@ class E57PointReader final : public PointReader {
     neutralColors_ += neutral;
   }
 
-  void appendIntensities(size_t kept, float* out) {
+  void appendIntensities(size_t kept, double* out) {
     const double* intensity = column(kIntensity);
     const double* invalid = column(kIntensityInvalid);
     const uint32_t* records = kept_.data();
@@ -383,9 +383,9 @@ class E57PointReader final : public PointReader {
       const size_t i = records[k];
       if (invalid != nullptr && invalid[i] != 0.0) {
         ++invalidIntensities_;
-        out[k] = std::numeric_limits<float>::quiet_NaN();
+        out[k] = std::numeric_limits<double>::quiet_NaN();
       } else {
-        out[k] = narrowToFloat(intensity[i]);
+        out[k] = intensity[i];
       }
     }
   }

@@ -21,12 +21,12 @@ namespace {
 class LazPointReader final : public PointReader {
  public:
   LazPointReader(InputStream in, const LasHeader& header, const ReadOptions& options)
-      : header_(header), keepIntensity_(options.keepExtras) {
+      : header_(header), keepExtras_(options.keepExtras) {
     info_.path = in.path();
     info_.format = lasFormatName(header_);
     info_.declaredPoints = header_.pointCount;
     info_.hasColors = lasRgbOffset(header_.pointFormat) != 0;
-    if (keepIntensity_) info_.extraNames = {"intensity"};
+    if (keepExtras_) info_.extraNames = lasExtraNames(header_.pointFormat);
     if (!hasLazDecoder()) in.failAt(0, kLazDecoderMissing);
     if (!in.knownSize())
       in.failAt(0, "a compressed copy of a LAZ file is not read: decompress it (gunzip) first");
@@ -80,11 +80,11 @@ class LazPointReader final : public PointReader {
                                    probedRecords_.size() / header_.recordLength);
       if (coding == LasColorCoding::kEightTimes256) info_.notes.push_back(kLasColorsTimes256Note);
     }
-    decoder_.emplace(header_, coding, keepIntensity_);
+    decoder_.emplace(header_, coding, keepExtras_);
   }
 
   LasHeader header_;
-  bool keepIntensity_;
+  bool keepExtras_;
   std::optional<LazChunkStream> stream_;
   std::optional<LasRecordDecoder> decoder_;
   std::vector<std::byte> probedRecords_;  // the records the colors were probed on

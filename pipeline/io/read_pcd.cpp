@@ -380,6 +380,16 @@ void decodeColumn(const Column& column, size_t count, Vec* out,
   });
 }
 
+// Decode one field to doubles `outStride` apart (an extra).
+void decodeExtraColumn(const Column& column, size_t count, double* out, size_t outStride) {
+  withType(column.type, [&](auto zero) {
+    using T = decltype(zero);
+    const std::byte* p = column.first;
+    for (size_t i = 0; i < count; ++i, p += column.stride, out += outStride)
+      *out = static_cast<double>(load<T>(p));
+  });
+}
+
 // Decode one separate color channel to linear values; 8- and 16-bit codes through the table.
 void decodeColorChannel(const Column& column, size_t count, glm::vec3* out,
                         float glm::vec3::*member) {
@@ -441,11 +451,19 @@ bool parseSlotValue(Slot slot, ScalarType type, std::string_view text, double& v
 
 class PcdPointReader final : public PointReader {
  public:
-  explicit PcdPointReader(InputStream in) : in_(std::move(in)), header_(readHeader(in_)) {
+  PcdPointReader(InputStream in, bool keepExtras) : in_(std::move(in)), header_(readHeader(in_)) {
     uint64_t units = 0;
     for (const PcdField& field : header_.fields) {
       fieldStart_.push_back(units);
       units += unitsOf(field, header_.data);
+    }
+    // Extras: the single-valued fields no slot reads (not PCL's "_" padding).
+    for (size_t f = 0; keepExtras && f < header_.fields.size(); ++f) {
+      const bool read = std::find(header_.slotField.begin(), header_.slotField.end(), int(f)) !=
+                        header_.slotField.end();
+      if (read || header_.fields[f].count != 1 || header_.fields[f].name == "_") continue;
+      extraFields_.push_back(f);
+      info_.extraNames.push_back(header_.fields[f].name);
     }
     pointUnits_ = units;
     info_.path = in_.path();
@@ -570,7 +588,12 @@ class PcdPointReader final : public PointReader {
     while (appended < maxPoints && pointsDone_ < header_.points) {
       const size_t count = static_cast<size_t>(
           std::min<uint64_t>(maxPoints - appended, header_.points - pointsDone_));
-      appended += appendPoints(blockColumns(), count, out);
+      std::vector<Column> extras;
+      for (const size_t f : extraFields_)
+        extras.push_back({block_.get() + fieldStart_[f] * header_.points +
+                              pointsDone_ * header_.fields[f].size,
+                          header_.fields[f].size, header_.fields[f].type});
+      appended += appendPoints(blockColumns(), extras, count, out);
       pointsDone_ += count;
     }
     if (pointsDone_ == header_.points) block_.reset();
@@ -597,7 +620,10 @@ class PcdPointReader final : public PointReader {
       if (bytes.size() < pointUnits_) failEndsEarly();
       const size_t count = static_cast<size_t>(std::min<uint64_t>(
           {bytes.size() / pointUnits_, maxPoints - appended, header_.points - pointsDone_}));
-      appended += appendPoints(recordColumns(bytes.data()), count, out);
+      std::vector<Column> extras;
+      for (const size_t f : extraFields_)
+        extras.push_back({bytes.data() + fieldStart_[f], pointUnits_, header_.fields[f].type});
+      appended += appendPoints(recordColumns(bytes.data()), extras, count, out);
       in_.consume(count * pointUnits_);
       pointsDone_ += count;
     }
@@ -616,7 +642,8 @@ class PcdPointReader final : public PointReader {
 
   // Decode `count` points from columns into out, dropping non-finite positions; returns the
   // points appended. Column by column dispatches on the type once per batch, not per value.
-  size_t appendPoints(const Columns& columns, size_t count, PointCloud& out) {
+  size_t appendPoints(const Columns& columns, const std::vector<Column>& extras, size_t count,
+                      PointCloud& out) {
     static constexpr double glm::dvec3::*kPositionMembers[] = {&glm::dvec3::x, &glm::dvec3::y,
                                                                &glm::dvec3::z};
     static constexpr float glm::vec3::*kMembers[] = {&glm::vec3::x, &glm::vec3::y, &glm::vec3::z};
@@ -639,6 +666,13 @@ class PcdPointReader final : public PointReader {
                              kMembers[channel]);
       }
     }
+    if (!extras.empty()) {
+      out.extraNames = info_.extraNames;
+      out.extras.resize((first + count) * extras.size());
+      for (size_t e = 0; e < extras.size(); ++e)
+        decodeExtraColumn(extras[e], count, out.extras.data() + first * extras.size() + e,
+                          extras.size());
+    }
     // PCL marks the invalid points of organized clouds with NaN.
     const size_t removed = removeNonFinite(out, first);
     stats_.droppedNonFinite += removed;
@@ -648,6 +682,9 @@ class PcdPointReader final : public PointReader {
   // Record the slot of each value of an ascii line, -1 for values not read.
   void mapValuesToSlots() {
     slotOfValue_.assign(pointUnits_, -1);
+    extraOfValue_.assign(pointUnits_, -1);
+    for (size_t e = 0; e < extraFields_.size(); ++e)
+      extraOfValue_[fieldStart_[extraFields_[e]]] = int(e);
     for (size_t slot = 0; slot < kSlotCount; ++slot)
       if (header_.slotField[slot] >= 0)
         slotOfValue_[fieldStart_[static_cast<size_t>(header_.slotField[slot])]] =
@@ -671,9 +708,16 @@ class PcdPointReader final : public PointReader {
   // Parse a data line; false when its point was dropped for a non-finite coordinate.
   bool parseLine(std::string_view line, PointCloud& out) {
     std::array<double, kSlotCount> values{};
+    lineExtras_.assign(extraFields_.size(), 0.0);
     std::string_view text;
     size_t column = 0;
     for (; nextField<isBlank>(line, text); ++column) {
+      if (column < extraOfValue_.size() && extraOfValue_[column] >= 0) {
+        const PcdField& field = header_.fields[extraFields_[size_t(extraOfValue_[column])]];
+        if (!parseNumber(text, lineExtras_[size_t(extraOfValue_[column])]))
+          in_.failLine(fmt::format("value {} (field '{}') is not a number: '{:.40}'", column + 1,
+                                   field.name, text));
+      }
       if (column >= slotOfValue_.size() || slotOfValue_[column] < 0) continue;
       const auto slot = static_cast<Slot>(slotOfValue_[column]);
       const PcdField& field = header_.fields[static_cast<size_t>(header_.slotField[slot])];
@@ -693,6 +737,10 @@ class PcdPointReader final : public PointReader {
       return false;
     }
     out.positions.push_back(position);
+    if (!extraFields_.empty()) {
+      out.extraNames = info_.extraNames;
+      out.extras.insert(out.extras.end(), lineExtras_.begin(), lineExtras_.end());
+    }
     if (header_.hasNormals)
       out.normals.emplace_back(narrowToFloat(values[kNx]), narrowToFloat(values[kNy]),
                                narrowToFloat(values[kNz]));
@@ -715,6 +763,9 @@ class PcdPointReader final : public PointReader {
   std::vector<uint64_t> fieldStart_;    // per field: where it starts in a point (see unitsOf)
   uint64_t pointUnits_ = 0;             // size of a point in the same unit
   std::vector<int8_t> slotOfValue_;     // ascii: the slot of each value of a line, or -1
+  std::vector<size_t> extraFields_;     // the fields read as extras (ReadOptions::keepExtras)
+  std::vector<int> extraOfValue_;       // ascii: the extra of each value of a line, or -1
+  std::vector<double> lineExtras_;      // ascii: the extras of the line being parsed
   uint64_t compressedBytes_ = 0;        // binary_compressed: the LZF data's size
   uint64_t blockBytes_ = 0;             // binary_compressed: the decompressed block's size
   std::unique_ptr<std::byte[]> block_;  // the decompressed block while points remain in it
@@ -741,8 +792,8 @@ bool looksLikePcd(InputStream& in) {
   return false;
 }
 
-std::unique_ptr<PointReader> makePcdReader(InputStream in) {
-  return std::make_unique<PcdPointReader>(std::move(in));
+std::unique_ptr<PointReader> makePcdReader(InputStream in, bool keepExtras) {
+  return std::make_unique<PcdPointReader>(std::move(in), keepExtras);
 }
 
 }  // namespace iso::io

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cctype>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -28,12 +29,13 @@ namespace {
 constexpr size_t kSampleRows = 100;
 constexpr size_t kSampleBytes = size_t{64} << 10;
 
-enum Slot : int8_t { kSkip = -1, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kSlotCount };
+enum Slot : int8_t { kValue = -2, kSkip = -1, kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kSlotCount };
 constexpr std::array<std::string_view, kSlotCount> kSlotNames = {"x",  "y", "z", "nx", "ny",
                                                                  "nz", "r", "g", "b"};
 
 struct ColumnSpec {
   std::vector<Slot> columns;  // the slot of each column
+  std::vector<std::string> valueNames;  // the names of the kValue columns, in order
   bool hasNormals = false;
   bool hasColors = false;
 };
@@ -58,12 +60,24 @@ ColumnSpec parseColumnSpec(const InputStream& in, std::string_view text) {
   std::string_view name;
   while (nextField<isBlankCommaOrSemicolon>(rest, name)) {
     const auto* known = std::find(kSlotNames.begin(), kSlotNames.end(), name);
-    if (name != "_" && known == kSlotNames.end())
-      fail(fmt::format("unknown column '{}' (known: x,y,z,nx,ny,nz,r,g,b and _ to skip)", name));
-    const Slot slot = name == "_" ? kSkip : static_cast<Slot>(known - kSlotNames.begin());
-    if (slot != kSkip &&
-        std::find(spec.columns.begin(), spec.columns.end(), slot) != spec.columns.end())
+    // Another name of letters, digits and _ (not first a digit) names a value column.
+    const bool isName = !name.empty() && std::isdigit(static_cast<unsigned char>(name[0])) == 0 &&
+                        std::all_of(name.begin(), name.end(), [](char c) {
+                          return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_';
+                        });
+    if (name != "_" && known == kSlotNames.end() && !isName)
+      fail(fmt::format("unknown column '{}' (known: x,y,z,nx,ny,nz,r,g,b, _ to skip, and names "
+                       "of values: letters, digits and _)",
+                       name));
+    const Slot slot = name == "_"                  ? kSkip
+                      : known == kSlotNames.end() ? kValue
+                                                   : static_cast<Slot>(known - kSlotNames.begin());
+    if ((slot >= 0 &&
+         std::find(spec.columns.begin(), spec.columns.end(), slot) != spec.columns.end()) ||
+        (slot == kValue && std::find(spec.valueNames.begin(), spec.valueNames.end(), name) !=
+                               spec.valueNames.end()))
       fail(fmt::format("column '{}' appears twice", name));
+    if (slot == kValue) spec.valueNames.emplace_back(name);
     spec.columns.push_back(slot);
   }
   if (!hasAll(spec.columns, kX)) fail("x, y and z are required");
@@ -185,6 +199,7 @@ class TextPointReader final : public PointReader {
     }
     info_.hasNormals = spec_.hasNormals;
     info_.hasColors = spec_.hasColors;
+    if (options.keepExtras) info_.extraNames = spec_.valueNames;
   }
 
   const PointFileInfo& info() const override { return info_; }
@@ -248,10 +263,16 @@ class TextPointReader final : public PointReader {
   // Parse a data line; false when its point was dropped for a non-finite coordinate.
   bool parseLine(std::string_view line, PointCloud& out) {
     std::array<double, kSlotCount> values{};
+    const size_t extras = info_.extraNames.size();
+    lineValues_.assign(extras, 0.0);
     std::string_view field;
-    size_t column = 0;
+    size_t column = 0, value = 0;
     for (; nextField<isBlankCommaOrSemicolon>(line, field); ++column) {
-      if (column >= spec_.columns.size() || spec_.columns[column] == kSkip) continue;
+      if (column < spec_.columns.size() && spec_.columns[column] == kValue && extras > 0 &&
+          !parseNumber(field, lineValues_[value++]))
+        in_.failLine(fmt::format("column {} ({}) is not a number: '{}'", column + 1,
+                                 info_.extraNames[value - 1], field));
+      if (column >= spec_.columns.size() || spec_.columns[column] < 0) continue;
       if (!parseNumber(field, values[spec_.columns[column]]))
         in_.failLine(fmt::format("column {} ({}) is not a number: '{}'", column + 1,
                                  kSlotNames[spec_.columns[column]], field));
@@ -264,6 +285,10 @@ class TextPointReader final : public PointReader {
       return false;
     }
     out.positions.push_back(position);
+    if (extras > 0) {
+      out.extraNames = info_.extraNames;
+      out.extras.insert(out.extras.end(), lineValues_.begin(), lineValues_.end());
+    }
     if (spec_.hasNormals)
       out.normals.emplace_back(narrowToFloat(values[kNx]), narrowToFloat(values[kNy]),
                                narrowToFloat(values[kNz]));
@@ -280,6 +305,7 @@ class TextPointReader final : public PointReader {
   bool hasPendingLine_ = false;
   bool hasSkippedColumnNames_ = false;
   double colorFullScale_ = 1.0;
+  std::vector<double> lineValues_;  // the value columns of the line being parsed (keepExtras)
   PointFileInfo info_;
   ReadStats stats_;
 };

@@ -22,8 +22,9 @@
 namespace iso {
 
 struct ReadOptions {
-  // Column spec for text files: comma-separated names among x,y,z,nx,ny,nz,r,g,b and "_" (skip),
-  // e.g. "x,y,z,_,r,g,b". Set, it also makes openPointFile read a file of any extension as text
+  // Column spec for text files: comma-separated names among x,y,z,nx,ny,nz,r,g,b, "_" (skip) and
+  // names of values (letters, digits and _: extras with keepExtras, else skipped), e.g.
+  // "x,y,z,_,r,g,b" or "x,y,z,temperature". Set, it also makes openPointFile read a file of any extension as text
   // unless its signature or a PCD header says otherwise. Empty: guessed from the column count of
   // the first (up to 100) rows and, where the count leaves a choice, their values (r,g,b of 0–255
   // have a value above 1, unit normals none) and the extension: 3 = x,y,z; 4 = x,y,z,_;
@@ -33,10 +34,12 @@ struct ReadOptions {
   // such values; others are not guessed. A guess of more than 3 columns is said in a note.
   // Colors in text files are 0–255 when any color value of those rows exceeds 1, else 0–1.
   std::string columns;
-  // PLY: carry every vertex scalar property that is not read as a position, normal or color
-  // (intensity, confidence, scalar_*, ...) as a float extra, in header order. LAS, LAZ and E57:
-  // the intensity as the extra "intensity" (as stored; E57's NaN where marked invalid). Other
-  // formats have none. Off: such properties are skipped at no cost.
+  // PLY and PCD: carry every scalar property (field) that is not read as a position, normal or
+  // color (intensity, confidence, scalar_*, ...) as an extra, in header order. LAS and LAZ:
+  // "intensity", "return_number", "classification" and, where the point format has it,
+  // "gps_time" (lasExtraNames). E57: the intensity as the extra "intensity" (as stored; NaN where
+  // marked invalid). Text files: the columns of the column spec named otherwise than x,y,z,nx,ny,
+  // nz,r,g,b,_. Others have none. Off: such properties are skipped at no cost.
   bool keepExtras = false;
 };
 

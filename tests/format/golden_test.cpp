@@ -1,4 +1,4 @@
-// tests/data/golden-v2.iso pins the bytes of the current format (2.0): the current writer must
+// tests/data/golden-v2.iso pins the bytes of the current format (2.1): the current writer must
 // reproduce it exactly, the reader must read the expected values from it, and the byte offsets
 // asserted here are the ones of specs/iso-format.md, written independently of format/src/layout.h.
 #include <gtest/gtest.h>
@@ -45,7 +45,7 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
   EXPECT_EQ(at<uint16_t>(b, 8), 2);      // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 0);     // versionMinor
+  EXPECT_EQ(at<uint16_t>(b, 10), 1);     // versionMinor
   EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
   EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
   EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2
@@ -194,13 +194,15 @@ TEST(FormatGolden, readerReadsTheExpectedValues) {
   EXPECT_TRUE(verifyFile(reader).ok());
 }
 
-// A file of version 1.2 (tests/data/golden-v1.iso, the golden file before 2.0): every 1.x file
-// is a valid 2.0 file, and this reader reads it as the same content.
-TEST(FormatGolden, aVersion1FileIsReadAsTheSameContent) {
-  const Reader old = Reader::open(std::filesystem::path(ISO_TEST_DATA_DIR) / "golden-v1.iso");
+// Files of versions 1.2 and 2.0 (tests/data/golden-v1.iso and golden-v2.0.iso, the golden file
+// before 2.0 and before 2.1): every 1.x file is a valid 2.0 file, every 2.0 file a valid 2.1 file,
+// and this reader reads each as the same content.
+void expectReadAsTheCurrentGolden(const std::string& name, uint16_t major, uint16_t minor) {
+  SCOPED_TRACE(name);
+  const Reader old = Reader::open(std::filesystem::path(ISO_TEST_DATA_DIR) / name);
   const Reader current = Reader::open(kGolden);
-  EXPECT_EQ(old.header().versionMajor, 1);
-  EXPECT_EQ(old.header().versionMinor, 2);
+  EXPECT_EQ(old.header().versionMajor, major);
+  EXPECT_EQ(old.header().versionMinor, minor);
   FileHeader header = old.header();
   header.versionMajor = kFormatMajor;
   header.versionMinor = kFormatMinor;
@@ -213,6 +215,14 @@ TEST(FormatGolden, aVersion1FileIsReadAsTheSameContent) {
     EXPECT_EQ(a, b) << "chunk " << i;
   }
   EXPECT_TRUE(verifyFile(old).ok());
+}
+
+TEST(FormatGolden, aVersion1FileIsReadAsTheSameContent) {
+  expectReadAsTheCurrentGolden("golden-v1.iso", 1, 2);
+}
+
+TEST(FormatGolden, aVersion2Point0FileIsReadAsTheSameContent) {
+  expectReadAsTheCurrentGolden("golden-v2.0.iso", 2, 0);
 }
 
 TEST(FormatGolden, checksumIsXxh3WithSeedZero) {

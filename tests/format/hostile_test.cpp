@@ -394,14 +394,19 @@ TEST(HostileFiles, aFlippedPointsPayloadByteIsRefusedByEveryWayToItsData) {
   test::writePointsSeedFile(dir / "points.iso");
   const std::vector<std::byte> good = test::readFile(dir / "points.iso");
   const Reader intact = Reader::fromMemory(good, "points.iso");
-  for (const ChunkInfo& c : intact.chunks()) {  // one raw, one zstd
-    SCOPED_TRACE(std::string(codecName(c.codec)));
-    EXPECT_EQ(decodePointsChunk(intact, c.id).size(), 60u);
+  // Points raw and zstd, their values, volume points.
+  for (const ChunkInfo& c : intact.chunks()) {
+    SCOPED_TRACE(std::string(codecName(c.codec)) + " " + std::string(chunkKindName(c.kind)));
+    const bool values = c.kind == kValuesKind;
+    const auto decode = [&](const Reader& r) {
+      return values ? decodeValuesChunk(r, c.id).size() : decodePointsChunk(r, c.id).size();
+    };
+    EXPECT_EQ(decode(intact), 60u);
     std::vector<std::byte> b = good;
     b[c.offset + c.storedSize / 2] ^= std::byte{0x01};
     const Reader reader = Reader::fromMemory(b, "flip.iso");
     expectChecksumMismatch(
-        "decodePointsChunk", [&] { decodePointsChunk(reader, c.id); }, "flip.iso", c.id, c.offset);
+        "decode", [&] { decode(reader); }, "flip.iso", c.id, c.offset);
     expectChecksumMismatch(
         "payload", [&] { reader.payload(c.id); }, "flip.iso", c.id, c.offset);
     const VerifyResult result = verifyFile(reader);

@@ -326,5 +326,180 @@ TEST(PointsChunk, sequentialDracoIsNotAPointsChunk) {
                  "not a Draco kd-tree point cloud");
 }
 
+
+// Since 2.1: values chunks. A file of one points chunk (id 0) and its values chunk (id 1).
+std::filesystem::path fileWithValues(const test::TempDir& dir, const std::string& name,
+                                     const std::vector<std::byte>& points, uint64_t count,
+                                     const std::vector<std::byte>& values,
+                                     ChunkDesc valuesDesc) {
+  const auto path = dir / name;
+  Writer writer(path, pointsHeader());
+  writer.addChunk(pointsDesc(count), points);
+  writer.addChunk(valuesDesc, values);
+  writer.finish();
+  return path;
+}
+
+ChunkDesc valuesDesc(uint64_t count) {
+  ChunkDesc d = pointsDesc(count);
+  d.kind = kValuesKind;
+  d.codec = Codec::Zstd;
+  return d;
+}
+
+TEST(ValuesChunk, eachPointGetsItsOwnValueBackThroughAFileThoughDracoReordersThePoints) {
+  test::TempDir dir;
+  PointsChunk in = randomPoints(5000, true, true, 21);
+  for (size_t i = 0; i < 40; ++i) in.offsets[4000 + i] = in.offsets[10];  // same places
+  std::mt19937_64 rng(22);
+  std::vector<double> values(in.size());
+  for (double& v : values) v = double(rng() % 60001);  // an intensity: kept exactly
+  values[3] = std::nan("");                              // no value
+  const std::vector<std::byte> data = encodePointsChunk(in);
+  const std::vector<uint32_t> order = decodedPointOrder(data, in);
+  std::vector<double> inDecodedOrder(order.size());
+  for (size_t i = 0; i < order.size(); ++i) inDecodedOrder[i] = values[order[i]];
+  const PointValues quantized = quantizeValues("intensity", 0, inDecodedOrder);
+  EXPECT_EQ(quantized.step, 1.0);
+  const auto path =
+      fileWithValues(dir, "values.iso", data, in.size(), encodeValuesChunk(quantized),
+                     valuesDesc(in.size()));
+  const Reader reader = Reader::open(path);
+  EXPECT_TRUE(verifyFile(reader).ok());
+  const PointsChunk out = decodePointsChunk(reader, 0);
+  const PointValues back = decodeValuesChunk(reader, 1);
+  EXPECT_EQ(back.name, "intensity");
+  EXPECT_EQ(back.pointsChunk, 0u);
+  ASSERT_EQ(back.size(), in.size());
+  // Each decoded point's value is the value of an input point alike in every attribute, each
+  // input point's value used once.
+  std::map<Row, std::multiset<double>> valuesOf;
+  for (size_t i = 0; i < in.size(); ++i)
+    valuesOf[Row(in.offsets[i], in.colors[i], in.normals[i])].insert(
+        std::isnan(values[i]) ? -1.0 : values[i]);
+  size_t missing = 0;
+  for (size_t i = 0; i < out.size(); ++i) {
+    const double v = back.value(i);
+    missing += std::isnan(v) ? 1 : 0;
+    auto& left = valuesOf[Row(out.offsets[i], out.colors[i], out.normals[i])];
+    const double key = std::isnan(v) ? -1.0 : v;
+    ASSERT_TRUE(left.contains(key)) << "point " << i << " value " << v;
+    left.erase(left.find(key));
+  }
+  EXPECT_EQ(missing, 1u);
+}
+
+TEST(ValuesChunk, valuesThatAreNotSmallIntegersKeepHalfAStep) {
+  std::vector<double> values;
+  for (int i = 0; i < 1000; ++i) values.push_back(3.0e8 + 17.123456 * i);  // GPS times
+  values.push_back(-std::numeric_limits<double>::infinity());
+  const PointValues q = quantizeValues("gps_time", 5, values);
+  EXPECT_EQ(q.offset, 3.0e8);
+  EXPECT_NEAR(q.step, 17.123456 * 999 / 65534, 1e-9);
+  for (size_t i = 0; i < 1000; ++i) EXPECT_LE(std::abs(q.value(i) - values[i]), q.step / 2 + 1e-6);
+  EXPECT_EQ(q.codes[1000], kNoValue);
+  // One value: step 1, code 0. Integers spanning more than 65534: a step above 1.
+  EXPECT_EQ(quantizeValues("v", 0, std::vector<double>{2.5}).value(0), 2.5);
+  const PointValues wide = quantizeValues("v", 0, std::vector<double>{0.0, 70000.0});
+  EXPECT_GT(wide.step, 1.0);
+  EXPECT_EQ(wide.value(1), 70000.0);
+  EXPECT_THROW(quantizeValues("", 0, values), InternalError);
+  EXPECT_THROW(quantizeValues(std::string(33, 'a'), 0, values), InternalError);
+  EXPECT_THROW(quantizeValues("v", 0, std::vector<double>{}), InternalError);
+}
+
+TEST(ValuesChunk, bytesAreWhereTheSpecSays) {
+  const PointValues v = quantizeValues("classification", 9, std::vector<double>{2.0, 6.0, 2.0});
+  const std::vector<std::byte> b = encodeValuesChunk(v);
+  ASSERT_EQ(b.size(), 64u + 3 * 2);
+  const auto u32 = [&](size_t at) { uint32_t x; std::memcpy(&x, b.data() + at, 4); return x; };
+  const auto f64 = [&](size_t at) { double x; std::memcpy(&x, b.data() + at, 8); return x; };
+  const auto u16 = [&](size_t at) { uint16_t x; std::memcpy(&x, b.data() + at, 2); return x; };
+  EXPECT_EQ(u32(0), 9u);  // pointsChunk
+  EXPECT_EQ(u32(4), 3u);  // count
+  EXPECT_EQ(f64(8), 2.0);  // offset
+  EXPECT_EQ(f64(16), 1.0);  // step
+  for (size_t i = 24; i < 32; ++i) EXPECT_EQ(b[i], std::byte{0});  // reserved
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(b.data() + 32)), "classification");
+  for (size_t i = 32 + 14; i < 64; ++i) EXPECT_EQ(b[i], std::byte{0});  // name padding
+  EXPECT_EQ(u16(64), 0);
+  EXPECT_EQ(u16(66), 4);
+  EXPECT_EQ(u16(68), 0);
+}
+
+TEST(ValuesChunk, valuesThatBreakTheRulesAreRefusedWithTheirReason) {
+  test::TempDir dir;
+  const PointsChunk in = randomPoints(100, false, false, 4);
+  const std::vector<std::byte> points = encodePointsChunk(in);
+  const std::vector<double> values(100, 1.0);
+  const std::vector<std::byte> good = encodeValuesChunk(quantizeValues("v", 0, values));
+  const auto expectRefused = [&](const std::string& name, const std::vector<std::byte>& bytes,
+                                 ChunkDesc desc, const std::string& reason) {
+    SCOPED_TRACE(reason);
+    const Reader reader = Reader::open(fileWithValues(dir, name, points, 100, bytes, desc));
+    try {
+      decodeValuesChunk(reader, 1);
+      ADD_FAILURE() << "decoded";
+    } catch (const FileError& error) {
+      EXPECT_NE(std::string(error.what()).find(name), std::string::npos) << error.what();
+      EXPECT_EQ(error.reason().rfind("chunk 1: ", 0), 0u) << error.what();
+      EXPECT_NE(error.reason().find(reason), std::string::npos) << error.what();
+    }
+    const VerifyResult verified = verifyFile(reader);
+    ASSERT_EQ(verified.problems.size(), 1u);
+    EXPECT_EQ(verified.problems[0].chunk, 1u);
+  };
+  const auto with = [&](size_t at, std::initializer_list<uint8_t> bytes) {
+    std::vector<std::byte> b = good;
+    for (uint8_t x : bytes) b[at++] = std::byte{x};
+    return b;
+  };
+  {
+    const Reader reader = Reader::open(fileWithValues(dir, "good.iso", points, 100, good,
+                                                      valuesDesc(100)));
+    EXPECT_EQ(decodeValuesChunk(reader, 1).value(99), 1.0);
+  }
+  expectRefused("self.iso", with(0, {1}), valuesDesc(100), "which is not a points chunk");
+  expectRefused("missing.iso", with(0, {7}), valuesDesc(100), "which is not a points chunk");
+  ChunkDesc other = valuesDesc(99);
+  expectRefused("count.iso", good, other, "values header says 100 values, the chunk table 99");
+  ChunkDesc elsewhere = valuesDesc(100);
+  elsewhere.key = 0x1a4;
+  expectRefused("cell.iso", good, elsewhere, "cell is not its points chunk's");
+  expectRefused("reserved.iso", with(24, {1}), valuesDesc(100), "reserved");
+  expectRefused("padding.iso", with(40, {'x'}), valuesDesc(100), "padding is not zero");
+  expectRefused("name.iso", with(32, {0}), valuesDesc(100), "the value name is empty");
+  expectRefused("step.iso", with(16, {0, 0, 0, 0, 0, 0, 0, 0}), valuesDesc(100),
+                "step is not positive");
+  expectRefused("nan.iso", with(8, {0, 0, 0, 0, 0, 0, 0xF8, 0x7F}), valuesDesc(100),
+                "not finite");
+  expectRefused("short.iso", std::vector<std::byte>(good.begin(), good.end() - 2),
+                valuesDesc(100), "not its header and 2 bytes a value");
+  // Entry rules, at open: a count of 0, and a parent (values chunks have none).
+  ChunkDesc parented = valuesDesc(100);
+  parented.parent = 0;
+  parented.level = 4;
+  parented.key = 0x1a5 << 3;
+  try {
+    Reader::open(fileWithValues(dir, "parent.iso", points, 100, good, parented));
+    ADD_FAILURE() << "opened";
+  } catch (const FileError& error) {
+    EXPECT_NE(error.reason().find("chunk 1: a values chunk of this kind has no parent"),
+              std::string::npos)
+        << error.what();
+  }
+}
+
+TEST(ValuesChunk, volumePointsAreReadAsPointsAndAreNotAPointsChunksParent) {
+  test::TempDir dir;
+  const PointsChunk in = randomPoints(200, true, false, 6);
+  ChunkDesc volume = pointsDesc(200);
+  volume.kind = kVolumePointsKind;
+  const Reader reader = Reader::open(fileWith(dir, "volume.iso", volume, encodePointsChunk(in)));
+  EXPECT_EQ(rowsOf(decodePointsChunk(reader, 0)), rowsOf(in));
+  EXPECT_EQ(chunkKindName(reader.chunk(0).kind), "volume points");
+  EXPECT_TRUE(verifyFile(reader).ok());
+}
+
 }  // namespace
 }  // namespace iso

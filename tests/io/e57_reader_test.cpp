@@ -431,9 +431,9 @@ TEST(E57Reader, keepsIntensityAsStoredAsAnExtraWithNaNWhereInvalid) {
   EXPECT_EQ(read.info.extraNames, std::vector<std::string>{"intensity"});
   ASSERT_EQ(read.points.extraNames, std::vector<std::string>{"intensity"});
   ASSERT_EQ(read.points.extras.size(), 3u);
-  EXPECT_EQ(read.points.extras[0], float(-666 * 0.1));
+  EXPECT_EQ(read.points.extras[0], -666 * 0.1);
   EXPECT_TRUE(std::isnan(read.points.extras[1]));
-  EXPECT_EQ(read.points.extras[2], float(666 * 0.1));
+  EXPECT_EQ(read.points.extras[2], 666 * 0.1);
   EXPECT_EQ(read.info.notes,
             std::vector<std::string>{"1 points marked isIntensityInvalid have intensity NaN"});
   const E57Read without = readE57(spec);

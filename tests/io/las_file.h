@@ -21,6 +21,13 @@ inline constexpr uint16_t kLasRgbOffset[11] = {0, 0, 20, 28, 0, 28, 0, 30, 30, 0
 struct LasPoint {
   int32_t x = 0, y = 0, z = 0;
   uint16_t red = 0, green = 0, blue = 0;
+  // Written when `fields` (else the record's other bytes are 0xA5): intensity at 12, the return
+  // byte at 14, the classification at 15 (formats 0-5) or 16 (6-10), the GPS time at 20 (1, 3-5)
+  // or 22 (6-10) (LAS 1.4 R15, Tables 7-17).
+  bool fields = false;
+  uint16_t intensity = 0;
+  uint8_t returns = 0, classification = 0;
+  double gpsTime = 0.0;
 };
 
 // A variable length record: in the VLRs (54-byte header) or EVLRs (60-byte header).
@@ -80,10 +87,21 @@ inline Bytes makeLas(const LasSpec& s) {
   EXPECT_EQ(b.size(), headerSize);
   for (const LasRecord& r : vlrs) appendLasRecord(b, r, false);
   for (const LasPoint& p : s.points) {
-    b.le(p.x).le(p.y).le(p.z);
+    const size_t at = b.size();
+    b.le(p.x).le(p.y).le(p.z).fill(kLasStandardSize[s.format] - 12, 0xA5);
     const size_t rgb = kLasRgbOffset[s.format];
-    if (rgb != 0) b.fill(rgb - 12, 0xA5).le(p.red).le(p.green).le(p.blue);
-    b.fill(kLasStandardSize[s.format] - (rgb != 0 ? rgb + 6 : 12), 0xA5);
+    if (rgb != 0) {
+      b.patchLE(at + rgb, p.red);
+      b.patchLE(at + rgb + 2, p.green);
+      b.patchLE(at + rgb + 4, p.blue);
+    }
+    if (p.fields) {
+      const bool extended = s.format >= 6;
+      b.patchLE(at + 12, p.intensity);
+      b.patchLE(at + 14, p.returns);
+      b.patchLE(at + (extended ? 16 : 15), p.classification);
+      if (s.format != 0 && s.format != 2) b.patchLE(at + (extended ? 22 : 20), p.gpsTime);
+    }
     b.fill(size_t(s.extraBytes), 0xEE);
   }
   EXPECT_TRUE(s.evlrs.empty() || b.size() == evlrStart);

@@ -102,6 +102,43 @@ TEST(LasReader, readsEveryPointFormatWithItsColors) {
   }
 }
 
+// ReadOptions::keepExtras: intensity, return number, classification and (where the format has
+// one) GPS time, from the fields where each format puts them; the other bits of their bytes are
+// not read (scan direction and edge flags, the classification's flags of formats 0-5).
+TEST(LasReader, keepsIntensityReturnNumberClassificationAndGpsTimeAsExtras) {
+  for (int format = 0; format <= 10; ++format) {
+    SCOPED_TRACE(format);
+    LasSpec spec{.minor = format >= 6 ? 4 : 2, .format = format};
+    const bool extended = format >= 6;
+    for (int i = 0; i < 3; ++i) {
+      LasPoint p{.x = i, .y = 2 * i, .z = 3 * i, .fields = true};
+      p.intensity = uint16_t(65535 - 1000 * i);
+      p.returns = uint8_t(0xF0 | (i + 1));  // number of returns and flags above
+      p.classification = uint8_t(extended ? 200 + i : 0xE0 | (2 + i));  // flags in bits 5-7
+      p.gpsTime = 3.0e8 + 0.000125 * i;
+      spec.points.push_back(p);
+    }
+    test::TempDir dir;
+    test::writeFile(dir / "e.las", makeLas(spec).bytes());
+    const PointCloud points = readPointFile(dir / "e.las", {.columns = "", .keepExtras = true});
+    const bool gps = format != 0 && format != 2;
+    std::vector<std::string> names = {"intensity", "return_number", "classification"};
+    if (gps) names.push_back("gps_time");
+    ASSERT_EQ(points.extraNames, names);
+    ASSERT_EQ(points.extras.size(), 3 * names.size());
+    for (size_t i = 0; i < 3; ++i) {
+      const double* e = points.extras.data() + i * names.size();
+      EXPECT_EQ(e[0], 65535 - 1000 * double(i));
+      EXPECT_EQ(e[1], double(extended ? (0xF0 | (i + 1)) & 15 : (i + 1)));
+      EXPECT_EQ(e[2], double(extended ? 200 + i : 2 + i));
+      if (gps) {
+        EXPECT_EQ(e[3], 3.0e8 + 0.000125 * double(i));
+      }
+    }
+    EXPECT_TRUE(readPointFile(dir / "e.las").extras.empty());
+  }
+}
+
 TEST(LasReader, readsEightBitValuesInSixteenBitColorFieldsAsEightBit) {
   LasSpec spec{.format = 2};
   spec.points = {{0, 0, 0, 255, 0, 128}, {1, 1, 1, 10, 20, 30}};

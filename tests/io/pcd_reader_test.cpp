@@ -497,6 +497,11 @@ TEST(PcdReader, followsAnyFieldOrderAndSkipsUnusedAndMultiValueFields) {
     }
     expectColor(points.colors[0], 0x10, 0x20, 0x30);
     expectColor(points.colors[1], 255, 255, 255);
+    // ReadOptions::keepExtras: the single-valued field no slot reads, exactly.
+    const PointCloud extras = test::readInBatches(dir / "s.pcd", {.columns = "", .keepExtras = true}, nullptr, 1);
+    EXPECT_EQ(extras.extraNames, std::vector<std::string>{"intensity"});
+    EXPECT_EQ(extras.extras, std::vector<double>({0.25, 7.0}));
+    EXPECT_TRUE(points.extras.empty());
   }
 }
 

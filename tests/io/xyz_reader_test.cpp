@@ -183,7 +183,8 @@ TEST(XyzReader, rejectsInvalidColumnSpecs) {
   test::writeText(dir / "p.xyz", "1 2 3 4 5 6\n");
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"x,y", "x, y and z are required"},
-      {"x,y,z,w", "unknown column 'w'"},
+      {"x,y,z,2w", "unknown column '2w'"},
+      {"x,y,z,w,w", "column 'w' appears twice"},
       {"x,y,z,x", "column 'x' appears twice"},
       {"x,y,z,nx,ny", "all of nx,ny,nz"},
       {"x,y,z,r", "all of r,g,b"},
@@ -192,6 +193,22 @@ TEST(XyzReader, rejectsInvalidColumnSpecs) {
     const std::string error = test::readError(dir / "p.xyz", {.columns = columns});
     EXPECT_NE(error.find(reason), std::string::npos) << columns << ": " << error;
   }
+}
+
+TEST(XyzReader, namedValueColumnsAreExtrasWhenAskedAndSkippedOtherwise) {
+  test::TempDir dir;
+  test::writeText(dir / "v.xyz", "1 2 3 0.5 9 -1e300\n4 5 6 -2.25 8 7\nnan 0 0 1 1 1\n");
+  const PointCloud values =
+      readPointFile(dir / "v.xyz", {.columns = "x,y,z,temperature,_,gps_time", .keepExtras = true});
+  EXPECT_EQ(values.extraNames, (std::vector<std::string>{"temperature", "gps_time"}));
+  EXPECT_EQ(values.extras, std::vector<double>({0.5, -1e300, -2.25, 7.0}));
+  const PointCloud plain = readPointFile(dir / "v.xyz", {.columns = "x,y,z,temperature,_,gps_time"});
+  EXPECT_EQ(plain.size(), 2u);
+  EXPECT_TRUE(plain.extras.empty());
+  test::writeText(dir / "bad.xyz", "1 2 3 warm\n");
+  EXPECT_NE(test::readError(dir / "bad.xyz", {.columns = "x,y,z,temperature", .keepExtras = true})
+                .find("column 4 (temperature) is not a number"),
+            std::string::npos);
 }
 
 TEST(XyzReader, dropsAndCountsNonFinitePoints) {

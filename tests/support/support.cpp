@@ -238,7 +238,25 @@ void writePointsSeedFile(const std::filesystem::path& path) {
     desc.geometricError = variant == 1 ? 0.002f : 0.0f;
     desc.pointCount = points.size();
     desc.codec = variant == 0 ? Codec::Raw : Codec::Zstd;
-    writer.addChunk(desc, encodePointsChunk(points));
+    const std::vector<std::byte> data = encodePointsChunk(points);
+    const uint32_t id = writer.addChunk(desc, data);
+    // Since 2.1: values of the points (one without a value), and the same points as volume points.
+    std::vector<double> values;
+    for (int i = 0; i < 60; ++i) values.push_back(i == 7 ? std::nan("") : 0.25 * i - 3.0);
+    const std::vector<uint32_t> order = decodedPointOrder(data, points);
+    std::vector<double> decoded(order.size());
+    for (size_t i = 0; i < order.size(); ++i) decoded[i] = values[order[i]];
+    ChunkDesc valuesDesc = desc;
+    valuesDesc.kind = kValuesKind;
+    valuesDesc.geometricError = 0.0f;
+    valuesDesc.codec = Codec::Zstd;
+    writer.addChunk(valuesDesc,
+                    encodeValuesChunk(quantizeValues(variant == 0 ? "intensity" : "value", id,
+                                                     decoded)));
+    if (variant == 1) {
+      desc.kind = kVolumePointsKind;
+      writer.addChunk(desc, data);
+    }
   }
   writer.finish();
 }

@@ -39,7 +39,9 @@ void exercise(const std::vector<std::byte>& bytes) {
       if (c.rawSize > (1u << 20)) continue;
       try {
         if (c.kind == iso::kSurfaceKind) iso::decodeSurfaceChunk(reader, c.id);
-        if (c.kind == iso::kPointsKind) iso::decodePointsChunk(reader, c.id);
+        if (c.kind == iso::kPointsKind || c.kind == iso::kVolumePointsKind)
+          iso::decodePointsChunk(reader, c.id);
+        if (c.kind == iso::kValuesKind) iso::decodeValuesChunk(reader, c.id);
       } catch (const iso::FileError&) {
       }
     }

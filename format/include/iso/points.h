@@ -5,6 +5,8 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
+#include <string>
 #include <vector>
 
 #include "iso/format.h"
@@ -14,6 +16,10 @@ namespace iso {
 class Reader;
 
 inline constexpr uint8_t kPointsKind = static_cast<uint8_t>(ChunkKind::Points);
+// Since 2.1: per-point values of a points chunk, and volume points (the same data as points
+// chunks; samples of a volume, not of the surface).
+inline constexpr uint8_t kValuesKind = static_cast<uint8_t>(ChunkKind::Values);
+inline constexpr uint8_t kVolumePointsKind = static_cast<uint8_t>(ChunkKind::VolumePoints);
 inline constexpr uint32_t kPointsHeaderSize = 8;
 inline constexpr uint32_t kMaxPointsPerChunk = uint32_t{1} << 20;
 inline constexpr uint8_t kMaxPointStepBits = 52;
@@ -53,9 +59,37 @@ struct PointsChunk {
 // spanning more than kMaxPointOffsetSpan).
 std::vector<std::byte> encodePointsChunk(const PointsChunk& points, int speed = 0);
 
-// Decode and check a points chunk of an open file (the rules of "Points chunks"). Throws
-// iso::FileError naming the file, the chunk's offset and the problem.
+// Decode and check a points or volume points chunk of an open file (the rules of "Points
+// chunks"). Throws iso::FileError naming the file, the chunk's offset and the problem.
 PointsChunk decodePointsChunk(const Reader& reader, uint32_t id);
+
+// The order in which a points chunk's data (encodePointsChunk(points)) gives back its points:
+// order[i] is the index in `points` of the i-th decoded point. Draco's kd-tree coder reorders
+// points; points alike in every attribute are interchangeable, so any of them matches.
+std::vector<uint32_t> decodedPointOrder(std::span<const std::byte> data, const PointsChunk& points);
+
+// Values chunks (since 2.1; specs/iso-format.md, "Values chunks"): one scalar per point of a points
+// or volume points chunk, in the order its data gives the points, as 16-bit codes:
+// value = offset + code · step, code 65535 (kNoValue) = no value.
+inline constexpr uint32_t kValuesHeaderSize = 64;
+inline constexpr size_t kMaxValueNameBytes = 32;
+inline constexpr uint16_t kNoValue = 65535;
+struct PointValues {
+  uint32_t pointsChunk = 0;  // the chunk id whose points these values belong to
+  std::string name;          // 1 to 32 bytes of UTF-8 without a zero byte
+  double offset = 0.0, step = 1.0;
+  std::vector<uint16_t> codes;
+  size_t size() const { return codes.size(); }
+  double value(size_t i) const;  // NaN for kNoValue
+};
+// The codes of `values` (non-finite: kNoValue): offset = the smallest finite value; step = 1 when
+// every finite value is an integer and they span at most 65534 (kept exactly), else the span /
+// 65534 (every value within step / 2). Throws iso::InternalError for a name the format does not
+// allow or values whose span overflows.
+PointValues quantizeValues(std::string name, uint32_t pointsChunk, std::span<const double> values);
+std::vector<std::byte> encodeValuesChunk(const PointValues& values);
+// Decode and check a values chunk (its rules and its points chunk's count, level and key).
+PointValues decodeValuesChunk(const Reader& reader, uint32_t id);
 
 // The points chunks of a file that are subsamples (the parents of other points chunks: drawn from
 // afar in place of them, and not among the file's kept points), by chunk id.
