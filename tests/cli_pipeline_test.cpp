@@ -1,6 +1,7 @@
 // `iso gen`, `iso convert` and `iso eval` run as a user would: outputs, reports, exit codes, and
 // clear errors for bad input that leave nothing behind.
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
@@ -9,6 +10,8 @@
 #include <unistd.h>
 
 #include <fstream>
+#include <map>
+#include <numbers>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -20,6 +23,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "iso/points.h"
 #include "iso/reader.h"
 #include "iso/surface_model.h"
 #include "pipeline/io/ply.h"
@@ -1410,6 +1414,162 @@ TEST_F(CliPipeline, eightBitColorsTimes256ComeBackExactlyInTheSurfaceAndKeptPoin
   for (const std::array<float, 3>& color : surface.corners().color)
     for (float channel : color) notWhite += linearToSrgb8(channel) != 255 ? 1 : 0;
   EXPECT_EQ(notWhite, 0u);
+}
+
+// --keep-scalar: a LAS scan's intensity, classification and GPS time come back with each kept
+// point from `iso export --points` (intensity and classification exactly, the GPS time within
+// half its step), in core and out of core alike; `density` is the scan's point density.
+TEST_F(CliPipeline, keptScalarsComeBackWithTheirPoints) {
+  const PointCloud sphere = readPointFile(dir_ / "sphere.ply");
+  LasScan scan = lasOf(sphere, 2, 1, [](size_t) { return std::array<uint16_t, 3>{}; });
+  std::map<std::tuple<int64_t, int64_t, int64_t>, std::array<double, 3>> truth;
+  for (size_t i = 0; i < scan.spec.points.size(); ++i) {
+    test::LasPoint& p = scan.spec.points[i];
+    p.fields = true;
+    p.intensity = uint16_t((i * 7919) % 65536);
+    p.returns = uint8_t(1 + i % 3);
+    p.classification = uint8_t(i % 19);
+    p.gpsTime = 4.0e8 + 0.00037 * double(i);
+    truth[{p.x, p.y, p.z}] = {double(p.intensity), double(p.classification), p.gpsTime};
+  }
+  test::writeFile(dir_ / "s.las", test::makeLas(scan.spec).bytes());
+  const std::array<std::string, 3> names = {"intensity", "classification", "gps_time"};
+  for (size_t k = 0; k < names.size(); ++k) {
+    SCOPED_TRACE(names[k]);
+    for (const std::string memory : {"", " --memory 4M"}) {
+      const auto iso = dir_ / ("s-" + names[k] + (memory.empty() ? "" : "-small") + ".iso");
+      auto run = runIso("convert -q --keep-points --point-bits 30 --keep-scalar " + names[k] +
+                        memory + " " + quoted(dir_ / "s.las") + " -o " + quoted(iso));
+      ASSERT_EQ(run.exitCode, 0) << run.err;
+    }
+    const auto iso = dir_ / ("s-" + names[k] + ".iso");
+    EXPECT_EQ(test::readFile(iso), test::readFile(dir_ / ("s-" + names[k] + "-small.iso")));
+    ASSERT_EQ(runIso("export -f " + quoted(iso) + " --points " + quoted(dir_ / "k.ply")).exitCode,
+              0);
+    const PointCloud kept = readPointFile(dir_ / "k.ply", {.columns = "", .keepExtras = true});
+    ASSERT_EQ(kept.extraNames, std::vector<std::string>{names[k]});
+    ASSERT_EQ(kept.size(), sphere.size());
+    const double span = 0.00037 * double(sphere.size() - 1);
+    size_t matched = 0;
+    double worst = 0.0;
+    for (size_t i = 0; i < kept.size(); ++i) {
+      // Positions to 2^-30 of the frame: they round back to the LAS's integers.
+      const glm::dvec3 q = (kept.positions[i] - scan.spec.offset) / scan.spec.scale;
+      const auto at = truth.find({std::llround(q.x), std::llround(q.y), std::llround(q.z)});
+      if (at == truth.end()) continue;
+      ++matched;
+      worst = std::max(worst, std::abs(kept.extras[i] - at->second[k]));
+    }
+    EXPECT_GT(matched, kept.size() * 99 / 100);
+    if (k < 2)
+      EXPECT_EQ(worst, 0.0);
+    else
+      EXPECT_LE(worst, span / 65534 / 2 * 1.0001);
+  }
+  // The density of a sphere of N points and radius 10: N / (4π 10²) points per square unit.
+  auto run = runIso("convert -q --keep-points --keep-scalar density " + quoted(dir_ / "s.las") +
+                    " -o " + quoted(dir_ / "d.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  ASSERT_EQ(runIso("export " + quoted(dir_ / "d.iso") + " --points " + quoted(dir_ / "d.ply"))
+                .exitCode,
+            0);
+  PointCloud density = readPointFile(dir_ / "d.ply", {.columns = "", .keepExtras = true});
+  ASSERT_EQ(density.extraNames, std::vector<std::string>{"density"});
+  std::vector<double> values = density.extras;
+  std::nth_element(values.begin(), values.begin() + ptrdiff_t(values.size() / 2), values.end());
+  const double analytic = double(sphere.size()) / (4.0 * std::numbers::pi * 100.0);
+  EXPECT_NEAR(values[values.size() / 2], analytic, 0.2 * analytic);
+}
+
+// --volume-points: a volume's samples and their values are stored beside the surface, exported by
+// `iso export --volume-points`, and do not change the surface.
+TEST_F(CliPipeline, volumePointsAreKeptBesideTheSurfaceWithTheirValues) {
+  std::string text;
+  std::vector<std::array<double, 4>> samples;
+  for (int i = 0; i < 5000; ++i) {
+    const double u = double((i * 37) % 101) / 101.0, v = double((i * 53) % 97) / 97.0,
+                 w = double(i) / 5000.0;
+    const std::array<double, 4> s = {1.6 * u - 0.8, 1.6 * v - 0.8, 1.6 * w - 0.8,
+                                     std::exp(-3.0 * (u * u + v * v + w * w)) * 1000.0 + i % 7};
+    samples.push_back(s);
+    text += fmt::format("{} {} {} {}\n", s[0], s[1], s[2], s[3]);
+  }
+  test::writeText(dir_ / "values.xyz", text);
+  const std::string sphere = quoted(dir_ / "sphere.ply");
+  auto run = runIso("convert -q " + sphere + " -o " + quoted(dir_ / "plain.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  run = runIso("convert -q " + sphere + " -o " + quoted(dir_ / "v.iso") + " --volume-points " +
+               quoted(dir_ / "values.xyz") + " --volume-columns x,y,z,value --keep-scalar value");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const Reader plain = Reader::open(dir_ / "plain.iso"), withVolume = Reader::open(dir_ / "v.iso");
+  size_t surface = 0;
+  for (const ChunkInfo& c : withVolume.chunks()) {
+    if (c.kind != kSurfaceKind) continue;
+    ASSERT_LT(c.id, plain.chunks().size());
+    EXPECT_EQ(plain.payload(c.id).bytes().size(), withVolume.payload(c.id).bytes().size());
+    EXPECT_TRUE(std::ranges::equal(plain.payload(c.id).bytes(), withVolume.payload(c.id).bytes()));
+    ++surface;
+  }
+  EXPECT_GT(surface, 0u);
+  run = runIso("export " + quoted(dir_ / "v.iso") + " --volume-points " + quoted(dir_ / "v.ply"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("5,000 volume points"), std::string::npos) << run.out;
+  const PointCloud back = readPointFile(dir_ / "v.ply", {.columns = "", .keepExtras = true});
+  ASSERT_EQ(back.extraNames, std::vector<std::string>{"value"});
+  ASSERT_EQ(back.size(), samples.size());
+  // Each exported sample is an input sample (positions to 2^-24 of the frame), its value within
+  // half a step of the values' span / 65534.
+  double lo = 1e300, hi = -1e300;
+  for (const auto& s : samples) {
+    lo = std::min(lo, s[3]);
+    hi = std::max(hi, s[3]);
+  }
+  size_t far = 0;
+  double worst = 0.0;
+  for (size_t i = 0; i < back.size(); ++i) {
+    double best = 1e300;
+    const std::array<double, 4>* nearest = nullptr;
+    for (const auto& s : samples) {
+      const double d = glm::length(back.positions[i] - glm::dvec3(s[0], s[1], s[2]));
+      if (d < best) {
+        best = d;
+        nearest = &s;
+      }
+    }
+    far += best > 1e-5 ? 1 : 0;
+    worst = std::max(worst, std::abs(back.extras[i] - (*nearest)[3]));
+  }
+  EXPECT_EQ(far, 0u);
+  EXPECT_LE(worst, (hi - lo) / 65534 / 2 * 1.0001);
+  // The surface's own export has no volume points; a file without them says so.
+  run = runIso("export " + quoted(dir_ / "plain.iso") + " --volume-points " +
+               quoted(dir_ / "none.ply"));
+  EXPECT_NE(run.exitCode, 0);
+  EXPECT_NE(run.err.find("keeps no volume points"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "none.ply"));
+}
+
+TEST_F(CliPipeline, impossibleScalarAndVolumeOptionsAreRefusedBeforeAnyWork) {
+  const std::string sphere = quoted(dir_ / "sphere.ply"), out = quoted(dir_ / "o.iso");
+  test::writeText(dir_ / "values.xyz", "0 0 0 1\n");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"--keep-scalar intensity", "--keep-scalar keeps a value with the kept points"},
+      {"--keep-points --keep-scalar intensity", "sphere.ply: has no scalar 'intensity'"},
+      {"--volume-points " + quoted(dir_ / "values.xyz"), "--volume-points needs --keep-scalar"},
+      {"--volume-points " + quoted(dir_ / "values.xyz") + " --keep-scalar value",
+       "values.xyz: has no scalar 'value'"},
+      {"--volume-points " + quoted(dir_ / "values.xyz") + " --keep-scalar density",
+       "--keep-scalar density is the scan's point density"},
+      {"--keep-points --keep-scalar " + std::string(33, 'n'), "a name of at most 32 bytes"},
+      {"--volume-points " + sphere + " --keep-scalar x", "is also a scan input"},
+  };
+  for (const auto& [options, reason] : cases) {
+    SCOPED_TRACE(options);
+    const auto run = runIso("convert -q " + options + " " + sphere + " -o " + out);
+    EXPECT_NE(run.exitCode, 0);
+    EXPECT_NE(run.err.find(reason), std::string::npos) << run.err;
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "o.iso"));
+  }
 }
 
 }  // namespace

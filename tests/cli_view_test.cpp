@@ -307,6 +307,25 @@ TEST(CliView, aRawScanOpensInAWindowWhoseKeysAndSceneFileChangeItsDrawing) {
   EXPECT_GT(changed, lit.size() / 20);
 }
 
+// --draw pss in a window: the first full picture, a screenshot, an orbit (traced smaller while
+// the camera moves), X and 1 (exact mode, no shadows) in the title, the last picture turned.
+TEST(CliView, aPointSetSurfaceWindowTracesWhatChangesAndOrbits) {
+  SKIP_WITHOUT_XDOTOOL();
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  ASSERT_TRUE(windowSession("pss_window_session.sh", data / "kitten_normals.xyz", dir.path()));
+  const std::string out = slurp(dir / "out.txt");
+  EXPECT_NE(out.find("first full picture"), std::string::npos) << out;
+  EXPECT_NE(out.find("point set surface, exact mode | 5210 points | shadows off"),
+            std::string::npos)
+      << out;
+  const auto first = expectPicture(dir / "iso-screenshot-1.png", 160, 120);
+  const auto last = expectPicture(dir / "final.png", 160, 120);
+  size_t changed = 0;
+  for (size_t i = 0; i < first.size(); ++i) changed += first[i] != last[i];
+  EXPECT_GT(changed, first.size() / 20);
+}
+
 // More read than fits --vram in a window: the points of the close view it opens at (part of
 // the scan out of sight), then, once the camera has flown back and rests, those of the view it
 // rests at (all of the scan in sight), each within the budget.
@@ -456,11 +475,8 @@ TEST(CliView, pointsDrawAsAPointSetSurfaceOnTheCpu) {
       }
     }
   EXPECT_LT(double(unlike) / double(a.size()), 0.005) << unlike;
-  // Three indices only for --draw pss; no window for it yet.
+  // Three indices only for --draw pss.
   EXPECT_EQ(iso("view " + kitten + " --cpu --out x.png --ior 1.5,1.52,1.54").exitCode, 2);
-  const CommandResult window = iso("view " + kitten + " --draw pss");
-  EXPECT_EQ(window.exitCode, 2);
-  EXPECT_NE(window.err.find("--headless"), std::string::npos) << window.err;
   EXPECT_EQ(iso("view " + kitten + " --draw pss --cpu --out x.png --ior 5").exitCode, 2);
 }
 
@@ -508,6 +524,33 @@ TEST(CliView, scatteredValuesDrawAsAVolumeInsideAPointSetSurface) {
   EXPECT_EQ(iso("view " + kitten + common + " --out x.png --volume-points " + quoted(blob)).exitCode, 2);
   EXPECT_EQ(iso("view " + kitten + common + " --out x.png --volume value").exitCode, 2);
   EXPECT_EQ(iso("view " + kitten + " --cpu --out x.png --volume-points " + quoted(blob)).exitCode, 2);
+  // The same volume kept in an .iso file (iso convert --volume-points) draws as from its points:
+  // their positions (2^-24 of the frame) and values (1/65535 of their span) are kept that closely.
+  const auto kept = dir / "kept.iso";
+  run = iso("convert --quiet --keep-points " + kitten + " -o " + quoted(kept) +
+            " --volume-points " + quoted(blob) + " --keep-scalar value");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto fromFile = dir / "from-file.png", fromPoints = dir / "from-points.png";
+  run = iso("view " + quoted(kept) + common + " --out " + quoted(fromFile) + " --scene " +
+            quoted(scene) + " --volume value");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("a volume of 15625 points inside it"), std::string::npos) << run.out;
+  ASSERT_EQ(iso("view " + quoted(kept) + common + " --out " + quoted(fromPoints) + " --scene " +
+                quoted(scene) + " --volume-points " + quoted(blob) + " --volume value")
+                .exitCode,
+            0);
+  const auto c = expectPicture(fromFile, 120, 120), d = expectPicture(fromPoints, 120, 120);
+  size_t differ = 0, redderKept = 0;
+  for (size_t i = 0; i < c.size(); ++i) {
+    for (int shift = 0; shift < 24; shift += 8)
+      differ += std::abs(int((c[i] >> shift) & 255) - int((d[i] >> shift) & 255)) > 2 ? 1 : 0;
+    redderKept += (c[i] & 255) > (b[i] & 255) + 8;
+  }
+  EXPECT_LT(differ, c.size() * 3 / 100) << differ;
+  EXPECT_GT(redderKept, c.size() / 50) << redderKept;
+  run = iso("view " + quoted(kept) + common + " --out x.png --volume density");
+  EXPECT_EQ(run.exitCode, 2);
+  EXPECT_NE(run.err.find("they keep: value"), std::string::npos) << run.err;
   std::ofstream(scene) << R"({"volume": {"transfer": [[1, 0, 0, 1, 0], [0, 1, 1, 1, 1]]}})";
   run = iso("view " + kitten + common + " --out x.png --scene " + quoted(scene) +
             " --volume-points " + quoted(blob) + " --volume value");
@@ -530,9 +573,29 @@ TEST(CliView, evalMeasuresTheIsoSurfaceAgainstThePointSetSurfaceOfItsPoints) {
     ASSERT_EQ(iso("convert --quiet --force --keep-points " + quoted(scan) + " -o " + quoted(kept))
                   .exitCode,
               0);
-    const CommandResult run = iso("eval " + quoted(kept) + " --against-pss --size 96");
+    const auto pictures = dir / "pictures";
+    const CommandResult run = iso("eval " + quoted(kept) + " --against-pss --size 96 --pictures " +
+                                  quoted(pictures));
     ASSERT_EQ(run.exitCode, 0) << run.err;
     const auto j = nlohmann::json::parse(run.out);
+    // The pictures are those measured: their silhouettes give the reported IoU, their shading
+    // the reported PSNR (background 0, a hit at least 38).
+    size_t both = 0, either = 0;
+    double squared = 0.0;
+    for (const char* axis : {"+x", "-x", "+y", "-y", "+z", "-z"}) {
+      const auto a = expectPicture(pictures / (std::string("view") + axis + "-iso.png"), 96, 96);
+      const auto b = expectPicture(pictures / (std::string("view") + axis + "-pss.png"), 96, 96);
+      expectPicture(pictures / (std::string("view") + axis + "-difference.png"), 96, 96);
+      for (size_t i = 0; i < a.size(); ++i) {
+        const int x = int(a[i] & 255), y = int(b[i] & 255);
+        both += x > 0 && y > 0;
+        either += x > 0 || y > 0;
+        squared += double(x - y) * double(x - y);
+      }
+    }
+    EXPECT_NEAR(double(both) / double(either), j["silhouette_iou"].get<double>(), 1e-9);
+    EXPECT_NEAR(10.0 * std::log10(255.0 * 255.0 / (squared / (6.0 * 96 * 96))),
+                j["psnr_db"].get<double>(), 1e-6);
     std::printf("%s: IoU %.4f, depth median %.3f spacings (%.1f %% within one), normals median "
                 "%.2f degrees, PSNR %.1f dB, the ISO tracer %.1f times the PSS exact mode's "
                 "rays/s\n",

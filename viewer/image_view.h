@@ -74,6 +74,9 @@ int viewPssCpu(const ViewOptions& options, const PssViewOptions& pss, const Imag
 int viewPssHeadless(const ViewOptions& options, const PssViewOptions& pss,
                     const ImageInputs& inputs);
 int viewPssBench(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);
+// In a window (pss_window.cpp): traced when the view or the scene changes, smaller while the
+// camera moves.
+int viewPssWindow(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);
 
 // Points arriving while a window is open: a loader publishes what it has read (previews, then
 // all of it, then the points of each view the window asks for), or its error; the window draws

@@ -34,16 +34,6 @@ bool sameView(const ImageFeed::View& a, const ImageFeed::View& b) {
          a.width == b.width && a.height == b.height;
 }
 
-// A picture `width` pixels wide shown `scale` times larger, cut to width × height.
-std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t from, uint32_t width,
-                               uint32_t height, uint32_t scale) {
-  std::vector<uint32_t> out(size_t(width) * height);
-  for (uint32_t y = 0; y < height; ++y)
-    for (uint32_t x = 0; x < width; ++x)
-      out[size_t(y) * width + x] = pixels[size_t(y / scale) * from + x / scale];
-  return out;
-}
-
 // What keys M, L, 1, + and - changed: kept over the scene file when it is reloaded.
 struct ImageKeys {
   std::optional<bool> shadows, eyeDome;
@@ -86,35 +76,6 @@ struct Drawn {
   std::unique_ptr<GpuPointImage> renderer;  // draws *scene
 };
 
-// The device side of the window: the swapchain, a host-visible copy of the picture for it, and
-// what orders a frame's copy and presentation.
-struct ImageWindowGpu {
-  Gpu gpu;
-  Owned<VkSurfaceKHR> surface;
-  Swapchain swapchain;
-  std::vector<Owned<VkSemaphore>> rendered;  // per swapchain image
-  PictureShow picture;
-
-  ImageWindowGpu(GLFWwindow* window, const ViewOptions& o)
-      : gpu(createGpu(windowGpuOptions(o))),
-        surface(surfaceOf(gpu, window)),
-        swapchain(createSwapchain(gpu, surface, o.width, o.height)),
-        rendered(semaphores(gpu, swapchain.images.size())),
-        picture(gpu) {}
-
-  bool bgra() const { return swapchain.format == VK_FORMAT_B8G8R8A8_UNORM; }
-
-  void resize(uint32_t width, uint32_t height) {
-    ISO_VK(vkDeviceWaitIdle(gpu.device));
-    swapchain = createSwapchain(gpu, surface, width, height, swapchain.swapchain);
-    rendered = semaphores(gpu, swapchain.images.size());
-  }
-
-  // Show a picture of the swapchain's size (RGBA words). Returns whether the swapchain no
-  // longer matches the window.
-  bool show(const std::vector<uint32_t>& rgba) { return picture.show(swapchain, rendered, rgba); }
-};
-
 }  // namespace
 
 int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOptions,
@@ -123,7 +84,7 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
   const std::string title = "iso view " + options.file.filename().string();
   const GlfwWindow glfw(options.width, options.height, title);
   GLFWwindow* window = glfw.window();
-  ImageWindowGpu w(window, options);
+  PictureWindowGpu w(window, options);
   Scene scene = options.scene;
   ImageViewOptions image = imageOptions;
   ImageKeys keys;

@@ -11,6 +11,7 @@
 #include "viewer/image_view.h"
 #include "viewer/pss.h"
 #include "viewer/pss_gpu.h"
+#include "viewer/pss_view.h"
 #include "viewer/view.h"
 
 namespace iso::viewer {
@@ -18,16 +19,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
-
-// The inputs' points as one surface (h: kPssSpacings of each point's spacing), their colors (none
-// when no input has any), and how long the fit took.
-struct PssScene {
-  std::unique_ptr<PssSurface> surface;
-  std::vector<glm::vec3> colors;
-  std::unique_ptr<PssVolume> volume;  // --volume-points, in the points' frame
-  std::vector<PssTransferPoint> transfer;
-  double fitSeconds = 0.0;
-};
 
 // The scene's transfer function, or a ramp over the values' range: from dark blue and clear to
 // light yellow absorbing 4 over the volume's diagonal.
@@ -46,6 +37,8 @@ std::vector<PssTransferPoint> volumeTransfer(const VolumeScene& scene, const Pss
   out.push_back({std::max(hi, lo + 1e-6f), glm::vec3(1.0f, 0.85f, 0.3f), 4.0f / diagonal});
   return out;
 }
+
+}  // namespace
 
 PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene) {
   const auto t0 = Clock::now();
@@ -112,8 +105,6 @@ void printScene(const ImageInputs& in, const PssScene& s) {
 }
 
 const char* modeName(const PssViewOptions& pss) { return pss.exact ? "exact" : "fast"; }
-
-}  // namespace
 
 int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
   const PssScene s = pssScene(in, pss, o.scene);

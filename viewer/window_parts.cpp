@@ -95,6 +95,7 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_C) in.toggled.push_back(6);
     if (key == GLFW_KEY_M) in.toggled.push_back(7);
     if (key == GLFW_KEY_L) in.toggled.push_back(8);
+    if (key == GLFW_KEY_X) in.toggled.push_back(9);
     if (key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD) in.samples += 1;
     if (key == GLFW_KEY_MINUS || key == GLFW_KEY_KP_SUBTRACT) in.samples -= 1;
   });
@@ -291,6 +292,15 @@ bool PictureShow::show(const Swapchain& swapchain,
   // The staging buffer and the command buffer are the next picture's: wait for the copy.
   ISO_VK(vkWaitForFences(gpu_.device, 1, &fence, VK_TRUE, UINT64_MAX));
   return stale || acquire == VK_SUBOPTIMAL_KHR;
+}
+
+std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t from, uint32_t width,
+                               uint32_t height, uint32_t scale) {
+  std::vector<uint32_t> out(size_t(width) * height);
+  for (uint32_t y = 0; y < height; ++y)
+    for (uint32_t x = 0; x < width; ++x)
+      out[size_t(y) * width + x] = pixels[size_t(y / scale) * from + x / scale];
+  return out;
 }
 
 }  // namespace iso::viewer

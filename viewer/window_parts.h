@@ -21,7 +21,8 @@ struct Input {
   double wheel = 0;
   bool screenshot = false, reload = false;
   // Switches pressed since the last frame, in order: 1 shadows, 2 reflections, 3 refractions,
-  // 4 back faces (next mode), 5 draw (K), 6 caustics, 7 shading mode (M), 8 layers (L)
+  // 4 back faces (next mode), 5 draw (K), 6 caustics, 7 shading mode (M), 8 layers (L),
+  // 9 exact or fast point set surfaces (X)
   std::vector<int> toggled;
   int samples = 0;  // +1 / -1
 };
@@ -129,5 +130,39 @@ class GlfwWindow {
  private:
   GLFWwindow* window_ = nullptr;
 };
+
+// The device side of a window that shows pictures made elsewhere (image-space points, point set
+// surfaces): the swapchain, a host-visible copy of the picture for it, and what orders a frame's
+// copy and presentation.
+struct PictureWindowGpu {
+  Gpu gpu;
+  Owned<VkSurfaceKHR> surface;
+  Swapchain swapchain;
+  std::vector<Owned<VkSemaphore>> rendered;  // per swapchain image
+  PictureShow picture;
+
+  PictureWindowGpu(GLFWwindow* window, const ViewOptions& o)
+      : gpu(createGpu(windowGpuOptions(o))),
+        surface(surfaceOf(gpu, window)),
+        swapchain(createSwapchain(gpu, surface, o.width, o.height)),
+        rendered(semaphores(gpu, swapchain.images.size())),
+        picture(gpu) {}
+
+  bool bgra() const { return swapchain.format == VK_FORMAT_B8G8R8A8_UNORM; }
+
+  void resize(uint32_t width, uint32_t height) {
+    ISO_VK(vkDeviceWaitIdle(gpu.device));
+    swapchain = createSwapchain(gpu, surface, width, height, swapchain.swapchain);
+    rendered = semaphores(gpu, swapchain.images.size());
+  }
+
+  // Show a picture of the swapchain's size (RGBA words). Returns whether the swapchain no
+  // longer matches the window.
+  bool show(const std::vector<uint32_t>& rgba) { return picture.show(swapchain, rendered, rgba); }
+};
+
+// A picture `from` pixels wide shown `scale` times larger, cut to width × height.
+std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t from, uint32_t width,
+                               uint32_t height, uint32_t scale);
 
 }  // namespace iso::viewer

@@ -259,8 +259,8 @@ std::vector<uint32_t> decodedPointOrder(std::span<const std::byte> data,
 }
 
 double PointValues::value(size_t i) const {
-  return codes[i] == kNoValue ? std::numeric_limits<double>::quiet_NaN()
-                              : offset + double(codes[i]) * step;
+  return missing && codes[i] == kNoValue ? std::numeric_limits<double>::quiet_NaN()
+                                         : offset + double(codes[i]) * step;
 }
 
 namespace {
@@ -292,10 +292,11 @@ PointValues quantizeValues(std::string name, uint32_t pointsChunk,
   PointValues out;
   out.name = std::move(name);
   out.pointsChunk = pointsChunk;
+  out.missing = std::any_of(values.begin(), values.end(), [](double v) { return !std::isfinite(v); });
   out.codes.resize(values.size(), kNoValue);
   if (!(lo <= hi)) return out;  // no finite value
   if (!std::isfinite(hi - lo)) throw InternalError("values span more than a double holds");
-  const double top = double(kNoValue - 1);
+  const double top = double(out.missing ? kNoValue - 1 : kNoValue);
   out.offset = lo;
   out.step = (integers && hi - lo <= top) || hi == lo ? 1.0 : (hi - lo) / top;
   for (size_t i = 0; i < values.size(); ++i)
@@ -308,13 +309,14 @@ std::vector<std::byte> encodeValuesChunk(const PointValues& v) {
   if (const std::string problem = nameProblem(v.name); !problem.empty())
     throw InternalError(problem);
   if (v.codes.empty() || v.codes.size() > kMaxPointsPerChunk || !std::isfinite(v.offset) ||
-      !(v.step > 0.0) || !std::isfinite(v.offset + double(kNoValue - 1) * v.step))
+      !(v.step > 0.0) || !std::isfinite(v.offset + double(kNoValue) * v.step))
     throw InternalError("values the format does not allow");
   std::vector<std::byte> data(kValuesHeaderSize + 2 * v.codes.size());
   storeLE<uint32_t>(data.data(), v.pointsChunk);
   storeLE<uint32_t>(data.data() + 4, uint32_t(v.codes.size()));
   storeLE<double>(data.data() + 8, v.offset);
   storeLE<double>(data.data() + 16, v.step);
+  storeLE<uint8_t>(data.data() + 24, v.missing ? 1 : 0);
   std::memcpy(data.data() + 32, v.name.data(), v.name.size());
   for (size_t i = 0; i < v.codes.size(); ++i)
     storeLE<uint16_t>(data.data() + kValuesHeaderSize + 2 * i, v.codes[i]);
@@ -335,7 +337,10 @@ PointValues decodeValuesChunk(const Reader& reader, uint32_t id) {
   const uint32_t count = loadLE<uint32_t>(data.data() + 4);
   out.offset = loadLE<double>(data.data() + 8);
   out.step = loadLE<double>(data.data() + 16);
-  for (size_t i = 24; i < 32; ++i)
+  const uint8_t flags = loadLE<uint8_t>(data.data() + 24);
+  out.missing = (flags & 1) != 0;
+  if ((flags & ~1) != 0) fail("reserved values header bits are not zero");
+  for (size_t i = 25; i < 32; ++i)
     if (data[i] != std::byte{0}) fail("reserved values header bytes are not zero");
   const char* name = reinterpret_cast<const char*>(data.data() + 32);
   out.name.assign(name, strnlen(name, kMaxValueNameBytes));
@@ -356,7 +361,7 @@ PointValues decodeValuesChunk(const Reader& reader, uint32_t id) {
   if (data.size() != kValuesHeaderSize + 2 * uint64_t{count})
     fail("values data is not its header and 2 bytes a value");
   if (!std::isfinite(out.offset) || !(out.step > 0.0) ||
-      !std::isfinite(out.offset + double(kNoValue - 1) * out.step))
+      !std::isfinite(out.offset + double(kNoValue) * out.step))
     fail("the values' offset and step are not finite, or the step is not positive");
   out.codes.resize(count);
   for (size_t i = 0; i < count; ++i)

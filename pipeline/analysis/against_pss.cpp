@@ -60,7 +60,7 @@ nlohmann::json evaluateAgainstPss(const Reader& reader, PointCloud points, doubl
   const double distance = radius / std::sin(20.0 * M_PI / 180.0) * 1.05;
   std::vector<double> depths, angles;
   size_t both = 0, either = 0, within = 0;
-  double squared = 0.0, isoSeconds = 0.0, pssSeconds = 0.0;
+  double squared = 0.0, squaredBoth = 0.0, isoSeconds = 0.0, pssSeconds = 0.0;
   uint64_t rays = 0;
   const glm::dvec3 axes[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
   for (const glm::dvec3& axis : axes) {
@@ -90,20 +90,25 @@ nlohmann::json evaluateAgainstPss(const Reader& reader, PointCloud points, doubl
     });
     pssSeconds += seconds(Clock::now() - t);
     rays += dirs.size();
+    std::vector<uint8_t> isoPicture(dirs.size()), pssPicture(dirs.size());
     for (size_t i = 0; i < dirs.size(); ++i) {
       const auto& a = isoHits[i];
       const auto& b = pssHits[i];
       const double pa = a ? shade(a->normal, dirs[i]) : 0.0, pb = b ? shade(b->normal, dirs[i]) : 0.0;
+      isoPicture[i] = uint8_t(pa);
+      pssPicture[i] = uint8_t(pb);
       squared += (pa - pb) * (pa - pb);
       either += a || b;
       if (!a || !b) continue;
       ++both;
+      squaredBoth += (pa - pb) * (pa - pb);
       const double depth = std::abs(double(a->t) * frame.size - double(b->t)) / spacing;
       depths.push_back(depth);
       within += depth <= 1.0;
       const double c = std::clamp(std::abs(double(glm::dot(a->normal, b->normal))), 0.0, 1.0);
       angles.push_back(std::acos(c) * 180.0 / M_PI);
     }
+    if (options.pictures) options.pictures(int(&axis - axes), isoPicture, pssPicture);
   }
   const double mse = squared / double(rays);
   nlohmann::json out;
@@ -119,6 +124,10 @@ nlohmann::json evaluateAgainstPss(const Reader& reader, PointCloud points, doubl
                            {"within_one", both ? double(within) / double(both) : 0.0}};
   out["normal_degrees"] = {{"median", quantile(angles, 0.5)}, {"p95", quantile(angles, 0.95)}};
   out["psnr_db"] = mse > 0.0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : 99.0;
+  // Where the difference is: the pixels both cover (shading), the others (silhouettes).
+  const double mseBoth = both ? squaredBoth / double(both) : 0.0;
+  out["psnr_where_both_hit_db"] = mseBoth > 0.0 ? 10.0 * std::log10(255.0 * 255.0 / mseBoth) : 99.0;
+  out["silhouette_share_of_error"] = squared > 0.0 ? 1.0 - squaredBoth / squared : 0.0;
   out["shading"] = "a headlight, Lambert, 8-bit gray, on both";
   out["iso_rays_per_second"] = double(rays) / isoSeconds;
   out["pss_exact_rays_per_second"] = double(rays) / pssSeconds;

@@ -5,6 +5,8 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "iso/reader.h"
@@ -14,6 +16,10 @@ namespace iso {
 
 struct AgainstPssOptions {
   int size = 256;  // pixels across each view
+  // When set, called for each view (0 to 5: +x, -x, +y, -y, +z, -z) with the shading of the ISO
+  // and of the PSS (8-bit gray, size × size, rows from the top).
+  std::function<void(int view, const std::vector<uint8_t>& iso, const std::vector<uint8_t>& pss)>
+      pictures;
 };
 
 // The six views along the axes, framing `points` (the file's kept points, with their normals; at

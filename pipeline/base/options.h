@@ -70,6 +70,10 @@ struct BuildOptions {
   // frame.
   bool keepPoints = false;
   int pointBits = 24;
+  // The scalar kept per point in values chunks (specs/iso-format.md, "Values chunks"): the name
+  // of the points' one extra (the readers' ReadOptions::keepExtras), or "density" (the local point
+  // density from each point's radius). Empty: none.
+  std::string keepScalar;
   // Points per points chunk, about (kPointsPerChunk). Not a command-line option: tests lower it
   // so that small scans have many chunks.
   uint32_t keptPointsPerChunk = 1u << 16;

@@ -218,10 +218,15 @@ nlohmann::json optionsJson(const BuildOptions& o) {
   if (o.occlusion.enabled)
     out["occlusion"] = {{"rays", o.occlusion.rays}, {"radius", o.occlusion.radius}};
   if (o.keepPoints) out["keep_points"] = {{"point_bits", o.pointBits}};
+  if (!o.keepScalar.empty()) out["keep_scalar"] = o.keepScalar;
   return out;
 }
 
 namespace {
+
+KeptValues keptValues(const BuildOptions& o) {
+  return {.name = o.keepScalar, .density = o.keepScalar == "density", .neighbours = o.neighbors};
+}
 
 // Writes the input points into points chunks (`--keep-points`), in the final frame.
 // `prepared`: the conversion's points, whose radii and normals the kept points take.
@@ -335,7 +340,7 @@ nlohmann::json convertToIso(const PointCloud& input, const std::filesystem::path
       },
       [&](Writer& writer, const FileHeader& header, const PointSet& prepared) {
         return keepPoints(writer, input, header, options.pointBits, options.keptPointsPerChunk,
-                          &prepared);
+                          &prepared, keptValues(options));
       });
 }
 
@@ -361,7 +366,7 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
       },
       [&](Writer& writer, const FileHeader& header, const PointSet& prepared) {
         return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
-                          options.keptPointsPerChunk, &prepared);
+                          options.keptPointsPerChunk, &prepared, keptValues(options));
       });
 }
 
@@ -545,13 +550,26 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              {"unprojected", s.unprojected},
                              {"mean", s.mean}};
     };
-  if (options.keepPoints)
+  if (options.keepPoints || source.volumePoints != nullptr)
     write.moreChunks = [&](Writer& out, const FileHeader& header) {
-      timer.next("keep points", inputPoints);
-      const KeptPointsStats kept = keep(out, header, points);
+      if (options.keepPoints) {
+        timer.next("keep points", inputPoints);
+        const KeptPointsStats kept = keep(out, header, points);
+        report["kept_points"] = kept.json();
+        report["kept_points"]["max_error_over_spacing"] = kept.maxError / spacing;
+      }
       points = PointSet{};
-      report["kept_points"] = kept.json();
-      report["kept_points"]["max_error_over_spacing"] = kept.maxError / spacing;
+      if (source.volumePoints != nullptr) {
+        const PointCloud& volume = *source.volumePoints;
+        timer.next("volume points", volume.size());
+        const KeptPointsStats kept =
+            keepPoints(out, volume, header, options.pointBits, options.keptPointsPerChunk, nullptr,
+                       {.name = volume.extraNames.empty() ? "" : volume.extraNames[0],
+                        .density = false,
+                        .neighbours = options.neighbors},
+                       true);
+        report["volume_points"] = kept.json();
+      }
     };
   // The file keeps what the data and options determine, not timings or memory, so that the same
   // input gives the same bytes on any machine and any number of threads.

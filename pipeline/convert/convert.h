@@ -35,6 +35,10 @@ struct ConvertSource {
   // When set, called once with the input points removed as strays (world units, their normals
   // and colors), before the octree stages.
   std::function<void(PointCloud strays)> onStrays;
+  // Samples of a volume inside the scanned surface, with their one extra (the values named by
+  // BuildOptions::keepScalar): written as volume points chunks with their values, never used to
+  // build the surface (specs/iso-format.md, "Volume points").
+  const PointCloud* volumePoints = nullptr;
 };
 
 // The coordinate system of a conversion's inputs (ConvertSource::inputs): the first input's that

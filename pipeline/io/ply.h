@@ -19,9 +19,13 @@ struct PlyWriteOptions {
   bool binary = true;            // binary little endian, else ASCII
   bool doublePositions = true;   // x y z as double (keeps large offsets exact), else float
   std::vector<std::string> comments = {};  // "comment" lines in the header
+  // The points' extras, written as double properties of these names (the points' extraNames
+  // must be these); empty: extras are not written.
+  std::vector<std::string> extraNames = {};
 };
 
-// Write points (with their normals and colors when present; colors as uchar sRGB) to a PLY file,
+// Write points (with their normals and colors when present; colors as uchar sRGB; extras as
+// PlyWriteOptions::extraNames says) to a PLY file,
 // atomically: a temporary file renamed into place. Throws iso::FileError on failure.
 void writePly(const std::filesystem::path& path, const PointCloud& points,
               const PlyWriteOptions& options = {});

@@ -51,10 +51,13 @@ std::string pointHeader(uint64_t count, bool normals, bool colors, const PlyWrit
     header += fmt::format("property {} {}\n", positionType, axis);
   if (normals) header += "property float nx\nproperty float ny\nproperty float nz\n";
   if (colors) header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+  for (const std::string& name : options.extraNames)
+    header += fmt::format("property double {}\n", name);
   return header + "end_header\n";
 }
 
-void writeBinaryPoints(AtomicFile& file, const PointCloud& points, bool doublePositions) {
+void writeBinaryPoints(AtomicFile& file, const PointCloud& points, bool doublePositions,
+                       size_t extras) {
   std::vector<std::byte> chunk;
   chunk.reserve(kChunkBytes + 64);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -69,6 +72,7 @@ void writeBinaryPoints(AtomicFile& file, const PointCloud& points, bool doublePo
     if (points.hasColors())
       for (int channel = 0; channel < 3; ++channel)
         appendLE(chunk, linearToSrgb8(points.colors[i][channel]));
+    for (size_t e = 0; e < extras; ++e) appendLE(chunk, points.extras[i * extras + e]);
     if (chunk.size() >= kChunkBytes) {
       file.write(chunk);
       chunk.clear();
@@ -77,7 +81,8 @@ void writeBinaryPoints(AtomicFile& file, const PointCloud& points, bool doublePo
   file.write(chunk);
 }
 
-void writeAsciiPoints(AtomicFile& file, const PointCloud& points, bool doublePositions) {
+void writeAsciiPoints(AtomicFile& file, const PointCloud& points, bool doublePositions,
+                      size_t extras) {
   std::string chunk;
   chunk.reserve(kChunkBytes + 256);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -100,6 +105,10 @@ void writeAsciiPoints(AtomicFile& file, const PointCloud& points, bool doublePos
         chunk += ' ';
         appendNumber(chunk, int{linearToSrgb8(points.colors[i][channel])});
       }
+    for (size_t e = 0; e < extras; ++e) {
+      chunk += ' ';
+      appendNumber(chunk, points.extras[i * extras + e]);
+    }
     chunk += '\n';
     if (chunk.size() >= kChunkBytes) {
       file.write(chunk);
@@ -128,10 +137,13 @@ void PlyPointWriter::write(const PointCloud& points) {
   ISO_CHECK(points.normals.empty() || points.normals.size() == points.size());
   ISO_CHECK(points.colors.empty() || points.colors.size() == points.size());
   ISO_CHECK(written_ + points.size() <= count_);
+  const size_t extras = options_.extraNames.size();
+  ISO_CHECK(extras == 0 || (points.extraNames == options_.extraNames &&
+                            points.extras.size() == points.size() * extras));
   if (options_.binary) {
-    writeBinaryPoints(*file_, points, options_.doublePositions);
+    writeBinaryPoints(*file_, points, options_.doublePositions, extras);
   } else {
-    writeAsciiPoints(*file_, points, options_.doublePositions);
+    writeAsciiPoints(*file_, points, options_.doublePositions, extras);
   }
   written_ += points.size();
 }

@@ -23,7 +23,8 @@ constexpr size_t kWriteBuffer = size_t{1} << 20;
 constexpr uint64_t kBatchPoints = uint64_t{1} << 18;
 
 size_t rawRecordBytes(const PointLayout& l) {
-  return 3 * sizeof(double) + (l.normals ? 12 : 0) + (l.colors ? 12 : 0);
+  return 3 * sizeof(double) + (l.normals ? 12 : 0) + (l.colors ? 12 : 0) +
+         (l.scalar.empty() ? 0 : 8);
 }
 
 // Encode point i of a cloud into a raw record.
@@ -34,7 +35,11 @@ void encodeRaw(const PointCloud& cloud, size_t i, const PointLayout& l, std::byt
     std::memcpy(out, &cloud.normals[i], 12);
     out += 12;
   }
-  if (l.colors) std::memcpy(out, &cloud.colors[i], 12);
+  if (l.colors) {
+    std::memcpy(out, &cloud.colors[i], 12);
+    out += 12;
+  }
+  if (!l.scalar.empty()) std::memcpy(out, &cloud.extras[i], 8);
 }
 
 void decodeRaw(const std::byte* in, const PointLayout& l, PointCloud& cloud) {
@@ -52,6 +57,13 @@ void decodeRaw(const std::byte* in, const PointLayout& l, PointCloud& cloud) {
     glm::vec3 c;
     std::memcpy(&c, in, 12);
     cloud.colors.push_back(c);
+    in += 12;
+  }
+  if (!l.scalar.empty()) {
+    double v;
+    std::memcpy(&v, in, 8);
+    if (cloud.extraNames.empty()) cloud.extraNames = {l.scalar};
+    cloud.extras.push_back(v);
   }
 }
 

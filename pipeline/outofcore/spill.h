@@ -78,9 +78,11 @@ class RecordFile {
 struct PointLayout {
   bool normals = false;
   bool colors = false;
+  std::string scalar;  // the one extra carried (a double), by name; empty: none
 };
 
-// The input points in input order: position (3 double), normal (3 float), color (3 float).
+// The input points in input order: position (3 double), normal (3 float), color (3 float),
+// scalar (double).
 class RawSpill {
  public:
   RawSpill(SpillDirectory& directory, PointLayout layout);

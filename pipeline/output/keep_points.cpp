@@ -8,9 +8,12 @@
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <limits>
+#include <numbers>
+#include <optional>
 #include <queue>
 #include <stdexcept>
 
+#include "iso/error.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
 #include "iso/writer.h"
@@ -27,6 +30,7 @@ constexpr size_t kBatchChunks = 16;  // chunks encoded in parallel at a time
 struct EncodedChunk {
   ChunkDesc desc;
   std::vector<std::byte> data;
+  std::optional<PointValues> values;  // in the order the data gives the points
   bool coarser = false;
   double maxError = 0.0;
 };
@@ -43,12 +47,16 @@ nlohmann::json KeptPointsStats::json() const {
           {"bytes_per_point", points > 0 ? double(bytes) / double(points) : 0.0},
           {"step_bits", stepBits},
           {"coarser_chunks", coarserChunks},
-          {"max_error", maxError}};
+          {"max_error", maxError},
+          {"values", valuesName.empty() ? nlohmann::json()
+                                        : nlohmann::json{{"name", valuesName},
+                                                         {"chunks", valuesChunks},
+                                                         {"bytes", valuesBytes}}}};
 }
 
 PointsChunkWriter::PointsChunkWriter(Writer& writer, const FileHeader& header, int stepBits,
                                      bool colors, bool normals, uint32_t perChunk,
-                                     const PointSet* prepared)
+                                     const PointSet* prepared, KeptValues values, bool volume)
     : writer_(writer),
       frame_(header.frame),
       finest_(header.maxLevel),
@@ -56,8 +64,11 @@ PointsChunkWriter::PointsChunkWriter(Writer& writer, const FileHeader& header, i
       colors_(colors),
       normals_(normals || (prepared != nullptr && !prepared->normal.empty())),
       perChunk_(std::clamp<uint32_t>(perChunk, 1, kMaxPointsPerChunk)),
-      prepared_(prepared != nullptr && prepared->size() > 0 ? prepared : nullptr) {
+      prepared_(prepared != nullptr && prepared->size() > 0 ? prepared : nullptr),
+      values_(std::move(values)),
+      volume_(volume) {
   stats_.stepBits = stepBits;
+  stats_.valuesName = values_.name;
 }
 
 PointsChunkWriter::~PointsChunkWriter() = default;
@@ -96,10 +107,12 @@ float PointsChunkWriter::preparedMatch(uint64_t key, const glm::dvec3& world, gl
 }
 
 void PointsChunkWriter::push(const glm::dvec3& world, uint64_t key, const glm::vec3& normal,
-                             const glm::vec3& color) {
+                             const glm::vec3& color, double value) {
   const glm::dvec3 u = toFrame(world, frame_);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
   if (!(u.x >= 0.0 && u.y >= 0.0 && u.z >= 0.0 && u.x < 1.0 && u.y < 1.0 && u.z < 1.0)) {
-    outside_.push_back({key, world, normal, color, 0.0f});  // last, in chunks of their own
+    // Last, in chunks of their own (no radius: no density).
+    outside_.push_back({key, world, normal, color, 0.0f, values_.density ? nan : value});
     return;
   }
   glm::vec3 n = unitOrZero(normal);
@@ -108,7 +121,11 @@ void PointsChunkWriter::push(const glm::dvec3& world, uint64_t key, const glm::v
     lastRadius_ = radius;
   else
     radius = lastRadius_;
-  buffer_.push_back({key, world, n, color, radius});
+  if (values_.density) {
+    const double r = double(radius) * frame_.size;
+    value = r > 0.0 ? double(values_.neighbours) / (std::numbers::pi * r * r) : nan;
+  }
+  buffer_.push_back({key, world, n, color, radius, value});
   while (buffer_.size() - head_ > perChunk_) cutOne();
 }
 
@@ -221,8 +238,10 @@ void PointsChunkWriter::cutOne() {
     buffer_.erase(buffer_.begin(), buffer_.begin() + ptrdiff_t(head_));
     head_ = 0;
   }
-  closeGatherings(level, cell);
-  give(level, cell, chunk.points, {sequence_}, true);
+  if (!volume_) {
+    closeGatherings(level, cell);
+    give(level, cell, chunk.points, {sequence_}, true);
+  }
   queue(std::move(chunk));
 }
 
@@ -255,7 +274,7 @@ void PointsChunkWriter::flush() {
     PointsChunk chunk;
     chunk.stepBits = uint8_t(bits);
     chunk.offsets.resize(p.points.size());
-    chunk.radii.resize(p.points.size());
+    if (!volume_) chunk.radii.resize(p.points.size());
     // (Points outside the frame have no radius: the largest the code holds.)
     double largest = 0.0;
     if (colors_) chunk.colors.resize(p.points.size());
@@ -265,12 +284,14 @@ void PointsChunkWriter::flush() {
       const glm::dvec3 d = toFrame(point.world, frame_) - cellMin;
       for (int a = 0; a < 3; ++a)
         chunk.offsets[i][a] = int32_t(std::llround(std::ldexp(d[a], bits)));
-      chunk.radii[i] = encodePointRadius(point.radius > 0.0f ? double(point.radius) : 1.0);
       const std::array<double, 3> stored =
           pointFramePosition(p.level, p.key, chunk.stepBits, chunk.offsets[i]);
-      if (stored[0] >= 0.0 && stored[1] >= 0.0 && stored[2] >= 0.0 && stored[0] < 1.0 &&
-          stored[1] < 1.0 && stored[2] < 1.0)
-        largest = std::max(largest, decodePointRadius(chunk.radii[i]));
+      if (!volume_) {
+        chunk.radii[i] = encodePointRadius(point.radius > 0.0f ? double(point.radius) : 1.0);
+        if (stored[0] >= 0.0 && stored[1] >= 0.0 && stored[2] >= 0.0 && stored[0] < 1.0 &&
+            stored[1] < 1.0 && stored[2] < 1.0)
+          largest = std::max(largest, decodePointRadius(chunk.radii[i]));
+      }
       const glm::dvec3 back = toWorld(glm::dvec3(stored[0], stored[1], stored[2]), frame_);
       if (p.children.empty()) out.maxError = std::max(out.maxError, glm::length(back - point.world));
       if (colors_)
@@ -283,7 +304,13 @@ void PointsChunkWriter::flush() {
       }
     }
     out.data = encodePointsChunk(chunk);
-    out.desc.kind = kPointsKind;
+    if (!values_.name.empty()) {
+      const std::vector<uint32_t> order = decodedPointOrder(out.data, chunk);
+      std::vector<double> values(order.size());
+      for (size_t i = 0; i < order.size(); ++i) values[i] = p.points[order[i]].value;
+      out.values = quantizeValues(values_.name, 0, values);  // its points chunk's id: on adding
+    }
+    out.desc.kind = volume_ ? kVolumePointsKind : kPointsKind;
     out.desc.level = p.level;
     out.desc.key = p.key;
     out.desc.pointCount = p.points.size();
@@ -302,6 +329,20 @@ void PointsChunkWriter::flush() {
     idOf_[p.sequence] = id;
     for (const uint64_t child : p.children) writer_.setParent(idOf_[child], id);
     stats_.bytes += e.data.size();
+    if (e.values) {
+      PointValues values = *e.values;
+      values.pointsChunk = id;
+      ChunkDesc desc;
+      desc.kind = kValuesKind;
+      desc.level = e.desc.level;
+      desc.key = e.desc.key;
+      desc.pointCount = e.desc.pointCount;
+      desc.codec = Codec::Zstd;  // the writer stores it raw where that is smaller
+      const std::vector<std::byte> bytes = encodeValuesChunk(values);
+      writer_.addChunk(desc, bytes);
+      ++stats_.valuesChunks;
+      stats_.valuesBytes += bytes.size();
+    }
     if (!p.children.empty()) {
       ++stats_.subsampleChunks;
       stats_.subsamplePoints += e.desc.pointCount;
@@ -316,7 +357,8 @@ void PointsChunkWriter::flush() {
 }
 
 KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHeader& header,
-                           int stepBits, uint32_t perChunk, const PointSet* prepared) {
+                           int stepBits, uint32_t perChunk, const PointSet* prepared,
+                           const KeptValues& values, bool volume) {
   const Frame& frame = header.frame;
   const size_t n = cloud.size();
   std::vector<uint64_t> keys(n);
@@ -324,12 +366,14 @@ KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHe
                     [&](size_t i) { keys[i] = keyOfWorld(cloud.positions[i], frame); });
   const std::vector<uint32_t> order = sortedOrder(keys);  // stable: input order within a key
   PointsChunkWriter out(writer, header, stepBits, cloud.hasColors(), cloud.hasNormals(), perChunk,
-                        prepared);
+                        prepared, values, volume);
   const glm::vec3 none(0.0f);
+  const size_t extras = cloud.extraCount();
   for (size_t j = 0; j < n; ++j) {
     const uint32_t i = order[j];
     out.push(cloud.positions[i], keys[i], cloud.hasNormals() ? cloud.normals[i] : none,
-             cloud.hasColors() ? cloud.colors[i] : none);
+             cloud.hasColors() ? cloud.colors[i] : none,
+             extras > 0 ? cloud.extras[i * extras] : std::numeric_limits<double>::quiet_NaN());
     if ((j + 1) % 65536 == 0) progressAdvance(65536);
   }
   progressAdvance(n % 65536);
@@ -339,11 +383,11 @@ KeptPointsStats keepPoints(Writer& writer, const PointCloud& cloud, const FileHe
 
 KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& directory,
                            const FileHeader& header, int stepBits, uint64_t maxLoadedPoints,
-                           uint32_t perChunk, const PointSet* prepared) {
+                           uint32_t perChunk, const PointSet* prepared, const KeptValues& values) {
   const Frame& frame = header.frame;
   const Distribution distribution(directory, raw, frame, maxLoadedPoints);
   PointsChunkWriter out(writer, header, stepBits, raw.layout().colors, raw.layout().normals,
-                        perChunk, prepared);
+                        perChunk, prepared, values);
   const glm::vec3 none(0.0f);
   for (const SpillChunk& chunk : distribution.chunks()) {
     const LoadedPoints loaded = distribution.load(chunk);
@@ -353,16 +397,18 @@ KeptPointsStats keepPoints(Writer& writer, const RawSpill& raw, SpillDirectory& 
     // A load holds the points of each fine cell in input order, and one key lies in one fine
     // cell: the stable sort by key gives (key, input index) order, as in core.
     const std::vector<uint32_t> order = sortedOrder(keys);
+    const size_t extras = cloud.extraCount();
     for (const uint32_t i : order)
       out.push(cloud.positions[i], keys[i], cloud.hasNormals() ? cloud.normals[i] : none,
-               cloud.hasColors() ? cloud.colors[i] : none);
+               cloud.hasColors() ? cloud.colors[i] : none,
+               extras > 0 ? cloud.extras[i * extras] : std::numeric_limits<double>::quiet_NaN());
     progressAdvance(cloud.size());
   }
   out.finish();
   return out.stats();
 }
 
-PointCloud decodeKeptPoints(const Reader& reader, uint32_t id) {
+PointCloud decodeKeptPoints(const Reader& reader, uint32_t id, uint32_t valuesChunk) {
   const Frame& frame = reader.header().frame;
   const ChunkInfo& info = reader.chunks()[id];
   const PointsChunk chunk = decodePointsChunk(reader, id);
@@ -379,14 +425,61 @@ PointCloud decodeKeptPoints(const Reader& reader, uint32_t id) {
                                srgbToLinear(float(c[2]) / 65535.0f));
   for (const std::array<int16_t, 3>& n : chunk.normals)
     points.normals.emplace_back(decodeSnorm16(n[0]), decodeSnorm16(n[1]), decodeSnorm16(n[2]));
+  if (valuesChunk != kNoParent) {
+    const PointValues values = decodeValuesChunk(reader, valuesChunk);
+    if (values.pointsChunk != id)
+      throw FileError(reader.name(), reader.chunk(valuesChunk).offset,
+                      "chunk " + std::to_string(valuesChunk) + ": the values of chunk " +
+                          std::to_string(values.pointsChunk) + ", not " + std::to_string(id));
+    points.extraNames = {values.name};
+    points.extras.resize(values.size());
+    for (size_t i = 0; i < values.size(); ++i) points.extras[i] = values.value(i);
+  }
   return points;
 }
 
+std::vector<uint32_t> valuesChunks(const Reader& reader, const std::string& name) {
+  std::vector<uint32_t> of(reader.chunks().size(), kNoParent);
+  for (const ChunkInfo& c : reader.chunks()) {
+    if (c.kind != kValuesKind) continue;
+    const PointValues values = decodeValuesChunk(reader, c.id);
+    if (values.name != name) continue;
+    if (of[values.pointsChunk] != kNoParent)
+      throw FileError(reader.name(), c.offset,
+                      "chunk " + std::to_string(c.id) + ": a second values chunk '" + name +
+                          "' of chunk " + std::to_string(values.pointsChunk));
+    of[values.pointsChunk] = c.id;
+  }
+  return of;
+}
+
+std::vector<std::string> keptValueNames(const Reader& reader, uint8_t kind) {
+  std::vector<std::string> names;
+  for (const ChunkInfo& c : reader.chunks()) {
+    if (c.kind != kValuesKind) continue;
+    const PointValues values = decodeValuesChunk(reader, c.id);
+    if (reader.chunk(values.pointsChunk).kind == kind &&
+        std::find(names.begin(), names.end(), values.name) == names.end())
+      names.push_back(values.name);
+  }
+  return names;
+}
+
 void forEachKeptPoints(const Reader& reader,
-                       const std::function<void(const PointCloud& points)>& f) {
+                       const std::function<void(const PointCloud& points)>& f,
+                       const std::string& values, uint8_t kind) {
   const std::vector<bool> subsample = subsampleChunks(reader);
-  for (const ChunkInfo& info : reader.chunks())
-    if (info.kind == kPointsKind && !subsample[info.id]) f(decodeKeptPoints(reader, info.id));
+  const std::vector<uint32_t> of =
+      values.empty() ? std::vector<uint32_t>(reader.chunks().size(), kNoParent)
+                     : valuesChunks(reader, values);
+  for (const ChunkInfo& info : reader.chunks()) {
+    if (info.kind != kind || subsample[info.id]) continue;
+    if (!values.empty() && of[info.id] == kNoParent)
+      throw FileError(reader.name(), info.offset,
+                      "chunk " + std::to_string(info.id) + ": its points have no values '" +
+                          values + "'");
+    f(decodeKeptPoints(reader, info.id, of[info.id]));
+  }
 }
 
 std::vector<uint32_t> keptPointsCut(const Reader& reader, uint64_t maxPoints) {
@@ -437,11 +530,11 @@ std::vector<uint32_t> keptPointsCut(const Reader& reader, uint64_t maxPoints) {
   return cut;
 }
 
-KeptPointsInfo keptPointsInfo(const Reader& reader) {
+KeptPointsInfo keptPointsInfo(const Reader& reader, uint8_t kind) {
   KeptPointsInfo info;
   const std::vector<bool> subsample = subsampleChunks(reader);
   for (const ChunkInfo& c : reader.chunks()) {
-    if (c.kind != kPointsKind || subsample[c.id]) continue;
+    if (c.kind != kind || subsample[c.id]) continue;
     if (info.chunks++ == 0) {
       const PointsChunk first = decodePointsChunk(reader, c.id);
       info.colors = !first.colors.empty();

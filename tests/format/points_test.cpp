@@ -395,6 +395,7 @@ TEST(ValuesChunk, valuesThatAreNotSmallIntegersKeepHalfAStep) {
   values.push_back(-std::numeric_limits<double>::infinity());
   const PointValues q = quantizeValues("gps_time", 5, values);
   EXPECT_EQ(q.offset, 3.0e8);
+  EXPECT_TRUE(q.missing);
   EXPECT_NEAR(q.step, 17.123456 * 999 / 65534, 1e-9);
   for (size_t i = 0; i < 1000; ++i) EXPECT_LE(std::abs(q.value(i) - values[i]), q.step / 2 + 1e-6);
   EXPECT_EQ(q.codes[1000], kNoValue);
@@ -403,6 +404,13 @@ TEST(ValuesChunk, valuesThatAreNotSmallIntegersKeepHalfAStep) {
   const PointValues wide = quantizeValues("v", 0, std::vector<double>{0.0, 70000.0});
   EXPECT_GT(wide.step, 1.0);
   EXPECT_EQ(wide.value(1), 70000.0);
+  // Every 16-bit value, none missing: all 65536 codes are values, kept exactly.
+  std::vector<double> all(65536);
+  for (size_t i = 0; i < all.size(); ++i) all[i] = double(65535 - i);
+  const PointValues full = quantizeValues("intensity", 0, all);
+  EXPECT_FALSE(full.missing);
+  EXPECT_EQ(full.step, 1.0);
+  for (size_t i = 0; i < all.size(); ++i) ASSERT_EQ(full.value(i), all[i]);
   EXPECT_THROW(quantizeValues("", 0, values), InternalError);
   EXPECT_THROW(quantizeValues(std::string(33, 'a'), 0, values), InternalError);
   EXPECT_THROW(quantizeValues("v", 0, std::vector<double>{}), InternalError);
@@ -419,7 +427,7 @@ TEST(ValuesChunk, bytesAreWhereTheSpecSays) {
   EXPECT_EQ(u32(4), 3u);  // count
   EXPECT_EQ(f64(8), 2.0);  // offset
   EXPECT_EQ(f64(16), 1.0);  // step
-  for (size_t i = 24; i < 32; ++i) EXPECT_EQ(b[i], std::byte{0});  // reserved
+  for (size_t i = 24; i < 32; ++i) EXPECT_EQ(b[i], std::byte{0});  // flags, reserved
   EXPECT_EQ(std::string(reinterpret_cast<const char*>(b.data() + 32)), "classification");
   for (size_t i = 32 + 14; i < 64; ++i) EXPECT_EQ(b[i], std::byte{0});  // name padding
   EXPECT_EQ(u16(64), 0);
@@ -466,7 +474,8 @@ TEST(ValuesChunk, valuesThatBreakTheRulesAreRefusedWithTheirReason) {
   ChunkDesc elsewhere = valuesDesc(100);
   elsewhere.key = 0x1a4;
   expectRefused("cell.iso", good, elsewhere, "cell is not its points chunk's");
-  expectRefused("reserved.iso", with(24, {1}), valuesDesc(100), "reserved");
+  expectRefused("flags.iso", with(24, {2}), valuesDesc(100), "reserved values header bits");
+  expectRefused("reserved.iso", with(25, {1}), valuesDesc(100), "reserved");
   expectRefused("padding.iso", with(40, {'x'}), valuesDesc(100), "padding is not zero");
   expectRefused("name.iso", with(32, {0}), valuesDesc(100), "the value name is empty");
   expectRefused("step.iso", with(16, {0, 0, 0, 0, 0, 0, 0, 0}), valuesDesc(100),

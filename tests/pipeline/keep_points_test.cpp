@@ -300,7 +300,7 @@ TEST(KeptPoints, outOfCoreWritesTheSameBytesAsInCore) {
   test::TempDir dir;
   const nlohmann::json inCore = convertToIso(cloud, dir / "in.iso", options);
   SpillDirectory spill(dir.path());
-  auto raw = std::make_unique<RawSpill>(spill, PointLayout{true, true});
+  auto raw = std::make_unique<RawSpill>(spill, PointLayout{true, true, ""});
   raw->append(cloud);
   raw->finish();
   // Loads of 700 points: chunk cells of the points cross the loads' cells both ways.

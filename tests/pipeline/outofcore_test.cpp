@@ -23,7 +23,7 @@ namespace {
 
 std::unique_ptr<RawSpill> spillOf(SpillDirectory& directory, const PointCloud& cloud) {
   auto raw =
-      std::make_unique<RawSpill>(directory, PointLayout{cloud.hasNormals(), cloud.hasColors()});
+      std::make_unique<RawSpill>(directory, PointLayout{cloud.hasNormals(), cloud.hasColors(), ""});
   raw->append(cloud);
   raw->finish();
   return raw;

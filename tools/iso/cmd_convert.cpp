@@ -10,6 +10,7 @@
 #include <optional>
 
 #include "iso/error.h"
+#include "iso/points.h"
 #include "iso/temporary_files.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
@@ -39,6 +40,7 @@ struct Options {
   std::string writeStrays;                     // --write-strays FILE.ply
   std::string progress = "auto";               // auto, line, json, none
   std::string texture, textureAt = "corners";  // --texture, --texture-at
+  std::string volumePoints, volumeColumns;       // --volume-points, --volume-columns
   int threads = 0;                             // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
@@ -141,6 +143,23 @@ void printReport(const nlohmann::json& r, const Options& o) {
                           withSeparators(k["coarser_chunks"].get<uint64_t>()))
             : "");
   }
+  // The values kept with the points (--keep-scalar) and the volume points (--volume-points).
+  const auto values = [](const nlohmann::json& k) {
+    if (!k.contains("values") || k["values"].is_null()) return std::string();
+    const auto& v = k["values"];
+    return fmt::format(", with their {} ({})", v["name"].get<std::string>(),
+                       byteSize(v["bytes"].get<uint64_t>()));
+  };
+  if (r.contains("kept_points") && !values(r["kept_points"]).empty())
+    fmt::print("  kept points{}\n", values(r["kept_points"]));
+  if (r.contains("volume_points")) {
+    const auto& v = r["volume_points"];
+    fmt::print("  volume points: {} in {} chunk{}, {}{}\n",
+               withSeparators(v["points"].get<uint64_t>()),
+               withSeparators(v["chunks"].get<uint64_t>()),
+               v["chunks"].get<uint64_t>() == 1 ? "" : "s", byteSize(v["bytes"].get<uint64_t>()),
+               values(v));
+  }
   const auto& a = r["accuracy"];
   fmt::print(
       "  accuracy: {} input points to the zero set: RMS {:.3f}, max {:.3f} spacings "
@@ -202,6 +221,44 @@ void checkOptions(Options& o) {
   }
   if (o.memory != "auto") parseSize(o.memory, "--memory");
   if (o.maxTemp != "auto") parseSize(o.maxTemp, "--max-temp");
+  const std::string& scalar = o.build.keepScalar;
+  if (!scalar.empty() && !o.build.keepPoints && o.volumePoints.empty())
+    throw UsageError("--keep-scalar keeps a value with the kept points (--keep-points) or the "
+                     "volume points (--volume-points): give one of them");
+  if (scalar.size() > kMaxValueNameBytes)
+    throw UsageError("--keep-scalar: a name of at most 32 bytes, not '" + scalar + "'");
+  if (scalar == "density" && !o.volumePoints.empty())
+    throw UsageError("--keep-scalar density is the scan's point density: the volume points "
+                     "(--volume-points) need a value their file carries");
+  if (!o.volumePoints.empty() && scalar.empty())
+    throw UsageError("--volume-points needs --keep-scalar NAME: the value of the volume's "
+                     "points in " + o.volumePoints);
+}
+
+// --volume-points FILE: its points and the value --keep-scalar names, read before the scan.
+PointCloud readVolumePoints(const Options& o, const std::vector<std::filesystem::path>& scan) {
+  const std::filesystem::path path(o.volumePoints);
+  refuseOutputOverInput(o.output, path, "-o");
+  for (const auto& file : scan)
+    if (namesSameFile(file, path))
+      throw UsageError("--volume-points " + o.volumePoints +
+                       " is also a scan input: volume points are never part of the surface");
+  ReadOptions read;
+  read.columns = o.volumeColumns;
+  LoadedPoints loaded;
+  try {
+    loaded = loadPoints({path}, read, nullptr, o.build.keepScalar);
+  } catch (const FileError& error) {
+    // A text file names its value columns: say how.
+    if (!o.volumeColumns.empty() || error.reason().find("has no scalar") == std::string::npos)
+      throw;
+    throw FileError(error.file(), error.offset(),
+                    error.reason() + "; a text file names its columns with --volume-columns, "
+                                     "e.g. x,y,z," + o.build.keepScalar);
+  }
+  if (loaded.cloud.size() == 0)
+    throw FileError(path, std::nullopt, "has no points (--volume-points)");
+  return std::move(loaded.cloud);
 }
 
 // The outputs (-o, --report), checked against the inputs before any work; the input files.
@@ -296,14 +353,27 @@ int run(Options& o) {
   // run chunk by chunk.
   SpillDirectory spill(tmp);
   std::unique_ptr<RawSpill> raw;
+  const PointCloud volume =
+      o.volumePoints.empty() ? PointCloud{} : readVolumePoints(o, files);
   ReadOptions read;
   read.columns = o.columns;
+  // The scan's own scalar, when the kept points keep one it carries. With --volume-points the
+  // scalar is the volume's: the kept points keep it only where every scan file has it.
+  std::string scalar =
+      o.build.keepPoints && o.build.keepScalar != "density" ? o.build.keepScalar : "";
+  if (!scalar.empty() && !o.volumePoints.empty() && !everyFileHas(files, read, scalar)) {
+    if (!o.quiet)
+      fmt::print(stderr, "note: the kept points keep no '{}': not every scan file has it\n",
+                 scalar);
+    scalar.clear();
+    o.build.keepScalar.clear();
+  }
   const ReadSummary loaded = readPoints(
       files, read, &progress,
       [&](bool normals, bool colors) {
-        raw = std::make_unique<RawSpill>(spill, PointLayout{normals, colors});
+        raw = std::make_unique<RawSpill>(spill, PointLayout{normals, colors, scalar});
       },
-      [&](const PointCloud& batch) { raw->append(batch); });
+      [&](const PointCloud& batch) { raw->append(batch); }, scalar);
   raw->finish();
   if (!o.quiet && mode != ProgressMode::Json) {
     fmt::print(stderr, "read {} points from {} file{} in {:.2f} s\n", withSeparators(raw->size()),
@@ -320,7 +390,13 @@ int run(Options& o) {
                "note: the octree stages' work lists stay in memory: about {} for {} points, "
                "more than --memory {}\n",
                byteSize(listBytes), withSeparators(raw->size()), byteSize(memory));
-  ConvertSource source{loaded.inputs, loaded.seconds, loaded.nonFiniteDropped, {}, &progress, {}};
+  ConvertSource source{loaded.inputs,
+                       loaded.seconds,
+                       loaded.nonFiniteDropped,
+                       {},
+                       &progress,
+                       {},
+                       o.volumePoints.empty() ? nullptr : &volume};
   if (!o.quiet && mode == ProgressMode::None)
     source.onStage = [](const std::string& stage, double seconds) {
       if (stage != "read") fmt::print(stderr, "  {:<16} {:.3f} s\n", stage, seconds);
@@ -439,6 +515,17 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Position precision of --keep-points: 2^-N of the frame's size")
       ->capture_default_str()
       ->needs(keep);
+  c->add_option("--keep-scalar", o->build.keepScalar,
+                "A value kept per point with --keep-points and --volume-points (16-bit codes; "
+                "integers exact): LAS/LAZ intensity, return_number, classification, gps_time; E57 "
+                "intensity; any PLY or PCD scalar property, or named text column, by name; or "
+                "density (the scan's local point density, points per square unit)");
+  c->add_option("--volume-points", o->volumePoints,
+                "A point file of volume samples (a simulation's or a sensor's values inside the "
+                "scanned object), stored beside the surface with their --keep-scalar value and "
+                "never used to build it; drawn by `iso view --draw pss --volume NAME`");
+  c->add_option("--volume-columns", o->volumeColumns,
+                "Column spec of a text --volume-points file, e.g. x,y,z,value");
   c->add_option("--threads", o->threads, "Worker threads (0: all cores); the output is the same")
       ->capture_default_str();
   c->add_option("--progress", o->progress,

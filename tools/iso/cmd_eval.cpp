@@ -15,6 +15,7 @@
 #include "pipeline/analysis/visibility.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
+#include "pipeline/io/image.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
 #include "pipeline/points/points.h"
@@ -45,6 +46,7 @@ struct Options {
   double spacing = 0.0;
   bool keepOutliers = false;  // --keep-outliers: measure the strays too
   bool againstPss = false;    // --against-pss
+  std::string pictures;       // --pictures DIR
   AgainstPssOptions pss;
 };
 
@@ -126,6 +128,7 @@ int run(Options& o) {
         "--tiles DIR, --against-pss "
         "(or --visibility alone, on the file's kept points)");
   if (o.againstPss && o.visibility) throw UsageError("--visibility does not go with --against-pss");
+  if (!o.pictures.empty() && !o.againstPss) throw UsageError("--pictures goes with --against-pss");
   if (o.pss.size < 16 || o.pss.size > 4096) throw UsageError("--size: 16 to 4096 pixels");
   if (o.perLevel && o.points.empty()) throw UsageError("--per-level measures against --points");
   if (o.depth != -1 && o.tiles.empty()) throw UsageError("--depth picks a cut of --tiles");
@@ -166,7 +169,33 @@ int run(Options& o) {
     if (kept.size() == 0)
       throw FileError(o.file, std::nullopt,
                       "keeps no points to fit a point set surface to (convert with --keep-points)");
-    result = evaluateAgainstPss(reader, std::move(kept), spacing, o.pss);
+    AgainstPssOptions pss = o.pss;
+    if (!o.pictures.empty()) {
+      const std::filesystem::path dir(o.pictures);
+      std::filesystem::create_directories(dir);
+      // Per view: the ISO, the PSS, and their difference (gray: equal; red: the ISO brighter,
+      // blue: the PSS brighter), as the seed ISO paper's Fig. 4.10 shows them.
+      pss.pictures = [&o, dir](int view, const std::vector<uint8_t>& iso,
+                         const std::vector<uint8_t>& ref) {
+        const uint32_t n = uint32_t(o.pss.size);
+        std::vector<uint32_t> a(iso.size()), b(iso.size()), d(iso.size());
+        for (size_t i = 0; i < iso.size(); ++i) {
+          const auto gray = [](uint32_t v) { return v | v << 8 | v << 16 | 0xFF000000u; };
+          a[i] = gray(iso[i]);
+          b[i] = gray(ref[i]);
+          const int diff = 2 * (int(iso[i]) - int(ref[i]));
+          const uint32_t red = uint32_t(std::clamp(128 + diff, 0, 255)),
+                         green = uint32_t(std::clamp(128 - std::abs(diff), 0, 255)),
+                         blue = uint32_t(std::clamp(128 - diff, 0, 255));
+          d[i] = red | green << 8 | blue << 16 | 0xFF000000u;
+        }
+        const std::string axis[6] = {"+x", "-x", "+y", "-y", "+z", "-z"};
+        writeRgba8Image(dir / ("view" + axis[view] + "-iso.png"), n, n, a);
+        writeRgba8Image(dir / ("view" + axis[view] + "-pss.png"), n, n, b);
+        writeRgba8Image(dir / ("view" + axis[view] + "-difference.png"), n, n, d);
+      };
+    }
+    result = evaluateAgainstPss(reader, std::move(kept), spacing, pss);
     result["file"] = o.file;
     fmt::print("{}\n", result.dump(2));
     return kExitOk;
@@ -244,6 +273,9 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
               "PSNR of one shading, rays/s of each");
   c->add_option("--size", o->pss.size, "--against-pss: pixels across each view")
       ->capture_default_str();
+  c->add_option("--pictures", o->pictures,
+                "--against-pss: write each view's ISO, PSS and difference pictures (PNG) into "
+                "this directory");
   c->add_option("--tiles", o->tiles,
                 "A tileset `iso export --tiles` wrote: the distance between what it draws and the "
                 "file's zero set, both ways (by default its finest tiles)");

@@ -29,7 +29,7 @@ namespace iso::cli {
 namespace {
 
 struct Options {
-  std::string file, mesh, vdb, points, tiles;
+  std::string file, mesh, vdb, points, tiles, volumePoints;
   double band = 3.0;
   std::optional<int> level;        // --level: the level-of-detail cut the mesh is made at
   std::optional<double> maxError;  // --max-error: simplified within this (world units)
@@ -53,7 +53,10 @@ double secondsSince(std::chrono::steady_clock::time_point started) {
 // file, not the .iso file itself, and no file named by two options.
 void checkOutputs(const Options& o) {
   const std::pair<std::string, const char*> outputs[] = {
-      {o.mesh, "--mesh"}, {o.vdb, "--vdb"}, {o.points, "--points"}};
+      {o.mesh, "--mesh"},
+      {o.vdb, "--vdb"},
+      {o.points, "--points"},
+      {o.volumePoints, "--volume-points"}};
   for (size_t i = 0; i < std::size(outputs); ++i) {
     const auto& [path, option] = outputs[i];
     if (path.empty()) continue;
@@ -83,23 +86,46 @@ void say(const std::string& doing) {
                       "; nothing was written, temporary files removed");
 }
 
-void writePoints(const Reader& reader, const Options& o, OutputGroup& outputs,
-                 nlohmann::json& summary) {
-  const KeptPointsInfo kept = keptPointsInfo(reader);
+// The kept points (kind kPointsKind, --points) or the volume points (--volume-points), with
+// every value they keep as a double property of its name (NaN where a point has none).
+void writePoints(const Reader& reader, uint8_t kind, const std::string& path,
+                 OutputGroup& outputs, nlohmann::json& summary) {
+  const bool volume = kind == kVolumePointsKind;
+  const KeptPointsInfo kept = keptPointsInfo(reader, kind);
   if (kept.chunks == 0)
-    throw FileError(o.file, std::nullopt,
-                    "keeps no points (convert with --keep-points to keep them)");
-  say("writing the points");
+    throw FileError(reader.name(), std::nullopt,
+                    volume ? "keeps no volume points (convert with --volume-points to keep them)"
+                           : "keeps no points (convert with --keep-points to keep them)");
+  say(volume ? "writing the volume points" : "writing the points");
   const auto started = std::chrono::steady_clock::now();
+  const std::vector<std::string> names = keptValueNames(reader, kind);
+  std::vector<std::vector<uint32_t>> valuesOf;
+  for (const std::string& name : names) valuesOf.push_back(valuesChunks(reader, name));
+  const std::vector<bool> subsample = subsampleChunks(reader);
   // Double positions: float would round them more coarsely than the file keeps them.
-  writeAs(outputs, o.points, [&](const std::filesystem::path& staged) {
-    PlyPointWriter ply(staged, kept.points, kept.normals, kept.colors, {.doublePositions = true});
-    forEachKeptPoints(reader, [&](const PointCloud& points) { ply.write(points); });
+  writeAs(outputs, path, [&](const std::filesystem::path& staged) {
+    PlyPointWriter ply(staged, kept.points, kept.normals, kept.colors,
+                       {.doublePositions = true, .extraNames = names});
+    for (const ChunkInfo& c : reader.chunks()) {
+      if (c.kind != kind || subsample[c.id]) continue;
+      PointCloud points = decodeKeptPoints(reader, c.id);
+      points.extraNames = names;
+      points.extras.assign(points.size() * names.size(), std::nan(""));
+      for (size_t k = 0; k < names.size(); ++k) {
+        if (valuesOf[k][c.id] == kNoParent) continue;
+        const PointCloud values = decodeKeptPoints(reader, c.id, valuesOf[k][c.id]);
+        for (size_t i = 0; i < points.size(); ++i)
+          points.extras[i * names.size() + k] = values.extras[i];
+      }
+      ply.write(points);
+    }
     ply.commit();
   });
-  summary["points"] = {{"path", o.points},      {"points", kept.points},
-                       {"chunks", kept.chunks}, {"normals", kept.normals},
-                       {"colors", kept.colors}, {"seconds", secondsSince(started)}};
+  summary[volume ? "volume_points" : "points"] = {
+      {"path", path},           {"points", kept.points},
+      {"chunks", kept.chunks},  {"normals", kept.normals},
+      {"colors", kept.colors},  {"values", names},
+      {"seconds", secondsSince(started)}};
 }
 
 void writeMesh(const Reader& reader, const SurfaceModel& surface, bool doubles, const Options& o,
@@ -200,8 +226,11 @@ void writeTileset(const Reader& reader, const Options& o, OutputDirectory& out,
 }
 
 int run(const Options& o) {
-  if (o.mesh.empty() && o.vdb.empty() && o.points.empty() && o.tiles.empty())
-    throw UsageError("give --mesh OUT.ply, --tiles OUT_DIR, --vdb OUT.vdb or --points OUT.ply");
+  if (o.mesh.empty() && o.vdb.empty() && o.points.empty() && o.tiles.empty() &&
+      o.volumePoints.empty())
+    throw UsageError(
+        "give --mesh OUT.ply, --tiles OUT_DIR, --vdb OUT.vdb, --points OUT.ply or "
+        "--volume-points OUT.ply");
   if (!(o.band >= 1.0 && o.band <= 64.0)) throw UsageError("--band must be 1 to 64");
   if ((o.level || o.maxError || o.noMeshopt) && o.mesh.empty())
     throw UsageError("--level, --max-error and --no-meshopt shape the --mesh output: give --mesh");
@@ -223,7 +252,9 @@ int run(const Options& o) {
     tiles.emplace(o.tiles, "--tiles", o.force);
     writeTileset(reader, o, *tiles, summary);
   }
-  if (!o.points.empty()) writePoints(reader, o, outputs, summary);
+  if (!o.points.empty()) writePoints(reader, kPointsKind, o.points, outputs, summary);
+  if (!o.volumePoints.empty())
+    writePoints(reader, kVolumePointsKind, o.volumePoints, outputs, summary);
   if (!o.mesh.empty() || !o.vdb.empty()) {
     say("reading the surface of " + o.file);
     // The finest surface, and for --level the cut at that level (the leaves above it and the
@@ -304,13 +335,17 @@ int print(const nlohmann::json& summary, const Options& o) {
           withSeparators(l["triangles"].get<uint64_t>()), byteSize(l["bytes"].get<uint64_t>()),
           l["geometric_error"].get<double>(), l["simplified"].get<double>());
   }
-  if (summary.contains("points")) {
-    const auto& p = summary["points"];
-    fmt::print("{}: {} points from {} chunks{}{} in {:.2f} s\n", o.points,
+  for (const char* key : {"points", "volume_points"}) {
+    if (!summary.contains(key)) continue;
+    const auto& p = summary[key];
+    std::string values;
+    for (const auto& name : p["values"]) values += ", " + name.get<std::string>();
+    fmt::print("{}: {} {} from {} chunks{}{}{} in {:.2f} s\n", p["path"].get<std::string>(),
                withSeparators(p["points"].get<uint64_t>()),
+               std::string(key) == "points" ? "points" : "volume points",
                withSeparators(p["chunks"].get<uint64_t>()),
                p["normals"].get<bool>() ? ", with normals" : "",
-               p["colors"].get<bool>() ? ", with colors" : "", p["seconds"].get<double>());
+               p["colors"].get<bool>() ? ", with colors" : "", values, p["seconds"].get<double>());
   }
   if (summary.contains("vdb")) {
     const auto& v = summary["vdb"];
@@ -354,8 +389,11 @@ void addExportCommand(CLI::App& app, int& exitCode) {
                 "OpenVDB narrow-band level set (float grid \"surface\"), voxels the finest "
                 "leaves' size (not in builds without OpenVDB)");
   c->add_option("--points", o->points,
-                "The original points (binary PLY with their normals and colors), when the file "
-                "keeps them (iso convert --keep-points)");
+                "The original points (binary PLY with their normals, colors and kept values), "
+                "when the file keeps them (iso convert --keep-points [--keep-scalar NAME])");
+  c->add_option("--volume-points", o->volumePoints,
+                "The volume points with their values (binary PLY), when the file keeps them (iso "
+                "convert --volume-points)");
   c->add_option("--band", o->band, "Half width of the --vdb narrow band, in voxels")
       ->capture_default_str();
   c->add_flag("-f,--force", o->force, "Replace output files that exist");

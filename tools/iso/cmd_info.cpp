@@ -24,6 +24,8 @@ struct Summary {
   std::map<int, LevelSummary> levels;  // of the surface (and other non-points) chunks
   LevelSummary kept;                   // the points chunks: the original points
   LevelSummary subsamples;             // the points chunks that are subsamples of others
+  LevelSummary values;                 // values chunks (their points: the values)
+  LevelSummary volume;                 // volume points chunks
 };
 
 // Point counts summed, stopping at 2^64 - 1: a file's surface and points chunks keep these sums
@@ -39,10 +41,14 @@ Summary summarize(const Reader& reader) {
     s.storedBytes += c.storedSize;
     s.rawBytes += c.rawSize;
     ++s.codecs[std::string(codecName(c.codec))];
-    const bool points = c.kind == static_cast<uint8_t>(ChunkKind::Points);
-    if (c.parent == kNoParent && !points) addPoints(s.points, c.pointCount);  // roots: all once
-    LevelSummary& level =
-        points ? (subsample[c.id] ? s.subsamples : s.kept) : s.levels[c.level];
+    const bool points = c.kind == kPointsKind;
+    const bool values = c.kind == kValuesKind, volume = c.kind == kVolumePointsKind;
+    if (c.parent == kNoParent && !points && !values && !volume)
+      addPoints(s.points, c.pointCount);  // roots: all once
+    LevelSummary& level = points   ? (subsample[c.id] ? s.subsamples : s.kept)
+                          : values ? s.values
+                          : volume ? s.volume
+                                   : s.levels[c.level];
     ++level.chunks;
     level.storedBytes += c.storedSize;
     level.rawBytes += c.rawSize;
@@ -108,6 +114,12 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
       {"subsample_chunks", s.subsamples.chunks},
       {"subsample_points", s.subsamples.points},
       {"subsample_stored_bytes", s.subsamples.storedBytes}};
+  j["values"] = {{"chunks", s.values.chunks},
+                 {"values", s.values.points},
+                 {"stored_bytes", s.values.storedBytes}};
+  j["volume_points"] = {{"chunks", s.volume.chunks},
+                        {"points", s.volume.points},
+                        {"stored_bytes", s.volume.storedBytes}};
   j["levels"] = nlohmann::json::array();
   for (const auto& [level, l] : s.levels)
     j["levels"].push_back({{"level", level},
@@ -180,6 +192,14 @@ void printInfo(const Reader& reader, bool withChunks) {
     fmt::print("{:<12}{} of them again in {} subsample chunk{}, {} stored\n", "",
                withSeparators(s.subsamples.points), withSeparators(s.subsamples.chunks),
                s.subsamples.chunks == 1 ? "" : "s", byteSize(s.subsamples.storedBytes));
+  if (s.volume.chunks > 0)
+    fmt::print("{:<12}{} volume points in {} chunk{}, {} stored\n", "volume",
+               withSeparators(s.volume.points), withSeparators(s.volume.chunks),
+               s.volume.chunks == 1 ? "" : "s", byteSize(s.volume.storedBytes));
+  if (s.values.chunks > 0)
+    fmt::print("{:<12}{} point values in {} chunk{}, {} stored\n", "values",
+               withSeparators(s.values.points), withSeparators(s.values.chunks),
+               s.values.chunks == 1 ? "" : "s", byteSize(s.values.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (const nlohmann::json crs = coordinateSystemIn(metadata); !crs.is_null())
     fmt::print("{:<12}{}\n", "crs", describeCoordinateSystem(crs));

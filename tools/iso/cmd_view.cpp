@@ -8,8 +8,12 @@
 #include <thread>
 
 #include "iso/error.h"
+#include "iso/points.h"
+#include "iso/reader.h"
 #include "pipeline/base/files.h"
 #include "pipeline/io/image.h"
+#include "pipeline/output/keep_points.h"
+#include "tools/iso/inputs.h"
 #include "tools/iso/commands.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
@@ -168,39 +172,61 @@ std::vector<double> parseIors(const ViewArgs& a) {
   return iors;
 }
 
-// --volume-points FILE [--volume NAME]: the file's points and the scalar NAME of each (a PLY
-// vertex property, or LAS/LAZ/E57 intensity); without --volume, its one scalar.
+// --volume-points FILE [--volume NAME]: the file's points and the scalar NAME of each (a PLY or
+// PCD property, a named text column, LAS/LAZ intensity, classification, ...); without --volume,
+// its one scalar. Without --volume-points, --volume NAME: the volume points an .iso input keeps
+// with values NAME (iso convert --volume-points).
 void readVolumePoints(const ViewArgs& a, viewer::PssViewOptions& pss) {
+  if (a.volumePoints.empty()) {
+    std::string all;
+    for (const std::string& file : a.files) {
+      if (std::filesystem::path(file).extension() != ".iso" && !isIsoFile(file)) continue;
+      const Reader reader = Reader::open(file);
+      const std::vector<std::string> names = keptValueNames(reader, kVolumePointsKind);
+      for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+      if (std::find(names.begin(), names.end(), a.volume) == names.end()) continue;
+      forEachKeptPoints(
+          reader,
+          [&](const PointCloud& points) {
+            pss.volumePositions.insert(pss.volumePositions.end(), points.positions.begin(),
+                                       points.positions.end());
+            for (double v : points.extras) pss.volumeValues.push_back(float(v));
+          },
+          a.volume, kVolumePointsKind);
+    }
+    if (pss.volumePositions.empty())
+      throw UsageError("--volume " + a.volume + ": no .iso input keeps volume points of that " +
+                       "value (" + (all.empty() ? "they keep none" : "they keep: " + all) +
+                       "); give a point file of them with --volume-points");
+    return;
+  }
   ReadOptions options;
   options.keepExtras = true;
-  const PointCloud cloud = readPointFile(a.volumePoints, options);
-  const auto& names = cloud.extraNames;
-  std::string all;
-  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+  const std::unique_ptr<PointReader> reader = openPointFile(a.volumePoints, options);
+  const auto& names = reader->info().extraNames;
   if (names.empty())
     throw FileError(a.volumePoints, std::nullopt,
-                    "has no scalar for a volume (a PLY vertex property, or LAS intensity)");
+                    "has no scalar for a volume (a PLY or PCD property, a named text column, or "
+                    "LAS intensity)");
+  std::string all;
+  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
   if (a.volume.empty() && names.size() > 1)
     throw UsageError("--volume-points " + a.volumePoints + " has several scalars (" + all +
                      "): name one with --volume");
-  const std::string name = a.volume.empty() ? names[0] : a.volume;
-  const auto at = std::find(names.begin(), names.end(), name);
-  if (at == names.end())
-    throw FileError(a.volumePoints, std::nullopt,
-                    "has no scalar '" + name + "' (it has: " + all + ")");
-  const size_t k = size_t(at - names.begin());
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    pss.volumePositions.push_back(cloud.positions[i]);
-    pss.volumeValues.push_back(cloud.extras[i * names.size() + k]);
+  const size_t k = a.volume.empty() ? 0 : extraIndex(reader->info(), a.volume);
+  PointCloud batch;
+  while (reader->read(batch, 1u << 20) > 0) {
+    for (size_t i = 0; i < batch.size(); ++i) {
+      pss.volumePositions.push_back(batch.positions[i]);
+      pss.volumeValues.push_back(float(batch.extras[i * names.size() + k]));
+    }
+    batch.clear();
   }
 }
 
 // --draw pss: the points (an .iso file's kept points, or point files) as a point set surface,
 // all of them, ray traced on the CPU reference, the GPU, or timed.
 int viewPss(ViewArgs& a) {
-  if (!a.cpu && !a.headless && !a.bench)
-    throw UsageError("--draw pss draws with --headless, --cpu or --bench (its window is not "
-                     "built yet)");
   viewer::PssViewOptions pss;
   pss.exact = a.pss == "exact";
   if (!a.ior.empty()) {
@@ -209,15 +235,14 @@ int viewPss(ViewArgs& a) {
   } else {
     pss.iors = glm::vec3(a.view.scene.material.ior);
   }
-  if (!a.volume.empty() && a.volumePoints.empty())
-    throw UsageError("--volume names a scalar of the --volume-points file");
-  if (!a.volumePoints.empty()) readVolumePoints(a, pss);
+  if (!a.volume.empty() || !a.volumePoints.empty()) readVolumePoints(a, pss);
   ImageFiles files = openImageFiles({a.files.begin(), a.files.end()}, hostPointBudget());
   viewer::ImageInputs inputs = imageInputs(readImagePoints(files), UINT64_MAX);
   colorPoints(a, inputs);
   if (a.cpu) return viewer::viewPssCpu(a.view, pss, inputs);
   if (a.headless) return viewer::viewPssHeadless(a.view, pss, inputs);
-  return viewer::viewPssBench(a.view, pss, inputs);
+  if (a.bench) return viewer::viewPssBench(a.view, pss, inputs);
+  return viewer::viewPssWindow(a.view, pss, inputs);
 }
 
 viewer::Vec3d parseUp(const std::string& text) {
@@ -412,7 +437,9 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "intensity) drawn as a volume inside the surface (the scene file's \"volume\": "
                 "transfer function, smoothing, step)");
   c->add_option("--volume", a->volume,
-                "--draw pss: the scalar of --volume-points to draw (default: its only one)");
+                "--draw pss: the scalar of --volume-points to draw (default: its only one); "
+                "without --volume-points, the volume points an .iso input keeps with values of "
+                "this name (iso convert --volume-points FILE --keep-scalar NAME)");
   c->add_option("--layers", a->layers,
                 "--draw image: surface layers peeled and blended front to back (transparency; "
                 "default 1)")

@@ -72,15 +72,42 @@ std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& 
   return files;
 }
 
+bool everyFileHas(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                  const std::string& name) {
+  ReadOptions withExtras = options;
+  withExtras.keepExtras = true;
+  for (const auto& file : files) {
+    const auto names = openPointFile(file, withExtras)->info().extraNames;
+    if (std::find(names.begin(), names.end(), name) == names.end()) return false;
+  }
+  return true;
+}
+
+size_t extraIndex(const PointFileInfo& info, const std::string& name) {
+  const auto& names = info.extraNames;
+  const auto at = std::find(names.begin(), names.end(), name);
+  if (at != names.end()) return size_t(at - names.begin());
+  std::string all;
+  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+  throw FileError(info.path, std::nullopt,
+                  "has no scalar '" + name + "' (" +
+                      (names.empty() ? std::string("it has none") : "it has: " + all) + ")");
+}
+
 ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
                        ProgressReporter* progress,
                        const std::function<void(bool normals, bool colors)>& begin,
-                       const std::function<void(const PointCloud&)>& add) {
+                       const std::function<void(const PointCloud&)>& add,
+                       const std::string& scalar) {
   const auto started = std::chrono::steady_clock::now();
   std::vector<std::unique_ptr<PointReader>> readers;
+  std::vector<size_t> scalarAt;  // per file: the index of `scalar` among its extras
   bool normals = true, colors = true;
+  ReadOptions withExtras = options;
+  withExtras.keepExtras = options.keepExtras || !scalar.empty();
   for (const auto& file : files) {
-    readers.push_back(openPointFile(file, options));
+    readers.push_back(openPointFile(file, withExtras));
+    if (!scalar.empty()) scalarAt.push_back(extraIndex(readers.back()->info(), scalar));
     normals = normals && readers.back()->info().hasNormals;
     colors = colors && readers.back()->info().hasColors;
   }
@@ -114,6 +141,12 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
       progressAdvance(batch.size());
       if (!normals) batch.normals.clear();
       if (!colors) batch.colors.clear();
+      if (!scalar.empty()) {
+        const size_t k = scalarAt[size_t(&reader - readers.data())], n = batch.extraCount();
+        for (size_t i = 0; i < batch.size(); ++i) batch.extras[i] = batch.extras[i * n + k];
+        batch.extras.resize(batch.size());
+        batch.extraNames = {scalar};
+      }
       points += batch.size();
       add(batch);
     }
@@ -135,7 +168,7 @@ ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const Re
 }
 
 LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
-                        ProgressReporter* progress) {
+                        ProgressReporter* progress, const std::string& scalar) {
   LoadedPoints loaded;
   PointCloud& cloud = loaded.cloud;
   static_cast<ReadSummary&>(loaded) = readPoints(
@@ -147,7 +180,12 @@ LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const R
         append(cloud.positions, batch.positions);
         append(cloud.normals, batch.normals);
         append(cloud.colors, batch.colors);
-      });
+        if (!scalar.empty()) {
+          cloud.extraNames = {scalar};
+          append(cloud.extras, batch.extras);
+        }
+      },
+      scalar);
   return loaded;
 }
 

@@ -32,14 +32,25 @@ std::vector<std::filesystem::path> expandInputs(const std::vector<std::string>& 
 
 // Read every file in order: `begin` learns whether the points carry normals and colors (kept only
 // when every file has them), then `add` gets them in batches. Shows progress in points read when
-// `progress` is set.
+// `progress` is set. With `scalar`, the batches carry that one extra (ReadOptions::keepExtras) and
+// nothing else; a file without it is refused before any is read (iso::FileError naming the file
+// and the scalars it has).
 ReadSummary readPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
                        ProgressReporter* progress,
                        const std::function<void(bool normals, bool colors)>& begin,
-                       const std::function<void(const PointCloud&)>& add);
+                       const std::function<void(const PointCloud&)>& add,
+                       const std::string& scalar = "");
+
+// Whether every file has the extra `name` (opening each, reading no point).
+bool everyFileHas(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
+                  const std::string& name);
+
+// The index of extra `name` among a file's extras; throws iso::FileError naming the file and the
+// scalars it has when it has none of that name.
+size_t extraIndex(const PointFileInfo& info, const std::string& name);
 
 // Read every file into one cloud.
 LoadedPoints loadPoints(const std::vector<std::filesystem::path>& files, const ReadOptions& options,
-                        ProgressReporter* progress = nullptr);
+                        ProgressReporter* progress = nullptr, const std::string& scalar = "");
 
 }  // namespace iso::cli

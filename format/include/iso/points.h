@@ -70,7 +70,7 @@ std::vector<uint32_t> decodedPointOrder(std::span<const std::byte> data, const P
 
 // Values chunks (since 2.1; specs/iso-format.md, "Values chunks"): one scalar per point of a points
 // or volume points chunk, in the order its data gives the points, as 16-bit codes:
-// value = offset + code · step, code 65535 (kNoValue) = no value.
+// value = offset + code · step; with `missing`, code 65535 (kNoValue) = no value.
 inline constexpr uint32_t kValuesHeaderSize = 64;
 inline constexpr size_t kMaxValueNameBytes = 32;
 inline constexpr uint16_t kNoValue = 65535;
@@ -78,13 +78,15 @@ struct PointValues {
   uint32_t pointsChunk = 0;  // the chunk id whose points these values belong to
   std::string name;          // 1 to 32 bytes of UTF-8 without a zero byte
   double offset = 0.0, step = 1.0;
+  bool missing = false;  // some points have no value: code kNoValue says which
   std::vector<uint16_t> codes;
   size_t size() const { return codes.size(); }
-  double value(size_t i) const;  // NaN for kNoValue
+  double value(size_t i) const;  // NaN for kNoValue when `missing`
 };
-// The codes of `values` (non-finite: kNoValue): offset = the smallest finite value; step = 1 when
-// every finite value is an integer and they span at most 65534 (kept exactly), else the span /
-// 65534 (every value within step / 2). Throws iso::InternalError for a name the format does not
+// The codes of `values` (non-finite: kNoValue, `missing`): offset = the smallest finite value;
+// with c = 65535 codes for values (65534 when some are missing), step = 1 when every finite value
+// is an integer and they span less than c (kept exactly), else the span / (c - 1) (every value
+// within step / 2). Throws iso::InternalError for a name the format does not
 // allow or values whose span overflows.
 PointValues quantizeValues(std::string name, uint32_t pointsChunk, std::span<const double> values);
 std::vector<std::byte> encodeValuesChunk(const PointValues& values);
