@@ -1,7 +1,7 @@
 // Ray tracing point set surfaces (pss.h; specs/viewer.md, "Point set surfaces"): a ray's color
 // from its hits, lit by Phong with shadow rays through the grid (self-shadowing included), and
 // followed through transparent surfaces along the refracted ray, each color channel with its own
-// index of refraction (dispersion). Compiled as GLSL and as C++ after pss.h; the includer also
+// index of refraction (dispersion). Compiled as GLSL and as C++ after pss.h and pss_volume.h; the includer also
 // provides:
 //   uint pssLightCount(); vec4 pssLight(uint l);   // position, intensity
 //   vec4 pssMaterial();   // diffuse, specular, shininess, transparency
@@ -11,15 +11,7 @@
 //   vec3 pssBackground();
 //   bool pssExact();      // the exact mode for camera and refracted rays (shadow rays: fast)
 //   bool pssShadows();    // shadow rays
-// and for volumes from scattered data (inside the surface, its material boundary):
-//   bool pssVolume();            // whether there is one
-//   vec4 pssVolumeSettings();    // smoothing r, reach (points farther do not count), step, 0
-//   vec3 pssVolumeLo(); float pssVolumeSide(); ivec3 pssVolumeDims();  // its grid
-//   uint pssVolumeStart(uint cell); uint pssVolumeAt(uint k);          // a cell's points
-//   vec4 pssVolumePoint(uint i);                                       // position, value
-//   uint pssTransferCount();     // the transfer function's control points, by value
-//   vec4 pssTransfer(uint k);    // (value, extinction per unit length, 0, 0)
-//   vec4 pssTransferColor(uint k);  // emitted color (linear)
+//   bool pssVolume();     // whether there is a volume inside (pss_volume.h, included before)
 
 // The light reaching p (normal n facing the viewer, seen along -view) from the lights, Phong,
 // each light's share cut by a shadow ray.
@@ -43,71 +35,6 @@ vec3 pssShade(vec3 p, vec3 n, vec3 view, vec3 base, float scale) {
     c += light.w * (material.x * diffuse * base + material.y * specular);
   }
   return c;
-}
-
-// The scattered data's value at x: the Gaussian-weighted mean of the values of the points within
-// reach (the paper's equation 3, smoothing r); negative where none is.
-float pssVolumeValue(vec3 x) {
-  vec4 settings = pssVolumeSettings();
-  float reach = settings.y, inv = 0.5f / (settings.x * settings.x);
-  ivec3 dims = pssVolumeDims();
-  ivec3 a = clamp(ivec3(floor((x - reach - pssVolumeLo()) / pssVolumeSide())), ivec3(0), dims - 1);
-  ivec3 b = clamp(ivec3(floor((x + reach - pssVolumeLo()) / pssVolumeSide())), ivec3(0), dims - 1);
-  float sum = 0.0f, weights = 0.0f;
-  for (int cz = a.z; cz <= b.z; ++cz)
-    for (int cy = a.y; cy <= b.y; ++cy)
-      for (int cx = a.x; cx <= b.x; ++cx) {
-        uint c = (uint(cz) * uint(dims.y) + uint(cy)) * uint(dims.x) + uint(cx);
-        uint end = pssVolumeStart(c + 1u);
-        for (uint k = pssVolumeStart(c); k < end; ++k) {
-          vec4 p = pssVolumePoint(pssVolumeAt(k));
-          vec3 r = vec3(p) - x;
-          float d = dot(r, r);
-          if (d > reach * reach) continue;
-          float w = exp(-d * inv);
-          sum += w * p.w;
-          weights += w;
-        }
-      }
-  return weights > 0.0f ? sum / weights : -1.0f;
-}
-
-// The transfer function at a value: (emitted color, extinction), linear between its control
-// points, a value beyond them taking the nearer end's.
-vec4 pssTransferAt(float value) {
-  uint count = pssTransferCount();
-  vec4 first = pssTransfer(0u);
-  if (value <= first.x) return vec4(vec3(pssTransferColor(0u)), first.y);
-  for (uint k = 1u; k < count; ++k) {
-    vec4 right = pssTransfer(k);
-    if (value <= right.x) {
-      vec4 left = pssTransfer(k - 1u);
-      float f = right.x > left.x ? (value - left.x) / (right.x - left.x) : 1.0f;
-      return vec4(mix(vec3(pssTransferColor(k - 1u)), vec3(pssTransferColor(k)), f),
-                  mix(left.y, right.y, f));
-    }
-  }
-  return vec4(vec3(pssTransferColor(count - 1u)), pssTransfer(count - 1u).y);
-}
-
-// Emission and absorption along o + t d for t in [0, span] (midpoint samples about the step
-// apart): the light emitted towards o, and what is let through (transmittance) in `through`.
-vec3 pssIntegrate(vec3 o, vec3 d, float span, ISO_INOUT(float) through) {
-  float step = pssVolumeSettings().z;
-  int n = max(int(ceil(span / step)), 1);
-  float dt = span / float(n);
-  vec3 color = vec3(0.0f);
-  float transmittance = 1.0f;
-  for (int i = 0; i < n; ++i) {
-    float value = pssVolumeValue(o + (float(i) + 0.5f) * dt * d);
-    if (value < 0.0f) continue;  // no data here: empty
-    vec4 tf = pssTransferAt(value);
-    float a = exp(-tf.w * dt);
-    color += transmittance * (1.0f - a) * vec3(tf);
-    transmittance *= a;
-  }
-  through = transmittance;
-  return color;
 }
 
 // The surface's first hit along o + t d (t > tMin) and the ray leaving it into the object or

@@ -210,7 +210,16 @@ vec3 radiance(vec3 o, vec3 d, float start, ISO_INOUT(uint) rng, ISO_INOUT(uvec3)
           stackWeight[count] = vec4(weight * mirror, packRayState(hit.from, false));
           count += 1u;
         }
-      } else if (bounce && count < kRayStack) {
+      } else {
+        // Inside a transparent object: a volume of scattered data there (pss_volume.h) emits and
+        // absorbs along the way.
+        if (pssCompiled() && (P.options.x & kOptionPss) != 0u && pssVolume()) {
+          float through = 1.0f;
+          color += weight * pssIntegrate(origin, direction, hit.t, through);
+          weight *= through;
+        }
+      }
+      if (inMedium && bounce && count < kRayStack) {
         // Leaving a transparent object: absorption along the way, then out or totally reflected.
         vec3 absorption = vec3(P.medium.y, P.medium.z, P.medium.w);
         vec3 r = refract(direction, n, eta);

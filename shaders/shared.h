@@ -100,6 +100,7 @@ ISO_CONST uint kOptionTileCones = 8192u;       // camera rays start where their 
 ISO_CONST uint kOptionSplats = 16384u;         // rays also meet the kept points as splats
 ISO_CONST uint kOptionNoSurface = 32768u;      // rays do not meet the surface (splats alone)
 ISO_CONST uint kOptionGround = 65536u;         // rays meet the ground plane (FrameParams.ground)
+ISO_CONST uint kOptionPss = 131072u;           // rays meet a point set surface (trace.h, PssParams)
 
 // Splats (shaders/splats.h, specs/viewer.md "Splats"). A points chunk on the GPU ("splat blob"):
 // word 0 the point count n, 1 the blob's words, 2 the levels of its box tree, 3 the word of point
@@ -258,6 +259,7 @@ struct ImageParams {
 // Point set surfaces (shaders/pss.h, pss_trace.h, pss.comp.glsl): a picture's camera, grid,
 // material and lights. Positions are relative to the scene's origin.
 ISO_CONST uint kPssMaxLights = 8u;
+ISO_CONST uint kPssStorageBindings = 11u;  // a surface's and its volume's buffers (pss_buffers.h)
 ISO_CONST uint kPssMaxTransfer = 8u;  // a volume's transfer function's control points at most
 ISO_CONST uint kPssExact = 1u;    // image.z bits: camera and refracted rays in the exact mode
 ISO_CONST uint kPssShadows = 2u;  // shadow rays

@@ -212,8 +212,9 @@ bool onGround(Hit hit) {
          hit.normal.y == P.ground.y && hit.normal.z == P.ground.z;
 }
 
-// The first hit of a ray on what the frame draws: the surface (intersect, rays.h), the splats, or
-// the nearer of the two; then the ground plane when it is nearer (seen from above only).
+// The first hit of a ray on what the frame draws: the surface (intersect, rays.h), the splats, a
+// point set surface (pss.h), the nearest of them; then the ground plane when it is nearer (seen
+// from above only).
 bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict, float distance,
                 bool request, ISO_INOUT(Hit) hit) {
   bool found = false;
@@ -224,6 +225,25 @@ bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict,
     Hit splat;
     if (intersectSplats(o, d, tMin, found ? hit.t : tMax, distance, request, splat)) {
       hit = splat;
+      found = true;
+    }
+  }
+  // A point set surface: its normals point out of it, so a ray meets it from outside where it
+  // runs against its normal.
+  if (pssCompiled() && (P.options.x & kOptionPss) != 0u) {
+    float t = 0.0f;
+    vec3 n = vec3(0.0f);
+    uint point = 0u;
+    int projections = 0;
+    // (Rays that leave a surface skip pssSkip(): neighbouring polynomials of one surface differ
+    // by more than the tracer's offset.)
+    if (pssHit(o, d, max(tMin, distance > 0.0f ? pssSkip() : 0.0f), found ? hit.t : tMax,
+               pssExact(), t, n, point, projections)) {
+      hit.t = t;
+      hit.from = dot(n, d) < 0.0f ? 1.0f : -1.0f;
+      hit.normal = n;
+      hit.color = pssColor(point);
+      hit.occlusion = 1.0f;
       found = true;
     }
   }

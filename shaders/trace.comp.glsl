@@ -37,6 +37,12 @@ layout(std430, binding = 9) buffer Pending { uint pending[]; };
 // The caustic map (shared.h, kCausticCells), summed by the photon pass (kPass 5) in the frames
 // that recompute it, read by shading.
 layout(std430, binding = 10) buffer Caustics { uint causticMap[]; };
+// A point set surface in the scene (kOptionPss; seed 001): its parameters (binding 11, the
+// grid's, the fit's and the volume's parts of PssParams, in frame units) and its buffers and its
+// volume's (bindings 12 to 22, pss_buffers.h).
+layout(std430, binding = 11) readonly buffer PssObject { PssParams Q; };
+#define ISO_PSS_BINDING 12
+#include "pss_buffers.h"
 // The page pool's buffers, by device address (no descriptor, so no 128 MiB range limit). A blob
 // lies in one buffer: its words are read from its base address.
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PoolWords {
@@ -103,6 +109,9 @@ layout(constant_id = 3) const uint kPass = 0u;
 // without the splat code (compiled in, it cost lavapipe a third of its speed on the surface).
 layout(constant_id = 4) const bool kSplats = false;
 bool splatsCompiled() { return kSplats; }
+// Whether the kernel meets a point set surface at all (kOptionPss), like kSplats.
+layout(constant_id = 5) const bool kPss = false;
+bool pssCompiled() { return kPss; }
 float lodPixels() { return kPass == 5u ? -1.0f : P.lod.x; }
 
 #include "trace.h"

@@ -24,6 +24,8 @@
 //   bool splatsCompiled();               whether the splat code may run (on the GPU a
 //                                        specialization constant; kOptionSplats says whether
 //                                        it does)
+//   bool pssCompiled();                  the same for a point set surface (kOptionPss), with
+//                                        the accessors of pss.h and pss_volume.h (PssParams Q)
 // and the macros ISO_INOUT(T) (GLSL `inout T`, C++ `T&`) and ISO_PRECISE (GLSL `precise`: no
 // reassociation; C++ keeps the written order anyway).
 //
@@ -34,7 +36,9 @@
 //   records.h  chunks in the page pool, node records, corner records
 //   cell.h     the surface inside one cell: the cubic along the ray and its first root
 //   rays.h     rays through the octree to the first crossing, and the hit's attributes
-//   splats.h   the kept points as blended disks; the first hit on surface, splats, ground
+//   pss.h      a point set surface (seed 001) and pss_volume.h the volume inside it
+//   splats.h   the kept points as blended disks; the first hit on surface, splats, point set
+//              surface, ground
 //   shade.h    shading, shadows, reflections, refractions, one pixel
 //   caustics.h photons from the lights through specular bounces into the caustic map
 //   cone.h     camera rays a tile at a time: where the tile's rays start
@@ -42,6 +46,8 @@
 #include "records.h"
 #include "cell.h"
 #include "rays.h"
+#include "pss.h"
+#include "pss_volume.h"
 #include "splats.h"
 #include "shade.h"
 #include "caustics.h"

@@ -1,4 +1,5 @@
 // `iso view` as a user runs it: pictures, the window under Xvfb, bad files and bad options.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -7,6 +8,8 @@
 #include <set>
 
 #include "iso/reader.h"
+#include "pipeline/io/ply.h"
+#include "pipeline/io/readers.h"
 #include "tests/cli_support.h"
 #include "viewer/image.h"
 
@@ -556,6 +559,86 @@ TEST(CliView, scatteredValuesDrawAsAVolumeInsideAPointSetSurface) {
             " --volume-points " + quoted(blob) + " --volume value");
   EXPECT_NE(run.exitCode, 0);
   EXPECT_NE(run.err.find("increasing value"), std::string::npos) << run.err;
+}
+
+// --with-pss: a point set surface among an .iso file's objects, in one tracer (shaders/trace.h):
+// a second kitten as a glass point set surface with scattered values glowing inside, beside the
+// kitten's ISO surface and its kept points as splats (--draw both). The GPU draws what the CPU
+// reference draws; the point set surface is where its points are, and its volume shows.
+TEST(CliView, aPointSetSurfaceAVolumeAnIsoSurfaceAndSplatsMixInOneScene) {
+  TempDir dir;
+  const auto data = std::filesystem::path(ISO_TEST_DATA_DIR);
+  const PointCloud kitten = readPointFile(data / "kitten_normals.xyz");
+  double lo = 1e30, hi = -1e30;
+  for (const auto& p : kitten.positions) {
+    lo = std::min(lo, p.x);
+    hi = std::max(hi, p.x);
+  }
+  const double shift = 1.1 * (hi - lo);  // the second kitten to the right of the first
+  PointCloud second = kitten;
+  for (auto& p : second.positions) p.x += shift;
+  writePly(dir / "second.ply", second);
+  {
+    std::ofstream out(dir / "blob.ply");
+    out << "ply\nformat ascii 1.0\nelement vertex 4913\nproperty float x\nproperty float y\n"
+           "property float z\nproperty float value\nend_header\n";
+    for (int i = -8; i <= 8; ++i)
+      for (int j = -8; j <= 8; ++j)
+        for (int k = -8; k <= 8; ++k) {
+          const double x = 0.035 * i, y = 0.045 * j, z = 0.03 * k;
+          out << x + shift << ' ' << y << ' ' << z << ' '
+              << std::exp(-(x * x + y * y + z * z) / 0.05) << "\n";
+        }
+  }
+  const auto kept = dir / "kept.iso";
+  ASSERT_EQ(iso("convert --quiet --keep-points " + quoted(data / "kitten_normals.xyz") + " -o " +
+                quoted(kept))
+                .exitCode,
+            0);
+  const auto scene = dir / "scene.json";
+  std::ofstream(scene) << R"({"volume": {"transfer": [[0, 0, 0, 1, 0], [1, 1, 0.5, 0, 12]]}})";
+  const std::string camera = fmt::format(" --camera {},0.15,2.2,{},0,0,0,1,0", shift / 2, shift / 2);
+  const std::string common = " --draw both --width 160 --height 96 --transparency 0.7 --ior 1.1" +
+                             camera + " --scene " + quoted(scene);
+  const std::string mixed =
+      " --with-pss " + quoted(dir / "second.ply") + " --volume-points " + quoted(dir / "blob.ply");
+  const auto cpu = dir / "cpu.png", gpu = dir / "gpu.png", alone = dir / "alone.png",
+             empty = dir / "empty.png";
+  CommandResult run = iso("view " + quoted(kept) + common + mixed + " --cpu --out " + quoted(cpu));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("a volume of 4913 points inside it"), std::string::npos) << run.out;
+  run = iso("view " + quoted(kept) + common + mixed + " --headless --out " + quoted(gpu));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  ASSERT_EQ(iso("view " + quoted(kept) + common + " --cpu --out " + quoted(alone)).exitCode, 0);
+  ASSERT_EQ(iso("view " + quoted(kept) + common + " --with-pss " + quoted(dir / "second.ply") +
+                " --cpu --out " + quoted(empty))
+                .exitCode,
+            0);
+  const auto a = expectPicture(cpu, 160, 96), b = expectPicture(gpu, 160, 96),
+             c = expectPicture(alone, 160, 96), d = expectPicture(empty, 160, 96);
+  size_t unlike = 0, left = 0, right = 0, leftChanged = 0, rightChanged = 0, redder = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    for (int k = 0; k < 24; k += 8)
+      if (std::abs(int(a[i] >> k & 255) - int(b[i] >> k & 255)) > 8) {
+        ++unlike;
+        break;
+      }
+    const bool isRight = i % 160 >= 80;
+    const bool changed = a[i] != c[i];
+    (isRight ? right : left) += 1;
+    (isRight ? rightChanged : leftChanged) += changed ? 1 : 0;
+    redder += (a[i] & 255) > (d[i] & 255) + 8 ? 1 : 0;  // the volume glows red and yellow
+  }
+  EXPECT_LT(double(unlike) / double(a.size()), 0.005) << unlike;
+  // The second kitten is on the right: most of what it changed is there.
+  EXPECT_GT(rightChanged, right / 10) << rightChanged;
+  EXPECT_GT(rightChanged, 3 * leftChanged) << leftChanged;
+  EXPECT_GT(redder, a.size() / 100) << redder;
+  // --with-pss goes into an .iso file's scene.
+  EXPECT_EQ(iso("view " + quoted(data / "kitten_normals.xyz") + " --cpu --out x.png --with-pss " +
+                quoted(dir / "second.ply"))
+                .exitCode,
+            2);
 }
 
 // iso eval --against-pss: the ISO surface against the point set surface of its kept points,

@@ -125,7 +125,8 @@ struct CpuRun {
 CpuRun runCpu(const GpuView& view, const gpu::FrameParams& params) {
   CpuRun run;
   const auto t0 = Clock::now();
-  const CpuPool pool = buildCpuPool(view.asset->reader, {}, view.scene.draw != Draw::Surface);
+  CpuPool pool = buildCpuPool(view.asset->reader, {}, view.scene.draw != Draw::Surface);
+  pool.pss = view.pss;
   run.loadSeconds = seconds(Clock::now() - t0);
   run.splatPoints = pool.splatPoints;
   run.splatBytes = pool.splatBytes;

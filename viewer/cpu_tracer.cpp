@@ -32,9 +32,15 @@ class Tracer {
   // `caustics`: the caustic map (read by shading, or summed into by photons: `photons`).
   Tracer(const CpuPool& pool, const FrameParams& params, const Environment* env,
          uint32_t* caustics = nullptr, bool photons = false)
-      : P(params), pool_(pool), env_(env), caustics_(caustics), photons_(photons) {}
+      : P(params),
+        Q(pool.pss ? pool.pss->params(params) : PssParams{}),
+        pool_(pool),
+        env_(env),
+        caustics_(caustics),
+        photons_(photons) {}
 
   FrameParams P;
+  PssParams Q;  // the point set surface's (pss_buffers.h), when the pool has one
 
   uint64_t blobBase(uint firstPage) { return uint64_t(firstPage) * kPageWords; }
   uint blobWord(uint64_t base, uint word) { return pool_.words[base + word]; }
@@ -47,6 +53,40 @@ class Tracer {
   bool floatDistances() const { return (P.options.x & kOptionFloatDistances) != 0u; }
   bool flatTraversal() const { return (P.options.x & kOptionFlatTraversal) != 0u; }
   static bool splatsCompiled() { return true; }
+  // The point set surface (pss.h, pss_volume.h), as shaders/pss_buffers.h reads it on the GPU.
+  bool pssCompiled() const { return pool_.pss != nullptr; }
+  const PssSurface& pssSurface() const { return *pool_.pss->surface; }
+  vec3 pssGridLo() const { return vec3(Q.gridLo); }
+  float pssGridSide() const { return Q.gridLo.w; }
+  ivec3 pssGridDims() const { return ivec3(Q.gridDims); }
+  uint pssPointStart(uint c) const { return pssSurface().grid().pointStart[c]; }
+  uint pssPointAt(uint k) const { return pssSurface().grid().points[k]; }
+  uint pssReachStart(uint c) const { return pssSurface().grid().reachStart[c]; }
+  uint pssReachAt(uint k) const { return pssSurface().grid().reach[k]; }
+  vec3 pssPosition(uint i) const { return pssSurface().positions()[i]; }
+  vec3 pssNormal(uint i) const { return pssSurface().normals()[i]; }
+  float pssH(uint i) const { return pssSurface().h()[i]; }
+  vec4 pssPatch(uint i, int part) const {
+    const PssPatch& p = pssSurface().patches()[i];
+    return part == 0 ? p.origin : part == 1 ? p.normal : part == 2 ? p.tangent : p.coefficients;
+  }
+  vec4 pssSettings() const { return Q.settings; }
+  vec3 pssColor(uint point) const {
+    return (Q.image.z & kPssColors) != 0u ? pool_.pss->colors[point] : vec3(Q.color);
+  }
+  bool pssExact() const { return (Q.image.z & kPssExact) != 0u; }
+  float pssSkip() const { return Q.eye.w; }
+  bool pssVolume() const { return Q.volumeDims.w != 0u; }
+  vec4 pssVolumeSettings() const { return Q.volumeSettings; }
+  vec3 pssVolumeLo() const { return vec3(Q.volumeLo); }
+  float pssVolumeSide() const { return Q.volumeLo.w; }
+  ivec3 pssVolumeDims() const { return ivec3(Q.volumeDims); }
+  uint pssVolumeStart(uint c) const { return pool_.pss->volume->start()[c]; }
+  uint pssVolumeAt(uint k) const { return pool_.pss->volume->order()[k]; }
+  vec4 pssVolumePoint(uint i) const { return pool_.pss->volume->points()[i]; }
+  uint pssTransferCount() const { return Q.volumeDims.w; }
+  vec4 pssTransfer(uint k) const { return Q.transfer[2u * k]; }
+  vec4 pssTransferColor(uint k) const { return Q.transfer[2u * k + 1u]; }
   float lodPixels() const { return photons_ ? -1.0f : P.lod.x; }
   uint causticWord(uint word) const { return caustics_ ? caustics_[word] : 0u; }
   void depositCaustic(uint word, uint value) {

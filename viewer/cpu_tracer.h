@@ -16,6 +16,7 @@
 #include "shaders/shared.h"
 #include "viewer/blob.h"
 #include "viewer/image.h"
+#include "viewer/pss.h"
 
 namespace iso::viewer {
 
@@ -29,6 +30,8 @@ struct CpuPool {
   uint32_t splatIndex = kNoParent;
   float splatRadius = 0.0f;
   uint64_t splatPoints = 0, splatBytes = 0;  // in the points chunks' splat blobs (subsamples too)
+  // A point set surface in the scene (kOptionPss), in the file's frame units; none: null.
+  const PssObject* pss = nullptr;
 };
 // Every surface chunk, or those `holds` accepts (the others are not resident: a ray that needs
 // one draws the coarser level, as the GPU does until it arrives). Throws iso::FileError for files

@@ -15,6 +15,8 @@ std::optional<Environment> environmentOf(const Scene& scene);
 
 struct GpuView {
   std::unique_ptr<Asset> asset;
+  std::shared_ptr<const PssObject> pssObject;  // ViewOptions::pss, kept for the renderer
+  const PssObject* pss = nullptr;
   Scene scene;
   std::optional<Environment> env;
   Gpu gpu;  // outlives what is made from it (members are destroyed in reverse order)

@@ -11,6 +11,7 @@
 #include <mutex>
 #include <vector>
 
+#include "iso/format.h"
 #include "viewer/point_image.h"
 #include "viewer/scene.h"
 #include "viewer/view.h"
@@ -74,6 +75,10 @@ int viewPssCpu(const ViewOptions& options, const PssViewOptions& pss, const Imag
 int viewPssHeadless(const ViewOptions& options, const PssViewOptions& pss,
                     const ImageInputs& inputs);
 int viewPssBench(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);
+// The points as a point set surface among the objects of an .iso file's scene (ViewOptions::pss,
+// `iso view FILE.iso --with-pss POINTS`), in its frame units (`frame`), with the volume inside.
+std::shared_ptr<const PssObject> pssObject(const ImageInputs& inputs, const PssViewOptions& pss,
+                                           const Scene& scene, const Frame& frame);
 // In a window (pss_window.cpp): traced when the view or the scene changes, smaller while the
 // camera moves.
 int viewPssWindow(const ViewOptions& options, const PssViewOptions& pss, const ImageInputs& inputs);

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "iso/check.h"
+#include "iso/error.h"
 
 namespace iso::viewer {
 namespace pss_shader {
@@ -73,6 +74,7 @@ class Env {
   vec4 pssTransferColor(uint k) const { return vec4(render->transfer[k].color, 0.0f); }
 
 #include "shaders/pss.h"
+#include "shaders/pss_volume.h"
 #include "shaders/pss_trace.h"
 
  private:
@@ -312,6 +314,39 @@ std::vector<glm::vec3> renderPss(const PssSurface& surface, const std::vector<gl
     }
   });
   return pixels;
+}
+
+void fillPssParams(gpu::PssParams& q, const PssSurface* surface, bool colors,
+                   const PssVolume* volume, const std::vector<PssTransferPoint>& transfer) {
+  if (transfer.size() > gpu::kPssMaxTransfer)
+    throw UsageError("a transfer function: at most " + std::to_string(gpu::kPssMaxTransfer) +
+                     " points");
+  if (surface) {
+    const PssSurface::Grid& grid = surface->grid();
+    q.gridLo = glm::vec4(grid.lo, grid.side);
+    q.gridDims = glm::uvec4(glm::uvec3(grid.dims), q.gridDims.w);
+    const PssOptions& o = surface->options();
+    q.settings = glm::vec4(o.trust, o.reach, o.tolerance, float(o.maxProjections));
+  }
+  if (colors) q.image.z |= gpu::kPssColors;
+  if (volume && !transfer.empty()) {
+    q.volumeLo = glm::vec4(volume->lo(), volume->side());
+    q.volumeDims = glm::uvec4(glm::uvec3(volume->dims()), uint32_t(transfer.size()));
+    q.volumeSettings = glm::vec4(volume->smoothing(), volume->reach(), volume->step(), 0.0f);
+    for (size_t k = 0; k < transfer.size(); ++k) {
+      q.transfer[2 * k] = glm::vec4(transfer[k].value, transfer[k].extinction, 0.0f, 0.0f);
+      q.transfer[2 * k + 1] = glm::vec4(transfer[k].color, 0.0f);
+    }
+  }
+}
+
+gpu::PssParams PssObject::params(const gpu::FrameParams& frame) const {
+  gpu::PssParams q{};
+  q.color = glm::vec4(frame.albedo.x, frame.albedo.y, frame.albedo.z, 0.0f);
+  fillPssParams(q, surface.get(), !colors.empty(), volume.get(), transfer);
+  if (exact) q.image.z |= gpu::kPssExact;
+  q.eye.w = 1e-4f * pssScale(*surface);
+  return q;
 }
 
 }  // namespace iso::viewer

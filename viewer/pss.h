@@ -12,6 +12,8 @@
 #include <memory>
 #include <vector>
 
+#include "shaders/shared.h"
+
 namespace iso::viewer {
 
 namespace pss_shader {
@@ -127,6 +129,27 @@ inline constexpr size_t kPssMaxTransferPoints = 8;
 struct PssLight {
   glm::vec3 position{0.0f};
   float intensity = 1.0f;
+};
+
+// The surface's and the volume's part of the parameters the shaders read them by
+// (shaders/pss_buffers.h): the grid, the fit's settings, kPssColors when `colors`, the volume's
+// grid and settings and the transfer function (none without a volume). Throws iso::UsageError
+// for more transfer points than PssParams holds.
+void fillPssParams(gpu::PssParams& q, const PssSurface* surface, bool colors,
+                   const PssVolume* volume, const std::vector<PssTransferPoint>& transfer);
+
+// A point set surface among the viewer's tracer's objects (shaders/trace.h, kOptionPss), in the
+// file's frame units, with the volume inside it: its parameters for the shaders (fillPssParams,
+// kPssExact, and in eye.w how far rays that leave a surface skip it: 10⁻⁴ of its grid's
+// diagonal).
+struct PssObject {
+  std::unique_ptr<PssSurface> surface;
+  std::vector<glm::vec3> colors;  // linear, one a point, or none
+  std::unique_ptr<PssVolume> volume;
+  std::vector<PssTransferPoint> transfer;
+  bool exact = false;
+  // The frame's material color is the color of points without one.
+  gpu::PssParams params(const gpu::FrameParams& frame) const;
 };
 
 // A picture of a point set surface (shaders/pss_trace.h): camera, lights, material.

@@ -33,34 +33,67 @@ Buffer upload(Gpu& gpu, const T* data, size_t count) {
 
 }  // namespace
 
-GpuPss::GpuPss(Gpu& gpu, const PssSurface& surface, const std::vector<glm::vec3>& colors)
-    : gpu_(gpu), surface_(surface), colors_(!colors.empty()) {
-  const size_t n = surface.size();
+PssBuffers::PssBuffers(Gpu& gpu, const PssSurface* surface, const std::vector<glm::vec3>& colors)
+    : gpu_(gpu), surface_(surface), colors_(surface != nullptr && !colors.empty()) {
+  const size_t n = surface ? surface->size() : 0;
   std::vector<glm::vec4> positions(n), normals(n), rgb(colors_ ? n : 0), patches(4 * n);
   for (size_t i = 0; i < n; ++i) {
-    positions[i] = glm::vec4(surface.positions()[i], surface.h()[i]);
-    normals[i] = glm::vec4(surface.normals()[i], 0.0f);
+    positions[i] = glm::vec4(surface->positions()[i], surface->h()[i]);
+    normals[i] = glm::vec4(surface->normals()[i], 0.0f);
     if (colors_) rgb[i] = glm::vec4(colors[i], 1.0f);
-    const PssPatch& p = surface.patches()[i];
+    const PssPatch& p = surface->patches()[i];
     patches[4 * i] = p.origin;
     patches[4 * i + 1] = p.normal;
     patches[4 * i + 2] = p.tangent;
     patches[4 * i + 3] = p.coefficients;
   }
-  const PssSurface::Grid& grid = surface.grid();
+  const uint32_t none = 0;
+  const auto list = [&](const std::vector<uint32_t>* v) {
+    return v ? upload(gpu, v->data(), v->size()) : upload(gpu, &none, 1);
+  };
+  const PssSurface::Grid* grid = surface ? &surface->grid() : nullptr;
   positions_ = upload(gpu, positions.data(), n);
   normals_ = upload(gpu, normals.data(), n);
   colorBuffer_ = upload(gpu, rgb.data(), rgb.size());
   patches_ = upload(gpu, patches.data(), patches.size());
-  pointStart_ = upload(gpu, grid.pointStart.data(), grid.pointStart.size());
-  points_ = upload(gpu, grid.points.data(), grid.points.size());
-  reachStart_ = upload(gpu, grid.reachStart.data(), grid.reachStart.size());
-  reach_ = upload(gpu, grid.reach.data(), grid.reach.size());
-  params_ = createBuffer(gpu, sizeof(gpu::PssParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
+  pointStart_ = list(grid ? &grid->pointStart : nullptr);
+  points_ = list(grid ? &grid->points : nullptr);
+  reachStart_ = list(grid ? &grid->reachStart : nullptr);
+  reach_ = list(grid ? &grid->reach : nullptr);
+  setVolume(nullptr);
+}
+
+void PssBuffers::setVolume(const PssVolume* volume) {
+  if (volume == volume_ && volumeStart_.buffer) return;
+  if (volumeStart_.buffer) ISO_VK(vkDeviceWaitIdle(gpu_.device));
   const uint32_t none = 0;
-  volumeStart_ = upload(gpu, &none, 1);
-  volumeOrder_ = upload(gpu, &none, 1);
-  volumePoints_ = upload(gpu, &none, 0);
+  volumeStart_ = volume ? upload(gpu_, volume->start().data(), volume->start().size())
+                        : upload(gpu_, &none, 1);
+  volumeOrder_ = volume ? upload(gpu_, volume->order().data(), volume->order().size())
+                        : upload(gpu_, &none, 1);
+  volumePoints_ = volume ? upload(gpu_, volume->points().data(), volume->points().size())
+                         : upload(gpu_, &none, 0);
+  volume_ = volume;
+}
+
+std::array<const Buffer*, gpu::kPssStorageBindings> PssBuffers::storage() const {
+  return {&positions_,  &normals_, &colorBuffer_, &patches_,     &pointStart_,  &points_,
+          &reachStart_, &reach_,   &volumeStart_, &volumeOrder_, &volumePoints_};
+}
+
+void PssBuffers::fill(gpu::PssParams& q, const std::vector<PssTransferPoint>& transfer) const {
+  fillPssParams(q, surface_, colors_, volume_, transfer);
+}
+
+uint64_t PssBuffers::memoryBytes() const {
+  uint64_t sum = 0;
+  for (const Buffer* b : storage()) sum += b->allocated;
+  return sum;
+}
+
+GpuPss::GpuPss(Gpu& gpu, const PssSurface& surface, const std::vector<glm::vec3>& colors)
+    : gpu_(gpu), surface_(surface), buffers_(gpu, &surface, colors) {
+  params_ = createBuffer(gpu, sizeof(gpu::PssParams), VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT, true);
   std::array<uint32_t, kBindings> counts;
   counts.fill(1);
   const std::vector<std::vector<uint32_t>> variants = {{}};
@@ -77,28 +110,14 @@ GpuPss::~GpuPss() {
 }
 
 uint64_t GpuPss::memoryBytes() const {
-  uint64_t sum = 0;
-  for (const Buffer* b : {&params_, &positions_, &normals_, &colorBuffer_, &patches_,
-                          &pointStart_, &points_, &reachStart_, &reach_, &pixels_, &volumeStart_,
-                          &volumeOrder_, &volumePoints_})
-    sum += b->allocated;
-  return sum;
+  return buffers_.memoryBytes() + params_.allocated + pixels_.allocated;
 }
 
 std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   if (r.lights.size() > gpu::kPssMaxLights)
     throw UsageError("point set surfaces: at most " + std::to_string(gpu::kPssMaxLights) +
                      " lights");
-  if (r.transfer.size() > gpu::kPssMaxTransfer)
-    throw UsageError("a transfer function: at most " + std::to_string(gpu::kPssMaxTransfer) +
-                     " points");
-  if (r.volume && r.volume != volume_) {
-    ISO_VK(vkDeviceWaitIdle(gpu_.device));
-    volumeStart_ = upload(gpu_, r.volume->start().data(), r.volume->start().size());
-    volumeOrder_ = upload(gpu_, r.volume->order().data(), r.volume->order().size());
-    volumePoints_ = upload(gpu_, r.volume->points().data(), r.volume->points().size());
-    volume_ = r.volume;
-  }
+  buffers_.setVolume(r.volume);
   const size_t pixels = size_t(r.width) * size_t(r.height);
   if (pixels_.size < pixels * 4) {
     ISO_VK(vkDeviceWaitIdle(gpu_.device));
@@ -111,39 +130,24 @@ std::vector<uint32_t> GpuPss::render(const PssRender& r, double* gpuSeconds) {
   q.right = glm::vec4(rays.right, 0.0f);
   q.up = glm::vec4(rays.up, 0.0f);
   q.forward = glm::vec4(rays.forward, 0.0f);
-  const PssSurface::Grid& grid = surface_.grid();
-  q.gridLo = glm::vec4(grid.lo, grid.side);
-  q.gridDims = glm::uvec4(glm::uvec3(grid.dims), uint32_t(r.lights.size()));
+  q.gridDims.w = uint32_t(r.lights.size());
   q.image = glm::uvec4(uint32_t(r.width), uint32_t(r.height),
-                       (r.exact ? gpu::kPssExact : 0u) | (r.shadows ? gpu::kPssShadows : 0u) |
-                           (colors_ ? gpu::kPssColors : 0u),
-                       0u);
-  const PssOptions& o = surface_.options();
-  q.settings = glm::vec4(o.trust, o.reach, o.tolerance, float(o.maxProjections));
+                       (r.exact ? gpu::kPssExact : 0u) | (r.shadows ? gpu::kPssShadows : 0u), 0u);
+  buffers_.fill(q, r.volume ? r.transfer : std::vector<PssTransferPoint>{});
   q.material = r.material;
   q.iors = glm::vec4(r.iors, r.ambient);
   q.color = glm::vec4(r.color, r.reflectivity);
   q.background = glm::vec4(r.background, 0.0f);
   for (size_t l = 0; l < r.lights.size(); ++l)
     q.lights[l] = glm::vec4(r.lights[l].position, r.lights[l].intensity);
-  if (r.volume && !r.transfer.empty()) {
-    q.volumeLo = glm::vec4(r.volume->lo(), r.volume->side());
-    q.volumeDims = glm::uvec4(glm::uvec3(r.volume->dims()), uint32_t(r.transfer.size()));
-    q.volumeSettings = glm::vec4(r.volume->smoothing(), r.volume->reach(), r.volume->step(), 0.0f);
-    for (size_t k = 0; k < r.transfer.size(); ++k) {
-      q.transfer[2 * k] = glm::vec4(r.transfer[k].value, r.transfer[k].extinction, 0.0f, 0.0f);
-      q.transfer[2 * k + 1] = glm::vec4(r.transfer[k].color, 0.0f);
-    }
-  }
   std::memcpy(params_.mapped, &q, sizeof q);
 
   std::array<VkDescriptorBufferInfo, kBindings + 1> infos{};
   infos[0] = {params_.buffer, 0, sizeof q};
-  const Buffer* storage[kBindings] = {&positions_,   &normals_,      &colorBuffer_,
-                                      &patches_,     &pointStart_,   &points_,
-                                      &reachStart_,  &reach_,        &pixels_,
-                                      &volumeStart_, &volumeOrder_,  &volumePoints_};
-  for (uint32_t b = 0; b < kBindings; ++b) infos[b + 1] = {storage[b]->buffer, 0, VK_WHOLE_SIZE};
+  const auto storage = buffers_.storage();
+  for (uint32_t b = 0; b < gpu::kPssStorageBindings; ++b)
+    infos[b + 1] = {storage[b]->buffer, 0, VK_WHOLE_SIZE};
+  infos[kBindings] = {pixels_.buffer, 0, VK_WHOLE_SIZE};
   writeComputeSet(gpu_, pipeline_.sets[0], infos);
 
   ISO_VK(vkResetCommandBuffer(cb_, 0));

@@ -22,10 +22,12 @@ double seconds(Clock::duration d) { return std::chrono::duration<double>(d).coun
 
 // The scene's transfer function, or a ramp over the values' range: from dark blue and clear to
 // light yellow absorbing 4 over the volume's diagonal.
-std::vector<PssTransferPoint> volumeTransfer(const VolumeScene& scene, const PssVolume& volume) {
+std::vector<PssTransferPoint> volumeTransfer(const VolumeScene& scene, const PssVolume& volume,
+                                            double scale) {
   std::vector<PssTransferPoint> out;
+  // (Extinction per unit length: per world unit in the scene file.)
   for (const auto& p : scene.transfer)
-    out.push_back({p[0], glm::vec3(p[1], p[2], p[3]), p[4]});
+    out.push_back({p[0], glm::vec3(p[1], p[2], p[3]), float(p[4] * scale)});
   if (!out.empty() || volume.size() == 0) return out;
   float lo = volume.points()[0].w, hi = lo;
   for (const glm::vec4& p : volume.points()) {
@@ -41,26 +43,34 @@ std::vector<PssTransferPoint> volumeTransfer(const VolumeScene& scene, const Pss
 }  // namespace
 
 PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene) {
+  return pssScene(in, pss, scene, in.origin, 1.0);
+}
+
+PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene,
+                  const glm::dvec3& base, double scale) {
   const auto t0 = Clock::now();
   std::vector<glm::vec3> positions, normals;
   std::vector<float> h;
   PssScene s;
   bool anyColors = false;
   for (const ImageObject& object : in.objects) anyColors |= !object.colors.empty();
+  const glm::dvec3 shift = in.origin - base;
   for (const ImageObject& object : in.objects)
     for (size_t i = 0; i < object.positions.size(); ++i) {
-      positions.push_back(object.positions[i]);
+      positions.push_back(glm::vec3((glm::dvec3(object.positions[i]) + shift) / scale));
       normals.push_back(object.normals.empty() ? glm::vec3(0.0f) : object.normals[i]);
-      h.push_back(kPssSpacings * (object.spacings.empty() ? object.spacing : object.spacings[i]));
+      h.push_back(float(kPssSpacings *
+                        (object.spacings.empty() ? object.spacing : object.spacings[i]) / scale));
       if (anyColors) s.colors.push_back(object.colors.empty() ? object.color : object.colors[i]);
     }
   s.surface = std::make_unique<PssSurface>(std::move(positions), std::move(normals), std::move(h));
   if (!pss.volumePositions.empty()) {
     std::vector<glm::vec3> local;
-    for (const glm::dvec3& p : pss.volumePositions) local.push_back(glm::vec3(p - in.origin));
-    s.volume = std::make_unique<PssVolume>(local, pss.volumeValues, float(scene.volume.smoothing),
-                                           float(scene.volume.step));
-    s.transfer = volumeTransfer(scene.volume, *s.volume);
+    for (const glm::dvec3& p : pss.volumePositions) local.push_back(glm::vec3((p - base) / scale));
+    s.volume = std::make_unique<PssVolume>(local, pss.volumeValues,
+                                           float(scene.volume.smoothing / scale),
+                                           float(scene.volume.step / scale));
+    s.transfer = volumeTransfer(scene.volume, *s.volume, scale);
   }
   s.fitSeconds = seconds(Clock::now() - t0);
   return s;
@@ -174,6 +184,20 @@ int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInp
              "GPU's frame)\n",
              cpu, cpu / median);
   return 0;
+}
+
+std::shared_ptr<const PssObject> pssObject(const ImageInputs& in, const PssViewOptions& pss,
+                                           const Scene& scene, const Frame& frame) {
+  PssScene s = pssScene(in, pss, scene, glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]),
+                        frame.size);
+  printScene(in, s);
+  auto object = std::make_shared<PssObject>();
+  object->surface = std::move(s.surface);
+  object->colors = std::move(s.colors);
+  object->volume = std::move(s.volume);
+  object->transfer = std::move(s.transfer);
+  object->exact = pss.exact;
+  return object;
 }
 
 }  // namespace iso::viewer

@@ -23,6 +23,10 @@ struct PssScene {
 };
 
 PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene);
+// The same at (world - base) / scale: lengths (h, the volume's smoothing and step, the transfer
+// function's extinction) scaled too.
+PssScene pssScene(const ImageInputs& in, const PssViewOptions& pss, const Scene& scene,
+                  const glm::dvec3& base, double scale);
 
 // The picture's camera, lights and material from o.scene, in the points' frame, o.width ×
 // o.height.

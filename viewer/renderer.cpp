@@ -224,7 +224,16 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
                                        glm::floatBitsToUint(chunks[i].geometricError),
                                        chunks[i].parent}
                           : glm::uvec4{gpu::kNotResident, 0u, 0u, gpu::kNotResident};
-  const uint32_t counts[] = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+  // Bindings 1 to 10, then the point set surface's parameters and buffers (11 to 22).
+  std::array<uint32_t, 10 + 1 + gpu::kPssStorageBindings> counts;
+  counts.fill(1);
+  if (options.pss) {
+    pss_ = std::make_unique<PssBuffers>(gpu, options.pss->surface.get(), options.pss->colors);
+    pss_->setVolume(options.pss->volume.get());
+  } else {
+    pss_ = std::make_unique<PssBuffers>(gpu, nullptr, std::vector<glm::vec3>{});
+  }
+  const uint32_t pss = options.pss ? 1u : 0u;
   // kFloatDistances, kFlatTraversal, the workgroup size, kPass (trace.comp.glsl): the variants
   // the options use (with oneKernel, one kernel and the cones).
   std::vector<std::vector<uint32_t>> variants;
@@ -234,7 +243,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
     for (uint32_t splats = 0; splats < (asset.splats ? 2u : 1u); ++splats) {
       pipelineIndex_[pass][splats] = uint32_t(variants.size());
       variants.push_back({asset.blob.floatDistances ? 1u : 0u, options.flatTraversal ? 1u : 0u,
-                          options.workgroupSize, pass, splats});
+                          options.workgroupSize, pass, splats, pss});
     }
     if (!asset.splats) pipelineIndex_[pass][1] = pipelineIndex_[pass][0];
   }
@@ -259,6 +268,7 @@ Renderer::Renderer(Gpu& gpu, const Asset& asset, const Environment* environment,
   setup_.requests = options.streaming;
   setup_.flatTraversal = options.flatTraversal;
   setup_.tileCones = options.tileCones;
+  setup_.pss = options.pss != nullptr;
   stats_.poolBytes = poolPages * kPageBytes;
 }
 
@@ -270,6 +280,8 @@ void Renderer::createSlots(uint64_t stagingRegion) {
   for (uint32_t i = 0; i < slots_.size(); ++i) {
     Slot& s = slots_[i];
     s.params = createBuffer(gpu_, sizeof(gpu::FrameParams), kUniform, true);
+    s.pssParams = createBuffer(gpu_, sizeof(gpu::PssParams), kStorage, true);
+    std::memset(s.pssParams.mapped, 0, sizeof(gpu::PssParams));
     s.table = createBuffer(gpu_, uint64_t(chunkCount) * 16, kStorage, true);
     s.feedback = createBuffer(gpu_, feedbackBytes(chunkCount), kStorage, true);
     std::memset(s.feedback.mapped, 0, s.feedback.size);
@@ -297,7 +309,10 @@ void Renderer::writeDescriptors(const Slot& slot) {
       {queue_.buffer, 0, VK_WHOLE_SIZE},        {starts_.buffer, 0, VK_WHOLE_SIZE},
       {paths_.buffer, 0, VK_WHOLE_SIZE},        {pending_.buffer, 0, VK_WHOLE_SIZE},
       {caustics_.buffer, 0, VK_WHOLE_SIZE}};
-  writeComputeSet(gpu_, slot.set, infos);
+  std::vector<VkDescriptorBufferInfo> all(std::begin(infos), std::end(infos));
+  all.push_back({slot.pssParams.buffer, 0, VK_WHOLE_SIZE});
+  for (const Buffer* b : pss_->storage()) all.push_back({b->buffer, 0, VK_WHOLE_SIZE});
+  writeComputeSet(gpu_, slot.set, all);
 }
 
 Renderer::~Renderer() {
@@ -348,6 +363,10 @@ void Renderer::prepare(gpu::FrameParams params) {
     params.options.x &= ~gpu::kOptionRequests;
   if (!options_.caustics) params.caustics = glm::uvec4(0u);
   std::memcpy(slot.params.mapped, &params, sizeof params);
+  if (options_.pss) {
+    const gpu::PssParams q = options_.pss->params(params);
+    std::memcpy(slot.pssParams.mapped, &q, sizeof q);
+  }
   // The caustic map again when what it depends on changed, the resident chunks included.
   slot.photons = 0;
   if (params.caustics.x > 0) {

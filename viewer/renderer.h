@@ -24,6 +24,7 @@
 #include "viewer/asset.h"
 #include "viewer/cpu_tracer.h"
 #include "viewer/image.h"
+#include "viewer/pss_gpu.h"
 #include "viewer/streaming.h"
 #include "viewer/vulkan.h"
 
@@ -50,6 +51,9 @@ struct RendererOptions {
   // Caustics: the caustic map and the photon pass exist (frames that ask for caustics without
   // them are drawn without).
   bool caustics = false;
+  // A point set surface in the scene (and the volume inside it), in the file's frame units: every
+  // frame meets it (kOptionPss). It must outlive the renderer.
+  const PssObject* pss = nullptr;
 };
 
 // One frame, as collected once it completed.
@@ -133,6 +137,7 @@ class Renderer {
     VkCommandBuffer cb = VK_NULL_HANDLE;
     Owned<VkFence> fence;
     Buffer params, table, feedback, timestamps;
+    Buffer pssParams;  // the point set surface's (PssObject::params), or a placeholder
     VkDescriptorSet set = VK_NULL_HANDLE;
     bool wavefront = false;  // the prepared frame runs as a wavefront
     uint32_t photons = 0;    // the prepared frame recomputes the caustic map with these photons
@@ -166,6 +171,7 @@ class Renderer {
   Buffer starts_;           // where each tile's camera rays start (shaders/cone.h)
   Buffer paths_, pending_;  // the wave's paths that reflect mirror rays, and the rays waiting
   Buffer caustics_;         // the caustic map (a word without RendererOptions::caustics)
+  std::unique_ptr<PssBuffers> pss_;  // RendererOptions::pss's buffers, or placeholders
   // What the caustic map was last computed for: the frame parameters that photons depend on
   // (causticKey), and the resident chunks' version (bumped by each upload or eviction).
   std::vector<std::byte> causticKey_;

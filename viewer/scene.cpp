@@ -449,8 +449,9 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (s.flatTraversal) options |= gpu::kOptionFlatTraversal;
   const bool splats = scene.draw != Draw::Surface && s.splatIndex != kNoParent;
   const bool ground = scene.groundHeight.has_value();
-  // (Tile cones see the surface's nodes, not the splats or the ground.)
-  if (s.tileCones && !splats && !ground) options |= gpu::kOptionTileCones;
+  // (Tile cones see the surface's nodes, not the splats, a point set surface or the ground.)
+  if (s.tileCones && !splats && !ground && !s.pss) options |= gpu::kOptionTileCones;
+  if (s.pss) options |= gpu::kOptionPss;
   if (ground) options |= gpu::kOptionGround;
   if (splats) options |= gpu::kOptionSplats;
   if (splats && scene.draw == Draw::Points) options |= gpu::kOptionNoSurface;

@@ -151,6 +151,7 @@ struct FrameSetup {
   // (frame units; secondary rays leave splats half of it away).
   uint32_t splatIndex = kNoParent;
   float splatRadius = 0.0f;
+  bool pss = false;  // a point set surface in the scene (kOptionPss)
 };
 
 // The shaders' parameters for a frame of `scene` (with its camera and lights set) in `frame`.

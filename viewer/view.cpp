@@ -44,6 +44,7 @@ RendererOptions rendererOptions(const ViewOptions& o, uint32_t framesInFlight, c
                 (!o.wavefront && gpu.properties.deviceType != VK_PHYSICAL_DEVICE_TYPE_CPU);
   r.framesInFlight = framesInFlight;
   r.caustics = o.scene.caustics > 0;
+  r.pss = o.pss.get();
   return r;
 }
 
@@ -63,6 +64,8 @@ std::optional<Environment> environmentOf(const Scene& scene) {
 
 GpuView::GpuView(const ViewOptions& o, uint32_t framesInFlight)
     : asset(Asset::open(o.file)),
+      pssObject(o.pss),
+      pss(o.pss.get()),
       scene(completeScene(o, *asset)),
       env(environmentOf(scene)),
       gpu(gpuFor(o)),
@@ -157,11 +160,13 @@ int viewCpu(const ViewOptions& options) {
   const Scene scene = completeScene(options, *asset);
   const auto env = environmentOf(scene);
   const auto t0 = Clock::now();
-  const CpuPool pool = buildCpuPool(asset->reader, {}, scene.draw != Draw::Surface);
+  CpuPool pool = buildCpuPool(asset->reader, {}, scene.draw != Draw::Surface);
+  pool.pss = options.pss.get();
   const double load = seconds(Clock::now() - t0);
   FrameSetup setup = cpuFrameSetup(*asset, options.width, options.height, env ? &*env : nullptr);
   setup.flatTraversal = options.flatTraversal;
   setup.tileCones = options.tileCones;
+  setup.pss = pool.pss != nullptr;
   const auto params =
       frameParams(scene, asset->reader.header().frame, asset->reader.header().maxLevel, setup);
   const auto t1 = Clock::now();

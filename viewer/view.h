@@ -12,6 +12,8 @@
 
 namespace iso::viewer {
 
+struct PssObject;
+
 struct ViewOptions {
   std::filesystem::path file;
   std::filesystem::path sceneFile;  // JSON scene (watched and reloaded in the window)
@@ -40,6 +42,9 @@ struct ViewOptions {
   bool wavefront = false;
   bool cpuCompare = true;  // also trace the first view with the CPU reference tracer
   bool benchJson = false;  // print the numbers as one JSON object instead of text
+  // A point set surface in the scene beside the file's surface and splats (--with-pss), in the
+  // file's frame units, and the volume inside it.
+  std::shared_ptr<const PssObject> pss;
 };
 
 struct Asset;

@@ -78,6 +78,7 @@ RendererOptions windowRendererOptions(const ViewOptions& options, const Swapchai
   ro.capacityHeight = std::max(ro.height, mode ? uint32_t(mode->height) : 0u);
   ro.vram = options.vram;
   ro.uploadBytes = options.uploadBytes;
+  ro.pss = options.pss.get();
   ro.framesInFlight = options.framesInFlight;
   ro.swapRedBlue = swapchain.format == VK_FORMAT_B8G8R8A8_UNORM;
   ro.caustics = options.scene.caustics > 0;

@@ -36,6 +36,7 @@ struct ViewArgs {
   std::string pss = "fast";
   bool drawPss = false;  // --draw pss (cleared from `draw` before the scene is built)
   std::string volumePoints, volume;  // --draw pss: scattered values inside the surface
+  std::string withPss;               // --with-pss: a point set surface beside an .iso's surface
   std::optional<int> bounces, samples;
   bool noShadows = false, noReflections = false, noRefractions = false;
   bool points = false, ground = false;
@@ -245,6 +246,22 @@ int viewPss(ViewArgs& a) {
   return viewer::viewPssWindow(a.view, pss, inputs);
 }
 
+// --with-pss POINTS: the points (a point file, or an .iso file's kept points) as a point set
+// surface in the .iso file's scene, in its frame units, with the volume of --volume-points or
+// --volume inside it.
+void withPss(ViewArgs& a) {
+  viewer::PssViewOptions pss;
+  pss.exact = a.pss == "exact";
+  // --volume NAME alone reads the volume points of the --with-pss file when it is an .iso.
+  ViewArgs volume = a;
+  volume.files = {a.withPss};
+  if (!a.volume.empty() || !a.volumePoints.empty()) readVolumePoints(volume, pss);
+  ImageFiles files = openImageFiles({a.withPss}, hostPointBudget());
+  viewer::ImageInputs inputs = imageInputs(readImagePoints(files), UINT64_MAX);
+  const Reader reader = Reader::open(a.view.file);
+  a.view.pss = viewer::pssObject(inputs, pss, a.view.scene, reader.header().frame);
+}
+
 viewer::Vec3d parseUp(const std::string& text) {
   if (text == "x") return {1, 0, 0};
   if (text == "y") return {0, 1, 0};
@@ -425,7 +442,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "What rays meet: surface (the default), points (the kept points as splats), or "
                 "both (the nearer); or image: point files drawn as image-space points (the "
                 "default for raw scans); or pss: the points (an .iso file's kept points, or point "
-                "files) as a point set surface (--headless, --cpu or --bench)")
+                "files) as a point set surface (a window, --headless, --cpu or --bench)")
       ->check(CLI::IsMember(drawNames))
       ->excludes(points);
   c->add_option("--pss", a->pss,
@@ -436,6 +453,12 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "--draw pss: a point file of scattered values (a PLY vertex property, or LAS "
                 "intensity) drawn as a volume inside the surface (the scene file's \"volume\": "
                 "transfer function, smoothing, step)");
+  c->add_option("--with-pss", a->withPss,
+                "Also a point set surface of these points (a point file, or an .iso file's kept "
+                "points) in the .iso file's scene, traced with its surface and splats (shadows, "
+                "reflections, refractions; --pss exact|fast; --volume-points or --volume: a "
+                "volume inside it)")
+      ->check(CLI::ExistingFile);
   c->add_option("--volume", a->volume,
                 "--draw pss: the scalar of --volume-points to draw (default: its only one); "
                 "without --volume-points, the volume points an .iso input keeps with values of "
@@ -558,8 +581,15 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       a->view.flatTraversal = a->traversal == "flat";
       a->view.uploadBytes = parseSize(a->upload, "--upload-per-frame");
       checkPictures(*a);
-      if ((!a->volumePoints.empty() || !a->volume.empty()) && a->draw != "pss") {
-        fmt::print(stderr, "iso view: --volume-points and --volume go with --draw pss\n");
+      if ((!a->volumePoints.empty() || !a->volume.empty()) && a->draw != "pss" &&
+          a->withPss.empty()) {
+        fmt::print(stderr,
+                   "iso view: --volume-points and --volume go with --draw pss or --with-pss\n");
+        return kExitUsage;
+      }
+      if (!a->withPss.empty() && (a->draw == "pss" || image)) {
+        fmt::print(stderr, "iso view: --with-pss puts a point set surface into an .iso file's "
+                           "scene: give one .iso file, without --draw pss or image\n");
         return kExitUsage;
       }
       if (a->draw == "pss") {
@@ -574,6 +604,7 @@ void addViewCommand(CLI::App& app, int& exitCode) {
         return viewImage(*a);
       }
       buildScene(*a);
+      if (!a->withPss.empty()) withPss(*a);
       if (a->cpu) return viewer::viewCpu(a->view);
       if (a->headless) return viewer::viewHeadless(a->view);
       if (a->bench) return viewer::viewBench(a->view);
