@@ -181,13 +181,7 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
     if (final) ++frames;  // --frames counts the frames of all the points
     const bool lastFrame =
         (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
-    const auto save = [&](const std::filesystem::path& file) {
-      writeImage(file, sized.width, sized.height, lastPicture);
-      fmt::print("iso view: saved {}\n", file.string());
-    };
-    if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));
-    input.screenshot = false;
-    if (lastFrame && !options.screenshot.empty()) save(options.screenshot);
+    saveScreenshots(input, options, lastFrame, sized.width, sized.height, lastPicture, screenshots);
     const double sinceTitle = seconds(Clock::now() - titleTime);
     if (sinceTitle > 0.5 || lastFrame) {
       const std::string text = fmt::format(

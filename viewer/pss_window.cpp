@@ -54,7 +54,7 @@ int viewPssWindow(const ViewOptions& options, const PssViewOptions& pssOptions,
   Mouse mouse;
   glfwGetCursorPos(window, &mouse.x, &mouse.y);
   auto last = Clock::now(), lastMove = last - std::chrono::seconds(1), titleTime = last;
-  bool stale = false, changed = true;
+  bool stale = false, changed = true, ended = false;
   uint32_t drawnScale = 0;  // the scale of the picture shown (0: none yet)
   uint32_t scale = 4, frames = 0, screenshots = 0;
   double pixelsPerSecond = 0.0;  // of the last frames, for the moving scale
@@ -119,13 +119,7 @@ int viewPssWindow(const ViewOptions& options, const PssViewOptions& pssOptions,
                  seconds(Clock::now() - opened), took);
     const bool lastFrame =
         (o.frames > 0 && frames >= o.frames) || glfwWindowShouldClose(window);
-    const auto save = [&](const std::filesystem::path& file) {
-      writeImage(file, width, height, shown);
-      fmt::print("iso view: saved {}\n", file.string());
-    };
-    if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));
-    input.screenshot = false;
-    if (lastFrame && !o.screenshot.empty()) save(o.screenshot);
+    saveScreenshots(input, o, lastFrame, width, height, shown, screenshots);
     const double sinceTitle = seconds(Clock::now() - titleTime);
     if (sinceTitle > 0.5 || lastFrame) {
       const std::string text = fmt::format(
@@ -142,8 +136,15 @@ int viewPssWindow(const ViewOptions& options, const PssViewOptions& pssOptions,
       titleFrames = 0;
       frameSeconds = 0.0;
     }
-    if (lastFrame) break;
+    if (lastFrame) {
+      ended = true;
+      break;
+    }
   }
+  // Closed while nothing was traced (the picture shown is the last): its --screenshot.
+  if (!ended && !shown.empty() && !o.screenshot.empty())
+    saveScreenshots(input, o, true, w.swapchain.extent.width, w.swapchain.extent.height, shown,
+                    screenshots);
   vkDeviceWaitIdle(w.gpu.device);
   if (*w.gpu.validationErrors == 0) return 0;
   fmt::print(stderr, "iso view: {} Vulkan validation errors\n", w.gpu.validationErrors->load());

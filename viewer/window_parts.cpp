@@ -1,6 +1,8 @@
 // What the windows of `iso view` share (window_parts.h).
 #include "viewer/window_parts.h"
 
+#include "viewer/image.h"
+
 #include <fmt/core.h>
 #include <glm/geometric.hpp>
 
@@ -301,6 +303,17 @@ std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t fro
     for (uint32_t x = 0; x < width; ++x)
       out[size_t(y) * width + x] = pixels[size_t(y / scale) * from + x / scale];
   return out;
+}
+
+void saveScreenshots(Input& input, const ViewOptions& options, bool lastFrame, uint32_t width,
+                     uint32_t height, const std::vector<uint32_t>& picture, uint32_t& taken) {
+  const auto save = [&](const std::filesystem::path& file) {
+    writeImage(file, width, height, picture);
+    fmt::print("iso view: saved {}\n", file.string());
+  };
+  if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++taken));
+  input.screenshot = false;
+  if (lastFrame && !options.screenshot.empty()) save(options.screenshot);
 }
 
 }  // namespace iso::viewer

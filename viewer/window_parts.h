@@ -161,6 +161,12 @@ struct PictureWindowGpu {
   bool show(const std::vector<uint32_t>& rgba) { return picture.show(swapchain, rendered, rgba); }
 };
 
+// The screenshots a window takes of the picture it shows (width × height RGBA words): P asked
+// for one (input.screenshot, then cleared: iso-screenshot-N.png, N counting in `taken`), and the
+// last frame's (--screenshot) when `lastFrame`.
+void saveScreenshots(Input& input, const ViewOptions& options, bool lastFrame, uint32_t width,
+                     uint32_t height, const std::vector<uint32_t>& picture, uint32_t& taken);
+
 // A picture `from` pixels wide shown `scale` times larger, cut to width × height.
 std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t from, uint32_t width,
                                uint32_t height, uint32_t scale);

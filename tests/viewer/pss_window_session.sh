@@ -8,7 +8,9 @@ iso=$1 file=$2 work=$3
 source "$(dirname "$0")/session_common.sh"
 cd "$work"
 open_window "$file" --draw pss --width 160 --height 120
-sleep 3
+# Until the first full picture is shown (the pipeline is made and the surface fitted first).
+for _ in $(seq 600); do grep -q "first full picture" out.txt && break; sleep 0.1; done
+sleep 0.5
 xdotool windowfocus --sync "$window" 2>/dev/null || true
 xdotool mousemove --window "$window" 80 60
 xdotool key p                       # screenshot: iso-screenshot-1.png

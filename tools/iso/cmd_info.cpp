@@ -184,22 +184,16 @@ void printInfo(const Reader& reader, bool withChunks) {
     fmt::print("  level {:<4}{} chunk{}, {} stored, {} points\n", level, withSeparators(l.chunks),
                l.chunks == 1 ? "" : "s", byteSize(l.storedBytes), withSeparators(l.points));
   fmt::print("{:<12}{}\n", "points", withSeparators(s.points));
-  if (s.kept.chunks > 0)
-    fmt::print("{:<12}{} original points in {} chunk{}, {} stored\n", "kept",
-               withSeparators(s.kept.points), withSeparators(s.kept.chunks),
-               s.kept.chunks == 1 ? "" : "s", byteSize(s.kept.storedBytes));
-  if (s.subsamples.chunks > 0)
-    fmt::print("{:<12}{} of them again in {} subsample chunk{}, {} stored\n", "",
-               withSeparators(s.subsamples.points), withSeparators(s.subsamples.chunks),
-               s.subsamples.chunks == 1 ? "" : "s", byteSize(s.subsamples.storedBytes));
-  if (s.volume.chunks > 0)
-    fmt::print("{:<12}{} volume points in {} chunk{}, {} stored\n", "volume",
-               withSeparators(s.volume.points), withSeparators(s.volume.chunks),
-               s.volume.chunks == 1 ? "" : "s", byteSize(s.volume.storedBytes));
-  if (s.values.chunks > 0)
-    fmt::print("{:<12}{} point values in {} chunk{}, {} stored\n", "values",
-               withSeparators(s.values.points), withSeparators(s.values.chunks),
-               s.values.chunks == 1 ? "" : "s", byteSize(s.values.storedBytes));
+  // A line for each kind of points chunk the file has.
+  const auto line = [](const char* label, const LevelSummary& l, const char* what) {
+    if (l.chunks == 0) return;
+    fmt::print("{:<12}{} {} in {} chunk{}, {} stored\n", label, withSeparators(l.points), what,
+               withSeparators(l.chunks), l.chunks == 1 ? "" : "s", byteSize(l.storedBytes));
+  };
+  line("kept", s.kept, "original points");
+  line("", s.subsamples, "of them again as subsamples");
+  line("volume", s.volume, "volume points");
+  line("values", s.values, "point values");
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (const nlohmann::json crs = coordinateSystemIn(metadata); !crs.is_null())
     fmt::print("{:<12}{}\n", "crs", describeCoordinateSystem(crs));
