@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <stdexcept>
 
@@ -181,6 +182,7 @@ void reloadScene(const ViewOptions& options, Input& input, Scene& scene,
       complete(next);
       scene = next;
       fmt::print("iso view: reloaded {}\n", options.sceneFile.string());
+      std::fflush(stdout);  // a session watching the output sees it now
     } catch (const std::exception& e) {
       fmt::print(stderr, "iso view: {} (kept the previous scene)\n", e.what());
     }

@@ -18,6 +18,13 @@ xdotool key m l                     # eye-dome shading, two layers
 sleep 1
 echo '{"image": {"opacity": 0.5}}' >scene.json.new
 mv scene.json.new scene.json
-sleep 2
+# Until the window has reloaded it (a loaded machine may take a while), then a frame or two more.
+# The pointer moves a pixel now and then: a window that waits for events wakes up.
+for i in $(seq 300); do
+  grep -q reloaded out.txt && break
+  if [ $((i % 5)) -eq 0 ]; then xdotool mousemove --window "$window" $((200 + i % 2)) 100 || true; fi
+  sleep 0.1
+done
+sleep 1
 xdotool key Escape
 wait $pid

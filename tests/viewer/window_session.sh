@@ -24,6 +24,16 @@ xdotool mouseup 1
 sleep 1
 echo '{"material": {"color": [0.8, 0.05, 0.05]}}' >scene.json.new
 mv scene.json.new scene.json
-sleep 2
+# Until the window has reloaded it (a loaded machine may take a while), then a frame or two more.
+# The pointer moves a pixel now and then: a window that waits for events wakes up.
+# (Under xvfb the tracer's window may not see the file change for a long while: after 3 s it
+# is asked to reload with R, which the image window's session does not need.)
+for i in $(seq 300); do
+  grep -q reloaded out.txt && break
+  if [ $((i % 5)) -eq 0 ]; then xdotool mousemove --window "$window" $((200 + i % 2)) 100 || true; fi
+  if [ "$i" -eq 30 ]; then xdotool key r || true; fi
+  sleep 0.1
+done
+sleep 1
 xdotool key Escape
 wait $pid
