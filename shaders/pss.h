@@ -275,7 +275,7 @@ bool pssHit(vec3 o, vec3 d, float tMin, float tMax, bool exact, ISO_INOUT(float)
       hitNormal = normal;
       continue;
     }
-    if (!pssFirstHit(o, d, t + 1e-4f * h, tMax, t, hitNormal, point)) return true;
+    if (!pssFirstHit(o, d, t + 1e-4f * h, tMax, t, hitNormal, point)) return false;
   }
   return true;
 }

@@ -812,7 +812,7 @@ TEST_F(CliPipeline, convertReportsTheStraysItRemovesAndWritesThemOnRequest) {
 TEST_F(CliPipeline, impossibleOptionsAreUsageErrors) {
   for (const std::string options :
        {"--max-depth 30", "--leaf-points 0", "--normal-bits 10", "--fit cubic", "--orient sideways",
-        "--smoothing -1", "--tolerance nan"}) {
+        "--smoothing -1", "--tolerance nan", "--corner-fit -1", "--corner-fit 17"}) {
     const auto run = runIso("convert -q " + options + " " + quoted(dir_ / "sphere.ply") + " -o " +
                             quoted(dir_ / "x.iso"));
     EXPECT_EQ(run.exitCode, 2) << options << ": " << run.err;

@@ -56,6 +56,7 @@ struct BuildOptions {
   double maxTestedEdge = 128.0;
   int maxDepth = 20;            // deepest octree level (at most 20)
   double tolerance = 0.1;       // allowed patch error, in point spacings
+  int cornerFit = 0;            // passes fitting leaf corners to the points (0: sampled values)
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;

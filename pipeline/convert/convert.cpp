@@ -77,6 +77,7 @@ void validateOptions(const BuildOptions& o) {
   require(o.leafPoints >= 1, "--leaf-points must be at least 1");
   require(o.maxDepth >= 1 && o.maxDepth <= 20, "--max-depth must be 1 to 20");
   require(std::isfinite(o.tolerance) && o.tolerance >= 0.0, "--tolerance must be 0 or more");
+  require(o.cornerFit >= 0 && o.cornerFit <= 16, "--corner-fit must be 0 to 16 passes");
   require(o.normalBits == 8 || o.normalBits == 12, "--normal-bits must be 8 or 12");
   require(o.chunkNodes >= 64, "--chunk-nodes must be at least 64");
   require(o.zstdLevel >= 1 && o.zstdLevel <= 19, "--zstd-level must be 1 to 19");
@@ -203,6 +204,7 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                         {"leaf_points", o.leafPoints},
                         {"max_depth", o.maxDepth},
                         {"tolerance", o.tolerance},
+                        {"corner_fit", o.cornerFit},
                         {"normal_bits", o.normalBits},
                         {"chunk_nodes", o.chunkNodes},
                         {"zstd_level", o.zstdLevel},
@@ -505,6 +507,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
+  fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit);
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
   const HangingCorners& hanging = closure.hanging;

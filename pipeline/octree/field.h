@@ -3,6 +3,7 @@
 //
 //   corners.cpp   leaf corner sampling: each distinct corner evaluated once
 //   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
+//   fit.cpp       corner values fitted to the points (the trilinear patch's bias undone)
 //   close.cpp     closure: empty cells the surface runs into are filled, until none is left
 //   lod.cpp       level of detail: corners of internal nodes from point proxies, node errors
 //
@@ -72,6 +73,13 @@ using HangingCorners = SpillVector<HangingCorner>;  // in the field's entry orde
 HangingCorners findHangingCorners(const Octree& tree, const CornerField& field);
 // Set each hanging corner to the mean of its sources, coarse levels first.
 void snapHangingCorners(CornerField& field, const HangingCorners& hanging);
+
+// ---- fit.cpp
+// Move the corners of the leaves that hold points by the mean distance of the points around them
+// from the interpolated zero set, `passes` times (hanging corners snapped after each); returns the
+// corners moved in the last pass.
+size_t fitCornersToPoints(CornerField& field, const HangingCorners& hanging, const Octree& tree,
+                          const PointSet& points, int passes);
 
 // ---- close.cpp
 struct Closure {

@@ -2,6 +2,8 @@
 // (specs/pipeline.md; iso eval's metric): 200k-point scans of a sphere and a torus.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <glm/geometric.hpp>
 #include <set>
 
 #include "pipeline/analysis/measure.h"
@@ -86,6 +88,45 @@ TEST(Accuracy, noisySphereMeetsTheTarget) {
   // |noise / cos(view, normal)| is about 0.54 spacings, which the depth error measures too.
   EXPECT_LE(e["visibility"]["worst_view_fraction"].get<double>(), 0.001);
   EXPECT_LE(e["visibility"]["depth_error_median"].get<double>(), 0.6);
+}
+
+// The zero set's mean signed distance from the unit sphere (world units, area-weighted) and its
+// RMS, in the point spacings of the conversion's report.
+std::pair<double, double> sphereOffset(const test::Converted& c) {
+  const Frame& frame = c.surface.header().frame;
+  double area = 0.0, sum = 0.0, squares = 0.0;
+  for (const ZeroSetSample& s : c.surface.sampleZeroSet(2)) {
+    const glm::dvec3 p = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) +
+                         frame.size * glm::dvec3(s.position[0], s.position[1], s.position[2]);
+    const double d = glm::length(p) - 1.0;
+    area += s.area;
+    sum += s.area * d;
+    squares += s.area * d * d;
+  }
+  const double spacing = c.report["spacing"].get<double>();
+  return {sum / area / spacing, std::sqrt(squares / area) / spacing};
+}
+
+// Trilinear patches of a convex surface's sampled distances lie inside it; the corner fit moves
+// the corners until the patches run through the points: the bias goes, with and without noise.
+TEST(Accuracy, theCornerFitUndoesThePatchesShrinkingOfAConvexSurface) {
+  for (const double noise : {0.0, 0.3}) {
+    std::pair<double, double> sampled, fitted;
+    for (const int passes : {0, 2}) {
+      test::TempDir dir;
+      BuildOptions options;
+      options.cornerFit = passes;
+      const test::Converted c =
+          test::convertAndLoad(test::scanOf("sphere", 60000, false, noise), dir / "s.iso", options);
+      (passes == 0 ? sampled : fitted) = sphereOffset(c);
+    }
+    std::printf("noise %.1f: zero set from the sphere: mean %.4f, RMS %.4f spacings sampled; "
+                "mean %.4f, RMS %.4f fitted\n",
+                noise, sampled.first, sampled.second, fitted.first, fitted.second);
+    EXPECT_LT(sampled.first, -0.04);  // inside
+    EXPECT_LT(std::abs(fitted.first), 0.02);
+    EXPECT_LT(fitted.second, sampled.second);
+  }
 }
 
 // The conversion's accuracy measure decodes the file region by region: every distance must be the

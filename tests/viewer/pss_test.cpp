@@ -137,6 +137,49 @@ TEST(Pss, exactHitsLieWithinATenthOfASpacingOfATorus) {
   expectHitsOnTheSurface(torus(30'000), torusDistance, "torus", 1.3f);
 }
 
+// Rays that graze a noisy sphere (points 0.3 spacings off it at random): every exact-mode hit is
+// near the MLS surface (projecting it moves it less than a quarter spacing; grazing hits that use
+// up their 8 projections stop within 0.2): a ray whose projections leave every polynomial it
+// meets misses, rather than keeping a hit that never converged (up to the trust radius, 1.5
+// spacings, outside the silhouette); and rays that pass the sphere by more than a spacing miss.
+TEST(Pss, grazingRaysHitTheSurfaceOrMissIt) {
+  Shape shape = sphere(20'000);
+  std::mt19937 rng(23);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  for (vec3& p : shape.positions) p *= 1.0f + 0.3f * shape.spacing * g(rng);
+  const PssSurface surface = surfaceOf(shape);
+  std::uniform_real_distribution<float> pass(1.0f - 2.0f * shape.spacing,
+                                             1.0f + 2.0f * shape.spacing);
+  size_t hits = 0, unconverged = 0, wrongHits = 0, outside = 0;
+  float largest = 0.0f;
+  for (int k = 0; k < 20'000; ++k) {
+    // A ray along a random direction d whose closest approach to the centre is b.
+    const vec3 d = glm::normalize(vec3(g(rng), g(rng), g(rng)));
+    const vec3 side = glm::normalize(glm::cross(d, vec3(g(rng), g(rng), g(rng))));
+    const float b = pass(rng);
+    const vec3 o = b * side - 3.0f * d;
+    const bool beyond = b > 1.0f + shape.spacing;
+    outside += beyond;
+    PssHit hit;
+    if (!surface.intersect(o, d, 0.0f, 10.0f, PssMode::Exact, hit)) continue;
+    ++hits;
+    wrongHits += beyond;
+    vec3 onSurface(0.0f);
+    const vec3 x = o + hit.t * d;
+    const float moved = surface.project(x, onSurface) ? glm::length(onSurface - x) / shape.spacing
+                                                      : 1e30f;
+    unconverged += moved > 0.25f;
+    largest = std::max(largest, moved);
+  }
+  std::printf("grazing rays: %zu hits, %zu more than a quarter spacing off the MLS surface (the "
+              "largest projection %.3f spacings); %zu of %zu rays passing more than a spacing "
+              "outside hit\n",
+              hits, unconverged, double(largest), wrongHits, outside);
+  ASSERT_GT(hits, 1000u);
+  EXPECT_LE(double(unconverged), 0.001 * double(hits));
+  EXPECT_LE(double(wrongHits), 0.001 * double(outside));
+}
+
 TEST(Pss, theGridFindsTheFirstHitThatEveryPatchGives) {
   const Shape shape = torus(8'000);
   const PssSurface surface = surfaceOf(shape);

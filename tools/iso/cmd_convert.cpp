@@ -464,6 +464,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--tolerance", o->build.tolerance, "Allowed patch error, in point spacings")
       ->capture_default_str();
+  c->add_option("--corner-fit", o->build.cornerFit,
+                "Passes moving leaf corners so that the surface runs through the points (0: the "
+                "sampled signed distances, whose trilinear patches shrink convex parts)")
+      ->capture_default_str();
   c->add_option("--normal-bits", o->build.normalBits,
                 "Octahedral normal bits per component: 8 or 12")
       ->capture_default_str();
