@@ -466,7 +466,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--corner-fit", o->build.cornerFit,
                 "Passes moving leaf corners so that the surface runs through the points (0: the "
-                "sampled signed distances, whose trilinear patches shrink convex parts)")
+                "sampled signed distances, whose trilinear patches shrink convex parts). "
+                "Experimental: pictures of such files show dark specks (specs/pipeline.md §6)")
       ->capture_default_str();
   c->add_option("--normal-bits", o->build.normalBits,
                 "Octahedral normal bits per component: 8 or 12")
