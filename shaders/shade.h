@@ -99,6 +99,7 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       vec3 l = at - p;
       float lengthL = length(l);
       l = l / lengthL;
+      float falloff = light.u.w > 0.0f ? 1.0f / (lengthL * lengthL) : 1.0f;
       float lambert = dot(n, l);
       bool lit = lambert > 0.0f;
       if (lit && (P.options.x & kOptionShadows) != 0u) {
@@ -109,7 +110,7 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       if (lit) {
         vec3 r = reflect(-l, n);
         float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
-        sum += P.material.x * lambert * hit.color + vec3(P.material.y * specular);
+        sum += falloff * (P.material.x * lambert * hit.color + vec3(P.material.y * specular));
       }
     }
     if (samples > 0u)

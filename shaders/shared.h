@@ -144,7 +144,7 @@ ISO_CONST uint kLightArea = 2u;
 struct Light {
   vec4 position;  // xyz; w: kind
   vec4 color;     // rgb radiance × intensity; w: samples (area light)
-  vec4 u;         // xyz: first edge (area light)
+  vec4 u;         // xyz: first edge (area light); w: 1 when it falls off as 1 / r² (frame units)
   vec4 v;         // xyz: second edge (area light)
 };
 

@@ -208,7 +208,8 @@ void readLights(const Fields& f, const json& lights, Scene& scene) {
   if (!lights.is_array()) f.fail("lights", "expected an array");
   scene.lights.clear();
   for (const json& l : lights) {
-    f.known(l, "lights[]", {"type", "position", "u", "v", "color", "intensity", "samples"});
+    f.known(l, "lights[]",
+            {"type", "position", "u", "v", "color", "intensity", "samples", "falloff"});
     LightSpec light;
     const std::string type = l.value("type", "point");
     if (type != "point" && type != "area") f.fail("lights[].type", "point or area");
@@ -223,6 +224,12 @@ void readLights(const Fields& f, const json& lights, Scene& scene) {
     if (l.contains("color")) light.color = f.color(l["color"], "lights[].color");
     if (l.contains("intensity"))
       light.intensity = float(f.number(l["intensity"], "lights[].intensity"));
+    if (l.contains("falloff")) {
+      if (!l["falloff"].is_string() ||
+          (l["falloff"] != "none" && l["falloff"] != "inverse_square"))
+        f.fail("lights[].falloff", "none or inverse_square");
+      light.inverseSquare = l["falloff"] == "inverse_square";
+    }
     if (l.contains("samples")) {
       const double s = f.number(l["samples"], "lights[].samples");
       if (s < 1 || s > 1024 || s != std::floor(s)) f.fail("lights[].samples", "1 to 1024");
@@ -503,6 +510,12 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
                    float(l.samples));
     g.u = toFrameVector(l.u);
     g.v = toFrameVector(l.v);
+    if (l.inverseSquare) {
+      // The shader divides by r² in frame units: r_world² = r² · size².
+      const float scale = float(1.0 / (frame.size * frame.size));
+      g.color = vec4(glm::vec3(g.color) * scale, g.color.w);
+      g.u.w = 1.0f;
+    }
   }
   return p;
 }

@@ -34,6 +34,9 @@ struct LightSpec {
   std::array<float, 3> color{1, 1, 1};
   float intensity = 1.0f;
   int samples = 16;  // area light shadow rays per sample
+  // The light falls off as 1 / r² (r in world units; "falloff": "inverse_square"), else it does
+  // not fall off ("none", the default).
+  bool inverseSquare = false;
 };
 
 struct Material {

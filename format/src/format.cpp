@@ -140,6 +140,8 @@ std::string_view chunkKindName(uint8_t kind) {
       return "values";
     case ChunkKind::VolumePoints:
       return "volume points";
+    case ChunkKind::Lighting:
+      return "lighting";
   }
   return "unknown";
 }

@@ -14,6 +14,7 @@
 #include "file_io.h"
 #include "iso/check.h"
 #include "iso/error.h"
+#include "iso/lighting.h"
 #include "iso/points.h"
 #include "iso/surface.h"
 #include "layout.h"
@@ -154,6 +155,7 @@ class Parser {
       return detail::FieldProblem{e::kGeometricError, "geometric error is negative or not finite"};
     if (c.kind == kPointsKind || c.kind == kVolumePointsKind || c.kind == kValuesKind)
       return pointsEntryProblem(c);
+    if (c.kind == kLightingKind) return lightingEntryProblem(c);
     return std::nullopt;
   }
 
@@ -170,6 +172,19 @@ class Parser {
     if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, what + " has leaves"};
     if (c.kind != kPointsKind && c.parent != kNoParent)
       return detail::FieldProblem{e::kParent, what + " of this kind has no parent"};
+    return std::nullopt;
+  }
+
+  // The rule of "Lighting chunks" (since 2.2) that the entry of such a chunk breaks.
+  static std::optional<detail::FieldProblem> lightingEntryProblem(const ChunkInfo& c) {
+    namespace e = detail::entry;
+    if (c.pointCount != 0) return detail::FieldProblem{e::kPointCount, "a lighting chunk has points"};
+    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, "a lighting chunk has nodes"};
+    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, "a lighting chunk has leaves"};
+    if (c.parent != kNoParent)
+      return detail::FieldProblem{e::kParent, "a lighting chunk has no parent"};
+    if (c.geometricError != 0.0f)
+      return detail::FieldProblem{e::kGeometricError, "a lighting chunk has no geometric error"};
     return std::nullopt;
   }
 

@@ -7,6 +7,7 @@
 
 #include "iso/error.h"
 #include "iso/flat_map.h"
+#include "iso/lighting.h"
 #include "iso/reader.h"
 
 namespace iso {
@@ -131,15 +132,23 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
     uint64_t key;
   };
   std::vector<Cut> cuts;
+  const std::vector<uint32_t> lighting = lightingChunks(reader);
+  const bool lit = std::any_of(lighting.begin(), lighting.end(),
+                               [](uint32_t id) { return id != kNoParent; });
   for (const uint32_t id : chunksFor(reader, region, cutLevel)) {
     const ChunkInfo& info = reader.chunk(id);
-    const std::shared_ptr<const SurfaceChunk> decoded =
+    std::shared_ptr<const SurfaceChunk> decoded =
         source ? source(info.id)
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
+    if (lighting[id] != kNoParent && decoded->leafValues.irradiance.empty()) {
+      SurfaceChunk copy = *decoded;
+      attachLighting(reader, lighting[id], copy);
+      decoded = std::make_shared<const SurfaceChunk>(std::move(copy));
+    }
     const SurfaceChunk& chunk = *decoded;
     // A corner's values appended to the model's the first time one of its leaves is kept:
     // corner c of values v, through remap (the model's number of each of v's corners, or
-    // kNoNode).
+    // kNoNode). In a file with lighting, a chunk without it lights its corners with 0.
     const auto cornerOf = [&](const CornerValues& v, std::vector<uint32_t>& remap, uint32_t c) {
       if (remap[c] != kNoNode) return remap[c];
       CornerValues& to = model.corners_;
@@ -148,6 +157,10 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
       if (!v.normal.empty()) to.normal.push_back(v.normal[c]);
       if (!v.color.empty()) to.color.push_back(v.color[c]);
       if (!v.occlusion.empty()) to.occlusion.push_back(v.occlusion[c]);
+      if (lit)
+        to.irradiance.push_back(v.irradiance.empty() ? std::array<float, 3>{}
+                                                     : v.irradiance[c]);
+      model.sources_.push_back({id, c, &v == &chunk.lodValues});
       return remap[c];
     };
     std::vector<uint32_t> leafRemap(chunk.leafValues.size(), kNoNode), lodRemap;
@@ -158,7 +171,9 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
         leaf.corners[size_t(c)] = cornerOf(values, remap, node.corners[size_t(c)]);
       return leaf;
     };
-    for (const SurfaceNode& node : chunk.layout.nodes) {
+    std::vector<uint32_t> leafOfNode(lit ? chunk.layout.nodes.size() : 0, kNoNode);
+    for (size_t nodeIndex = 0; nodeIndex < chunk.layout.nodes.size(); ++nodeIndex) {
+      const SurfaceNode& node = chunk.layout.nodes[nodeIndex];
       if (node.level > cutLevel) continue;
       // A node outside the region (and so everything below it) is never reached by a query.
       if (region && !region->meetsCell(node.level, node.key)) continue;
@@ -176,11 +191,18 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
               reader.name(), info.offset,
               "chunk " + std::to_string(info.id) + ": a leaf overlaps another chunk's leaf");
         model.nodes_[id].leaf = uint32_t(model.leaves_.size());
+        if (lit) leafOfNode[nodeIndex] = model.nodes_[id].leaf;
         model.leaves_.push_back(leafOf(node, chunk.leafValues, leafRemap));
       } else if (node.firstChild == kNoNode) {
         cuts.push_back({info.id, id, node.childMask, node.level, node.key});
       }
     }
+    for (const CornerOverride& o : chunk.irradianceOverrides)
+      if (leafOfNode[o.node] != kNoNode) {
+        model.lightOverrides_.insert(uint64_t{leafOfNode[o.node]} << 3 | o.corner,
+                                     uint32_t(model.overrideValues_.size()));
+        model.overrideValues_.push_back(o.value);
+      }
   }
   for (const Node& node : model.nodes_)
     if (node.leaf != kNoNode &&
@@ -254,6 +276,17 @@ double SurfaceModel::distanceAt(uint32_t leafId, const Vec3& p,
   return value;
 }
 
+const std::array<float, 3>& SurfaceModel::irradianceAt(uint32_t leaf, int corner) const {
+  if (!overrideValues_.empty())
+    if (const uint32_t* o = lightOverrides_.find(uint64_t{leaf} << 3 | uint64_t(corner)))
+      return overrideValues_[*o];
+  return corners_.irradiance[leaves_[leaf].corners[size_t(corner)]];
+}
+
+std::array<double, 8> SurfaceModel::cornerWeights(uint32_t leaf, const Vec3& p) const {
+  return trilinearWeights(localCoordinates(leaves_[leaf], p));
+}
+
 SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
   SurfaceEval e;
   e.distance = distanceAt(leafId, p, &e.gradient);
@@ -268,6 +301,14 @@ SurfaceEval SurfaceModel::evaluate(uint32_t leafId, const Vec3& p) const {
         if (hasColors())
           e.color[size_t(k)] += float(w[size_t(c)]) * corners_.color[corner][size_t(k)];
       }
+    }
+  }
+  if (hasIrradiance()) {
+    const Leaf& leaf = leaves_[leafId];
+    const std::array<double, 8> w = trilinearWeights(localCoordinates(leaf, p));
+    for (int c = 0; c < 8; ++c) {
+      const std::array<float, 3>& value = irradianceAt(leafId, c);
+      for (int k = 0; k < 3; ++k) e.irradiance[size_t(k)] += float(w[size_t(c)]) * value[size_t(k)];
     }
   }
   if (!hasNormals())

@@ -8,6 +8,7 @@
 
 #include "bytes.h"
 #include "iso/error.h"
+#include "iso/lighting.h"
 #include "iso/points.h"
 #include "iso/surface.h"
 
@@ -35,8 +36,8 @@ VerifyProblem chunkProblem(const ChunkInfo& c, const FileError& error) {
 }
 
 // Check a chunk's data (its checksum, its zstd frame) and, for the kinds this version knows, the
-// rules of "Surface chunks", "Points chunks" and "Values chunks"; the data of other kinds is decoded through a
-// small buffer and dropped.
+// rules of "Surface chunks", "Points chunks", "Values chunks" and "Lighting chunks"; the data of
+// other kinds is decoded through a small buffer and dropped.
 void checkChunk(const Reader& reader, const ChunkInfo& c, VerifyResult& result) {
   try {
     if (c.kind == kSurfaceKind)
@@ -45,7 +46,17 @@ void checkChunk(const Reader& reader, const ChunkInfo& c, VerifyResult& result) 
       decodePointsChunk(reader, c.id);
     else if (c.kind == kValuesKind)
       decodeValuesChunk(reader, c.id);
-    else
+    else if (c.kind == kLightingKind) {
+      // Its corners are those of its surface chunk (whose own problems are that chunk's).
+      const ChunkLighting lighting = decodeLightingChunk(reader, c.id);
+      SurfaceChunk surface;
+      try {
+        surface = decodeSurfaceChunk(reader, lighting.surfaceChunk);
+      } catch (const FileError&) {
+        return;
+      }
+      attachLighting(reader, c.id, surface);
+    } else
       reader.checkPayload(c.id);
   } catch (const FileError& error) {
     result.problems.push_back(chunkProblem(c, error));
@@ -69,6 +80,11 @@ VerifyResult verifyFile(const Reader& reader) {
     checkChunk(reader, c, result);
     checkPadding(c.id, c.offset + c.storedSize);
     ++result.chunksChecked;
+  }
+  try {
+    lightingChunks(reader);  // at most one a surface chunk
+  } catch (const FileError& error) {
+    result.problems.push_back({std::nullopt, error.offset().value_or(0), error.reason()});
   }
   if (reader.metadata().starts_with(kByteOrderMark))
     result.problems.push_back({std::nullopt,

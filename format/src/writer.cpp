@@ -142,6 +142,26 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
   return c.id;
 }
 
+uint32_t Writer::copyChunk(const ChunkInfo& info, std::span<const std::byte> stored) {
+  Impl& w = *impl_;
+  w.requireOpen();
+  if (info.level > w.header.maxLevel)
+    throw InternalError("chunk level is above the header's maxLevel");
+  if (!isValidKey(info.level, info.key)) throw InternalError("chunk key does not fit its level");
+  if (stored.size() != info.storedSize) throw InternalError("copyChunk: stored size differs");
+  if (w.chunks.size() >= kNoParent) throw InternalError("too many chunks");
+  ChunkInfo c = info;
+  c.id = static_cast<uint32_t>(w.chunks.size());
+  c.checksum = detail::checksum(stored);
+  if (c.checksum != info.checksum) throw InternalError("copyChunk: the bytes are not the chunk's");
+  c.offset = w.file.position();
+  ISO_CHECK(c.offset % w.header.payloadAlignment() == 0);
+  w.file.write(stored);
+  w.file.writeZeros(alignUp(w.file.position(), w.header.payloadAlignment()) - w.file.position());
+  w.chunks.push_back(c);
+  return c.id;
+}
+
 void Writer::setParent(uint32_t chunk, uint32_t parent) {
   impl_->requireOpen();
   if (chunk >= impl_->chunks.size()) throw InternalError("setParent: no such chunk");

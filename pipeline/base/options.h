@@ -3,8 +3,10 @@
 // (pipeline/convert/convert.h); written into the file's "parameters".
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
+#include <vector>
 
 #include "pipeline/base/text.h"
 
@@ -41,6 +43,29 @@ struct OcclusionOptions {
   double radius = 0.0;  // world units a ray looks for the surface; 0: a tenth of the frame's size
 };
 
+// A light of a light bake, in world units. What a lit point receives is what the viewer's
+// shading gives it (shaders/shade.h): radiance × max(cos θ, 0), over r² with inverseSquare,
+// averaged over an area light's samples, 0 where the light is hidden.
+struct BakeLight {
+  bool area = false;
+  std::array<double, 3> position{};      // a point light, or the center of an area light
+  std::array<double, 3> u{}, v{};    // an area light's edges
+  std::array<float, 3> radiance{1.0f, 1.0f, 1.0f};  // color × intensity
+  bool inverseSquare = false;
+  int samples = 16;        // an area light's samples at each corner (a stratified grid)
+};
+
+struct LightBakeOptions {
+  bool enabled = false;  // iso convert --bake-light
+  std::vector<BakeLight> lights;
+  int bounces = 1;  // diffuse interreflection bounces after the direct light (0: direct only)
+  int rays = 64;    // rays a corner for each bounce (cosine-weighted)
+  // The diffuse reflectance is diffuse × the surface's color (the file's colors, else `color`),
+  // as the viewer's diffuse term weighs it.
+  std::array<float, 3> color{0.75f, 0.75f, 0.72f};
+  float diffuse = 0.9f;
+};
+
 struct BuildOptions {
   int neighbors = 10;      // k of the k-NN radius r_i (and of PCA normals)
   double smoothing = 1.0;  // σ_i = smoothing · r_i
@@ -67,6 +92,7 @@ struct BuildOptions {
   uint32_t orientBlockPoints = 1u << 20;
   TextureOptions texture;      // a triplanar texture baked into the colors (output/texture.h)
   OcclusionOptions occlusion;  // ambient occlusion baked into the corners (output/occlusion.h)
+  LightBakeOptions lighting;   // light maps in lighting chunks (output/lighting.h)
   // The input points kept in points chunks (output/keep_points.h), positions to 2^-pointBits of the
   // frame.
   bool keepPoints = false;

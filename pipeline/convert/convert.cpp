@@ -24,6 +24,7 @@
 #include "pipeline/outofcore/outofcore.h"
 #include "pipeline/output/chunks.h"
 #include "pipeline/output/keep_points.h"
+#include "pipeline/output/lighting.h"
 #include "pipeline/output/occlusion.h"
 #include "pipeline/output/texture.h"
 #include "pipeline/points/knn.h"
@@ -89,6 +90,7 @@ void validateOptions(const BuildOptions& o) {
   const OcclusionOptions& a = o.occlusion;
   require(a.rays >= 1 && a.rays <= 4096, "--ao-rays must be 1 to 4096");
   require(std::isfinite(a.radius) && a.radius >= 0.0, "--ao-radius must be positive");
+  if (o.lighting.enabled) validateLightBake(o.lighting);
   require(o.pointBits >= 8 && o.pointBits <= 30, "--point-bits must be 8 to 30");
   require(o.keptPointsPerChunk >= 1 && o.keptPointsPerChunk <= kMaxPointsPerChunk,
           "kept points per chunk must be 1 to 2^20");
@@ -219,6 +221,7 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                       {"at", nameOf(kTextureAtNames, o.texture.at)}};
   if (o.occlusion.enabled)
     out["occlusion"] = {{"rays", o.occlusion.rays}, {"radius", o.occlusion.radius}};
+  if (o.lighting.enabled) out["lighting"] = lightBakeJson(o.lighting);
   if (o.keepPoints) out["keep_points"] = {{"point_bits", o.pointBits}};
   if (!o.keepScalar.empty()) out["keep_scalar"] = o.keepScalar;
   return out;
@@ -541,18 +544,25 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                    .colors = points.hasColors() || texture.has_value(),
                    .options = options};
   if (options.occlusion.enabled)
-    write.occlusion = [&](const Reader& written, Writer& out) {
-      timer.next("occlusion");
-      const double radius =
-          options.occlusion.radius > 0.0 ? options.occlusion.radius : 0.1 * frame.size;
-      const OcclusionStats s =
-          bakeOcclusion(written, out, options.occlusion.rays, radius / frame.size);
-      report["occlusion"] = {{"rays_per_corner", options.occlusion.rays},
-                             {"radius", radius},
-                             {"corners", s.corners},
-                             {"unprojected", s.unprojected},
-                             {"mean", s.mean}};
-    };
+    write.passes.push_back({withOcclusion, [&](const Reader& written, Writer& out) {
+                              timer.next("occlusion");
+                              const double radius = options.occlusion.radius > 0.0
+                                                        ? options.occlusion.radius
+                                                        : 0.1 * frame.size;
+                              const OcclusionStats s = bakeOcclusion(
+                                  written, out, options.occlusion.rays, radius / frame.size);
+                              report["occlusion"] = {{"rays_per_corner", options.occlusion.rays},
+                                                     {"radius", radius},
+                                                     {"corners", s.corners},
+                                                     {"unprojected", s.unprojected},
+                                                     {"mean", s.mean}};
+                            }});
+  if (options.lighting.enabled)
+    write.passes.push_back({withLighting, [&](const Reader& written, Writer& out) {
+                              timer.next("light bake");
+                              report["lighting"] =
+                                  bakeLighting(written, out, options.lighting).json();
+                            }});
   if (options.keepPoints || source.volumePoints != nullptr)
     write.moreChunks = [&](Writer& out, const FileHeader& header) {
       if (options.keepPoints) {
@@ -580,6 +590,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     for (const char* key :
          {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core"})
       r.erase(key);
+    if (r.contains("lighting")) r["lighting"].erase("timing");
     nlohmann::json m{{"generator", std::string("iso ") + ISO_VERSION},
                      {"inputs", source.inputs},
                      {"parameters", optionsJson(options)},

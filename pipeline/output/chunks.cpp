@@ -16,7 +16,6 @@
 #include "pipeline/base/buffers.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
-#include "pipeline/output/occlusion.h"
 
 namespace iso {
 namespace {
@@ -272,21 +271,22 @@ WriteStats writeSurfaceFile(const std::filesystem::path& output, const WriteInpu
   stats.fileBytesWithoutMetadata = bytesWithoutMetadata(writer);
   writer.setMetadata(in.metadata);
   writer.close();
-  if (!in.occlusion) {
-    writer.replaceMetadata(finalMetadata(writer.temporaryPath(), stats));
-    writer.commit();
-    return stats;
+  // The passes over the finished file: each copies the file so far into the next writer.
+  Writer current = std::move(writer);
+  FileHeader passHeader = header;
+  for (const WritePass& pass : in.passes) {
+    passHeader = pass.header(passHeader);
+    Writer next(output, passHeader, {.zstdLevel = in.options.zstdLevel});
+    pass.run(Reader::open(current.temporaryPath()), next);
+    current.abandon();
+    stats.chunks = next.chunkCount();
+    stats.fileBytesWithoutMetadata = bytesWithoutMetadata(next);
+    next.setMetadata(in.metadata);
+    next.close();
+    current = std::move(next);
   }
-  // The second file, at the output path: the first (complete, under its temporary name) with the
-  // occlusion at its corners.
-  Writer second(output, withOcclusion(header), {.zstdLevel = in.options.zstdLevel});
-  in.occlusion(Reader::open(writer.temporaryPath()), second);
-  writer.abandon();
-  stats.fileBytesWithoutMetadata = bytesWithoutMetadata(second);
-  second.setMetadata(in.metadata);
-  second.close();
-  second.replaceMetadata(finalMetadata(second.temporaryPath(), stats));
-  second.commit();
+  current.replaceMetadata(finalMetadata(current.temporaryPath(), stats));
+  current.commit();
   return stats;
 }
 

@@ -31,6 +31,11 @@ struct ChunkPlan {
 };
 std::vector<ChunkPlan> planChunks(const Octree& tree, uint32_t nodeBudget);
 
+struct WritePass {
+  std::function<FileHeader(FileHeader)> header;
+  std::function<void(const Reader& written, Writer& output)> run;
+};
+
 struct WriteInput {
   const Octree* tree;
   const PointSet* points;
@@ -43,9 +48,10 @@ struct WriteInput {
   BuildOptions options;
   std::function<void()> release =
       {};  // when set, called once every chunk is written (frees the above)
-  // When set, the written file is copied by it into a second writer (whose header is
-  // withOcclusion's), which becomes the output: ambient occlusion needs the finished surface.
-  std::function<void(const Reader& written, Writer& output)> occlusion = {};
+  // Passes over the finished file (ambient occlusion, light maps need the finished surface): in
+  // order, each copies the file written so far into a new writer, whose header is its `header`
+  // of the previous one; the last becomes the output.
+  std::vector<WritePass> passes = {};
   // When set, called after the surface chunks (and `release`) to add chunks of other kinds.
   std::function<void(Writer& output, const FileHeader& header)> moreChunks = {};
 };

@@ -24,34 +24,74 @@ Vec3 add(const Vec3& a, const Vec3& b, double s) {
 
 }  // namespace
 
-float ambientOcclusion(const SurfaceModel& surface, const Vec3& p, const Vec3& n, int rays,
-                       double radius, uint64_t seed) {
+std::array<Vec3, 2> tangents(const Vec3& n) {
   // An orthonormal basis (t, b, n) (Duff et al. 2017).
   const double sign = std::copysign(1.0, n[2]);
   const double a = -1.0 / (sign + n[2]), c = n[0] * n[1] * a;
-  const Vec3 t{1.0 + sign * n[0] * n[0] * a, sign * c, -sign * n[0]};
-  const Vec3 b{c, sign + n[1] * n[1] * a, -n[1]};
+  return {Vec3{1.0 + sign * n[0] * n[0] * a, sign * c, -sign * n[0]},
+          Vec3{c, sign + n[1] * n[1] * a, -n[1]}};
+}
+
+Vec3 cosineDirection(const Vec3& n, const std::array<Vec3, 2>& tb, int k, int rays,
+                     const std::array<double, 2>& jitter) {
+  // cos²θ uniform in [0, 1]: stratified in it, golden-ratio steps in azimuth.
+  const double u = (k + jitter[0]) / rays;
+  const double phi = 2.0 * std::numbers::pi * std::fmod(jitter[1] + k * 0.6180339887498949, 1.0);
+  const double s = std::sqrt(u), z = std::sqrt(std::max(0.0, 1.0 - u));
+  const double x = s * std::cos(phi), y = s * std::sin(phi);
+  const Vec3 &t = tb[0], &b = tb[1];
+  return {x * t[0] + y * b[0] + z * n[0], x * t[1] + y * b[1] + z * n[1],
+          x * t[2] + y * b[2] + z * n[2]};
+}
+
+std::array<double, 2> rayJitter(uint64_t seed) {
+  return {unit(hashBits(seed)), unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull))};
+}
+
+RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n) {
   // Start off the surface by a thousandth of the leaf there, and count hits from a twentieth of
   // it on: neighbouring leaves' patches agree at their faces only to within quantization, and a
   // ray near its start crossing such a face would meet that difference, not an occluder.
   const uint32_t leaf = surface.findLeaf(p);
   const uint8_t level = leaf == kNoNode ? surface.header().maxLevel : surface.leaves()[leaf].level;
   const double size = std::ldexp(1.0, -int(level));
-  const Vec3 origin = add(p, n, 1e-3 * size);
-  const double jitterU = unit(hashBits(seed)),
-               jitterPhi = unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull));
-  int open = 0;
-  for (int k = 0; k < rays; ++k) {
-    // Cosine-weighted: cos²θ uniform in [0, 1]; stratified in it, golden-ratio steps in azimuth.
-    const double u = (k + jitterU) / rays;
-    const double phi = 2.0 * std::numbers::pi * std::fmod(jitterPhi + k * 0.6180339887498949, 1.0);
-    const double s = std::sqrt(u), z = std::sqrt(std::max(0.0, 1.0 - u));
-    const double x = s * std::cos(phi), y = s * std::sin(phi);
-    const Vec3 d{x * t[0] + y * b[0] + z * n[0], x * t[1] + y * b[1] + z * n[1],
-                 x * t[2] + y * b[2] + z * n[2]};
-    if (!surface.intersect(origin, d, 0.05 * size, radius)) ++open;
+  return {add(p, n, 1e-3 * size), 0.05 * size};
+}
+
+Receiver receiverOf(const SurfaceModel& surface, const Vec3& corner, Vec3 n, double distance) {
+  // A corner lies on its leaf's boundary, often outside the filled leaves: the projection starts
+  // from the corner's own estimate p − f·n, which lies near the zero set.
+  Vec3 p = add(corner, n, -distance);
+  std::optional<Vec3> q = surface.project(p);
+  if (!q) q = surface.project(corner);
+  if (!q) return {p, n, false};
+  p = *q;
+  const uint32_t leaf = surface.findLeaf(p);
+  // The gradient's direction, which always points to the open side (f > 0); stored normals
+  // interpolated across a leaf holding two facing sheets need not.
+  if (leaf != kNoNode) {
+    const Vec3 g = surface.evaluate(leaf, p).gradient;
+    const double length = std::hypot(g[0], g[1], g[2]);
+    if (length > 0.0) n = {g[0] / length, g[1] / length, g[2] / length};
   }
+  return {p, n, true};
+}
+
+float ambientOcclusion(const SurfaceModel& surface, const Vec3& p, const Vec3& n, int rays,
+                       double radius, uint64_t seed) {
+  const std::array<Vec3, 2> tb = tangents(n);
+  const RayStart start = leaveSurface(surface, p, n);
+  const std::array<double, 2> jitter = rayJitter(seed);
+  int open = 0;
+  for (int k = 0; k < rays; ++k)
+    if (!surface.intersect(start.origin, cosineDirection(n, tb, k, rays, jitter), start.tMin,
+                           radius))
+      ++open;
   return float(open) / float(rays);
+}
+
+uint64_t gridSeed(const GridPoint& g) {
+  return hashBits(uint64_t(g.x) | uint64_t(g.y) << 21 | uint64_t(g.z) << 42);
 }
 
 FileHeader withOcclusion(FileHeader header) {
@@ -73,30 +113,14 @@ OcclusionStats bakeOcclusion(const Reader& in, Writer& out, int rays, double rad
     tbb::parallel_for(size_t{0}, corners.size(), [&](size_t i) {
       const CornerKey& k = corners[i];
       const glm::dvec3 g = gridToFrame(k.point);
-      const Vec3 corner{g.x, g.y, g.z};
-      Vec3 n{values.normal[i][0], values.normal[i][1], values.normal[i][2]};
-      // A corner lies on its leaf's boundary, often outside the filled leaves: the projection
-      // starts from the corner's own estimate p − f·n, which lies near the zero set.
-      Vec3 p = add(corner, n, -double(values.distance[i]));
-      std::optional<Vec3> q = surface.project(p);
-      if (!q) q = surface.project(corner);
-      if (q) {
-        p = *q;
-        const uint32_t leaf = surface.findLeaf(p);
-        // The gradient's direction, which always points to the open side (f > 0); stored
-        // normals interpolated across a leaf holding two facing sheets need not.
-        if (leaf != kNoNode) {
-          const Vec3 g = surface.evaluate(leaf, p).gradient;
-          const double length = std::hypot(g[0], g[1], g[2]);
-          if (length > 0.0) n = {g[0] / length, g[1] / length, g[2] / length};
-        }
-      } else {
-        unprojected.fetch_add(1, std::memory_order_relaxed);
-      }
+      const Receiver r =
+          receiverOf(surface, {g.x, g.y, g.z},
+                     {values.normal[i][0], values.normal[i][1], values.normal[i][2]},
+                     double(values.distance[i]));
+      if (!r.projected) unprojected.fetch_add(1, std::memory_order_relaxed);
       // Seeded by the grid point alone: a corner in several chunks gets one value.
-      const uint64_t seed =
-          hashBits(uint64_t(k.point.x) | uint64_t(k.point.y) << 21 | uint64_t(k.point.z) << 42);
-      values.occlusion[i] = ambientOcclusion(surface, p, n, rays, radius, seed);
+      values.occlusion[i] =
+          ambientOcclusion(surface, r.position, r.normal, rays, radius, gridSeed(k.point));
     });
     for (float o : values.occlusion) sum += o;
     stats.corners += corners.size();

@@ -2,6 +2,7 @@
 // (specs/pipeline.md §16).
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 #include "iso/format.h"
@@ -18,6 +19,35 @@ class Writer;
 // `seed`: the same seed gives the same answer.
 float ambientOcclusion(const SurfaceModel& surface, const Vec3& p, const Vec3& n, int rays,
                        double radius, uint64_t seed);
+
+// Shared by the bakes (occlusion, lighting).
+// Two unit tangents completing the unit normal n to an orthonormal basis.
+std::array<Vec3, 2> tangents(const Vec3& n);
+// Direction k of `rays` cosine-weighted ones over the hemisphere of n (tangents tb): stratified
+// (k + j0)/rays in cos²θ and by the golden ratio from j1 in azimuth.
+Vec3 cosineDirection(const Vec3& n, const std::array<Vec3, 2>& tb, int k, int rays,
+                     const std::array<double, 2>& jitter);
+// The jitters (j0, j1) in [0, 1) of a seed.
+std::array<double, 2> rayJitter(uint64_t seed);
+// A corner's seed: its grid point alone, so that a corner in several chunks gets one value.
+uint64_t gridSeed(const GridPoint& g);
+
+// Where rays leaving the surface at p along the side of n start, and the t from which their hits
+// count (hits nearer are the seams of quantization between leaves, not occluders).
+struct RayStart {
+  Vec3 origin{};
+  double tMin = 0.0;
+};
+RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n);
+
+// A corner (frame units; its stored normal n and signed distance) as a receiver of light: its
+// projection onto the zero set and the gradient's direction there (which points to the open
+// side), or, when the projection fails, corner − distance · n and n (projected false).
+struct Receiver {
+  Vec3 position{}, normal{};
+  bool projected = true;
+};
+Receiver receiverOf(const SurfaceModel& surface, const Vec3& corner, Vec3 n, double distance);
 
 struct OcclusionStats {
   uint64_t corners = 0;      // leaf and level-of-detail corners, counted once per chunk

@@ -1,4 +1,4 @@
-// tests/data/golden-v2.iso pins the bytes of the current format (2.1): the current writer must
+// tests/data/golden-v2.iso pins the bytes of the current format (2.2): the current writer must
 // reproduce it exactly, the reader must read the expected values from it, and the byte offsets
 // asserted here are the ones of specs/iso-format.md, written independently of format/src/layout.h.
 #include <gtest/gtest.h>
@@ -45,7 +45,7 @@ TEST(FormatGolden, headerBytesAreWhereTheSpecSays) {
   const uint8_t magic[8] = {0x89, 0x49, 0x53, 0x4F, 0x0D, 0x0A, 0x1A, 0x0A};
   EXPECT_EQ(std::memcmp(b.data(), magic, 8), 0);
   EXPECT_EQ(at<uint16_t>(b, 8), 2);      // versionMajor
-  EXPECT_EQ(at<uint16_t>(b, 10), 1);     // versionMinor
+  EXPECT_EQ(at<uint16_t>(b, 10), 2);     // versionMinor
   EXPECT_EQ(at<uint32_t>(b, 12), 256u);  // headerSize
   EXPECT_EQ(at<uint32_t>(b, 16), 0u);    // flags
   EXPECT_EQ(at<uint8_t>(b, 20), 12);     // payloadAlignmentLog2
@@ -194,9 +194,9 @@ TEST(FormatGolden, readerReadsTheExpectedValues) {
   EXPECT_TRUE(verifyFile(reader).ok());
 }
 
-// Files of versions 1.2 and 2.0 (tests/data/golden-v1.iso and golden-v2.0.iso, the golden file
-// before 2.0 and before 2.1): every 1.x file is a valid 2.0 file, every 2.0 file a valid 2.1 file,
-// and this reader reads each as the same content.
+// Files of versions 1.2, 2.0 and 2.1 (tests/data/golden-v1.iso, golden-v2.0.iso and
+// golden-v2.1.iso, the golden file before 2.0, 2.1 and 2.2): every 1.x file is a valid 2.0 file,
+// every 2.x file a valid file of a later 2.x, and this reader reads each as the same content.
 void expectReadAsTheCurrentGolden(const std::string& name, uint16_t major, uint16_t minor) {
   SCOPED_TRACE(name);
   const Reader old = Reader::open(std::filesystem::path(ISO_TEST_DATA_DIR) / name);
@@ -223,6 +223,10 @@ TEST(FormatGolden, aVersion1FileIsReadAsTheSameContent) {
 
 TEST(FormatGolden, aVersion2Point0FileIsReadAsTheSameContent) {
   expectReadAsTheCurrentGolden("golden-v2.0.iso", 2, 0);
+}
+
+TEST(FormatGolden, aVersion2Point1FileIsReadAsTheSameContent) {
+  expectReadAsTheCurrentGolden("golden-v2.1.iso", 2, 1);
 }
 
 TEST(FormatGolden, checksumIsXxh3WithSeedZero) {

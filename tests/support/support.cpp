@@ -1,6 +1,8 @@
 #include "tests/support/support.h"
 
 #include "iso/points.h"
+#include "iso/lighting.h"
+#include "iso/reader.h"
 
 #define XXH_INLINE_ALL
 #include <unistd.h>
@@ -212,6 +214,30 @@ void writeGoldenFile(const std::filesystem::path& path) {
   Writer writer(path, goldenHeader(), {.zstdLevel = 3});
   for (const GoldenChunk& c : goldenChunks()) writer.addChunk(c.desc, c.data);
   writer.setMetadata(goldenMetadata());
+  writer.finish();
+}
+
+void writeLightingSeedFile(const std::filesystem::path& golden, const std::filesystem::path& path) {
+  const Reader in = Reader::open(golden);
+  Writer writer(path, in.header());
+  for (const ChunkInfo& c : in.chunks()) writer.copyChunk(c, in.bytes().subspan(c.offset, c.storedSize));
+  for (const ChunkInfo& c : in.chunks()) {
+    if (c.kind != kSurfaceKind) continue;
+    const SurfaceChunk surface = decodeSurfaceChunk(in, c.id);
+    ChunkLighting lighting;
+    lighting.surfaceChunk = c.id;
+    for (size_t i = 0; i < surface.layout.leafCorners.size(); ++i)
+      lighting.leaf.push_back({float(i), 0.5f, 2.0f});
+    lighting.lod.assign(surface.layout.lodCorners.size(), {1.0f, 1.0f, 1.0f});
+    for (uint32_t n = 0; n < surface.layout.nodes.size(); ++n)
+      if (surface.layout.nodes[n].isLeaf()) lighting.overrides.push_back({n, 5, {3.0f, 0.0f, 1.0f}});
+    ChunkDesc desc;
+    desc.kind = kLightingKind;
+    desc.level = c.level;
+    desc.key = c.key;
+    desc.codec = Codec::Raw;
+    writer.addChunk(desc, encodeLightingChunk(lighting));
+  }
   writer.finish();
 }
 

@@ -73,5 +73,7 @@ GoldenSurface goldenSurface();
 void writeGoldenFile(const std::filesystem::path& path);
 // A small file of two points chunks (with and without colors and normals), payloads 8-aligned.
 void writePointsSeedFile(const std::filesystem::path& path);
+// The golden file with a lighting chunk for each surface chunk (a seed for the fuzzer).
+void writeLightingSeedFile(const std::filesystem::path& golden, const std::filesystem::path& path);
 
 }  // namespace iso::test

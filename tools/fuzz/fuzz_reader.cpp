@@ -1,13 +1,15 @@
 // libFuzzer target for the reader: any bytes must give a FileError or a reader whose every call
-// (verify, the checked data of every chunk, surface and points chunks, and the surface model with a
-// ray and a projection) works, never a crash or undefined behaviour. Each input is also tried with
-// its checksums recomputed, so the fuzzer reaches the structural checks behind them.
+// (verify, the checked data of every chunk, surface, points, values and lighting chunks, and the
+// surface model with a ray, a projection and its leaves' attributes) works, never a crash or
+// undefined behaviour. Each input is also tried with its checksums recomputed, so the fuzzer
+// reaches the structural checks behind them.
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <vector>
 
 #include "iso/error.h"
+#include "iso/lighting.h"
 #include "iso/points.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
@@ -42,6 +44,7 @@ void exercise(const std::vector<std::byte>& bytes) {
         if (c.kind == iso::kPointsKind || c.kind == iso::kVolumePointsKind)
           iso::decodePointsChunk(reader, c.id);
         if (c.kind == iso::kValuesKind) iso::decodeValuesChunk(reader, c.id);
+        if (c.kind == iso::kLightingKind) iso::decodeLightingChunk(reader, c.id);
       } catch (const iso::FileError&) {
       }
     }
@@ -49,6 +52,8 @@ void exercise(const std::vector<std::byte>& bytes) {
     // Queries on whatever was decoded must stay inside the model.
     (void)model.intersect({-0.5, 0.3, 0.4}, {1.0, 0.1, 0.05}, 0.0, 10.0);
     (void)model.project({0.4, 0.5, 0.6});
+    for (uint32_t leaf = 0; leaf < model.leaves().size() && leaf < 64; ++leaf)
+      (void)model.evaluate(leaf, {0.5, 0.5, 0.5});
   } catch (const iso::FileError&) {
   }
 }

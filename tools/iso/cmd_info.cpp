@@ -5,6 +5,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "iso/lighting.h"
 #include "iso/points.h"
 #include "iso/reader.h"
 #include "tools/iso/commands.h"
@@ -26,6 +27,7 @@ struct Summary {
   LevelSummary subsamples;             // the points chunks that are subsamples of others
   LevelSummary values;                 // values chunks (their points: the values)
   LevelSummary volume;                 // volume points chunks
+  LevelSummary lighting;               // lighting chunks (their points: none)
 };
 
 // Point counts summed, stopping at 2^64 - 1: a file's surface and points chunks keep these sums
@@ -43,12 +45,14 @@ Summary summarize(const Reader& reader) {
     ++s.codecs[std::string(codecName(c.codec))];
     const bool points = c.kind == kPointsKind;
     const bool values = c.kind == kValuesKind, volume = c.kind == kVolumePointsKind;
+    const bool lighting = c.kind == kLightingKind;
     if (c.parent == kNoParent && !points && !values && !volume)
       addPoints(s.points, c.pointCount);  // roots: all once
-    LevelSummary& level = points   ? (subsample[c.id] ? s.subsamples : s.kept)
-                          : values ? s.values
-                          : volume ? s.volume
-                                   : s.levels[c.level];
+    LevelSummary& level = points     ? (subsample[c.id] ? s.subsamples : s.kept)
+                          : values   ? s.values
+                          : volume   ? s.volume
+                          : lighting ? s.lighting
+                                     : s.levels[c.level];
     ++level.chunks;
     level.storedBytes += c.storedSize;
     level.rawBytes += c.rawSize;
@@ -120,6 +124,7 @@ nlohmann::json infoJson(const Reader& reader, bool withChunks) {
   j["volume_points"] = {{"chunks", s.volume.chunks},
                         {"points", s.volume.points},
                         {"stored_bytes", s.volume.storedBytes}};
+  j["lighting"] = {{"chunks", s.lighting.chunks}, {"stored_bytes", s.lighting.storedBytes}};
   j["levels"] = nlohmann::json::array();
   for (const auto& [level, l] : s.levels)
     j["levels"].push_back({{"level", level},
@@ -194,6 +199,10 @@ void printInfo(const Reader& reader, bool withChunks) {
   line("", s.subsamples, "of them again as subsamples");
   line("volume", s.volume, "volume points");
   line("values", s.values, "point values");
+  if (s.lighting.chunks > 0)
+    fmt::print("{:<12}baked irradiance in {} chunk{}, {} stored (iso bake)\n", "lighting",
+               withSeparators(s.lighting.chunks), s.lighting.chunks == 1 ? "" : "s",
+               byteSize(s.lighting.storedBytes));
   const nlohmann::json metadata = nlohmann::json::parse(reader.metadata(), nullptr, false);
   if (const nlohmann::json crs = coordinateSystemIn(metadata); !crs.is_null())
     fmt::print("{:<12}{}\n", "crs", describeCoordinateSystem(crs));

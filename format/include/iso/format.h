@@ -14,7 +14,7 @@ namespace iso {
 // major version; a change that older readers cannot ignore increases the major version. This
 // reader also reads every 1.x file: each is a valid 2.0 file.
 inline constexpr uint16_t kFormatMajor = 2;
-inline constexpr uint16_t kFormatMinor = 1;
+inline constexpr uint16_t kFormatMinor = 2;
 inline constexpr uint16_t kOldestFormatMajor = 1;
 
 inline constexpr std::array<uint8_t, 8> kHeaderMagic = {0x89, 'I',  'S',  'O',
@@ -59,8 +59,15 @@ enum class Encoding : uint8_t {
 
 enum class Codec : uint8_t { Raw = 0, Zstd = 1 };
 
-// Values (3) and VolumePoints (4) since 2.1.
-enum class ChunkKind : uint8_t { Blob = 0, Surface = 1, Points = 2, Values = 3, VolumePoints = 4 };
+// Values (3) and VolumePoints (4) since 2.1, Lighting (5) since 2.2.
+enum class ChunkKind : uint8_t {
+  Blob = 0,
+  Surface = 1,
+  Points = 2,
+  Values = 3,
+  VolumePoints = 4,
+  Lighting = 5
+};
 
 // One corner attribute and its quantization.
 struct AttributeDesc {

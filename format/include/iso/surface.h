@@ -71,6 +71,9 @@ struct CornerValues {
   std::vector<std::array<float, 3>> normal;  // unit; empty when the schema has none
   std::vector<std::array<float, 3>> color;   // linear RGB; empty when the schema has none
   std::vector<float> occlusion;              // empty when the schema has none
+  // Baked irradiance (linear RGB; iso/lighting.h): not a schema attribute but the lighting chunk
+  // of the surface chunk, when the file has one (attachLighting); else empty.
+  std::vector<std::array<float, 3>> irradiance;
   size_t size() const { return distance.size(); }
 };
 
@@ -93,10 +96,22 @@ std::vector<std::byte> encodeSurfaceChunk(const SurfaceTopology& topology,
                                           const CornerValues& leafValues,
                                           const CornerValues& lodValues);
 
+// A value of one corner of one filled leaf that differs from its shared corner's (lighting: a
+// corner between two sides of a thin wall lights each side's leaves as that side).
+struct CornerOverride {
+  uint32_t node = 0;  // in layout order
+  uint8_t corner = 0;
+  std::array<float, 3> value{};
+  bool operator==(const CornerOverride&) const = default;
+};
+
 struct SurfaceChunk {
   SurfaceTopology topology;
   CornerLayout layout;
   CornerValues leafValues, lodValues;  // dequantized
+  // With lighting (attachLighting): the leaves' corners whose irradiance is their own, by node
+  // and corner, increasing.
+  std::vector<CornerOverride> irradianceOverrides;
 };
 
 // Decode and validate surface chunk `id` of a file. Throws iso::FileError (file, the chunk's

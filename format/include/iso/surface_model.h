@@ -15,6 +15,7 @@
 #include <span>
 #include <vector>
 
+#include "iso/flat_map.h"
 #include "iso/format.h"
 #include "iso/surface.h"
 
@@ -29,6 +30,7 @@ struct SurfaceEval {
   Vec3 gradient{};                // its gradient
   std::array<float, 3> normal{};  // interpolated stored normal, or the gradient's direction
   std::array<float, 3> color{};   // interpolated linear color (zero when the file has none)
+  std::array<float, 3> irradiance{};  // interpolated baked irradiance (zero when none)
 };
 
 struct RayHit {
@@ -76,11 +78,25 @@ class SurfaceModel {
   std::span<const Leaf> leaves() const { return leaves_; }
   bool hasNormals() const { return !corners_.normal.empty(); }
   bool hasColors() const { return !corners_.color.empty(); }
+  // The file has lighting chunks (iso/lighting.h): corners() carries their irradiance.
+  bool hasIrradiance() const { return !corners_.irradiance.empty(); }
   const CornerValues& corners() const { return corners_; }
+  // Where each of the model's corners comes from: a leaf corner (or, for the internal nodes of a
+  // level-of-detail cut, an LOD corner) of a surface chunk, by its number there. A corner shared
+  // by chunks is a corner of the model once per chunk.
+  struct CornerSource {
+    uint32_t chunk = 0, corner = 0;
+    bool lod = false;
+  };
+  std::span<const CornerSource> cornerSources() const { return sources_; }
 
   // The filled leaf that contains p, or kNoNode in empty space and outside the frame.
   uint32_t findLeaf(const Vec3& p) const;
   SurfaceEval evaluate(uint32_t leaf, const Vec3& p) const;
+  // With irradiance: the irradiance of a leaf's corner (its own where the file overrides it).
+  const std::array<float, 3>& irradianceAt(uint32_t leaf, int corner) const;
+  // The trilinear weights of the leaf's corners (Leaf::corners) at p (clamped into it).
+  std::array<double, 8> cornerWeights(uint32_t leaf, const Vec3& p) const;
   // The trilinear signed distance in a leaf at p (clamped into it), and its gradient in frame
   // units when asked: evaluate() without the normal and color.
   double distanceAt(uint32_t leaf, const Vec3& p, std::array<double, 3>* gradient = nullptr) const;
@@ -118,6 +134,9 @@ class SurfaceModel {
   std::vector<Node> nodes_;  // node 0 is the root (level 0)
   std::vector<Leaf> leaves_;
   CornerValues corners_;
+  std::vector<CornerSource> sources_;
+  FlatMap<uint64_t, uint32_t> lightOverrides_;  // leaf << 3 | corner: into overrideValues_
+  std::vector<std::array<float, 3>> overrideValues_;
 };
 
 }  // namespace iso

@@ -51,6 +51,10 @@ class Writer {
   // and iso::FileError when writing fails.
   uint32_t addChunk(const ChunkDesc& desc, std::span<const std::byte> data);
 
+  // Write chunk `info` of another file as that file stores it: `stored` (its stored bytes, which
+  // the caller checked), codec, raw size and table fields; returns its id here. Throws as
+  // addChunk does for a description this file cannot hold.
+  uint32_t copyChunk(const ChunkInfo& info, std::span<const std::byte> stored);
   // Set the parent of a chunk added earlier (parents are often written after their children).
   void setParent(uint32_t chunk, uint32_t parent);
 
