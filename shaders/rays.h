@@ -7,7 +7,15 @@ struct Hit {
   vec3 normal;      // unit, pointing outside (where the signed distance is positive)
   vec3 color;       // linear RGB: the file's colors, or the material's
   float occlusion;  // baked ambient occlusion (1: open)
+  vec4 irradiance;  // rgb: the baked irradiance; w: 1 when the hit has it (a surface of a file
+                    // with lighting chunks), else 0
 };
+
+// An RGB9E5 code's value (iso/lighting.h): three 9-bit mantissas, a 5-bit exponent (bias 15).
+vec3 decodeRgb9e5(uint code) {
+  float unit = uintBitsToFloat(((code >> 27u) + 103u) << 23u);  // 2^(e - 24), exactly
+  return vec3(float(code & 511u), float((code >> 9u) & 511u), float((code >> 18u) & 511u)) * unit;
+}
 
 vec3 decodeOctahedral(vec2 e) {
   vec3 n = vec3(e.x, e.y, 1.0f - abs(e.x) - abs(e.y));
@@ -48,6 +56,7 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
   hit.normal = dot(n, n) > 0.0f ? normalize(n) : vec3(0.0f, 0.0f, 1.0f);
   hit.color = vec3(P.albedo.x, P.albedo.y, P.albedo.z);
   hit.occlusion = 1.0f;
+  hit.irradiance = vec4(0.0f);
   if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) {
     vec3 sum = vec3(0.0f);
     float open = 0.0f;
@@ -60,6 +69,13 @@ void surfaceAttributes(Cell cell, Corners c, vec3 u, ISO_INOUT(Hit) hit) {
     }
     if ((P.options.x & kOptionColors) != 0u) hit.color = sum;
     if ((P.options.x & kOptionOcclusion) != 0u) hit.occlusion = open;
+    word += kRecordColorWords;
+  }
+  if ((P.options.x & kOptionIrradiance) != 0u) {
+    vec3 sum = vec3(0.0f);
+    for (uint k = 0u; k < 8u; ++k)
+      sum += cornerWeight(k, u) * decodeRgb9e5(blobWord(cell.base, word + k));
+    hit.irradiance = vec4(sum, 1.0f);
   }
 }
 

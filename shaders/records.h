@@ -31,6 +31,7 @@ uint recordWords() {
   uint words = distanceWords();
   if ((P.options.x & kOptionNormals) != 0u) words += kRecordNormalWords;
   if ((P.options.x & (kOptionColors | kOptionOcclusion)) != 0u) words += kRecordColorWords;
+  if ((P.options.x & kOptionIrradiance) != 0u) words += kRecordIrradianceWords;
   return words;
 }
 

@@ -80,6 +80,13 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
   vec3 ambient = vec3(P.ambient.x, P.ambient.y, P.ambient.z);
   vec3 color = ambient * hit.occlusion * hit.color;
   vec3 origin = p + n * P.lod.y;
+  // Baked lighting (--lighting baked or both): the irradiance of the hit's surface lights its
+  // diffuse term. Back faces and hits without it (splats, the ground) keep live lighting.
+  bool baked = (P.options.x & kOptionBakedLight) != 0u && hit.irradiance.w > 0.0f &&
+               hit.from > 0.0f;
+  bool live = !baked || (P.options.x & kOptionLiveLight) != 0u;
+  if (baked) color += P.material.x * hit.color * vec3(hit.irradiance.x, hit.irradiance.y,
+                                                      hit.irradiance.z);
   for (uint i = 0u; i < kMaxLights; ++i) {
     Light light = P.lights[i];
     uint kind = uint(light.position.w);
@@ -102,15 +109,18 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       float falloff = light.u.w > 0.0f ? 1.0f / (lengthL * lengthL) : 1.0f;
       float lambert = dot(n, l);
       bool lit = lambert > 0.0f;
-      if (lit && (P.options.x & kOptionShadows) != 0u) {
+      if (lit && live && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
         rays.y += 1u;
         lit = !traceScene(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker);
       }
       if (lit) {
+        // Baked alone: the specular highlight stays live (without a shadow ray), the diffuse
+        // term is the baked one.
         vec3 r = reflect(-l, n);
         float specular = pow(max(dot(r, -d), 0.0f), P.albedo.w);
-        sum += falloff * (P.material.x * lambert * hit.color + vec3(P.material.y * specular));
+        vec3 diffuse = live ? P.material.x * lambert * hit.color : vec3(0.0f);
+        sum += falloff * (diffuse + vec3(P.material.y * specular));
       }
     }
     if (samples > 0u)

@@ -55,6 +55,9 @@ ISO_CONST uint kRecordDistanceWords = 3u;
 ISO_CONST uint kRecordFloatDistanceWords = 8u;
 ISO_CONST uint kRecordNormalWords = 4u;
 ISO_CONST uint kRecordColorWords = 8u;
+// Then, when the file has lighting chunks (kOptionIrradiance), the 8 corners' baked irradiance as
+// RGB9E5 (iso/lighting.h; a leaf's own corners' where its lighting chunk overrides them).
+ISO_CONST uint kRecordIrradianceWords = 8u;
 
 // Feedback from the shader, one buffer: the rays traced this frame by kind (camera rays, shadow
 // rays, reflected and refracted rays), then per chunk the frame it was last requested, then per
@@ -101,6 +104,11 @@ ISO_CONST uint kOptionSplats = 16384u;         // rays also meet the kept points
 ISO_CONST uint kOptionNoSurface = 32768u;      // rays do not meet the surface (splats alone)
 ISO_CONST uint kOptionGround = 65536u;         // rays meet the ground plane (FrameParams.ground)
 ISO_CONST uint kOptionPss = 131072u;           // rays meet a point set surface (trace.h, PssParams)
+ISO_CONST uint kOptionIrradiance = 262144u;    // records carry baked irradiance (lighting chunks)
+// --lighting (shade.h): the baked irradiance lights the diffuse term of the surface's hits, and
+// the lights' own diffuse term and shadow rays are left out (baked), or kept too (both).
+ISO_CONST uint kOptionBakedLight = 524288u;
+ISO_CONST uint kOptionLiveLight = 1048576u;
 
 // Splats (shaders/splats.h, specs/viewer.md "Splats"). A points chunk on the GPU ("splat blob"):
 // word 0 the point count n, 1 the blob's words, 2 the levels of its box tree, 3 the word of point

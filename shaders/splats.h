@@ -203,6 +203,7 @@ bool intersectSplats(vec3 o, vec3 d, float tMin, float tMax, float distance, boo
   hit.color = (P.options.x & kOptionColors) != 0u ? s.color / s.weight
                                                   : vec3(P.albedo.x, P.albedo.y, P.albedo.z);
   hit.occlusion = 1.0f;
+  hit.irradiance = vec4(0.0f);
   return true;
 }
 
@@ -244,6 +245,7 @@ bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict,
       hit.normal = n;
       hit.color = pssColor(point);
       hit.occlusion = 1.0f;
+      hit.irradiance = vec4(0.0f);
       found = true;
     }
   }
@@ -257,6 +259,7 @@ bool traceScene(vec3 o, vec3 d, float tMin, float tMax, float side, bool strict,
       hit.normal = n;
       hit.color = vec3(P.groundColor.x, P.groundColor.y, P.groundColor.z);
       hit.occlusion = 1.0f;
+      hit.irradiance = vec4(0.0f);
       found = true;
     }
   }

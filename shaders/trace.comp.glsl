@@ -18,8 +18,9 @@ layout(std430, binding = 1) readonly buffer Chunks { ChunkEntry chunks[]; };
 layout(std430, binding = 2) buffer Feedback { uint feedback[]; };
 layout(std430, binding = 3) writeonly buffer Image { uint pixels[]; };
 layout(std430, binding = 4) readonly buffer Environment { uint environment[]; };
-// The passes of a wavefront frame (kPass 1, 2 and 4): the hits to shade, three vec4s each (t,
-// side, occlusion, pixel index; normal, path index; color, depth: 0 for a camera ray's hit), and
+// The passes of a wavefront frame (kPass 1, 2 and 4): the hits to shade, four vec4s each (t,
+// side, occlusion, pixel index; normal, path index; color, depth: 0 for a camera ray's hit; the
+// baked irradiance and whether the hit has it), and
 // the queue's words: 0 the count of hits, 1-3 the indirect dispatch of the shading pass (x, y, z
 // workgroups), 4 the wave's first tile, 5 the count of pending mirror rays, 8-10 the indirect
 // dispatch of the pass that traces them.
@@ -193,11 +194,12 @@ void traceCameraRays() {
   }
   barrier();
   if (found) {
-    uint at = 3u * (groupFirst + slot);
+    uint at = 4u * (groupFirst + slot);
     uint path = (tile - queue[4]) * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
     hits[at] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(xy.y * P.image.x + xy.x));
     hits[at + 1u] = vec4(hit.normal, uintBitsToFloat(path));
     hits[at + 2u] = vec4(hit.color, 0.0f);
+    hits[at + 3u] = hit.irradiance;
   }
   if (inside) atomicAdd(feedback[kFeedbackPrimaryRays], 1u);
 }
@@ -209,9 +211,9 @@ void traceCameraRays() {
 void shadeHits() {
   uint index = gl_GlobalInvocationID.x;
   if (index >= queue[0]) return;
-  vec4 a = hits[3u * index];
-  vec4 b = hits[3u * index + 1u];
-  vec4 c = hits[3u * index + 2u];
+  vec4 a = hits[4u * index];
+  vec4 b = hits[4u * index + 1u];
+  vec4 c = hits[4u * index + 2u];
   uint pixel = floatBitsToUint(a.w);
   uint path = floatBitsToUint(b.w);
   uint depth = floatBitsToUint(c.w);
@@ -221,6 +223,7 @@ void shadeHits() {
   hit.occlusion = a.z;
   hit.normal = b.xyz;
   hit.color = c.xyz;
+  hit.irradiance = hits[4u * index + 3u];
   vec3 origin = vec3(P.eye.x, P.eye.y, P.eye.z);
   vec3 direction;
   vec3 weight = vec3(1.0f);
@@ -283,9 +286,10 @@ void traceMirrorRays() {
   }
   uint slot = atomicAdd(queue[0], 1u);
   atomicMax(queue[1], (slot + gl_WorkGroupSize.x) / gl_WorkGroupSize.x);
-  hits[3u * slot] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(pixel));
-  hits[3u * slot + 1u] = vec4(hit.normal, uintBitsToFloat(path));
-  hits[3u * slot + 2u] = vec4(hit.color, uintBitsToFloat(state >> 2u));
+  hits[4u * slot] = vec4(hit.t, hit.from, hit.occlusion, uintBitsToFloat(pixel));
+  hits[4u * slot + 1u] = vec4(hit.normal, uintBitsToFloat(path));
+  hits[4u * slot + 2u] = vec4(hit.color, uintBitsToFloat(state >> 2u));
+  hits[4u * slot + 3u] = hit.irradiance;
 }
 
 // Pass 5: the photons of all lights (P.caustics.y), an invocation each in strides of the whole

@@ -17,7 +17,7 @@ std::unique_ptr<Asset> Asset::open(const std::filesystem::path& path) {
   const FileHeader& header = a->reader.header();
   if (a->tree.topChunk() == kNoParent)
     throw FileError(a->reader.name(), std::nullopt, "the file holds no surface to view");
-  a->blob = blobOptionsOf(header);
+  a->blob = blobOptionsOf(a->reader);
   // Bounds from the coarsest chunk's deepest level.
   const SurfaceChunk top = decodeSurfaceChunk(a->reader, a->tree.topChunk());
   const uint8_t last = uint8_t(top.topology.startLevel + top.topology.depth - 1);

@@ -1,6 +1,9 @@
 // Building the GPU form of surface chunks (specs/viewer.md, "Chunks on the GPU").
 #include "viewer/blob.h"
 
+#include "iso/lighting.h"
+#include "iso/reader.h"
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -15,6 +18,12 @@
 
 namespace iso::viewer {
 namespace {
+
+// A leaf's corners whose irradiance is its own (bit c of mask: corner c's code).
+struct OwnCorners {
+  std::array<uint32_t, 8> code{};
+  uint32_t mask = 0;
+};
 
 using gpu::kBlobData;
 using gpu::kBlobHeaderWords;
@@ -59,6 +68,7 @@ void appendDistances(std::vector<uint32_t>& out, const SurfaceNode& node,
 struct CornerWords {
   std::vector<uint16_t> normals;
   std::vector<uint32_t> colors;
+  std::vector<uint32_t> irradiance;  // RGB9E5
 };
 
 CornerWords encodeCorners(const CornerValues& values, const BlobOptions& options) {
@@ -83,13 +93,20 @@ CornerWords encodeCorners(const CornerValues& values, const BlobOptions& options
       words.colors[i] = word | uint32_t(std::lround(std::clamp(open, 0.0f, 1.0f) * 255.0f)) << 24;
     }
   }
+  if (options.irradiance) {
+    // The file's own codes (values.irradiance are their decoded values, or none: a surface chunk
+    // without a lighting chunk receives nothing).
+    words.irradiance.assign(values.size(), 0u);
+    for (size_t i = 0; i < values.irradiance.size() && i < values.size(); ++i)
+      words.irradiance[i] = encodeRgb9e5(values.irradiance[i]);
+  }
   return words;
 }
 
 // Append the corner record of a node: its 8 corners' values.
 void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const CornerValues& values,
                   const CornerWords& words, std::span<const CornerKey> keys,
-                  const BlobOptions& options) {
+                  const BlobOptions& options, const OwnCorners& own = {}) {
   appendDistances(out, node, values, keys, options);
   if (options.normals) {
     for (int c = 0; c < 8; c += 2)
@@ -99,6 +116,10 @@ void appendRecord(std::vector<uint32_t>& out, const SurfaceNode& node, const Cor
   if (options.colors || options.occlusion) {
     for (int c = 0; c < 8; ++c) out.push_back(words.colors.at(node.corners[c]));
   }
+  if (options.irradiance)
+    for (int c = 0; c < 8; ++c)
+      out.push_back((own.mask >> c & 1u) != 0 ? own.code[size_t(c)]
+                                               : words.irradiance.at(node.corners[c]));
 }
 
 }  // namespace
@@ -123,8 +144,13 @@ uint32_t ChunkTree::childCovering(uint32_t parent, uint8_t level, uint64_t key) 
   return kNoParent;
 }
 
-BlobOptions blobOptionsOf(const FileHeader& header) {
+BlobOptions blobOptionsOf(const Reader& reader) {
+  const FileHeader& header = reader.header();
   BlobOptions o;
+  auto lighting = std::make_shared<std::vector<uint32_t>>(lightingChunks(reader));
+  o.irradiance = std::any_of(lighting->begin(), lighting->end(),
+                             [](uint32_t id) { return id != kNoParent; });
+  if (o.irradiance) o.lightingOf = std::move(lighting);
   for (const AttributeDesc& d : header.attributes) {
     if (d.semantic == Semantic::Normal) o.normals = true;
     if (d.semantic == Semantic::Color) o.colors = true;
@@ -140,13 +166,22 @@ BlobOptions blobOptionsOf(const FileHeader& header) {
 uint32_t recordOptionBits(const BlobOptions& o) {
   return (o.normals ? gpu::kOptionNormals : 0u) | (o.colors ? gpu::kOptionColors : 0u) |
          (o.occlusion ? gpu::kOptionOcclusion : 0u) |
-         (o.floatDistances ? gpu::kOptionFloatDistances : 0u);
+         (o.floatDistances ? gpu::kOptionFloatDistances : 0u) |
+         (o.irradiance ? gpu::kOptionIrradiance : 0u);
 }
 
 uint32_t recordWords(const BlobOptions& options) {
   return (options.floatDistances ? gpu::kRecordFloatDistanceWords : gpu::kRecordDistanceWords) +
          (options.normals ? gpu::kRecordNormalWords : 0) +
-         (options.colors || options.occlusion ? gpu::kRecordColorWords : 0);
+         (options.colors || options.occlusion ? gpu::kRecordColorWords : 0) +
+         (options.irradiance ? gpu::kRecordIrradianceWords : 0);
+}
+
+SurfaceChunk decodeBlobChunk(const Reader& reader, uint32_t id, const BlobOptions& options) {
+  SurfaceChunk chunk = decodeSurfaceChunk(reader, id);
+  if (options.irradiance && options.lightingOf && (*options.lightingOf)[id] != kNoParent)
+    attachLighting(reader, (*options.lightingOf)[id], chunk);
+  return chunk;
 }
 
 void setColorTable(gpu::FrameParams& params) {
@@ -239,11 +274,23 @@ std::vector<uint32_t> buildBlob(const SurfaceChunk& chunk, uint32_t id, const Ch
   records.reserve(nodes.size() * recordWords(options));
   const CornerWords leafWords = encodeCorners(chunk.leafValues, options);
   const CornerWords lodWords = encodeCorners(chunk.lodValues, options);
-  for (const SurfaceNode& node : nodes) {
-    if (node.isLeaf())
-      appendRecord(records, node, chunk.leafValues, leafWords, chunk.layout.leafCorners, options);
-    else
+  size_t nextOwn = 0;  // the leaves' own corners, in node order
+  for (uint32_t i = 0; i < nodes.size(); ++i) {
+    const SurfaceNode& node = nodes[i];
+    if (node.isLeaf()) {
+      OwnCorners own;
+      for (; options.irradiance && nextOwn < chunk.irradianceOverrides.size() &&
+             chunk.irradianceOverrides[nextOwn].node == i;
+           ++nextOwn) {
+        const CornerOverride& o = chunk.irradianceOverrides[nextOwn];
+        own.code[o.corner] = encodeRgb9e5(o.value);
+        own.mask |= 1u << o.corner;
+      }
+      appendRecord(records, node, chunk.leafValues, leafWords, chunk.layout.leafCorners, options,
+                   own);
+    } else {
       appendRecord(records, node, chunk.lodValues, lodWords, chunk.layout.lodCorners, options);
+    }
   }
   // Cut nodes: links to the roots of the child chunks. A child chunk's roots are the children of
   // this chunk's last-level nodes inside its cell, in key order, so counting them in node order

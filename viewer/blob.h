@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -33,13 +34,20 @@ struct BlobOptions {
   bool normals = false;    // the records carry normals
   bool colors = false;     // the records carry colors
   bool occlusion = false;  // ... and occlusion (in the color words, white without colors)
+  // The file has lighting chunks: the records carry the baked irradiance (RGB9E5), whose chunk
+  // for each surface chunk is lightingOf[id] (kNoParent: none, its corners receive nothing).
+  bool irradiance = false;
+  std::shared_ptr<const std::vector<uint32_t>> lightingOf;
   // Distances as float32 (files whose distances are not snorm8), else as the file's codes.
   bool floatDistances = false;
   float distanceUnit = 0.0f;  // a code's unit at level 0: float(√3 · the distance scale)
 };
 
-// What a file's corner records carry, from its attributes.
-BlobOptions blobOptionsOf(const FileHeader& header);
+// What a file's corner records carry, from its attributes and its lighting chunks.
+BlobOptions blobOptionsOf(const Reader& reader);
+
+// Surface chunk `id` decoded, with its lighting when the records carry irradiance.
+SurfaceChunk decodeBlobChunk(const Reader& reader, uint32_t id, const BlobOptions& options);
 
 // Words per corner record with these options.
 uint32_t recordWords(const BlobOptions& options);

@@ -123,7 +123,7 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds, bool splats
   if (tree.topChunk() == kNoParent)
     throw FileError(reader.name(), std::nullopt, "the file holds no surface to trace");
   pool.topChunk = tree.topChunk();
-  pool.blob = blobOptionsOf(reader.header());
+  pool.blob = blobOptionsOf(reader);
   std::optional<SplatIndex> index;
   if (splats) index = buildSplatIndex(reader);
   const size_t count = chunks.size() + (index ? 1 : 0);
@@ -132,7 +132,7 @@ CpuPool buildCpuPool(const Reader& reader, const ChunkFilter& holds, bool splats
   tbb::parallel_for(size_t(0), chunks.size(), [&](size_t i) {
     if (holds && !holds(chunks[i])) return;
     if (chunks[i].kind == kSurfaceKind)
-      blobs[i] = buildBlob(decodeSurfaceChunk(reader, uint32_t(i)), uint32_t(i), tree, pool.blob);
+      blobs[i] = buildBlob(decodeBlobChunk(reader, uint32_t(i), pool.blob), uint32_t(i), tree, pool.blob);
     else if (chunks[i].kind == kPointsKind && index)
       blobs[i] = buildSplatBlob(decodePointsChunk(reader, uint32_t(i)), chunks[i]);
   });

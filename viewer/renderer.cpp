@@ -74,7 +74,7 @@ constexpr uint64_t kTimestampBytes = kTimestamps * sizeof(uint64_t);
 constexpr uint64_t kQueueBytes = 48;
 constexpr uint32_t kQueueMirrorCount = 5, kQueueMirrorDispatch = 8;
 constexpr auto kQueueUsage = kStorage | kTransferDst | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT;
-constexpr uint64_t kHitBytes = 48;     // three vec4s a hit
+constexpr uint64_t kHitBytes = 64;     // four vec4s a hit
 constexpr uint64_t kPathBytes = 64;    // four vec4s a path that reflects a mirror ray, and
 constexpr uint64_t kPendingBytes = 4;  // its index while its ray waits
 // Pixels a wave of a wavefront frame (its hits, paths and pending rays: 14.5 MiB), so that large

@@ -326,6 +326,13 @@ void readRendering(const Fields& f, const json& j, const std::filesystem::path& 
       f.fail("caustics", fmt::format("a whole number of photons from 0 to {}", kMaxCausticPhotons));
     scene.caustics = uint32_t(n);
   }
+  if (j.contains("lighting")) {
+    const std::optional<Lighting> value =
+        j["lighting"].is_string() ? valueNamed(kLightingNames, j["lighting"].get<std::string>())
+                                  : std::nullopt;
+    if (!value) f.fail("lighting", namesOf(kLightingNames));
+    scene.lighting = *value;
+  }
   if (j.contains("draw")) {
     const std::optional<Draw> value =
         j["draw"].is_string() ? valueNamed(kDrawNames, j["draw"].get<std::string>()) : std::nullopt;
@@ -346,7 +353,7 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   f.known(j, "",
           {"camera", "lights", "material", "ambient", "sky_top", "sky_bottom", "up", "environment",
            "environment_intensity", "shadows", "reflections", "refractions", "bounces", "samples",
-           "lod_pixels", "backfaces", "backface_tint", "draw", "ground", "ground_color",
+           "lod_pixels", "backfaces", "backface_tint", "lighting", "draw", "ground", "ground_color",
            "caustics", "image", "volume"});
   if (j.contains("camera")) readCamera(f, j["camera"], scene);
   if (j.contains("lights")) readLights(f, j["lights"], scene);
@@ -464,6 +471,9 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   if (splats && scene.draw == Draw::Points) options |= gpu::kOptionNoSurface;
   if (scene.backFaces == BackFaces::Tint) options |= gpu::kOptionBackTint;
   if (scene.backFaces == BackFaces::Hide) options |= gpu::kOptionBackHide;
+  if (s.blob.irradiance && scene.lighting != Lighting::Live)
+    options |= gpu::kOptionBakedLight |
+               (scene.lighting == Lighting::Both ? gpu::kOptionLiveLight : 0u);
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
   p.pool = {s.poolWordsLog2, s.poolWords, s.environmentWidth, s.environmentHeight};
   setColorTable(p);

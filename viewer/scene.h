@@ -55,6 +55,15 @@ inline constexpr NameTable<BackFaces, 3> kBackFaceNames{
 BackFaces parseBackFaces(const std::string& text);
 
 // What rays meet: the surface, the kept points as splats, or both (the nearer hit).
+// What lights the diffuse term of a file with baked lighting (iso bake): its baked irradiance
+// (no shadow rays; specular highlights live), the lights as for any file, or both added. Auto:
+// baked when the file has lighting chunks.
+enum class Lighting { Auto, Baked, Live, Both };
+inline constexpr NameTable<Lighting, 4> kLightingNames{{{"auto", Lighting::Auto},
+                                                        {"baked", Lighting::Baked},
+                                                        {"live", Lighting::Live},
+                                                        {"both", Lighting::Both}}};
+
 enum class Draw { Surface, Points, Both };
 inline constexpr NameTable<Draw, 3> kDrawNames{
     {{"surface", Draw::Surface}, {"points", Draw::Points}, {"both", Draw::Both}}};
@@ -99,6 +108,7 @@ struct Scene {
   int samples = 1;         // per pixel (supersampling)
   float lodPixels = 1.0f;  // screen-space error allowed, pixels
   BackFaces backFaces = BackFaces::Show;
+  Lighting lighting = Lighting::Auto;
   Draw draw = Draw::Surface;
   // A diffuse ground plane across the scene's up axis at this height (world units, along up),
   // seen from above; none when unset.

@@ -57,7 +57,7 @@ std::vector<uint32_t> ChunkCache::prepare(uint32_t chunk) const {
     return buildSplatBlob(decodePointsChunk(reader_, chunk), reader_.chunk(chunk));
   // Decoding checks the payload's checksum (once per load) and the table's node and leaf counts,
   // from which the renderer sizes buffers.
-  const SurfaceChunk decoded = decodeSurfaceChunk(reader_, chunk);
+  const SurfaceChunk decoded = decodeBlobChunk(reader_, chunk, options_);
   return buildBlob(decoded, chunk, tree_, options_);
 }
 

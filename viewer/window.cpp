@@ -29,8 +29,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Keys 1, 2, 3, B, K, C, + and -. C turns the caustics of --caustics N off and on. K steps
-// through what is drawn, the image-space mode last when the window has one (`image`).
+// Keys 1, 2, 3, B, K, C, L, + and -. C turns the caustics of --caustics N off and on. K steps
+// through what is drawn, the image-space mode last when the window has one (`image`). L steps
+// through the lighting of a file with baked lighting (baked, live, both).
 void applySwitches(Input& input, Scene& scene, uint32_t photons, bool* image) {
   for (const int toggled : input.toggled) {
     if (toggled == 1) scene.shadows = !scene.shadows;
@@ -48,6 +49,13 @@ void applySwitches(Input& input, Scene& scene, uint32_t photons, bool* image) {
     if (toggled == 6 && photons == 0)
       fmt::print("iso view: no caustics to show (start with --caustics N)\n");
     if (toggled == 6) scene.caustics = scene.caustics > 0 ? 0 : photons;
+    if (toggled == 8) {
+      scene.lighting = scene.lighting == Lighting::Auto || scene.lighting == Lighting::Baked
+                           ? Lighting::Live
+                           : (scene.lighting == Lighting::Live ? Lighting::Both : Lighting::Baked);
+      fmt::print("iso view: lighting {} (drawn so when the file has baked lighting)\n",
+                 nameOf(kLightingNames, scene.lighting));
+    }
   }
   input.toggled.clear();
   if (input.samples != 0) scene.samples = std::clamp(scene.samples + input.samples, 1, 64);

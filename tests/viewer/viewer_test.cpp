@@ -292,6 +292,74 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
   EXPECT_EQ(lighter, 0u);
 }
 
+// A ball over a plane under a point light, its light baked without bounces (iso bake): drawn with
+// the baked irradiance (no shadow rays) the picture is the live one's but for the light map's
+// interpolation across the leaves; `both` adds the baked diffuse light to the live one; the GPU
+// draws what the CPU reference draws.
+TEST(ViewerGolden, bakedLightingDrawsTheLiveLightsDiffuseTermAndAgreesOnTheGpu) {
+  TempDir dir;
+  PointCloud points = scanOf("plane", 30000);
+  ShapeParams ball;
+  ball.radius = 0.3;
+  ball.center = {0.0, 0.0, 0.45};
+  const PointCloud sphere = scanOf(ball, 12000);
+  for (size_t i = 0; i < sphere.size(); ++i) appendPoint(points, sphere, i);
+  BuildOptions options;
+  options.maxTestedEdge = 4.0;  // a light map as fine as the shadow's edge
+  BakeLight light;
+  light.position = {0.6, -0.5, 1.6};
+  options.lighting.enabled = true;
+  options.lighting.lights = {light};
+  options.lighting.bounces = 0;
+  convertToIso(points, dir / "lit.iso", options);
+  const auto asset = Asset::open(dir / "lit.iso");
+  ASSERT_TRUE(asset->blob.irradiance);
+  Scene scene = sceneFor(*asset);
+  scene.camera->eye = {0.0, -2.2, 1.4};
+  scene.camera->target = {0.0, 0.0, 0.1};
+  scene.camera->up = {0.0, 0.0, 1.0};
+  scene.lights = {LightSpec{.position = {0.6, -0.5, 1.6}}};
+  scene.material.specular = 0.0f;
+  scene.ambient = {0.05f, 0.05f, 0.05f};
+  const uint32_t w = 160, h = 120;
+  std::vector<uint32_t> pictures[3];
+  const Lighting modes[3] = {Lighting::Live, Lighting::Baked, Lighting::Both};
+  for (int i = 0; i < 3; ++i) {
+    scene.lighting = modes[i];
+    pictures[i] = renderReference(*asset, scene, w, h);
+  }
+  // Baked against live: the same picture but where the light map interpolates across a shadow's
+  // edge (a leaf or two wide).
+  double sum = 0.0;
+  for (size_t i = 0; i < pictures[0].size(); ++i)
+    sum += std::abs(int(pictures[0][i] >> 8 & 0xFF) - int(pictures[1][i] >> 8 & 0xFF));
+  const double differ = differing(pictures[0], pictures[1]);
+  std::printf("baked against live lighting: %.3f %% of the pixels differ by more than 8/255, "
+              "mean difference %.3f/255\n",
+              100 * differ, sum / double(pictures[0].size()));
+  EXPECT_LT(differ, 0.03);
+  EXPECT_LT(sum / double(pictures[0].size()), 1.5);
+  // Both: the diffuse light twice where the light reaches (a tenth of the picture at least),
+  // nothing darker anywhere.
+  size_t brighter = 0, darker = 0;
+  for (size_t i = 0; i < pictures[0].size(); ++i) {
+    const int live = int(pictures[0][i] >> 8 & 0xFF), both = int(pictures[2][i] >> 8 & 0xFF);
+    brighter += both > live + 20;
+    darker += both < live - 1;
+  }
+  EXPECT_GT(brighter, pictures[0].size() / 10);
+  EXPECT_EQ(darker, 0u);
+  // The GPU (streaming the lighting with the surface) draws what the CPU draws.
+  for (int i = 1; i < 3; ++i) {
+    scene.lighting = modes[i];
+    const double gpuDiffer =
+        differing(renderGpu(*asset, scene, w, h, uint64_t(1) << 30).pixels, pictures[i]);
+    std::printf("%s lighting: %.4f %% of the GPU's pixels differ by more than 8/255\n",
+                i == 1 ? "baked" : "both", 100 * gpuDiffer);
+    EXPECT_LE(gpuDiffer, 0.002);
+  }
+}
+
 // An open sheet (a plane turned out of the axes) seen from behind, where the signed distance is
 // negative: the viewer shows that side (shaded with the flipped normal), tints it on request, or
 // hides it, and the GPU draws what the CPU reference draws.

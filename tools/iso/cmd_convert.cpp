@@ -20,6 +20,7 @@
 #include "pipeline/octree/octree.h"
 #include "pipeline/outofcore/spill.h"
 #include "tools/iso/commands.h"
+#include "tools/iso/light_bake.h"
 #include "tools/iso/inputs.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/text.h"
@@ -41,6 +42,8 @@ struct Options {
   std::string progress = "auto";               // auto, line, json, none
   std::string texture, textureAt = "corners";  // --texture, --texture-at
   std::string volumePoints, volumeColumns;       // --volume-points, --volume-columns
+  std::string bakeLight;                         // --bake-light SCENE
+  int bounces = LightBakeOptions{}.bounces, bakeRays = LightBakeOptions{}.rays;
   int threads = 0;                             // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
   BuildOptions build;
@@ -123,6 +126,7 @@ void printReport(const nlohmann::json& r, const Options& o) {
             ? fmt::format(" ({} not projected)", withSeparators(c["unprojected"].get<uint64_t>()))
             : "");
   }
+  if (r.contains("lighting")) printLightBake(r["lighting"]);
   if (r.contains("kept_points")) {
     const auto& k = r["kept_points"];
     fmt::print(
@@ -213,6 +217,7 @@ void checkOptions(Options& o) {
   o.build.fit = named(kFitNames, o.fit, "--fit");
   o.build.orient = named(kOrientNames, o.orient, "--orient");
   o.build.removeOutliers = !o.keepOutliers;
+  if (!o.bakeLight.empty()) o.build.lighting = lightBakeFromScene(o.bakeLight, o.bounces, o.bakeRays);
   validateOptions(o.build);  // before any file is read
   if (o.threads < 0) throw UsageError("--threads must be 0 (all cores) or more");
   if (!o.texture.empty()) {
@@ -512,6 +517,12 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--ao-radius", o->build.occlusion.radius,
                 "How far (world units) an occluder counts (default: a tenth of the frame)")
       ->needs(ao);
+  CLI::Option* light = c->add_option(
+      "--bake-light", o->bakeLight,
+      "Bake this scene file's lights into the file (light maps: irradiance at every corner, "
+      "shadows and diffuse bounces; as `iso bake` does)");
+  light->check(CLI::ExistingFile);
+  addLightBakeOptions(c, o->bounces, o->bakeRays, light);
   CLI::Option* keep = c->add_flag(
       "--keep-points", o->build.keepPoints,
       "Also store the input points in the file (Draco-compressed, a cell per chunk), for `iso "

@@ -29,6 +29,7 @@ struct ViewArgs {
   viewer::ViewOptions view;
   bool headless = false, cpu = false, bench = false;
   std::string vram = "1G", upload = "16M", camera, up, color, ambient, environment, backFaces;
+  std::string lighting;
   double fov = 0;
   std::vector<std::string> lights;
   std::optional<float> reflectivity, transparency, shininess, environmentIntensity, lodPixels;
@@ -323,6 +324,8 @@ void buildScene(ViewArgs& a) {
   if (a.noReflections) s.reflections = false;
   if (a.noRefractions) s.refractions = false;
   if (!a.backFaces.empty()) s.backFaces = viewer::parseBackFaces(a.backFaces);
+  if (!a.lighting.empty())
+    s.lighting = *valueNamed(viewer::kLightingNames, a.lighting);  // checked by the option
   if (a.points) s.draw = viewer::Draw::Points;
   if (a.ground) s.groundAuto = true;
   if (a.groundHeight) s.groundHeight = *a.groundHeight;
@@ -432,6 +435,11 @@ void addViewCommand(CLI::App& app, int& exitCode) {
                 "Back faces (the inside of the surface, e.g. an open scan seen from behind): "
                 "show (shaded, the default), tint, or hide (see through them)")
       ->check(CLI::IsMember(namesList(viewer::kBackFaceNames)));
+  c->add_option("--lighting", a->lighting,
+                "A file with baked lighting (iso bake): baked (its irradiance, no shadow rays; "
+                "the default), live (the lights, as any file), or both; key L in the window "
+                "steps through them")
+      ->check(CLI::IsMember(namesList(viewer::kLightingNames)));
   auto* points = c->add_flag("--points", a->points,
                              "Draw the kept points (iso convert --keep-points) as splats instead "
                              "of the surface (--draw points); key K in the window cycles");

@@ -14,6 +14,7 @@ inline constexpr int kExitUsage = 2;
 // code: kExitUsage for a UsageError, kExitFailure for anything else (iso/error.h).
 int runGuarded(const char* command, const std::function<int()>& body);
 
+void addBakeCommand(CLI::App& app, int& exitCode);
 void addConvertCommand(CLI::App& app, int& exitCode);
 void addEvalCommand(CLI::App& app, int& exitCode);
 void addExportCommand(CLI::App& app, int& exitCode);

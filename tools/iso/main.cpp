@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
   iso::cli::addGenCommand(app, exitCode);
   iso::cli::addInfoCommand(app, exitCode);
   iso::cli::addVerifyCommand(app, exitCode);
+  iso::cli::addBakeCommand(app, exitCode);
   iso::cli::addViewCommand(app, exitCode);
   iso::cli::installInterruptHandlers();  // Ctrl-C: no temporary file left, a line saying so
   try {
