@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
@@ -31,6 +32,17 @@ const std::filesystem::path& intactIso() {
                                      quoted(ply) + " -o " + quoted(out));
     EXPECT_EQ(run.exitCode, 0) << run.err;
     return out;
+  }();
+  return path;
+}
+
+// A scene with a light, for `iso bake`.
+const std::filesystem::path& bakeScene() {
+  static TempDir dir;
+  static const std::filesystem::path path = [] {
+    const auto scene = dir / "scene.json";
+    std::ofstream(scene) << R"({"lights": [{"type": "point", "position": [2, 3, 4]}]})";
+    return scene;
   }();
   return path;
 }
@@ -60,6 +72,8 @@ const std::vector<Command>& commands() {
       {"export --mesh", "export FILE --mesh OUT", Answer::File, "mesh.ply"},
       {"export --vdb", "export FILE --vdb OUT", Answer::Vdb, "surface.vdb"},
       {"export --points", "export FILE --points OUT", Answer::File, "points.ply"},
+      {"bake", "bake FILE -o OUT --scene SCENE --bounces 1 --bake-rays 4", Answer::File,
+       "lit.iso"},
   };
   static const std::vector<Command> withoutVdb = [] {  // ISO_WITH_OPENVDB=OFF
     std::vector<Command> l = list;
@@ -115,6 +129,7 @@ Outcome runOn(const Command& c, const std::filesystem::path& file) {
   TempDir dir;
   const auto out = dir / (c.output.empty() ? "none" : c.output);
   std::string arguments = replaced(c.arguments, "INTACT", quoted(intactIso()));
+  arguments = replaced(arguments, "SCENE", quoted(bakeScene()));
   arguments = replaced(replaced(arguments, "FILE", quoted(file)), "OUT", quoted(out));
   Outcome o;
   o.run = runIso(arguments);

@@ -268,6 +268,67 @@ TEST_F(CliPipeline, badTexturesAndImpossibleBakeOptionsLeaveTheOldFile) {
   EXPECT_TRUE(test::readFile(dir_ / "out.iso") == old);
 }
 
+TEST_F(CliPipeline, bakeLightsAFileAndRefusesWhatItCannotDo) {
+  auto run =
+      runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "sphere.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto write = [&](const char* name, const std::string& text) {
+    std::ofstream(dir_ / name) << text;
+    return quoted(dir_ / name);
+  };
+  const std::string scene =
+      write("scene.json", R"({"lights": [{"type": "point", "position": [2, 3, 4],)"
+                          R"( "falloff": "inverse_square", "intensity": 20}]})");
+  const std::string bake = "bake " + quoted(dir_ / "sphere.iso") + " -o ";
+  run = runIso(bake + quoted(dir_ / "lit.iso") + " --scene " + scene + " --bounces 1 --bake-rays 8");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_NE(run.out.find("light bake:"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("light map error"), std::string::npos) << run.out;
+  EXPECT_EQ(runIso("verify " + quoted(dir_ / "lit.iso")).exitCode, 0);
+  run = runIso("info --json " + quoted(dir_ / "lit.iso"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const nlohmann::json info = nlohmann::json::parse(run.out);
+  EXPECT_GT(info["lighting"]["chunks"].get<int>(), 0);
+  EXPECT_EQ(info["metadata"]["lighting"]["bounces"], 1);
+  EXPECT_EQ(info["metadata"]["lighting"]["lights"][0]["falloff"], "inverse_square");
+  // The same through the conversion: the same lighting chunks.
+  run = runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "both.iso") +
+               " --bake-light " + scene + " --bounces 1 --bake-rays 8");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  {
+    const Reader a = Reader::open(dir_ / "lit.iso"), b = Reader::open(dir_ / "both.iso");
+    ASSERT_EQ(a.chunks().size(), b.chunks().size());
+    for (const ChunkInfo& c : a.chunks()) {
+      if (c.kind != 5) continue;
+      EXPECT_TRUE(std::ranges::equal(a.bytes().subspan(c.offset, c.storedSize),
+                                     b.bytes().subspan(b.chunk(c.id).offset,
+                                                       b.chunk(c.id).storedSize)));
+    }
+  }
+  // An existing output without -f, the input as output, a scene without lights, impossible
+  // options: refused before any work, the old file left as it was.
+  const std::vector<std::byte> old(64, std::byte{7});
+  test::writeFile(dir_ / "old.iso", old);
+  run = runIso(bake + quoted(dir_ / "old.iso") + " --scene " + scene);
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  EXPECT_NE(run.err.find("old.iso"), std::string::npos) << run.err;
+  run = runIso(bake + quoted(dir_ / "sphere.iso") + " -f --scene " + scene);
+  EXPECT_EQ(run.exitCode, 1) << run.err;
+  const std::string dark = write("dark.json", R"({"lights": []})");
+  const std::string odd = write("odd.json", R"({"lights": [{"type": "point", "position": [1, 2, 3], "falloff": "cubic"}]})");
+  for (const std::string& options :
+       {" --scene " + dark, " --scene " + odd, " --scene " + scene + " --bounces 17",
+        " --scene " + scene + " --bake-rays 0", " --scene " + quoted(dir_ / "missing.json")}) {
+    run = runIso(bake + quoted(dir_ / "old.iso") + " -f" + options);
+    EXPECT_NE(run.exitCode, 0) << options;
+    EXPECT_TRUE(test::readFile(dir_ / "old.iso") == old) << options;
+  }
+  run = runIso("convert -f -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "old.iso") +
+               " --bounces 2");
+  EXPECT_EQ(run.exitCode, 2) << "--bounces without --bake-light\n" << run.err;
+  EXPECT_TRUE(test::readFile(dir_ / "old.iso") == old);
+}
+
 TEST_F(CliPipeline, exportWritesAMeshOfTheSurfaceAndRefusesToClobber) {
   ASSERT_EQ(runIso("convert -q " + quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "s.iso"))
                 .exitCode,

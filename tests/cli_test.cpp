@@ -71,7 +71,7 @@ TEST(Cli, infoJsonIsValidAndComplete) {
   const CommandResult run = iso("info --json --chunks " + quoted(kGolden));
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json j = nlohmann::json::parse(run.out);
-  EXPECT_EQ(j["format_version"], "2.1");
+  EXPECT_EQ(j["format_version"], "2.2");
   EXPECT_EQ(j["chunk_count"], 6);
   EXPECT_EQ(j["frame"]["origin"][0].get<double>(), 515000.25);
   EXPECT_EQ(j["frame"]["origin"][2].get<double>(), -1234.125);
@@ -146,7 +146,7 @@ TEST(Cli, badFilesAndUsageErrorsExitNonZeroWithAMessage) {
   EXPECT_NE(run.out.find("verify"), std::string::npos);
   run = iso("--version");
   EXPECT_EQ(run.exitCode, 0);
-  EXPECT_NE(run.out.find(".iso format 2.1"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find(".iso format 2.2"), std::string::npos) << run.out;
 }
 
 }  // namespace

@@ -97,6 +97,72 @@ double browserAgainstViewer(const std::filesystem::path& scan, const test::TempD
   return iou;
 }
 
+// A baked scan's tiles carry its lit colors (COLOR_0, unlit material): drawn in Chromium they
+// look as `iso view --lighting baked` draws the scan without ambient and specular light.
+TEST(CliWeb, aBakedKittensTilesInChromiumShowTheViewersBakedLight) {
+  test::TempDir dir;
+  const std::string iso = quoted(dir / "kitten.iso"), lit = quoted(dir / "lit.iso");
+  auto run = runIso("convert -q --chunk-nodes 2000 " +
+                    quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz") +
+                    " -o " + iso);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const Frame frame = Reader::open(dir / "kitten.iso").header().frame;
+  const glm::dvec3 centre =
+      glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]) + 0.5 * frame.size;
+  const glm::dvec3 eye = centre + 1.3 * frame.size * glm::normalize(glm::dvec3(0.8, 0.45, 0.55));
+  const glm::dvec3 light = centre + 2.0 * frame.size * glm::normalize(glm::dvec3(0.3, 0.9, 0.6));
+  {
+    std::ofstream scene(dir / "scene.json");
+    scene << R"({"sky_top": [0, 0, 0], "sky_bottom": [0, 0, 0], "ambient": [0, 0, 0],)"
+          << R"( "lights": [{"type": "point", "position": [)" << triple(light) << "]}],"
+          << R"( "material": {"color": [0.8, 0.7, 0.6], "specular": 0}})";
+  }
+  run = runIso("bake " + iso + " -o " + lit + " --scene " + quoted(dir / "scene.json") +
+               " --bounces 1 --bake-rays 16");
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  run = runIso("export -f " + lit + " --tiles " + quoted(dir / "tiles"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  constexpr uint32_t kWidth = 256, kHeight = 192;
+  run = runIso("view " + lit + " --cpu --width " + std::to_string(kWidth) + " --height " +
+               std::to_string(kHeight) + " --fov 40 --camera=" + triple(eye) + "," +
+               triple(centre) + ",0,0,1 --scene " + quoted(dir / "scene.json") +
+               " --lighting baked --out " + quoted(dir / "viewer.png"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const std::filesystem::path web = ISO_WEB_TOOLS_DIR;
+  run = test::runCommand("node " + quoted(web / "screenshot-tiles.mjs") + " " +
+                         quoted(dir / "tiles") + " " + quoted(dir / "browser.png") + " " +
+                         triple(eye) + " " + triple(centre) + " 0,0,1 40 " +
+                         std::to_string(kWidth) + " " + std::to_string(kHeight) + " own");
+  ASSERT_EQ(run.exitCode, 0) << run.out << run.err;
+  const Raster viewer = decodePng(test::readFile(dir / "viewer.png"), "viewer.png");
+  const Raster browser = decodePng(test::readFile(dir / "browser.png"), "browser.png");
+  // Where both draw the scan: the mean difference of the channels, and the share of pixels whose
+  // green differs by more than 24/255 (the tiles' vertices interpolate the light linearly across
+  // triangles that the simplification made larger than the leaves).
+  size_t both = 0, far = 0;
+  double sum = 0.0, brightness = 0.0;
+  const auto at = [](const Raster& r, size_t i, uint32_t c) {
+    return int(r.samples[i * r.channels + c]);
+  };
+  for (size_t i = 0; i < size_t(kWidth) * kHeight; ++i) {
+    const bool a = at(viewer, i, 0) + at(viewer, i, 1) + at(viewer, i, 2) > 6;
+    const bool b = at(browser, i, 0) + at(browser, i, 1) + at(browser, i, 2) > 6;
+    if (!a || !b) continue;
+    ++both;
+    for (uint32_t c = 0; c < 3; ++c) sum += std::abs(at(viewer, i, c) - at(browser, i, c));
+    brightness += at(viewer, i, 1);
+    far += std::abs(at(viewer, i, 1) - at(browser, i, 1)) > 24;
+  }
+  ASSERT_GT(both, size_t(kWidth) * kHeight / 10);
+  const double mean = sum / (3.0 * double(both));
+  std::printf("baked kitten in Chromium against iso view: %zu pixels both draw, mean green %.1f, "
+              "mean difference %.2f/255, %.2f %% differ by more than 24/255\n",
+              both, brightness / double(both), mean, 100.0 * double(far) / double(both));
+  EXPECT_GT(brightness / double(both), 40.0);  // lit, not black
+  EXPECT_LT(mean, 8.0);
+  EXPECT_LT(double(far) / double(both), 0.05);
+}
+
 TEST(CliWeb, theKittensTilesInChromiumHaveTheViewersSilhouette) {
   test::TempDir dir;
   EXPECT_GE(browserAgainstViewer(std::filesystem::path(ISO_TEST_DATA_DIR) / "kitten_normals.xyz",

@@ -147,7 +147,7 @@ uint32_t ChunkTree::childCovering(uint32_t parent, uint8_t level, uint64_t key) 
 BlobOptions blobOptionsOf(const Reader& reader) {
   const FileHeader& header = reader.header();
   BlobOptions o;
-  auto lighting = std::make_shared<std::vector<uint32_t>>(lightingChunks(reader));
+  auto lighting = std::make_shared<std::vector<uint32_t>>(lightingByCell(reader));
   o.irradiance = std::any_of(lighting->begin(), lighting->end(),
                              [](uint32_t id) { return id != kNoParent; });
   if (o.irradiance) o.lightingOf = std::move(lighting);
@@ -180,7 +180,7 @@ uint32_t recordWords(const BlobOptions& options) {
 SurfaceChunk decodeBlobChunk(const Reader& reader, uint32_t id, const BlobOptions& options) {
   SurfaceChunk chunk = decodeSurfaceChunk(reader, id);
   if (options.irradiance && options.lightingOf && (*options.lightingOf)[id] != kNoParent)
-    attachLighting(reader, (*options.lightingOf)[id], chunk);
+    attachLighting(reader, (*options.lightingOf)[id], id, chunk);
   return chunk;
 }
 

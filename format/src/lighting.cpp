@@ -8,6 +8,7 @@
 #include "bytes.h"
 #include "iso/check.h"
 #include "iso/error.h"
+#include "iso/flat_map.h"
 #include "iso/reader.h"
 #include "iso/surface.h"
 
@@ -148,8 +149,25 @@ std::vector<uint32_t> lightingChunks(const Reader& reader) {
   return of;
 }
 
-void attachLighting(const Reader& reader, uint32_t id, SurfaceChunk& chunk) {
+std::vector<uint32_t> lightingByCell(const Reader& reader) {
+  const auto cell = [](const ChunkInfo& c) { return (uint64_t{1} << (3 * c.level)) | c.key; };
+  FlatMap<uint64_t, uint32_t> cells(64);
+  for (const ChunkInfo& c : reader.chunks())
+    if (c.kind == kLightingKind && !cells.insert(cell(c), c.id).second)
+      return lightingChunks(reader);
+  std::vector<uint32_t> of(reader.chunks().size(), kNoParent);
+  for (const ChunkInfo& c : reader.chunks())
+    if (c.kind == kSurfaceKind)
+      if (const uint32_t* id = cells.find(cell(c))) of[c.id] = *id;
+  return of;
+}
+
+void attachLighting(const Reader& reader, uint32_t id, uint32_t surfaceId, SurfaceChunk& chunk) {
   ChunkLighting lighting = decodeLightingChunk(reader, id);
+  if (lighting.surfaceChunk != surfaceId)
+    fail(reader, id,
+         "lights surface chunk " + std::to_string(lighting.surfaceChunk) + ", not chunk " +
+             std::to_string(surfaceId) + " whose cell it shares");
   if (lighting.leaf.size() != chunk.layout.leafCorners.size() ||
       lighting.lod.size() != chunk.layout.lodCorners.size())
     fail(reader, id,

@@ -132,7 +132,7 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
     uint64_t key;
   };
   std::vector<Cut> cuts;
-  const std::vector<uint32_t> lighting = lightingChunks(reader);
+  const std::vector<uint32_t> lighting = lightingByCell(reader);
   const bool lit = std::any_of(lighting.begin(), lighting.end(),
                                [](uint32_t id) { return id != kNoParent; });
   for (const uint32_t id : chunksFor(reader, region, cutLevel)) {
@@ -142,7 +142,7 @@ SurfaceModel SurfaceModel::load(const Reader& reader, const std::optional<Region
                : std::make_shared<const SurfaceChunk>(decodeSurfaceChunk(reader, info.id));
     if (lighting[id] != kNoParent && decoded->leafValues.irradiance.empty()) {
       SurfaceChunk copy = *decoded;
-      attachLighting(reader, lighting[id], copy);
+      attachLighting(reader, lighting[id], id, copy);
       decoded = std::make_shared<const SurfaceChunk>(std::move(copy));
     }
     const SurfaceChunk& chunk = *decoded;

@@ -55,7 +55,7 @@ void checkChunk(const Reader& reader, const ChunkInfo& c, VerifyResult& result) 
       } catch (const FileError&) {
         return;
       }
-      attachLighting(reader, c.id, surface);
+      attachLighting(reader, c.id, lighting.surfaceChunk, surface);
     } else
       reader.checkPayload(c.id);
   } catch (const FileError& error) {

@@ -54,6 +54,17 @@ struct Writer::Impl {
     return size < data.size();
   }
 
+  // Write a chunk's stored bytes at the current position (aligned) and enter it in the table
+  // (`c` has everything but its offset); returns its id.
+  uint32_t append(ChunkInfo c, std::span<const std::byte> stored) {
+    c.offset = file.position();
+    ISO_CHECK(c.offset % header.payloadAlignment() == 0);
+    file.write(stored);
+    file.writeZeros(alignUp(file.position(), header.payloadAlignment()) - file.position());
+    chunks.push_back(c);
+    return c.id;
+  }
+
   // Write metadata and trailer at the current position (right after the chunk table).
   void writeMetadataAndTrailer() {
     const auto bytes = std::as_bytes(std::span(metadata));
@@ -134,12 +145,7 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
   }
   c.storedSize = stored.size();
   c.checksum = detail::checksum(stored);
-  c.offset = w.file.position();
-  ISO_CHECK(c.offset % w.header.payloadAlignment() == 0);
-  w.file.write(stored);
-  w.file.writeZeros(alignUp(w.file.position(), w.header.payloadAlignment()) - w.file.position());
-  w.chunks.push_back(c);
-  return c.id;
+  return w.append(c, stored);
 }
 
 uint32_t Writer::copyChunk(const ChunkInfo& info, std::span<const std::byte> stored) {
@@ -154,12 +160,7 @@ uint32_t Writer::copyChunk(const ChunkInfo& info, std::span<const std::byte> sto
   c.id = static_cast<uint32_t>(w.chunks.size());
   c.checksum = detail::checksum(stored);
   if (c.checksum != info.checksum) throw InternalError("copyChunk: the bytes are not the chunk's");
-  c.offset = w.file.position();
-  ISO_CHECK(c.offset % w.header.payloadAlignment() == 0);
-  w.file.write(stored);
-  w.file.writeZeros(alignUp(w.file.position(), w.header.payloadAlignment()) - w.file.position());
-  w.chunks.push_back(c);
-  return c.id;
+  return w.append(c, stored);
 }
 
 void Writer::setParent(uint32_t chunk, uint32_t parent) {

@@ -13,7 +13,11 @@
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "iso/flat_map.h"
+#include "iso/lighting.h"
+#include "iso/reader.h"
 #include "pipeline/points/points.h"
 
 namespace iso {
@@ -399,12 +403,31 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
   return std::move(extractor.mesh);
 }
 
+std::optional<BakedAppearance> bakedAppearance(const Reader& reader) {
+  if (std::none_of(reader.chunks().begin(), reader.chunks().end(),
+                   [](const ChunkInfo& c) { return c.kind == kLightingKind; }))
+    return std::nullopt;
+  BakedAppearance out;
+  const nlohmann::json m = nlohmann::json::parse(reader.metadata(), nullptr, false);
+  if (m.is_object() && m.contains("lighting") && m["lighting"].is_object()) {
+    const nlohmann::json& l = m["lighting"];
+    if (l.contains("diffuse") && l["diffuse"].is_number())
+      out.diffuse = std::clamp(l["diffuse"].get<float>(), 0.0f, 1.0f);
+    if (l.contains("color") && l["color"].is_array() && l["color"].size() == 3)
+      for (size_t a = 0; a < 3; ++a)
+        if (l["color"][a].is_number()) out.color[a] = std::clamp(l["color"][a].get<float>(), 0.0f, 1.0f);
+  }
+  return out;
+}
+
 MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& mesh,
-                              std::span<const uint32_t> vertexLeaves) {
+                              std::span<const uint32_t> vertexLeaves,
+                              const BakedAppearance* baked) {
   MeshAttributes out;
-  if (surface.hasNormals() || surface.hasColors()) {
+  const bool lit = baked != nullptr && surface.hasIrradiance();
+  if (surface.hasNormals() || surface.hasColors() || lit) {
     out.normals.resize(mesh.vertices.size());
-    if (surface.hasColors()) out.colors.resize(mesh.vertices.size());
+    if (surface.hasColors() || lit) out.colors.resize(mesh.vertices.size());
   }
   if (out.normals.empty()) return out;
   const Frame& frame = surface.header().frame;
@@ -414,8 +437,15 @@ MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& m
                         const glm::dvec3 p = toFrame(mesh.vertices[v], frame);
                         const SurfaceEval e = surface.evaluate(vertexLeaves[v], {p.x, p.y, p.z});
                         out.normals[v] = glm::vec3(e.normal[0], e.normal[1], e.normal[2]);
-                        if (!out.colors.empty())
-                          out.colors[v] = glm::vec3(e.color[0], e.color[1], e.color[2]);
+                        if (out.colors.empty()) continue;
+                        glm::vec3 c(e.color[0], e.color[1], e.color[2]);
+                        if (lit) {
+                          if (!surface.hasColors())
+                            c = glm::vec3(baked->color[0], baked->color[1], baked->color[2]);
+                          c *= baked->diffuse * glm::vec3(e.irradiance[0], e.irradiance[1],
+                                                          e.irradiance[2]);
+                        }
+                        out.colors[v] = c;
                       }
                     });
   if (!surface.hasNormals()) out.normals.clear();  // (evaluated only for the colors)

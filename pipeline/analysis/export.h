@@ -2,9 +2,11 @@
 // the zero set, crack-free across levels.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <glm/vec3.hpp>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -13,6 +15,8 @@
 #include "pipeline/io/point_cloud.h"
 
 namespace iso {
+
+class Reader;
 
 struct MeshStats {
   uint64_t leaves = 0;      // filled leaves
@@ -50,8 +54,22 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats = nullptr
 struct MeshAttributes {
   std::vector<glm::vec3> normals, colors;
 };
+
+// What a file with baked lighting (iso bake) looks like lit: the bake's material (its metadata's
+// "lighting": the color of surfaces without their own, the diffuse weight), or none for a file
+// without lighting chunks.
+struct BakedAppearance {
+  std::array<float, 3> color{0.75f, 0.75f, 0.72f};
+  float diffuse = 0.9f;
+};
+std::optional<BakedAppearance> bakedAppearance(const Reader& reader);
+
+// With `baked` (and a surface with irradiance), the colors are the lit ones: diffuse × color ×
+// irradiance (linear, clamped to 1 by the encodings), what the viewer's baked lighting draws
+// without its ambient and specular terms.
 MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& mesh,
-                              std::span<const uint32_t> vertexLeaves);
+                              std::span<const uint32_t> vertexLeaves,
+                              const BakedAppearance* baked = nullptr);
 
 // The mesh (and its attributes) simplified by edge collapses (meshoptimizer) within maxError
 // (world units): the largest distance between the two meshes, sampled both ways (every vertex of

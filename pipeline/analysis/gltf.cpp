@@ -249,16 +249,26 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
                        {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
     extensions.push_back("EXT_meshopt_compression");
   }
-  const nlohmann::json gltf = {{"asset", {{"version", "2.0"}, {"generator", "iso export"}}},
-                               {"extensionsUsed", extensions},
-                               {"extensionsRequired", extensions},
-                               {"scene", 0},
-                               {"scenes", {{{"nodes", {0}}}}},
-                               {"nodes", {node}},
-                               {"meshes", {{{"primitives", primitives}}}},
-                               {"accessors", accessors},
-                               {"bufferViews", views},
-                               {"buffers", buffers}};
+  std::vector<std::string> used = extensions;
+  if (options.unlit) used.push_back("KHR_materials_unlit");  // used, not required
+  nlohmann::json gltf = {{"asset", {{"version", "2.0"}, {"generator", "iso export"}}},
+                         {"extensionsUsed", used},
+                         {"extensionsRequired", extensions},
+                         {"scene", 0},
+                         {"scenes", {{{"nodes", {0}}}}},
+                         {"nodes", {node}},
+                         {"meshes", {{{"primitives", primitives}}}},
+                         {"accessors", accessors},
+                         {"bufferViews", views},
+                         {"buffers", buffers}};
+  if (options.unlit) {
+    gltf["materials"] = {{{"pbrMetallicRoughness",
+                           {{"baseColorFactor", {1.0, 1.0, 1.0, 1.0}},
+                            {"metallicFactor", 0.0},
+                            {"roughnessFactor", 1.0}}},
+                          {"extensions", {{"KHR_materials_unlit", nlohmann::json::object()}}}}};
+    for (nlohmann::json& p : gltf["meshes"][0]["primitives"]) p["material"] = 0;
+  }
   std::string json = gltf.dump();
   json.resize(padded(json.size()), ' ');
 

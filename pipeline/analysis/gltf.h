@@ -33,6 +33,9 @@ struct GlbOptions {
   bool yUp = false;
   // Triangles from this one on are skirts (3D Tiles), a second primitive over the same vertices.
   size_t skirtsFrom = SIZE_MAX;
+  // The colors are lit already (baked lighting): the primitives' material is unlit
+  // (KHR_materials_unlit; viewers without it light a white matte material with them).
+  bool unlit = false;
 };
 
 struct GlbStats {

@@ -185,7 +185,8 @@ std::vector<uint8_t> makeContent(const Reader& reader, const SurfaceModel::Chunk
   std::vector<uint32_t> vertexLeaves;
   TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region, without);
   if (mesh.triangles.empty()) return {};
-  MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves);
+  const std::optional<BakedAppearance> baked = bakedAppearance(reader);
+  MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves, baked ? &*baked : nullptr);
   const Frame& frame = reader.header().frame;
   const double leaf = std::ldexp(frame.size, -int(cut));
   if (budget > 0.0)
@@ -208,6 +209,7 @@ std::vector<uint8_t> makeContent(const Reader& reader, const SurfaceModel::Chunk
   GlbOptions glb;
   glb.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
   glb.yUp = true;
+  glb.unlit = baked.has_value();
   // One grid for every tile (the finest leaves' share): a vertex tiles share lands on one point
   // in each, whatever their cuts (16 bits over a coarse tile's box where it reaches too far).
   glb.positionStep = options.positionStep * std::ldexp(frame.size, -int(reader.header().maxLevel));

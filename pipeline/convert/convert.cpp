@@ -597,6 +597,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                      {"report", r}};
     if (nlohmann::json crs = coordinateSystemOf(source.inputs); !crs.is_null())
       m["crs"] = std::move(crs);
+    if (options.lighting.enabled) {  // as iso bake writes it
+      m["lighting"] = lightBakeJson(options.lighting);
+      if (r.contains("lighting")) m["lighting"]["report"] = r["lighting"];
+    }
     return m;
   };
   write.metadata = metadata(report).dump();

@@ -41,8 +41,9 @@ struct RayStart {
 RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n);
 
 // A corner (frame units; its stored normal n and signed distance) as a receiver of light: its
-// projection onto the zero set and the gradient's direction there (which points to the open
-// side), or, when the projection fails, corner − distance · n and n (projected false).
+// projection onto the zero set and the interpolated stored normal there (or the gradient's
+// direction, which points to the open side, where they disagree or the file has no normals), or,
+// when the projection fails, corner − distance · n and n (projected false).
 struct Receiver {
   Vec3 position{}, normal{};
   bool projected = true;

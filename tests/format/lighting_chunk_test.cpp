@@ -96,7 +96,7 @@ TEST(LightingChunk, bytesAreWhereTheSpecSaysAndReadBack) {
   const std::vector<uint32_t> of = lightingChunks(reader);
   ASSERT_EQ(of[lit.surfaceId], uint32_t(reader.chunks().size() - 1));
   SurfaceChunk chunk = decodeSurfaceChunk(reader, lit.surfaceId);
-  attachLighting(reader, of[lit.surfaceId], chunk);
+  attachLighting(reader, of[lit.surfaceId], lit.surfaceId, chunk);
   EXPECT_EQ(chunk.leafValues.irradiance, lit.lighting.leaf);
   EXPECT_EQ(chunk.lodValues.irradiance, lit.lighting.lod);
   EXPECT_EQ(chunk.irradianceOverrides, lit.lighting.overrides);
@@ -121,7 +121,7 @@ TEST(LightingChunk, everyBrokenRuleIsRefusedByName) {
       const VerifyResult result = verifyFile(reader);
       for (const VerifyProblem& p : result.problems) message += describe(reader, p) + "\n";
       SurfaceChunk chunk = decodeSurfaceChunk(reader, lit.surfaceId);
-      attachLighting(reader, uint32_t(reader.chunks().size() - 1), chunk);
+      attachLighting(reader, uint32_t(reader.chunks().size() - 1), lit.surfaceId, chunk);
       ADD_FAILURE() << "read without an error; verify said: " << message;
     } catch (const FileError& error) {
       message += error.what();

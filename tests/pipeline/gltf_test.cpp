@@ -194,6 +194,57 @@ std::set<std::tuple<double, double, double>> borderVertices(const TriangleMesh& 
   return out;
 }
 
+// A sphere of one color baked under a distant point light: the glTF's COLOR_0 is the lit color
+// (the material's diffuse weight × the color × cos θ) and its material is unlit.
+TEST(GlbExport, aBakedFilesColorsAreLitAndItsMaterialUnlit) {
+  test::TempDir dir;
+  PointCloud scan = test::scanOf("sphere", 30000);
+  scan.colors.assign(scan.size(), glm::vec3(0.5f, 0.6f, 0.7f));
+  BuildOptions options;
+  BakeLight light;
+  light.position = {0.0, 0.0, 10.0};
+  options.lighting.enabled = true;
+  options.lighting.lights = {light};
+  options.lighting.bounces = 0;
+  options.lighting.diffuse = 0.8f;
+  const test::Converted c = test::convertAndLoad(scan, dir / "lit.iso", options);
+  ASSERT_TRUE(c.surface.hasIrradiance());
+  const Reader reader = Reader::open(dir / "lit.iso");
+  const std::optional<BakedAppearance> baked = bakedAppearance(reader);
+  ASSERT_TRUE(baked.has_value());
+  EXPECT_FLOAT_EQ(baked->diffuse, 0.8f);
+  std::vector<uint32_t> leaves;
+  TriangleMesh mesh = extractMesh(c.surface, nullptr, &leaves);
+  MeshAttributes attributes = meshAttributes(c.surface, mesh, leaves, &*baked);
+  ASSERT_EQ(attributes.colors.size(), mesh.vertices.size());
+  double worst = 0.0;
+  size_t checked = 0;
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const glm::dvec3 p = mesh.vertices[i], n = glm::normalize(p);
+    const double cosine = glm::dot(n, glm::normalize(glm::dvec3(0.0, 0.0, 10.0) - p));
+    // The terminator: the light is interpolated across the leaves there.
+    if (std::abs(cosine) < 0.1) continue;
+    const glm::dvec3 want = 0.8 * std::max(cosine, 0.0) * glm::dvec3(0.5, 0.6, 0.7);
+    for (int a = 0; a < 3; ++a)
+      worst = std::max(worst, std::abs(double(attributes.colors[i][a]) - want[a]));
+    ++checked;
+  }
+  std::printf("baked sphere: %zu vertices, largest color error %.4f\n", checked, worst);
+  EXPECT_GT(checked, mesh.vertices.size() / 2);
+  EXPECT_LT(worst, 0.01);
+  const Glb glb = parseGlb(encodeGlb(mesh, attributes, {.unlit = true}));
+  EXPECT_NE(std::find(glb.json["extensionsUsed"].begin(), glb.json["extensionsUsed"].end(),
+                      "KHR_materials_unlit"),
+            glb.json["extensionsUsed"].end());
+  EXPECT_EQ(std::find(glb.json["extensionsRequired"].begin(),
+                      glb.json["extensionsRequired"].end(), "KHR_materials_unlit"),
+            glb.json["extensionsRequired"].end());
+  EXPECT_TRUE(glb.json["materials"][0]["extensions"].contains("KHR_materials_unlit"));
+  for (const nlohmann::json& primitive : glb.json["meshes"][0]["primitives"])
+    EXPECT_EQ(primitive["material"], 0);
+  EXPECT_TRUE(glb.json["meshes"][0]["primitives"][0]["attributes"].contains("COLOR_0"));
+}
+
 TEST(MeshSimplification, staysWithinItsErrorOfTheSphereAndKeepsOpenBorders) {
   test::TempDir dir;
   const test::Converted sphere = test::convertAndLoad(test::scanOf("sphere", 30000), dir / "s.iso");

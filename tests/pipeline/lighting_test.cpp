@@ -364,7 +364,7 @@ TEST(Lighting, theBakeKeepsEveryOtherChunkByteForByteAndReplacesItsOwn) {
     if (c.kind == kSurfaceKind) {
       ASSERT_NE(of[c.id], kNoParent);
       SurfaceChunk chunk = decodeSurfaceChunk(lit, c.id);
-      attachLighting(lit, of[c.id], chunk);
+      attachLighting(lit, of[c.id], c.id, chunk);
       EXPECT_EQ(chunk.leafValues.irradiance.size(), chunk.layout.leafCorners.size());
     }
   // Baked again (other lights): the same number of chunks, the new lighting in place of the old,

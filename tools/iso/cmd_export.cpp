@@ -138,7 +138,8 @@ void writeMesh(const Reader& reader, const SurfaceModel& surface, bool doubles, 
   const uint64_t extracted = mesh.triangles.size();
   const bool glb = isGlb(o.mesh);
   MeshAttributes attributes;
-  if (glb) attributes = meshAttributes(surface, mesh, vertexLeaves);
+  const std::optional<BakedAppearance> baked = bakedAppearance(reader);
+  if (glb) attributes = meshAttributes(surface, mesh, vertexLeaves, baked ? &*baked : nullptr);
   vertexLeaves = {};
   double measured = 0.0;
   if (o.maxError) measured = simplifyMesh(mesh, attributes, *o.maxError);
@@ -154,6 +155,7 @@ void writeMesh(const Reader& reader, const SurfaceModel& surface, bool doubles, 
     for (const SurfaceModel::Leaf& leaf : surface.leaves()) finest = std::max(finest, leaf.level);
     GlbOptions options;
     options.compress = !o.noMeshopt;
+    options.unlit = baked.has_value();
     options.maxPositionStep = 0.01 * std::ldexp(reader.header().frame.size, -int(finest));
     writeFileBytes(staged, encodeGlb(mesh, attributes, options, &glbStats));
   });

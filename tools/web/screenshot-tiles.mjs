@@ -1,8 +1,9 @@
-// node tools/web/screenshot-tiles.mjs TILESET_DIR OUT.png EYE TARGET UP FOV WIDTH HEIGHT
+// node tools/web/screenshot-tiles.mjs TILESET_DIR OUT.png EYE TARGET UP FOV WIDTH HEIGHT [LOOK]
 // Serve TILESET_DIR and the page tiles/main.js (bundled with esbuild) on localhost, load it in
 // Debian's headless Chromium (playwright-core), wait until the tiles the view needs are drawn and
 // save the canvas as OUT.png. EYE, TARGET and UP are "x,y,z" in world units. Prints one JSON line
-// (the tiles' models and triangles drawn); exits 1 on any error.
+// (the tiles' models and triangles drawn); exits 1 on any error. LOOK: silhouette (white on
+// black, the default) or own (the tiles' own materials: a baked scan's lit colors).
 import { createServer } from 'node:http';
 import { readFile, writeFile } from 'node:fs/promises';
 import { join, normalize, dirname } from 'node:path';
@@ -10,9 +11,9 @@ import { fileURLToPath } from 'node:url';
 import * as esbuild from 'esbuild';
 import { chromium } from 'playwright-core';
 
-const [tilesetDir, out, eye, target, up, fov, width, height] = process.argv.slice(2);
+const [tilesetDir, out, eye, target, up, fov, width, height, look] = process.argv.slice(2);
 if (!height) {
-  console.error('usage: screenshot-tiles.mjs TILESET_DIR OUT.png EYE TARGET UP FOV WIDTH HEIGHT');
+  console.error('usage: screenshot-tiles.mjs TILESET_DIR OUT.png EYE TARGET UP FOV WIDTH HEIGHT [LOOK]');
   process.exit(2);
 }
 const here = dirname(fileURLToPath(import.meta.url));
@@ -59,7 +60,7 @@ try {
   const errors = [];
   tab.on('pageerror', (error) => errors.push(String(error)));
   const query = new URLSearchParams({ tileset: `${address}/tiles/tileset.json`, eye, target, up,
-    fov, width, height });
+    fov, width, height, look: look ?? 'silhouette' });
   await tab.goto(`${address}/?${query}`);
   const ready = await tab.waitForFunction(
     () => window.tilesReady ?? (window.tilesError ? { error: window.tilesError } : null),

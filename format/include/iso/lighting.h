@@ -47,9 +47,14 @@ ChunkLighting decodeLightingChunk(const Reader& reader, uint32_t id);
 // is not a surface chunk or a surface chunk has two.
 std::vector<uint32_t> lightingChunks(const Reader& reader);
 
-// Decode lighting chunk `id` into the irradiance of `chunk` (the surface chunk it belongs to):
-// throws iso::FileError when its corner counts are not the chunk's or an override's node is not
-// one of its filled leaves.
-void attachLighting(const Reader& reader, uint32_t id, SurfaceChunk& chunk);
+// The same from the chunk table alone, for readers that decode a few chunks: the lighting chunk in
+// each surface chunk's cell (which attachLighting checks is that chunk's). Where two lighting
+// chunks share a cell, lightingChunks' answer.
+std::vector<uint32_t> lightingByCell(const Reader& reader);
+
+// Decode lighting chunk `id` into the irradiance of `chunk`, surface chunk `surfaceId`: throws
+// iso::FileError when it is another surface chunk's, its corner counts are not the chunk's or an
+// override's node is not one of its filled leaves.
+void attachLighting(const Reader& reader, uint32_t id, uint32_t surfaceId, SurfaceChunk& chunk);
 
 }  // namespace iso

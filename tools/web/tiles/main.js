@@ -1,6 +1,7 @@
 // The page tools/web/screenshot-tiles.mjs loads: a 3D Tiles tileset drawn by three.js and
 // 3d-tiles-renderer from the camera in the address's query (eye, target, up: world units, z up;
-// fov: vertical degrees; width, height: pixels), as a white silhouette on black. Sets
+// fov: vertical degrees; width, height: pixels), as a white silhouette on black, or with
+// look=own in the tiles' own materials (a baked scan's unlit vertex colors). Sets
 // window.tilesReady once every tile the view needs is in and drawn; window.tilesError on errors.
 import * as THREE from 'three';
 import { TilesRenderer } from '3d-tiles-renderer';
@@ -16,6 +17,7 @@ const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuff
 renderer.setPixelRatio(1);
 renderer.setSize(width, height);
 renderer.setClearColor(0x000000, 1);
+renderer.outputColorSpace = THREE.SRGBColorSpace;  // linear colors out as sRGB, as iso view writes
 document.body.appendChild(renderer.domElement);
 
 const eye = vector('eye');
@@ -38,7 +40,8 @@ tiles.setResolutionFromRenderer(camera, renderer);
 let models = 0;
 tiles.addEventListener('load-model', ({ scene: model }) => {
   models++;
-  model.traverse((object) => { if (object.isMesh) object.material = white; });
+  if (query.get('look') !== 'own')
+    model.traverse((object) => { if (object.isMesh) object.material = white; });
 });
 tiles.addEventListener('load-error', ({ error, url }) => {
   window.tilesError = `${url}: ${error}`;
