@@ -59,7 +59,7 @@ struct LightBakeOptions {
   bool enabled = false;  // iso convert --bake-light
   std::vector<BakeLight> lights;
   int bounces = 1;  // diffuse interreflection bounces after the direct light (0: direct only)
-  int rays = 64;    // rays a corner for each bounce (cosine-weighted)
+  int rays = 32;    // rays a corner for each bounce (cosine-weighted)
   // The diffuse reflectance is diffuse × the surface's color (the file's colors, else `color`),
   // as the viewer's diffuse term weighs it.
   std::array<float, 3> color{0.75f, 0.75f, 0.72f};

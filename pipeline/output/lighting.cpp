@@ -344,16 +344,15 @@ LightBakeStats bakeLighting(const Reader& in, Writer& out, const LightBakeOption
   // zero set (at most 20,000), the interpolated direct irradiance against the exact one.
   {
     const std::vector<ZeroSetSample> samples = surface.sampleZeroSet(1);
+    std::vector<BakeLight> reference = options.lights;
+    for (BakeLight& l : reference) l.samples = std::min(4 * l.samples, 4096);
     const size_t every = std::max<size_t>(1, samples.size() / 20000);
     std::vector<double> errors((samples.size() + every - 1) / every), truths(errors.size());
     tbb::parallel_for(size_t{0}, errors.size(), [&](size_t k) {
       const ZeroSetSample& s = samples[k * every];
-      Vec3 g{};
-      surface.distanceAt(s.leaf, s.position, &g);
-      const double length = std::hypot(g[0], g[1], g[2]);
-      if (!(length > 0.0)) return;
-      const Vec3 normal{g[0] / length, g[1] / length, g[2] / length};
-      const Rgb exact = directIrradiance(surface, s.position, normal, options.lights,
+      const Vec3 normal = surfaceNormal(surface, s.leaf, s.position);
+      // Four times the area lights' samples: the reference's own noise left out.
+      const Rgb exact = directIrradiance(surface, s.position, normal, reference,
                                          hashBits(uint64_t(k) + 1));
       const Rgb drawn = interpolate(direct, s.leaf, s.position);
       truths[k] = (exact[0] + exact[1] + exact[2]) / 3.0;

@@ -58,6 +58,21 @@ RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n)
   return {add(p, n, 1e-3 * size), 0.05 * size};
 }
 
+Vec3 surfaceNormal(const SurfaceModel& surface, uint32_t leaf, const Vec3& p) {
+  // The interpolated stored normal (the points', within a fraction of a degree), unless it leans
+  // more than 60° from the gradient's direction, which always points to the open side (f > 0):
+  // stored normals interpolated across a leaf holding two facing sheets need not. The gradient of
+  // a trilinear patch is degrees off (a sphere's light 10 % too low at cos θ = 0.37).
+  const SurfaceEval e = surface.evaluate(leaf, p);
+  const double length = std::hypot(e.gradient[0], e.gradient[1], e.gradient[2]);
+  if (!(length > 0.0)) return {0.0, 0.0, 1.0};
+  const Vec3 n{e.gradient[0] / length, e.gradient[1] / length, e.gradient[2] / length};
+  const Vec3 stored{e.normal[0], e.normal[1], e.normal[2]};
+  if (surface.hasNormals() && stored[0] * n[0] + stored[1] * n[1] + stored[2] * n[2] > 0.5)
+    return stored;
+  return n;
+}
+
 Receiver receiverOf(const SurfaceModel& surface, const Vec3& corner, Vec3 n, double distance) {
   // A corner lies on its leaf's boundary, often outside the filled leaves: the projection starts
   // from the corner's own estimate p − f·n, which lies near the zero set.
@@ -67,20 +82,7 @@ Receiver receiverOf(const SurfaceModel& surface, const Vec3& corner, Vec3 n, dou
   if (!q) return {p, n, false};
   p = *q;
   const uint32_t leaf = surface.findLeaf(p);
-  // The interpolated stored normal (the points', within a fraction of a degree), unless it leans
-  // more than 60° from the gradient's direction, which always points to the open side (f > 0):
-  // stored normals interpolated across a leaf holding two facing sheets need not. The gradient of
-  // a trilinear patch is degrees off (a sphere's light 10 % too low at cos θ = 0.37).
-  if (leaf != kNoNode) {
-    const SurfaceEval e = surface.evaluate(leaf, p);
-    const double length = std::hypot(e.gradient[0], e.gradient[1], e.gradient[2]);
-    if (length > 0.0) {
-      n = {e.gradient[0] / length, e.gradient[1] / length, e.gradient[2] / length};
-      const Vec3 stored{e.normal[0], e.normal[1], e.normal[2]};
-      if (surface.hasNormals() && stored[0] * n[0] + stored[1] * n[1] + stored[2] * n[2] > 0.5)
-        n = stored;
-    }
-  }
+  if (leaf != kNoNode) n = surfaceNormal(surface, leaf, p);
   return {p, n, true};
 }
 

@@ -40,6 +40,11 @@ struct RayStart {
 };
 RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n);
 
+// The normal that lights the surface at p in a leaf: the interpolated stored normal, or the
+// gradient's direction (which points to the open side) where they are more than 60° apart or the
+// file has none.
+Vec3 surfaceNormal(const SurfaceModel& surface, uint32_t leaf, const Vec3& p);
+
 // A corner (frame units; its stored normal n and signed distance) as a receiver of light: its
 // projection onto the zero set and the interpolated stored normal there (or the gradient's
 // direction, which points to the open side, where they disagree or the file has no normals), or,
