@@ -33,8 +33,6 @@ Receiver cornerReceiver(const SurfaceModel& surface, const CornerKey& key,
   return receiverOf(surface, {g.x, g.y, g.z}, normal, double(values.distance[c]));
 }
 
-double unit(uint64_t bits) { return double(bits >> 11) * 0x1.0p-53; }
-
 double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -85,8 +83,8 @@ std::array<double, 3> directIrradiance(const SurfaceModel& surface, const Vec3& 
     const int rows = (samples + columns - 1) / columns;
     for (int s = 0; s < samples; ++s) {
       const uint64_t bits = hashBits(seed ^ hashBits(uint64_t(i) << 32 | uint64_t(s)));
-      const double a = (double(s % columns) + unit(bits)) / columns - 0.5;
-      const double b = (double(s / columns) + unit(hashBits(bits))) / rows - 0.5;
+      const double a = (double(s % columns) + unitInterval(bits)) / columns - 0.5;
+      const double b = (double(s / columns) + unitInterval(hashBits(bits))) / rows - 0.5;
       const Vec3 at{light.position[0] + a * light.u[0] + b * light.v[0],
                     light.position[1] + a * light.u[1] + b * light.v[1],
                     light.position[2] + a * light.u[2] + b * light.v[2]};

@@ -16,8 +16,6 @@
 namespace iso {
 namespace {
 
-double unit(uint64_t bits) { return double(bits >> 11) * 0x1.0p-53; }
-
 Vec3 add(const Vec3& a, const Vec3& b, double s) {
   return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]};
 }
@@ -45,7 +43,7 @@ Vec3 cosineDirection(const Vec3& n, const std::array<Vec3, 2>& tb, int k, int ra
 }
 
 std::array<double, 2> rayJitter(uint64_t seed) {
-  return {unit(hashBits(seed)), unit(hashBits(seed ^ 0x9e3779b97f4a7c15ull))};
+  return {unitInterval(hashBits(seed)), unitInterval(hashBits(seed ^ 0x9e3779b97f4a7c15ull))};
 }
 
 RayStart leaveSurface(const SurfaceModel& surface, const Vec3& p, const Vec3& n) {

@@ -27,6 +27,8 @@ std::array<Vec3, 2> tangents(const Vec3& n);
 // (k + j0)/rays in cos²θ and by the golden ratio from j1 in azimuth.
 Vec3 cosineDirection(const Vec3& n, const std::array<Vec3, 2>& tb, int k, int rays,
                      const std::array<double, 2>& jitter);
+// 53 random bits of a hash as a number in [0, 1).
+inline double unitInterval(uint64_t bits) { return double(bits >> 11) * 0x1.0p-53; }
 // The jitters (j0, j1) in [0, 1) of a seed.
 std::array<double, 2> rayJitter(uint64_t seed);
 // A corner's seed: its grid point alone, so that a corner in several chunks gets one value.
