@@ -8,6 +8,7 @@
 #include <map>
 #include <numbers>
 
+#include "iso/check.h"
 #include "iso/quantize.h"
 #include "iso/reader.h"
 #include "pipeline/analysis/measure.h"
@@ -18,16 +19,29 @@
 namespace iso {
 namespace {
 
+// Weighted distances and, in units of the point spacing, the shares beyond half a spacing and two,
+// and the RMS of the bulk within two spacings: the one summary every metric here reports.
 struct Weighted {
+  double spacing = 0.0;  // 0: no shares
   double sum = 0.0, squares = 0.0, weight = 0.0, max = 0.0;
+  double beyondHalf = 0.0, beyondTwo = 0.0, bulkSquares = 0.0;
   void add(double d, double w) {
     sum += w * d;
     squares += w * d * d;
     weight += w;
     max = std::max(max, d);
+    if (d > 0.5 * spacing) beyondHalf += w;
+    if (d > 2.0 * spacing)
+      beyondTwo += w;
+    else
+      bulkSquares += w * d * d;
   }
   double mean() const { return weight > 0 ? sum / weight : 0.0; }
   double rms() const { return weight > 0 ? std::sqrt(squares / weight) : 0.0; }
+  double share(double w) const { return weight > 0 ? w / weight : 0.0; }
+  double bulkRms() const {
+    return weight > beyondTwo ? std::sqrt(bulkSquares / (weight - beyondTwo)) : 0.0;
+  }
 };
 
 glm::dvec3 toWorld(const Vec3& p, const Frame& f) {
@@ -47,7 +61,8 @@ struct IsoToTruth {
   std::vector<glm::vec3> samples;    // frame units, for the fallback of truth → iso
 };
 
-IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const EvalOptions& options) {
+IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const EvalOptions& options,
+                      double spacing) {
   const Frame& frame = surface.header().frame;
   const std::vector<ZeroSetSample> samples = surface.sampleZeroSet(options.linesPerEdge);
   std::vector<double> distance(samples.size()), angle(samples.size());
@@ -64,6 +79,7 @@ IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const Eva
         }
       });
   IsoToTruth out;
+  out.distance.spacing = spacing;
   for (size_t i = 0; i < samples.size(); ++i) {
     out.distance.add(distance[i], samples[i].area);
     out.samples.push_back(glm::vec3(float(samples[i].position[0]), float(samples[i].position[1]),
@@ -112,7 +128,8 @@ std::optional<glm::dvec3> closestOnZeroSet(const SurfaceModel& surface, const gl
 }
 
 TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
-                      const std::vector<glm::vec3>& isoSamples, const EvalOptions& options) {
+                      const std::vector<glm::vec3>& isoSamples, const EvalOptions& options,
+                      double spacing) {
   const Frame& frame = surface.header().frame;
   std::mt19937_64 rng(options.seed);
   std::vector<glm::dvec3> points(options.truthSamples);
@@ -138,6 +155,7 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
         }
       });
   TruthToIso out;
+  out.distance.spacing = spacing;
   for (size_t i = 0; i < points.size(); ++i) {
     out.distance.add(distance[i], 1.0);
     out.unprojected += projected[i] ? 0 : 1;
@@ -218,33 +236,44 @@ nlohmann::json weightedJson(const Weighted& w, double spacing) {
           {"max", w.max},
           {"mean", w.mean()},
           {"rms_over_spacing", w.rms() / spacing},
-          {"max_over_spacing", w.max / spacing}};
+          {"max_over_spacing", w.max / spacing},
+          {"beyond_half_spacing", w.share(w.beyondHalf)},
+          {"beyond_two_spacings", w.share(w.beyondTwo)},
+          {"bulk_rms_over_spacing", w.bulkRms() / spacing}};
+}
+
+// Both ways as one: RMS of the two RMS, the larger max, the mean shares, the RMS of the bulk RMS.
+nlohmann::json bothWays(const Weighted& a, const Weighted& b, double spacing) {
+  const auto rootMeanSquare = [](double x, double y) { return std::sqrt(0.5 * (x * x + y * y)); };
+  const double rms = rootMeanSquare(a.rms(), b.rms()), max = std::max(a.max, b.max);
+  return {{"rms", rms},
+          {"max", max},
+          {"mean", 0.5 * (a.mean() + b.mean())},
+          {"spacing", spacing},
+          {"rms_over_spacing", rms / spacing},
+          {"max_over_spacing", max / spacing},
+          {"beyond_half_spacing", 0.5 * (a.share(a.beyondHalf) + b.share(b.beyondHalf))},
+          {"beyond_two_spacings", 0.5 * (a.share(a.beyondTwo) + b.share(b.beyondTwo))},
+          {"bulk_rms_over_spacing", rootMeanSquare(a.bulkRms(), b.bulkRms()) / spacing}};
 }
 
 }  // namespace
 
 nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& truth,
                                     double pointSpacing, const EvalOptions& options) {
-  const IsoToTruth a = isoToTruth(surface, truth, options);
-  const TruthToIso b = truthToIso(surface, truth, a.samples, options);
+  const IsoToTruth a = isoToTruth(surface, truth, options, pointSpacing);
+  const TruthToIso b = truthToIso(surface, truth, a.samples, options, pointSpacing);
   const Rays rays = castRays(surface, truth, options);
-  const double rms =
-      std::sqrt(0.5 * (a.distance.rms() * a.distance.rms() + b.distance.rms() * b.distance.rms()));
-  const double max = std::max(a.distance.max, b.distance.max);
   const double diagonal = glm::length(truth.boundsMax() - truth.boundsMin());
   nlohmann::json iso = weightedJson(a.distance, pointSpacing);
   iso["samples"] = a.normalAngles.size();
   nlohmann::json back = weightedJson(b.distance, pointSpacing);
   back["samples"] = options.truthSamples;
   back["unprojected"] = b.unprojected;
-  return {{"truth", truth.name()},
-          {"rms", rms},
-          {"max", max},
-          {"mean", 0.5 * (a.distance.mean() + b.distance.mean())},
-          {"spacing", pointSpacing},
-          {"rms_over_spacing", rms / pointSpacing},
-          {"max_over_spacing", max / pointSpacing},
-          {"rms_over_diagonal", rms / diagonal},
+  nlohmann::json out = bothWays(a.distance, b.distance, pointSpacing);
+  out["truth"] = truth.name();
+  out.update(nlohmann::json{
+          {"rms_over_diagonal", out["rms"].get<double>() / diagonal},
           {"normal_median_deg", percentile(a.normalAngles, 0.5)},
           {"normal_p99_deg", percentile(a.normalAngles, 0.99)},
           {"normal_outward_fraction", outwardFraction(a.normalAngles)},
@@ -254,7 +283,8 @@ nlohmann::json evaluateAgainstShape(const SurfaceModel& surface, const Shape& tr
           {"holes", rays.holes},
           {"spurious_hits", rays.spurious},
           {"iso_to_truth", iso},
-          {"truth_to_iso", back}};
+          {"truth_to_iso", back}});
+  return out;
 }
 
 namespace {
@@ -418,37 +448,78 @@ nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
   return out;
 }
 
+namespace {
+
+// The distance from each of `count` points (drawn by `point(rng, i)`, in parallel with one stream
+// per block) to `distance(p)`, tallied.
+template <typename Point, typename Distance>
+Weighted tallyDistances(uint64_t count, uint64_t seed, double spacing, Point point,
+                        Distance distance) {
+  constexpr uint64_t kBlock = 4096;
+  std::vector<double> d(count);
+  tbb::parallel_for(uint64_t{0}, (count + kBlock - 1) / kBlock, [&](uint64_t block) {
+    std::mt19937_64 rng(seed + block);
+    for (uint64_t i = block * kBlock; i < std::min(count, (block + 1) * kBlock); ++i)
+      d[i] = distance(point(rng, i));
+  });
+  Weighted w;
+  w.spacing = spacing;
+  for (double v : d) w.add(v, 1.0);
+  return w;
+}
+
+nlohmann::json meshJson(const Weighted& meshToTruth, const Weighted& truthToMesh, double spacing,
+                        const TriangleMesh& mesh) {
+  nlohmann::json out = bothWays(meshToTruth, truthToMesh, spacing);
+  out["mesh_to_truth"] = weightedJson(meshToTruth, spacing);
+  out["truth_to_mesh"] = weightedJson(truthToMesh, spacing);
+  out["triangles"] = mesh.triangles.size();
+  return out;
+}
+
+}  // namespace
+
 nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
                                         double pointSpacing, uint64_t samples, uint64_t seed) {
   const std::unique_ptr<Shape> surface = makeMeshShape(mesh);
-  // Distances from `count` samples of one to the other, in parallel with one stream per block.
   const auto oneWay = [&](const Shape& from, const Shape& to, uint64_t salt) {
-    constexpr uint64_t kBlock = 4096;
-    std::vector<double> distance(samples);
-    tbb::parallel_for(uint64_t{0}, (samples + kBlock - 1) / kBlock, [&](uint64_t block) {
-      std::mt19937_64 rng(seed * 0x9e3779b97f4a7c15ull + salt + block);
-      for (uint64_t i = block * kBlock; i < std::min(samples, (block + 1) * kBlock); ++i)
-        distance[i] = to.closest(from.sample(rng).position).distance;
-    });
-    double squares = 0.0, max = 0.0;
-    for (double d : distance) {
-      squares += d * d;
-      max = std::max(max, d);
-    }
-    return std::pair{std::sqrt(squares / double(std::max<uint64_t>(samples, 1))), max};
+    return tallyDistances(
+        samples, seed * 0x9e3779b97f4a7c15ull + salt, pointSpacing,
+        [&](std::mt19937_64& rng, uint64_t) { return from.sample(rng).position; },
+        [&](const glm::dvec3& p) { return to.closest(p).distance; });
   };
-  const auto [rmsMT, maxMT] = oneWay(*surface, truth, 1);
-  const auto [rmsTM, maxTM] = oneWay(truth, *surface, 2);
-  const double rms = std::sqrt(0.5 * (rmsMT * rmsMT + rmsTM * rmsTM)), max = std::max(maxMT, maxTM);
-  return {{"rms", rms},
-          {"max", max},
-          {"spacing", pointSpacing},
-          {"rms_over_spacing", rms / pointSpacing},
-          {"max_over_spacing", max / pointSpacing},
-          {"mesh_to_truth", {{"rms", rmsMT}, {"max", maxMT}}},
-          {"truth_to_mesh", {{"rms", rmsTM}, {"max", maxTM}}},
-          {"triangles", mesh.triangles.size()},
-          {"samples", samples}};
+  nlohmann::json out = meshJson(oneWay(*surface, truth, 1), oneWay(truth, *surface, 2),
+                                pointSpacing, mesh);
+  out["samples"] = samples;
+  return out;
+}
+
+nlohmann::json evaluateMeshAgainstPoints(const TriangleMesh& mesh, const PointCloud& points,
+                                         double pointSpacing, uint64_t samples, uint64_t seed) {
+  ISO_CHECK(!points.positions.empty());
+  const std::unique_ptr<Shape> surface = makeMeshShape(mesh);
+  // The points relative to their first, in float, for the nearest-point index.
+  const glm::dvec3 origin = points.positions[0];
+  std::vector<glm::vec3> local(points.positions.size());
+  for (size_t i = 0; i < local.size(); ++i) local[i] = glm::vec3(points.positions[i] - origin);
+  const PointIndex index(local);
+  const Weighted meshToPoints = tallyDistances(
+      samples, seed * 0x9e3779b97f4a7c15ull + 1, pointSpacing,
+      [&](std::mt19937_64& rng, uint64_t) { return surface->sample(rng).position; },
+      [&](const glm::dvec3& p) {
+        uint32_t nearest = 0;
+        float d2 = 0.0f;
+        index.nearest(glm::vec3(p - origin), 1, &nearest, &d2);
+        return glm::length(points.positions[nearest] - p);
+      });
+  const uint64_t step = std::max<uint64_t>(1, points.size() / samples);
+  const Weighted pointsToMesh = tallyDistances(
+      (points.size() + step - 1) / step, seed, pointSpacing,
+      [&](std::mt19937_64&, uint64_t i) { return points.positions[i * step]; },
+      [&](const glm::dvec3& p) { return surface->closest(p).distance; });
+  nlohmann::json out = meshJson(meshToPoints, pointsToMesh, pointSpacing, mesh);
+  out["samples"] = samples;
+  return out;
 }
 
 }  // namespace iso

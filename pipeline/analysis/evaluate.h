@@ -54,11 +54,21 @@ nlohmann::json evaluateAgainstFile(const SurfaceModel& a, const SurfaceModel& b,
                                    int linesPerEdge = 2);
 
 // A triangle mesh against a truth, both ways by closest points: the one metric for surfaces that
-// other tools make (an OpenVDB level set's mesh) and for an .iso file's exported mesh beside them.
-// "mesh_to_truth": area-uniform samples of the mesh; "truth_to_mesh": samples of the truth; "rms"
-// and "max" combined as evaluateAgainstShape does; *_over_spacing in pointSpacing.
+// other tools make (an OpenVDB level set's or screened Poisson's mesh) and for an .iso file's
+// exported mesh beside them. "mesh_to_truth": area-uniform samples of the mesh; "truth_to_mesh":
+// samples of the truth; "rms" and "max" combined as evaluateAgainstShape does; *_over_spacing in
+// pointSpacing; "beyond_half_spacing" and "beyond_two_spacings" the shares of samples farther than
+// that (the mean of the two ways), "bulk_rms_over_spacing" the RMS of those within two spacings.
 nlohmann::json evaluateMeshAgainstShape(const TriangleMesh& mesh, const Shape& truth,
                                         double pointSpacing, uint64_t samples = 100000,
                                         uint64_t seed = 1);
+
+// The same against a scan's own points: "mesh_to_truth" is the distance of each mesh sample to
+// the nearest point (a surface where the scan has no points is far from all of them; on a perfect
+// surface it is still up to about half a spacing), "truth_to_mesh" that of each point (up to
+// `samples` of them, evenly spread) to the mesh.
+nlohmann::json evaluateMeshAgainstPoints(const TriangleMesh& mesh, const PointCloud& points,
+                                         double pointSpacing, uint64_t samples = 100000,
+                                         uint64_t seed = 1);
 
 }  // namespace iso

@@ -128,8 +128,9 @@ size_t addSkirts(TriangleMesh& mesh, MeshAttributes& attributes, const glm::dvec
   return edges;
 }
 
-// How deep a tile's skirts hang: twice the largest chunk error (its simplification is within one
-// more) of the tiles that may be drawn unrefined beside it, the tile itself when it has children,
+// How deep a tile's skirts hang: three times the largest chunk error (its simplification is within
+// one more, and a finer neighbour's fitted corners may move its border by a third) of the tiles
+// that may be drawn unrefined beside it, the tile itself when it has children,
 // its siblings and its parent's siblings with children; 0 when none has (refinement replaces a
 // parent by all its children at once, so tiles of one parent that have none are drawn together).
 double skirtHeight(const std::vector<Tile>& tiles, uint32_t i) {
@@ -140,7 +141,7 @@ double skirtHeight(const std::vector<Tile>& tiles, uint32_t i) {
     for (uint32_t sibling : tiles[up].children)
       if (!tiles[sibling].children.empty()) error = std::max(error, tiles[sibling].chunkError);
   }
-  return 2.0 * error;
+  return 3.0 * error;
 }
 
 // A tile's content: the chunk's surface at its last level (the cut a viewer draws when it stops

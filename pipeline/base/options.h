@@ -71,7 +71,7 @@ struct BuildOptions {
   double smoothing = 1.0;  // σ_i = smoothing · r_i
   FitMode fit = FitMode::Sphere;
   OrientMode orient = OrientMode::Auto;
-  uint32_t leafPoints = 8;      // a node with more points may be subdivided
+  uint32_t leafPoints = 4;      // a node with more points may be subdivided
   // A node with more points is subdivided without a patch test. Not a command-line option: tests
   // lower it so that small scans have chunks many tested nodes wide, as large scans do.
   uint32_t maxTestedPoints = 4096;
@@ -81,7 +81,11 @@ struct BuildOptions {
   double maxTestedEdge = 128.0;
   int maxDepth = 20;            // deepest octree level (at most 20)
   double tolerance = 0.1;       // allowed patch error, in point spacings
-  int cornerFit = 0;            // passes fitting leaf corners to the points (0: sampled values)
+  int cornerFit = 2;            // passes fitting leaf corners to the points (0: sampled values)
+  // Keep every sheet the patches make, also across holes farther than trimReach radii of influence
+  // from every point (a closed surface); false: the surface ends where the points end.
+  bool fillHoles = false;
+  double trimReach = 1.0;
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;

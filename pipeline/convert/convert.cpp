@@ -207,6 +207,8 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                         {"max_depth", o.maxDepth},
                         {"tolerance", o.tolerance},
                         {"corner_fit", o.cornerFit},
+                        {"fill_holes", o.fillHoles},
+                        {"trim_reach", o.trimReach},
                         {"normal_bits", o.normalBits},
                         {"chunk_nodes", o.chunkNodes},
                         {"zstd_level", o.zstdLevel},
@@ -511,6 +513,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
   fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit);
+  const size_t trimmed =
+      options.fillHoles ? 0 : trimFarSurface(octree, points, *sdf, closure, options.trimReach);
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
   const CornerField& corners = closure.corners;
   const HangingCorners& hanging = closure.hanging;
@@ -531,6 +535,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   reportPoints(ready, inputPoints + source.nonFiniteDropped, source.nonFiniteDropped, report);
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
   report["octree"]["closure_filled"] = closure.filled;
+  report["octree"]["trimmed"] = trimmed;
   report["corners"] = {
       {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 

@@ -96,6 +96,14 @@ struct Closure {
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerField&& corners);
 
+// ---- trim.cpp
+// Empty the filled leaves whose zero set exists and lies, everywhere it is sampled, farther than
+// `reach` radii of influence from the nearest point (sheets across holes), and the internal nodes
+// left with nothing filled below; the closure's corner levels and hanging corners are updated.
+// Returns the leaves emptied.
+size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                      Closure& closure, double reach);
+
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
 struct LodField {

@@ -8,7 +8,8 @@
 // voxel, which leaves a shell a couple of voxels thick whose two sheets lie about a voxel from the
 // surface, and smoothed by one mean-curvature step. Prints JSON: seconds, peak memory, .vdb bytes,
 // and the error of its zero set's mesh (volumeToMesh) against the truth; and, with the same metric
-// (evaluateMeshAgainstShape, or points to mesh), the error of the .iso file's exported mesh.
+// (evaluateMeshAgainstShape or evaluateMeshAgainstPoints), the error of the .iso file's exported
+// mesh.
 #include <fmt/core.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetFilter.h>
@@ -61,25 +62,6 @@ TriangleMesh meshOf(const openvdb::FloatGrid& grid) {
     mesh.triangles.push_back({q[0], q[2], q[3]});
   }
   return mesh;
-}
-
-// Points to a mesh: the distance of each (every step-th) point to it.
-nlohmann::json pointsToMesh(const PointCloud& cloud, const TriangleMesh& mesh, double spacing) {
-  const std::unique_ptr<Shape> shape = makeMeshShape(mesh);
-  const size_t step = std::max<size_t>(1, cloud.size() / 100000);
-  double squares = 0.0, max = 0.0;
-  size_t n = 0;
-  for (size_t i = 0; i < cloud.size(); i += step, ++n) {
-    const double d = shape->closest(cloud.positions[i]).distance;
-    squares += d * d;
-    max = std::max(max, d);
-  }
-  const double rms = std::sqrt(squares / double(std::max<size_t>(n, 1)));
-  return {{"rms", rms},
-          {"max", max},
-          {"rms_over_spacing", rms / spacing},
-          {"max_over_spacing", max / spacing},
-          {"points", n}};
 }
 
 }  // namespace
@@ -150,8 +132,8 @@ int main(int argc, char** argv) {
     const TriangleMesh isoMesh = extractMesh(surface);
     if (!truthPoints.empty()) {
       const PointCloud truth = readPointFile(truthPoints);
-      result["vdb_error"] = pointsToMesh(truth, vdbMesh, spacing);
-      result["iso_mesh_error"] = pointsToMesh(truth, isoMesh, spacing);
+      result["vdb_error"] = evaluateMeshAgainstPoints(vdbMesh, truth, spacing);
+      result["iso_mesh_error"] = evaluateMeshAgainstPoints(isoMesh, truth, spacing);
     } else {
       std::unique_ptr<Shape> truth;
       if (!truthMesh.empty()) {

@@ -471,9 +471,18 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_option("--corner-fit", o->build.cornerFit,
                 "Passes moving leaf corners so that the surface runs through the points (0: the "
-                "sampled signed distances, whose trilinear patches shrink convex parts). "
-                "Experimental: pictures of such files show dark specks (specs/pipeline.md §6)")
+                "sampled signed distances, whose trilinear patches shrink convex parts; "
+                "specs/pipeline.md §6)")
       ->capture_default_str();
+  c->add_flag("--fill-holes", o->build.fillHoles,
+              "Keep the surface the patches make across holes in the scan (a closed surface); "
+              "without it the surface ends where the points end: a leaf whose surface is farther "
+              "than --trim-reach radii of influence from every point is left out");
+  c->add_option("--trim-reach", o->build.trimReach,
+                "How far from the points, in radii of influence, the surface may reach before it "
+                "is trimmed")
+      ->capture_default_str()
+      ->check(CLI::Range(0.5, 100.0));
   c->add_option("--normal-bits", o->build.normalBits,
                 "Octahedral normal bits per component: 8 or 12")
       ->capture_default_str();

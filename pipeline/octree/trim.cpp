@@ -1,0 +1,102 @@
+// A surface that ends where the points end (specs/pipeline.md, "Trimming"): a filled leaf whose
+// zero set lies farther than a few radii of influence from every point is emptied. Such sheets
+// span holes in the scan (passive leaves and closure follow the points' disks, but balance splits
+// and the patches of sparse leaves can carry the zero set across a hole), and they are the
+// largest errors of a conversion: the scene models only what its points show. The zero set of a
+// leaf is sampled where it crosses a grid of lines along each axis (the trilinear is linear
+// along them, so each crossing is exact). Leaves are emptied all at once from the tree as it
+// stands, so the result does not depend on their order; internal nodes left with no filled
+// descendant become empty, so that no level of detail draws what the finest level does not.
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+
+#include "pipeline/base/buffers.h"
+#include "pipeline/octree/field.h"
+#include "pipeline/octree/octree.h"
+
+namespace iso {
+namespace {
+
+constexpr int kTrimLines = 4;  // lines per leaf edge along each axis
+
+// Whether some crossing of the leaf's zero set with the lines lies within `reach` radii of
+// influence of its nearest point; `crossed` tells whether there was any crossing at all.
+bool zeroSetNearPoints(const OctreeNode& leaf, const std::array<double, 8>& f,
+                       const SdfEvaluator& sdf, const PointSet& points, double reach,
+                       bool& crossed) {
+  const double size = std::ldexp(1.0, -leaf.level);
+  const auto cell = mortonDecode(leaf.key);
+  const glm::dvec3 origin = glm::dvec3(cell[0], cell[1], cell[2]) * size;
+  crossed = false;
+  for (int axis = 0; axis < 3; ++axis) {
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    for (int i = 0; i < kTrimLines; ++i)
+      for (int j = 0; j < kTrimLines; ++j) {
+        std::array<double, 3> lo{}, hi{};
+        lo[size_t(u)] = hi[size_t(u)] = (i + 0.5) / kTrimLines;
+        lo[size_t(v)] = hi[size_t(v)] = (j + 0.5) / kTrimLines;
+        hi[size_t(axis)] = 1.0;
+        const double f0 = trilinear(f, lo), f1 = trilinear(f, hi);
+        if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) continue;
+        crossed = true;
+        std::array<double, 3> x = lo;
+        x[size_t(axis)] = f0 / (f0 - f1);
+        const glm::dvec3 p = origin + size * glm::dvec3(x[0], x[1], x[2]);
+        float distance = 0.0f;
+        const uint32_t nearest = sdf.nearest(p, distance);
+        if (double(distance) <= reach * double(points.radius[nearest])) return true;
+      }
+  }
+  return false;
+}
+
+// Empty the internal nodes none of whose descendants is filled (children come after parents).
+void emptyBareInternalNodes(Octree& tree) {
+  for (size_t i = tree.nodes.size(); i-- > 0;) {
+    OctreeNode& node = tree.nodes[i];
+    if (node.kind != NodeKind::Internal) continue;
+    bool any = false;
+    for (uint32_t c = 0; c < 8 && !any; ++c)
+      any = tree.nodes[node.firstChild + c].kind != NodeKind::Empty;
+    if (!any) node.kind = NodeKind::Empty;
+  }
+}
+
+}  // namespace
+
+size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                      Closure& closure, double reach) {
+  std::vector<uint8_t> far(tree.nodes.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, tree.nodes.size(), 1024),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      spillPause();
+                      for (size_t i = r.begin(); i < r.end(); ++i) {
+                        const OctreeNode& leaf = tree.nodes[i];
+                        if (!leaf.isFilled()) continue;
+                        std::array<double, 8> f{};
+                        for (int c = 0; c < kCorners; ++c)
+                          f[size_t(c)] = closure.corners.value[closure.corners.find(
+                              cornerPoint(leaf.level, leaf.key, c))].distance;
+                        bool crossed = false;
+                        far[i] = !zeroSetNearPoints(leaf, f, sdf, points, reach, crossed) &&
+                                 crossed;
+                      }
+                    });
+  size_t trimmed = 0;
+  for (size_t i = 0; i < far.size(); ++i)
+    if (far[i]) {
+      tree.nodes[i].kind = NodeKind::Empty;
+      ++trimmed;
+    }
+  if (trimmed == 0) return 0;
+  emptyBareInternalNodes(tree);
+  // Corners of emptied leaves are no longer in use, and a corner that hung on an emptied leaf's
+  // face keeps its value but no longer hangs.
+  closure.cornersInUse = refreshCornerLevels(closure.corners, tree);
+  closure.hanging = findHangingCorners(tree, closure.corners);
+  snapHangingCorners(closure.corners, closure.hanging);
+  return trimmed;
+}
+
+}  // namespace iso
