@@ -62,7 +62,7 @@ TEST_F(CliPipeline, genConvertVerifyInfoAndEvalWorkTogether) {
   ASSERT_EQ(run.exitCode, 0);
   const nlohmann::json info = nlohmann::json::parse(run.out);
   EXPECT_EQ(info["metadata"]["inputs"][0]["points"], 20000);
-  EXPECT_EQ(info["metadata"]["parameters"]["leaf_points"], 4);
+  EXPECT_EQ(info["metadata"]["parameters"]["leaf_points"], 6);
   EXPECT_GT(info["metadata"]["report"]["accuracy"]["samples"].get<int>(), 0);
   EXPECT_EQ(info["point_count"], 20000);
 

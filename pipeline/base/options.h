@@ -71,7 +71,7 @@ struct BuildOptions {
   double smoothing = 1.0;  // σ_i = smoothing · r_i
   FitMode fit = FitMode::Sphere;
   OrientMode orient = OrientMode::Auto;
-  uint32_t leafPoints = 4;      // a node with more points may be subdivided
+  uint32_t leafPoints = 6;      // a node with more points may be subdivided
   // A node with more points is subdivided without a patch test. Not a command-line option: tests
   // lower it so that small scans have chunks many tested nodes wide, as large scans do.
   uint32_t maxTestedPoints = 4096;

@@ -5,6 +5,7 @@
 //   snap.cpp      hanging corners snapped to the coarser neighbour's face or edge (crack-free)
 //   fit.cpp       corner values fitted to the points (the trilinear patch's bias undone)
 //   close.cpp     closure: empty cells the surface runs into are filled, until none is left
+//   trim.cpp      trimming: leaves whose surface lies mostly far from every point are emptied
 //   lod.cpp       level of detail: corners of internal nodes from point proxies, node errors
 //
 // The octree and the field depend on each other (the octree's patch tests fill the field; the
@@ -97,10 +98,10 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
                             CornerField&& corners);
 
 // ---- trim.cpp
-// Empty the filled leaves whose zero set exists and lies, everywhere it is sampled, farther than
-// `reach` radii of influence from the nearest point (sheets across holes), and the internal nodes
-// left with nothing filled below; the closure's corner levels and hanging corners are updated.
-// Returns the leaves emptied.
+// Empty the filled leaves without points whose zero set exists and lies, at half or more of the
+// places where it is sampled, farther than `reach` radii of influence from the nearest point
+// (sheets across holes), and the internal nodes left with nothing filled below; the closure's
+// corner levels and hanging corners are updated. Returns the leaves emptied.
 size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                       Closure& closure, double reach);
 

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "iso/verify.h"
+#include "pipeline/analysis/evaluate.h"
 #include "pipeline/base/options.h"
 #include "pipeline/io/readers.h"
 #include "pipeline/points/knn.h"
@@ -252,6 +253,60 @@ TEST(HardCases, openSurfaceOverhangsItsBoundaryByLittle) {
       convertAndMeasure(test::scanOf("plane", 40000), *shape("plane"), &report);
   // The surface may reach past the boundary by about a radius of influence, not more.
   EXPECT_LE(e["iso_to_truth"]["max"].get<double>(), 2.0 * report["median_radius"].get<double>());
+}
+
+// The largest distance from the zero set (its area-weighted samples) to the nearest input point,
+// in world units.
+double farthestSurfaceFromPoints(const test::Converted& c, const PointCloud& points) {
+  const Frame& frame = c.surface.header().frame;
+  std::vector<glm::vec3> local(points.size());
+  for (size_t i = 0; i < points.size(); ++i)
+    local[i] = glm::vec3((points.positions[i] - glm::dvec3(frame.origin[0], frame.origin[1],
+                                                           frame.origin[2])) /
+                         frame.size);
+  const PointIndex index(local);
+  double farthest = 0.0;
+  for (const ZeroSetSample& s : c.surface.sampleZeroSet(2)) {
+    uint32_t nearest = 0;
+    float d2 = 0.0f;
+    index.nearest(glm::vec3(s.position[0], s.position[1], s.position[2]), 1, &nearest, &d2);
+    farthest = std::max(farthest, std::sqrt(double(d2)) * frame.size);
+  }
+  return farthest;
+}
+
+TEST(HardCases, aHoleInTheScanStaysOpenUnlessHolesAreFilled) {
+  // A unit sphere without its cap above z = 0.8: a hole 1.2 wide, about 30 spacings across.
+  PointCloud scan = test::scanOf("sphere", 40000, false);
+  PointCloud cut;
+  for (size_t i = 0; i < scan.size(); ++i)
+    if (scan.positions[i].z <= 0.8) cut.positions.push_back(scan.positions[i]);
+  test::TempDir dir;
+  BuildOptions filled;
+  filled.fillHoles = true;
+  const test::Converted t = test::convertAndLoad(cut, dir / "t.iso");
+  const test::Converted f = test::convertAndLoad(cut, dir / "f.iso", filled);
+  EXPECT_TRUE(verifyFile(Reader::open(dir / "t.iso")).ok());
+  const double radius = t.report["median_radius"].get<double>();
+  const double trimmedFar = farthestSurfaceFromPoints(t, cut);
+  const double filledFar = farthestSurfaceFromPoints(f, cut);
+  const double trimmedRms = evaluateAgainstPoints(t.surface, cut)["rms_over_spacing"];
+  const double filledRms = evaluateAgainstPoints(f.surface, cut)["rms_over_spacing"];
+  std::printf("farthest surface from the points: %.2f radii trimmed (%llu leaves emptied), %.2f "
+              "radii with --fill-holes; points to the surface RMS %.4f and %.4f spacings\n",
+              trimmedFar / radius, (unsigned long long)t.report["octree"]["trimmed"].get<uint64_t>(),
+              filledFar / radius, trimmedRms, filledRms);
+  // Filled, the patches run on into the hole (measured: 3.8 median radii from every point);
+  // trimmed, the surface ends within a leaf of the points' reach (2.6), and the points are as
+  // well covered and as well seen.
+  EXPECT_GT(filledFar, 3.0 * radius);
+  EXPECT_LT(trimmedFar, 3.0 * radius);
+  EXPECT_LT(trimmedFar, 0.8 * filledFar);
+  EXPECT_EQ(f.report["octree"]["trimmed"].get<uint64_t>(), 0u);
+  EXPECT_GT(t.report["octree"]["trimmed"].get<uint64_t>(), 0u);
+  EXPECT_LE(trimmedRms, 1.05 * filledRms + 0.01);
+  EXPECT_LE(t.report["visibility"]["worst_view_fraction"].get<double>(),
+            f.report["visibility"]["worst_view_fraction"].get<double>() + 0.001);
 }
 
 PointCloud withSpoiledNormals(uint64_t every, const glm::vec3& replacement, bool flip) {

@@ -160,7 +160,10 @@ TEST(OneSurface, raysThatLeaveASurfaceKeepTheirSide) {
     const double chord = -2.0 * glm::dot(world, -d) / frame.size;
     inwardAgree += in && in->from < 0.0f && std::abs(double(in->t) - chord) < 0.01;
   }
-  EXPECT_EQ(outwardHits, 0);
+  // A written face-centre hanging corner is within half a quantization step of its sources' mean
+  // (specs/pipeline.md §6), so a ray leaving the surface right where it crosses such a face can
+  // see a sign change there: 1 of 4,000 with the defaults (the corner fit and 6 leaf points).
+  EXPECT_LE(outwardHits, 2);
   // Without the flag, a ray from a rounded point of the surface meets the surface it leaves.
   EXPECT_GT(withoutSide, rays / 10);
   EXPECT_GE(inwardAgree, rays * 99 / 100);
