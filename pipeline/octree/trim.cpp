@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <optional>
 
 #include "pipeline/base/buffers.h"
 #include "pipeline/octree/field.h"
@@ -19,16 +20,16 @@
 namespace iso {
 namespace {
 
-// Lines per leaf edge along each axis, the leaf's own edges among them (where a surface that only
-// clips a corner of the leaf crosses it).
-constexpr int kTrimLines = 5;
+constexpr int kTrimLines = 4;  // lines per leaf edge along each axis
 // A leaf is emptied when at least this share of its crossings is far: a leaf on the rim of a hole
 // has its near crossings on the rim and the rest across the hole (specs/pipeline.md measures 1,
 // 0.5 and 0.25).
 constexpr double kTrimShare = 0.5;
 
-// The crossings of the leaf's zero set with the lines: how many, and how many of them lie farther
-// than `reach` radii of influence from their nearest point.
+// The crossings of the leaf's zero set with lines along the axes, a 4×4 grid inside the leaf:
+// how many, and how many of them lie farther than `reach` radii of influence from their nearest
+// point. Crossings on the leaf's 12 edges count too when they are near: a surface that only clips
+// a corner of the leaf crosses its edges there, between the grid's lines.
 struct Crossings {
   int count = 0, far = 0;
 };
@@ -37,25 +38,31 @@ Crossings zeroSetCrossings(const OctreeNode& leaf, const std::array<double, 8>& 
   const double size = std::ldexp(1.0, -leaf.level);
   const auto cell = mortonDecode(leaf.key);
   const glm::dvec3 origin = glm::dvec3(cell[0], cell[1], cell[2]) * size;
+  // The crossing along `axis` through (a, b) on the other two axes, if any: whether it is far.
+  const auto crossing = [&](int axis, double a, double b) -> std::optional<bool> {
+    std::array<double, 3> lo{}, hi{};
+    lo[size_t((axis + 1) % 3)] = hi[size_t((axis + 1) % 3)] = a;
+    lo[size_t((axis + 2) % 3)] = hi[size_t((axis + 2) % 3)] = b;
+    hi[size_t(axis)] = 1.0;
+    const double f0 = trilinear(f, lo), f1 = trilinear(f, hi);
+    if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) return std::nullopt;
+    std::array<double, 3> x = lo;
+    x[size_t(axis)] = f0 / (f0 - f1);
+    float distance = 0.0f;
+    const uint32_t nearest = sdf.nearest(origin + size * glm::dvec3(x[0], x[1], x[2]), distance);
+    return double(distance) > reach * double(points.radius[nearest]);
+  };
   Crossings out;
   for (int axis = 0; axis < 3; ++axis) {
-    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
     for (int i = 0; i < kTrimLines; ++i)
-      for (int j = 0; j < kTrimLines; ++j) {
-        std::array<double, 3> lo{}, hi{};
-        lo[size_t(u)] = hi[size_t(u)] = double(i) / (kTrimLines - 1);
-        lo[size_t(v)] = hi[size_t(v)] = double(j) / (kTrimLines - 1);
-        hi[size_t(axis)] = 1.0;
-        const double f0 = trilinear(f, lo), f1 = trilinear(f, hi);
-        if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) continue;
-        ++out.count;
-        std::array<double, 3> x = lo;
-        x[size_t(axis)] = f0 / (f0 - f1);
-        const glm::dvec3 p = origin + size * glm::dvec3(x[0], x[1], x[2]);
-        float distance = 0.0f;
-        const uint32_t nearest = sdf.nearest(p, distance);
-        out.far += double(distance) > reach * double(points.radius[nearest]);
-      }
+      for (int j = 0; j < kTrimLines; ++j)
+        if (const std::optional<bool> far =
+                crossing(axis, (i + 0.5) / kTrimLines, (j + 0.5) / kTrimLines)) {
+          ++out.count;
+          out.far += *far;
+        }
+    for (int e = 0; e < 4; ++e)
+      if (const std::optional<bool> far = crossing(axis, e & 1, e >> 1); far && !*far) ++out.count;
   }
   return out;
 }
