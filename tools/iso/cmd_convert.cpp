@@ -476,8 +476,9 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str();
   c->add_flag("--fill-holes", o->build.fillHoles,
               "Keep the surface the patches make across holes in the scan (a closed surface); "
-              "without it the surface ends where the points end: a leaf whose surface is farther "
-              "than --trim-reach radii of influence from every point is left out");
+              "without it the surface ends where the points end: a leaf without points whose surface "
+              "lies mostly farther than --trim-reach radii of influence from every point is left "
+              "out");
   c->add_option("--trim-reach", o->build.trimReach,
                 "How far from the points, in radii of influence, the surface may reach before it "
                 "is trimmed")
