@@ -25,11 +25,15 @@ struct Weighted {
   double spacing = 0.0;  // 0: no shares
   double sum = 0.0, squares = 0.0, weight = 0.0, max = 0.0;
   double beyondHalf = 0.0, beyondTwo = 0.0, bulkSquares = 0.0;
-  void add(double d, double w) {
+  std::optional<glm::dvec3> maxAt;  // world units, where the caller says
+  void add(double d, double w, std::optional<glm::dvec3> at = std::nullopt) {
     sum += w * d;
     squares += w * d * d;
     weight += w;
-    max = std::max(max, d);
+    if (d >= max) {
+      max = d;
+      maxAt = at;
+    }
     if (d > 0.5 * spacing) beyondHalf += w;
     if (d > 2.0 * spacing)
       beyondTwo += w;
@@ -81,7 +85,7 @@ IsoToTruth isoToTruth(const SurfaceModel& surface, const Shape& truth, const Eva
   IsoToTruth out;
   out.distance.spacing = spacing;
   for (size_t i = 0; i < samples.size(); ++i) {
-    out.distance.add(distance[i], samples[i].area);
+    out.distance.add(distance[i], samples[i].area, toWorld(samples[i].position, frame));
     out.samples.push_back(glm::vec3(float(samples[i].position[0]), float(samples[i].position[1]),
                                     float(samples[i].position[2])));
   }
@@ -157,7 +161,7 @@ TruthToIso truthToIso(const SurfaceModel& surface, const Shape& truth,
   TruthToIso out;
   out.distance.spacing = spacing;
   for (size_t i = 0; i < points.size(); ++i) {
-    out.distance.add(distance[i], 1.0);
+    out.distance.add(distance[i], 1.0, points[i]);
     out.unprojected += projected[i] ? 0 : 1;
   }
   return out;
@@ -232,7 +236,7 @@ double outwardFraction(const std::vector<double>& anglesDeg) {
 }
 
 nlohmann::json weightedJson(const Weighted& w, double spacing) {
-  return {{"rms", w.rms()},
+  nlohmann::json out = {{"rms", w.rms()},
           {"max", w.max},
           {"mean", w.mean()},
           {"rms_over_spacing", w.rms() / spacing},
@@ -240,6 +244,8 @@ nlohmann::json weightedJson(const Weighted& w, double spacing) {
           {"beyond_half_spacing", w.share(w.beyondHalf)},
           {"beyond_two_spacings", w.share(w.beyondTwo)},
           {"bulk_rms_over_spacing", w.bulkRms() / spacing}};
+  if (w.maxAt) out["max_at"] = {w.maxAt->x, w.maxAt->y, w.maxAt->z};
+  return out;
 }
 
 // Both ways as one: RMS of the two RMS, the larger max, the mean shares, the RMS of the bulk RMS.

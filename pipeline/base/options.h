@@ -85,7 +85,7 @@ struct BuildOptions {
   // Keep every sheet the patches make, also across holes farther than trimReach radii of influence
   // from every point (a closed surface); false: the surface ends where the points end.
   bool fillHoles = false;
-  double trimReach = 1.0;
+  double trimReach = 0.85;
   int normalBits = 8;           // octahedral normal bits per component: 8 or 12
   uint32_t chunkNodes = 32768;  // octree nodes per file chunk, about
   int zstdLevel = 3;

@@ -29,9 +29,13 @@ constexpr double kTrimShare = 0.5;
 // The crossings of the leaf's zero set with lines along the axes, a 4×4 grid inside the leaf:
 // how many, and how many of them lie farther than `reach` radii of influence from their nearest
 // point. Crossings on the leaf's 12 edges count too when they are near: a surface that only clips
-// a corner of the leaf crosses its edges there, between the grid's lines.
+// a corner of the leaf crosses its edges there, between the grid's lines. Far crossings on the
+// edges are counted apart: they decide a leaf whose surface misses the grid.
 struct Crossings {
-  int count = 0, far = 0;
+  int count = 0, far = 0, farOnEdges = 0;
+  bool isFar() const {
+    return count > 0 ? double(far) >= kTrimShare * double(count) : farOnEdges > 0;
+  }
 };
 Crossings zeroSetCrossings(const OctreeNode& leaf, const std::array<double, 8>& f,
                            const SdfEvaluator& sdf, const PointSet& points, double reach) {
@@ -62,7 +66,10 @@ Crossings zeroSetCrossings(const OctreeNode& leaf, const std::array<double, 8>& 
           out.far += *far;
         }
     for (int e = 0; e < 4; ++e)
-      if (const std::optional<bool> far = crossing(axis, e & 1, e >> 1); far && !*far) ++out.count;
+      if (const std::optional<bool> far = crossing(axis, e & 1, e >> 1)) {
+        out.count += !*far;
+        out.farOnEdges += *far;
+      }
   }
   return out;
 }
@@ -95,7 +102,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
                           f[size_t(c)] = closure.corners.value[closure.corners.find(
                               cornerPoint(leaf.level, leaf.key, c))].distance;
                         const Crossings c = zeroSetCrossings(leaf, f, sdf, points, reach);
-                        far[i] = c.count > 0 && double(c.far) >= kTrimShare * double(c.count);
+                        far[i] = c.isFar();
                       }
                     });
   size_t trimmed = 0;
