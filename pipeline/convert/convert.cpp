@@ -512,7 +512,13 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const size_t splits = balanceOctree(octree, points);
   timer.next("corners");
   Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
-  fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit);
+  {
+    std::vector<uint8_t> wasNegative(closure.corners.size());
+    for (size_t e = 0; e < wasNegative.size(); ++e)
+      wasNegative[e] = closure.corners.value[e].distance < 0.0f;
+    if (fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit) > 0)
+      closeAgain(octree, points, *sdf, closure, wasNegative);
+  }
   const size_t trimmed =
       options.fillHoles ? 0 : trimFarSurface(octree, points, *sdf, closure, options.trimReach);
   octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
@@ -535,6 +541,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   reportPoints(ready, inputPoints + source.nonFiniteDropped, source.nonFiniteDropped, report);
   report["octree"] = octreeJson(octree, octreeStats, passive, splits);
   report["octree"]["closure_filled"] = closure.filled;
+  report["octree"]["closure_refilled"] = closure.refilled;
   report["octree"]["trimmed"] = trimmed;
   report["corners"] = {
       {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};

@@ -178,17 +178,12 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
   return filled;
 }
 
-}  // namespace
-
-Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                            CornerField&& corners) {
-  Closure closure;
-  closure.corners = std::move(corners);
-  std::vector<uint32_t> fresh;  // the leaves to look at in this pass
-  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
-    if (tree.nodes[i].isFilled()) fresh.push_back(i);
+// Fill the exits of every filled leaf, then of the leaves each pass adds, until none is left;
+// then set the corner levels from the final leaves and snap the hanging corners.
+void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points,
+               const SdfEvaluator& sdf, Closure& closure) {
   addLeafCorners(closure.corners, tree, fresh, sdf);
-  // Exits are found on the sampled values: snapping moves hanging corners very little.
+  // Exits are found on the values as they are: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
     std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
     if (filled.empty()) break;
@@ -204,7 +199,39 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
   closure.cornersInUse = refreshCornerLevels(closure.corners, tree);
   closure.hanging = findHangingCorners(tree, closure.corners);
   snapHangingCorners(closure.corners, closure.hanging);
+}
+
+}  // namespace
+
+Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
+                            CornerField&& corners) {
+  Closure closure;
+  closure.corners = std::move(corners);
+  std::vector<uint32_t> filled;
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
+    if (tree.nodes[i].isFilled()) filled.push_back(i);
+  closeFrom(std::move(filled), tree, points, sdf, closure);
   return closure;
+}
+
+void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,
+                const std::vector<uint8_t>& wasNegative) {
+  const CornerField& field = closure.corners;
+  std::vector<uint32_t> changed;
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i) {
+    const OctreeNode& leaf = tree.nodes[i];
+    if (!leaf.isFilled()) continue;
+    for (int c = 0; c < kCorners; ++c) {
+      const uint32_t e = field.find(cornerPoint(leaf.level, leaf.key, c));
+      if (wasNegative[e] != uint8_t(field.value[e].distance < 0.0f)) {
+        changed.push_back(i);
+        break;
+      }
+    }
+  }
+  const size_t before = closure.filled;
+  closeFrom(std::move(changed), tree, points, sdf, closure);
+  closure.refilled = closure.filled - before;
 }
 
 }  // namespace iso

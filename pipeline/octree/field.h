@@ -88,6 +88,7 @@ struct Closure {
   HangingCorners hanging;
   size_t cornersInUse = 0;  // corners of the final filled leaves
   size_t filled = 0;        // empty cells filled because the surface ran into them
+  size_t refilled = 0;      // ... of them, by closeAgain
   size_t passes = 0;
 };
 // Sample the leaf corners, snap hanging corners, and fill the empty cells next to points into
@@ -96,6 +97,12 @@ struct Closure {
 // `corners` holds the values evaluated while building; it becomes the closure's field.
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerField&& corners);
+// Close the surface again after its corners moved (the corner fit carries the zero set of some
+// leaves out through faces the first closure saw it stay behind): the same passes, from the
+// filled leaves one of whose corners changed sign (`wasNegative`, by corner entry, before the
+// move); the cells they fill get sampled corners.
+void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,
+                const std::vector<uint8_t>& wasNegative);
 
 // ---- trim.cpp
 // Empty the filled leaves without points whose zero set exists and lies, at half or more of the
