@@ -112,7 +112,7 @@ vec3 shade(vec3 p, vec3 d, Hit hit, float distance, ISO_INOUT(uint) rng, ISO_INO
       if (lit && live && (P.options.x & kOptionShadows) != 0u) {
         Hit blocker;
         rays.y += 1u;
-        lit = !traceScene(origin, l, 0.0f, lengthL, hit.from, false, distance, false, blocker);
+        lit = !traceScene(origin, l, P.lod.w, lengthL, hit.from, false, distance, false, blocker);
       }
       if (lit) {
         // Baked alone: the specular highlight stays live (without a shadow ray), the diffuse

@@ -166,7 +166,8 @@ struct FrameParams {
   uvec4 options;   // option bits, bounce limit, top chunk, chunk count
   uvec4 pool;      // log2 of the words per pool buffer, pool words, environment width, height
   vec4 lod;        // x: screen-space error (pixels) below which a coarser chunk is drawn; y: ray
-                   // offset (frame units) against self-intersection; z: environment intensity
+                   // offset (frame units) against self-intersection; z: environment intensity;
+                   // w: where shadow rays start counting blockers (frame units)
   vec4 ambient;    // rgb: ambient light
   vec4 albedo;     // rgb: material color (when the file has none); w: Phong exponent
   vec4 material;   // x: diffuse, y: specular, z: reflectivity, w: transparency

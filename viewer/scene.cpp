@@ -398,6 +398,8 @@ bool secondaryRays(const gpu::FrameParams& p) {
 
 namespace {
 
+constexpr double kShadowStartCells = 2.0;  // see frameParams
+
 // The caustics of a frame whose ground is set (p.ground, frame units): the disc photons aim at
 // (the sphere around the content box, seen from each light), and the map: a square on the ground
 // centered under the content's center, reaching 1.5 content radii plus twice the center's height
@@ -477,9 +479,14 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   p.options = {options, uint32_t(std::max(scene.bounces, 0)), s.topChunk, s.chunkCount};
   p.pool = {s.poolWordsLog2, s.poolWords, s.environmentWidth, s.environmentHeight};
   setColorTable(p);
-  // Rays leave surfaces a hundredth of the finest cell away (the side flag does the rest).
-  p.lod = vec4(scene.lodPixels, float(0.01 * std::ldexp(1.0, -int(maxLevel))),
-               scene.environmentIntensity, 0);
+  // Rays leave surfaces a hundredth of the finest cell away (the side flag does the rest), and
+  // shadow rays count blockers from two finest cells on: where the corner fit bends a leaf's
+  // zero set against its stored normals, a light just above the shading normal's horizon lies
+  // below the patch's own, and its shadow ray met the patch it left (dark blotches on the demo
+  // kitten at one cell and none, none at two; specs/viewer.md, "Shadows").
+  const double finest = std::ldexp(1.0, -int(maxLevel));
+  p.lod = vec4(scene.lodPixels, float(0.01 * finest), scene.environmentIntensity,
+               float(kShadowStartCells * finest));
   p.ambient = rgb(scene.ambient);
   p.albedo = rgb(scene.material.color, scene.material.shininess);
   p.material = vec4(scene.material.diffuse, scene.material.specular, scene.material.reflectivity,

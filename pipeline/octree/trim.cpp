@@ -11,7 +11,6 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
-#include <optional>
 
 #include "pipeline/base/buffers.h"
 #include "pipeline/octree/field.h"
@@ -26,52 +25,56 @@ constexpr int kTrimLines = 4;  // lines per leaf edge along each axis
 // 0.5 and 0.25).
 constexpr double kTrimShare = 0.5;
 
-// The crossings of the leaf's zero set with lines along the axes, a 4×4 grid inside the leaf:
-// how many, and how many of them lie farther than `reach` radii of influence from their nearest
-// point. Crossings on the leaf's 12 edges count too when they are near: a surface that only clips
-// a corner of the leaf crosses its edges there, between the grid's lines. Far crossings on the
-// edges are counted apart: they decide a leaf whose surface misses the grid.
-struct Crossings {
-  int count = 0, far = 0, farOnEdges = 0;
-  bool isFar() const {
-    return count > 0 ? double(far) >= kTrimShare * double(count) : farOnEdges > 0;
-  }
-};
-Crossings zeroSetCrossings(const OctreeNode& leaf, const std::array<double, 8>& f,
-                           const SdfEvaluator& sdf, const PointSet& points, double reach) {
+// Whether the leaf's zero set lies mostly far from the points. It is sampled where it crosses
+// lines along the axes, a 4×4 grid inside the leaf; a crossing is far when it lies farther than
+// `reach` radii of influence from its nearest point, and the leaf is far when at least half its
+// crossings are. Crossings on the leaf's 12 edges count too when they are near: a surface that
+// only clips a corner of the leaf crosses its edges there, between the grid's lines; far ones
+// there decide only a leaf whose surface misses the grid. The crossings are found first and their
+// nearest points looked up until the answer is known.
+bool isFarFromPoints(const OctreeNode& leaf, const std::array<double, 8>& f,
+                     const SdfEvaluator& sdf, const PointSet& points, double reach) {
   const double size = std::ldexp(1.0, -leaf.level);
   const auto cell = mortonDecode(leaf.key);
   const glm::dvec3 origin = glm::dvec3(cell[0], cell[1], cell[2]) * size;
-  // The crossing along `axis` through (a, b) on the other two axes, if any: whether it is far.
-  const auto crossing = [&](int axis, double a, double b) -> std::optional<bool> {
+  constexpr int kGrid = 3 * kTrimLines * kTrimLines, kEdges = 12;
+  std::array<glm::dvec3, kGrid> grid;
+  std::array<glm::dvec3, kEdges> edges;
+  int g = 0, e = 0;
+  // The crossing along `axis` through (a, b) on the other two axes, if any, into `out`.
+  const auto crossing = [&](int axis, double a, double b, glm::dvec3* out) {
     std::array<double, 3> lo{}, hi{};
     lo[size_t((axis + 1) % 3)] = hi[size_t((axis + 1) % 3)] = a;
     lo[size_t((axis + 2) % 3)] = hi[size_t((axis + 2) % 3)] = b;
     hi[size_t(axis)] = 1.0;
     const double f0 = trilinear(f, lo), f1 = trilinear(f, hi);
-    if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) return std::nullopt;
+    if ((f0 < 0.0) == (f1 < 0.0) || f0 == f1) return false;
     std::array<double, 3> x = lo;
     x[size_t(axis)] = f0 / (f0 - f1);
-    float distance = 0.0f;
-    const uint32_t nearest = sdf.nearest(origin + size * glm::dvec3(x[0], x[1], x[2]), distance);
-    return double(distance) > reach * double(points.radius[nearest]);
+    *out = origin + size * glm::dvec3(x[0], x[1], x[2]);
+    return true;
   };
-  Crossings out;
   for (int axis = 0; axis < 3; ++axis) {
     for (int i = 0; i < kTrimLines; ++i)
       for (int j = 0; j < kTrimLines; ++j)
-        if (const std::optional<bool> far =
-                crossing(axis, (i + 0.5) / kTrimLines, (j + 0.5) / kTrimLines)) {
-          ++out.count;
-          out.far += *far;
-        }
-    for (int e = 0; e < 4; ++e)
-      if (const std::optional<bool> far = crossing(axis, e & 1, e >> 1)) {
-        out.count += !*far;
-        out.farOnEdges += *far;
-      }
+        g += crossing(axis, (i + 0.5) / kTrimLines, (j + 0.5) / kTrimLines, &grid[size_t(g)]);
+    for (int c = 0; c < 4; ++c) e += crossing(axis, c & 1, c >> 1, &edges[size_t(e)]);
   }
-  return out;
+  const auto far = [&](const glm::dvec3& x) {
+    float distance = 0.0f;
+    const uint32_t nearest = sdf.nearest(x, distance);
+    return double(distance) > reach * double(points.radius[nearest]);
+  };
+  int farGrid = 0;
+  for (int i = 0; i < g; ++i) {
+    farGrid += far(grid[size_t(i)]);
+    // Near edge crossings only add to the count: too few far ones left to reach the share.
+    if (double(farGrid + g - 1 - i) < kTrimShare * double(g)) return false;
+  }
+  int nearEdges = 0, farEdges = 0;
+  for (int i = 0; i < e; ++i) (far(edges[size_t(i)]) ? farEdges : nearEdges) += 1;
+  const int count = g + nearEdges;
+  return count > 0 ? double(farGrid) >= kTrimShare * double(count) : farEdges > 0;
 }
 
 // Empty the internal nodes none of whose descendants is filled (children come after parents).
@@ -101,8 +104,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
                         for (int c = 0; c < kCorners; ++c)
                           f[size_t(c)] = closure.corners.value[closure.corners.find(
                               cornerPoint(leaf.level, leaf.key, c))].distance;
-                        const Crossings c = zeroSetCrossings(leaf, f, sdf, points, reach);
-                        far[i] = c.isFar();
+                        far[i] = isFarFromPoints(leaf, f, sdf, points, reach);
                       }
                     });
   size_t trimmed = 0;
