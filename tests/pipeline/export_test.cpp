@@ -8,7 +8,9 @@
 #include <numbers>
 #include <random>
 
+#include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/export.h"
+#include "pipeline/geom/shape.h"
 #include "pipeline/base/options.h"
 #include "pipeline/points/points.h"
 #include "tests/pipeline/pipeline_support.h"
@@ -140,6 +142,31 @@ TEST(MeshExport, theTorusAndAnOpenSheetToo) {
   EXPECT_GT(p.boundaryEdges, 0u);
   EXPECT_GT(p.area, 4.0 * 0.99);
   EXPECT_LT(p.area, 4.0 * 1.3);
+}
+
+// The scans of `tools/run bench accuracy` (200k points, noise of 0.3 spacings, no normals) with
+// the default conversion: the closed shapes' meshes are closed, and no farther from the truth than
+// the file's own surface and half a spacing more (both ways, as the benchmark measures them).
+TEST(MeshExport, noisyClosedShapesExportClosedMeshesAsCloseAsTheirFiles) {
+  for (const char* name : {"sphere", "torus"}) {
+    test::TempDir dir;
+    const test::Converted c =
+        test::convertAndLoad(test::scanOf(name, 200000, false, 0.3), dir / "s.iso");
+    ShapeParams params;
+    params.name = name;
+    const std::unique_ptr<Shape> truth = makeShape(params);
+    const TriangleMesh mesh = extractMesh(c.surface);
+    const MeshCheck m = check(mesh, c.surface);
+    const double spacing = c.report["spacing"].get<double>();
+    const double file = test::evaluate(c, *truth)["max_over_spacing"].get<double>();
+    const double meshMax =
+        evaluateMeshAgainstShape(mesh, *truth, spacing)["max_over_spacing"].get<double>();
+    std::printf("%s: %zu open edges; max %.3f spacings (mesh), %.3f (file)\n", name,
+                m.boundaryEdges, meshMax, file);
+    expectCrackFree(m, name);
+    EXPECT_EQ(m.boundaryEdges, 0u) << name;
+    EXPECT_LE(meshMax, file + 0.5) << name;
+  }
 }
 
 TEST(VdbExport, theLevelSetHoldsTheFilesDistancesAndItsZeroSetIsTheSphere) {
