@@ -134,8 +134,24 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
   const auto cell = mortonDecode(leaf.key);
   const bool lost = leaf.pointCount() > 0 && !hasSurface(f);
   const int toward = lost ? faceTowardSurface(f) : -1;
+  std::array<double, 8> values{};
+  for (int c = 0; c < kCorners; ++c) values[size_t(c)] = f[size_t(c)];
+  // Whether the patch changes sign on the face: where its 4 corners agree, the bilinear (a convex
+  // combination of them) agrees everywhere on it, and no part of the face has a crossing.
+  const auto changesSign = [&](int axis, int side) {
+    int negative = 0;
+    for (int i = 0; i < 4; ++i) {
+      std::array<double, 3> local{};
+      local[size_t(axis)] = side;
+      local[size_t((axis + 1) % 3)] = i & 1;
+      local[size_t((axis + 2) % 3)] = i >> 1;
+      negative += trilinear(values, local) < 0.0;
+    }
+    return negative != 0 && negative != 4;
+  };
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2, side = face % 2;
+    if (face != toward && !changesSign(axis, side)) continue;
     std::array<int64_t, 3> n = {cell[0], cell[1], cell[2]};
     n[size_t(axis)] += side ? 1 : -1;
     if (n[size_t(axis)] < 0 || n[size_t(axis)] >= (int64_t{1} << leaf.level)) continue;
