@@ -483,7 +483,7 @@ gpu::FrameParams frameParams(const Scene& scene, const Frame& frame, uint8_t max
   // shadow rays count blockers from two finest cells on: where the corner fit bends a leaf's
   // zero set against its stored normals, a light just above the shading normal's horizon lies
   // below the patch's own, and its shadow ray met the patch it left (dark blotches on the demo
-  // kitten at one cell and none, none at two; specs/viewer.md, "Shadows").
+  // kitten without the start, a few at one cell, none at two; specs/viewer.md, "Shadows").
   const double finest = std::ldexp(1.0, -int(maxLevel));
   p.lod = vec4(scene.lodPixels, float(0.01 * finest), scene.environmentIntensity,
                float(kShadowStartCells * finest));

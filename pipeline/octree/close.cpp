@@ -194,7 +194,7 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
   return filled;
 }
 
-// Fill the exits of every filled leaf, then of the leaves each pass adds, until none is left;
+// Fill the exits of the given leaves, then of the leaves each pass adds, until none is left;
 // then set the corner levels from the final leaves and snap the hanging corners.
 void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points,
                const SdfEvaluator& sdf, Closure& closure) {
@@ -210,14 +210,17 @@ void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points
     fresh.insert(fresh.end(), created.begin(), created.end());
     addLeafCorners(closure.corners, tree, fresh, sdf);
   }
-  // Splits left corners of leaves that are leaves no more: the levels are set from the final
-  // leaves (every corner they use is in the field), then hanging corners are snapped.
+  // Splits left corners of leaves that are leaves no more.
+  refreshCorners(tree, closure);
+}
+
+}  // namespace
+
+void refreshCorners(const Octree& tree, Closure& closure) {
   closure.cornersInUse = refreshCornerLevels(closure.corners, tree);
   closure.hanging = findHangingCorners(tree, closure.corners);
   snapHangingCorners(closure.corners, closure.hanging);
 }
-
-}  // namespace
 
 Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
                             CornerField&& corners) {

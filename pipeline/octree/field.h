@@ -103,6 +103,9 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
 // move); the cells they fill get sampled corners.
 void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,
                 const std::vector<uint8_t>& wasNegative);
+// After the tree's filled leaves changed: the corner levels set from the final leaves (every
+// corner they use is in the field), the hanging corners found again and snapped.
+void refreshCorners(const Octree& tree, Closure& closure);
 
 // ---- trim.cpp
 // Empty the filled leaves without points whose zero set exists and lies, at half or more of the

@@ -117,9 +117,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
   emptyBareInternalNodes(tree);
   // Corners of emptied leaves are no longer in use, and a corner that hung on an emptied leaf's
   // face keeps its value but no longer hangs.
-  closure.cornersInUse = refreshCornerLevels(closure.corners, tree);
-  closure.hanging = findHangingCorners(tree, closure.corners);
-  snapHangingCorners(closure.corners, closure.hanging);
+  refreshCorners(tree, closure);
   return trimmed;
 }
 
