@@ -433,10 +433,15 @@ TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsT
                 .exitCode,
             0);
   const std::string iso = quoted(dir_ / "s.iso"), out = quoted(dir_ / "tiles");
-  auto run = runIso("export --json " + iso + " --tiles " + out);
+  auto run = runIso("export --json " + iso + " --tiles " + out + " --tile-leaves 200");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json summary = nlohmann::json::parse(run.out)["tiles"];
   EXPECT_GT(summary["tiles"].get<uint64_t>(), 1u);
+  const size_t levels = summary["levels"].size();
+  EXPECT_GE(levels, 3u);
+  uint64_t triangles = 0;
+  for (const auto& l : summary["levels"]) triangles += l["triangles"].get<uint64_t>();
+  EXPECT_EQ(triangles, summary["triangles"].get<uint64_t>());
   std::vector<std::string> glbs;
   for (const auto& entry : std::filesystem::directory_iterator(dir_ / "tiles"))
     if (entry.path().extension() == ".glb") glbs.push_back(quoted(entry.path()));
@@ -447,19 +452,27 @@ TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsT
   run = test::runCommand(command);
   EXPECT_EQ(run.exitCode, 0) << run.out << run.err;
   // iso eval measures what the tileset draws against the file: its finest tiles close to the
-  // zero set; its root within the geometric error it states (which is of the finest surface).
+  // zero set; at every depth each tile within the error it states of the finest tiles below it,
+  // and the root within its error of the zero set too (the finest are close to it).
   run = runIso("eval " + iso + " --tiles " + out);
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json finest = nlohmann::json::parse(run.out);
-  EXPECT_EQ(finest["tiles"]["triangles"].get<uint64_t>() +
-                summary["levels"][0]["triangles"].get<uint64_t>(),
-            summary["triangles"].get<uint64_t>());
   EXPECT_LT(finest["rms_over_spacing"].get<double>(), 0.1);
+  for (size_t depth = 0; depth < levels; ++depth) {
+    run = runIso("eval " + iso + " --tiles " + out + " --depth " + std::to_string(depth));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    const nlohmann::json cut = nlohmann::json::parse(run.out)["tiles"];
+    EXPECT_EQ(cut["to_finest"]["tiles_beyond_their_error"], 0) << depth;
+    EXPECT_LE(cut["to_finest"]["max"].get<double>(), cut["geometric_error"].get<double>());
+  }
   run = runIso("eval " + iso + " --tiles " + out + " --depth 0");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json top = nlohmann::json::parse(run.out);
   EXPECT_EQ(top["tiles"]["tiles"], 1);
   EXPECT_LE(top["max"].get<double>(), top["tiles"]["geometric_error"].get<double>());
+  run = runIso("export " + iso + " --tile-leaves 4 --tiles " + quoted(dir_ / "t2"));
+  EXPECT_EQ(run.exitCode, 2);
+  EXPECT_NE(run.err.find("--tile-leaves"), std::string::npos) << run.err;
   std::printf("finest tiles: RMS %.3f spacings; root tile: max %.4g, stated %.4g\n",
               finest["rms_over_spacing"].get<double>(), top["max"].get<double>(),
               top["tiles"]["geometric_error"].get<double>());

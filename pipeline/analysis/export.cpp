@@ -282,17 +282,25 @@ void Extractor::leaf(uint32_t id, bool emit) {
     return glm::dvec3(double(p[0]), double(p[1]), double(p[2])) * unit;
   };
   // Which quarters of each face have a finer leaf across them, and which edges touch one (2:1
-  // balance: one level finer at most), from the leaves around points a little off them.
+  // balance: one level finer at most), from the leaves around points a little off them. A leaf
+  // no finer than this one that holds such a point holds the whole cell of this one's size
+  // there, so one point of that cell answers for the others.
   std::array<std::array<bool, 4>, 6> fineQuarter{};
+  std::array<bool, 6> coarseAcross{};  // a leaf no finer than this one across the whole face
   for (int face = 0; face < 6; ++face) {
     const int axis = face / 2, side = face % 2, u = (axis + 1) % 3, v = (axis + 2) % 3;
-    for (int q = 0; q < 4; ++q) {
+    const auto across = [&](double qu, double qv) {
       glm::dvec3 p = frameOf(origin);
       p[axis] += double(side * size) * unit + (side ? nudge : -nudge);
-      p[u] += double((q & 1 ? 3 : 1) * size) * unit / 4;
-      p[v] += double((q & 2 ? 3 : 1) * size) * unit / 4;
-      fineQuarter[size_t(face)][size_t(q)] = levelAt(p) > level;
-    }
+      p[u] += qu * double(size) * unit;
+      p[v] += qv * double(size) * unit;
+      return levelAt(p);
+    };
+    const int centre = across(0.5, 0.5);
+    coarseAcross[size_t(face)] = centre >= 0 && centre <= level;
+    if (coarseAcross[size_t(face)]) continue;
+    for (int q = 0; q < 4; ++q)
+      fineQuarter[size_t(face)][size_t(q)] = across(q & 1 ? 0.75 : 0.25, q & 2 ? 0.75 : 0.25) > level;
     const auto& f = fineQuarter[size_t(face)];
     stats.splitFaces += emit && (f[0] || f[1] || f[2] || f[3]);
   }
@@ -303,12 +311,22 @@ void Extractor::leaf(uint32_t id, bool emit) {
       for (int j = 0; j < 2; ++j) {
         const int b = (a + 1) % 3, c = (a + 2) % 3;
         bool split = false;
-        for (int k = 0; k < 8 && !split; ++k) {
-          glm::dvec3 p = frameOf(origin);
-          p[a] += double((k & 1 ? 3 : 1) * size) * unit / 4;
-          p[b] += double(i * size) * unit + (k & 2 ? nudge : -nudge);
-          p[c] += double(j * size) * unit + (k & 4 ? nudge : -nudge);
-          split = levelAt(p) > level;
+        for (int quadrant = 0; quadrant < 4 && !split; ++quadrant) {
+          // Off the edge along b and c (this leaf's own side, or across).
+          const bool upB = quadrant & 1, upC = quadrant & 2;
+          const bool acrossB = upB != (i == 0), acrossC = upC != (j == 0);
+          if (!acrossB && !acrossC) continue;  // inside this leaf
+          if (acrossB && !acrossC && coarseAcross[size_t(2 * b + i)]) continue;
+          if (acrossC && !acrossB && coarseAcross[size_t(2 * c + j)]) continue;
+          for (int along = 0; along < 2; ++along) {
+            glm::dvec3 p = frameOf(origin);
+            p[a] += double((along ? 3 : 1) * size) * unit / 4;
+            p[b] += double(i * size) * unit + (upB ? nudge : -nudge);
+            p[c] += double(j * size) * unit + (upC ? nudge : -nudge);
+            const int found = levelAt(p);
+            split = found > level;
+            if (found >= 0) break;  // (a leaf no finer holds the other point too)
+          }
         }
         splitEdge[a][i][j] = split;
       }

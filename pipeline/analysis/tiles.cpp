@@ -1,19 +1,23 @@
-// 3D Tiles of an .iso file's surface (pipeline/analysis/tiles.h): a tile a surface chunk (and a
-// rest tile beside a chunk's children), its content the chunk's surface at its own cut, extracted
-// from the chunks around its cell.
+// 3D Tiles of an .iso file's surface (pipeline/analysis/tiles.h): a tile an octree cell with
+// surface, its content the cell's surface at a cut some levels below it, its error measured
+// against its children's content and theirs, children first.
 #include "pipeline/analysis/tiles.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <list>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
 
 #include "iso/error.h"
@@ -22,33 +26,41 @@
 #include "pipeline/analysis/export.h"
 #include "pipeline/analysis/gltf.h"
 #include "pipeline/base/files.h"
+#include "pipeline/geom/shape.h"
 
 namespace iso {
 namespace {
 
 // Decoded chunks kept for the tiles around them (a dragon's chunk is about 2 MB decoded).
-constexpr size_t kCachedChunks = 128;
+constexpr size_t kCachedChunks = 64;
+// A child's stated error is at most this share of its parent's.
+constexpr double kChildShare = 0.5;
+constexpr int kMostContentLevels = 10;
+// Points a triangle edge is cut into when sampling a coarser tile against its children (finer
+// triangles: their corners and centre).
+constexpr int kCoarseGrid = 4, kFineGrid = 0;
 
 struct Tile {
-  uint32_t chunk = 0;
-  uint8_t level = 0;
+  uint8_t depth = 0;  // in the tileset (the root at 0)
+  uint8_t level = 0;  // of the cell
   uint64_t key = 0;
-  double chunkError = 0.0;  // the chunk's geometric error, world units
+  uint8_t deepest = 0;  // the deepest leaf with surface inside the cell
+  uint8_t cut = 0;      // the content's cut level (kMaxLevel: the finest)
   std::vector<uint32_t> children;
   uint32_t parent = kNoNode;
-  // The rest of a chunk with children: its own leaves outside its children's cells, at full
-  // detail, a child tile beside theirs (refinement replaces the chunk's tile by its children's).
-  bool rest = false;
-  // Made:
-  uint64_t triangles = 0, bytes = 0;
-  double simplified = 0.0;    // measured distance of the simplified content, world units
-  double quantization = 0.0;  // how far the content's 16-bit positions may be from it
-  uint64_t skirtEdges = 0;
-  double geometricError = 0.0;  // what the tileset says: see finishErrors
+  // Made (children first):
+  TriangleMesh mesh;  // world units, before skirts
+  MeshAttributes attributes;
+  uint64_t triangles = 0, bytes = 0, skirtEdges = 0;
+  double toChildren = 0.0;      // measured distance to the children's content, world units
+  double positionStep = 0.0;    // the content's 16-bit grid (world units)
+  double geometricError = 0.0;  // stated: see measureAgainstChildren
+  bool raised = false;          // the error is twice a child's, more than measured
+  bool finest() const { return children.empty(); }
 };
 
 std::string contentName(const Tile& tile) {
-  return "tile-" + std::to_string(tile.chunk) + (tile.rest ? "-rest" : "") + ".glb";
+  return "tile-" + std::to_string(tile.depth) + "-" + std::to_string(tile.key) + ".glb";
 }
 
 SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
@@ -60,6 +72,114 @@ SurfaceModel::Region cellRegion(uint8_t level, uint64_t key) {
     region.hi[a] = region.lo[a] + size;
   }
   return region;
+}
+
+// The filled leaves whose corners change sign (where the surface is), as (key at the file's
+// deepest level, level), in key order: each cell's leaves are then one run.
+struct SurfaceLeaf {
+  uint64_t deepKey = 0;
+  uint8_t level = 0;
+};
+
+std::vector<SurfaceLeaf> surfaceLeaves(const Reader& reader,
+                                       const SurfaceModel::ChunkSource& source) {
+  const uint8_t deepest = reader.header().maxLevel;
+  std::vector<uint32_t> ids;
+  for (const ChunkInfo& info : reader.chunks())
+    if (info.kind == uint8_t(ChunkKind::Surface)) ids.push_back(info.id);
+  std::vector<std::vector<SurfaceLeaf>> perChunk(ids.size());
+  tbb::parallel_for(size_t(0), ids.size(), [&](size_t c) {
+    const std::shared_ptr<const SurfaceChunk> chunk = source(ids[c]);
+    for (const SurfaceNode& node : chunk->layout.nodes) {
+      if (node.childMask != 0) continue;
+      bool negative = false, positive = false;
+      for (uint32_t corner : node.corners)
+        (chunk->leafValues.distance[corner] < 0.0f ? negative : positive) = true;
+      if (negative && positive)
+        perChunk[c].push_back({node.key << (3 * (deepest - node.level)), node.level});
+    }
+  });
+  std::vector<SurfaceLeaf> leaves;
+  for (const auto& some : perChunk) leaves.insert(leaves.end(), some.begin(), some.end());
+  std::sort(leaves.begin(), leaves.end(),
+            [](const SurfaceLeaf& a, const SurfaceLeaf& b) { return a.deepKey < b.deepKey; });
+  return leaves;
+}
+
+// How many levels below a cell its content is cut: the most (up to `most`) at which the cells
+// with surface in the frame are at most `cells` (each gives a few triangles), so that a tile's
+// content is about that size at any depth (a cell at level L holds about 4^-L of the surface).
+int contentLevelsFor(std::span<const SurfaceLeaf> leaves, uint8_t deepestLevel, uint64_t cells,
+                     int most) {
+  int levels = 1;
+  for (int k = 1; k <= std::min(most, int(deepestLevel)); ++k) {
+    const int shift = 3 * (deepestLevel - k);
+    uint64_t count = 0;
+    for (size_t i = 0; i < leaves.size(); ++i)
+      count += i == 0 || (leaves[i].deepKey >> shift) != (leaves[i - 1].deepKey >> shift);
+    if (count > cells) break;
+    levels = k;
+  }
+  return levels;
+}
+
+// The tile of the cell at `level` holding `leaves` (at `depth` of the tileset) and, where a leaf
+// inside it is deeper than its content's cut, the tiles of its child cells with leaves.
+uint32_t addTiles(std::vector<Tile>& tiles, std::span<const SurfaceLeaf> leaves, uint8_t depth,
+                  uint8_t level, uint64_t key, uint8_t deepestLevel, int contentLevels,
+                  uint64_t finestLeaves, uint32_t parent) {
+  const uint32_t self = uint32_t(tiles.size());
+  Tile& tile = tiles.emplace_back();
+  tile.depth = depth;
+  tile.level = level;
+  tile.key = key;
+  tile.parent = parent;
+  for (const SurfaceLeaf& leaf : leaves) tile.deepest = std::max(tile.deepest, leaf.level);
+  // The finest where the cut would be, or where the finest surface is no larger than a coarser
+  // tile's content (a flat part of finished leaves, a few deeper ones).
+  if (int(tile.deepest) <= int(level) + contentLevels || leaves.size() <= finestLeaves) {
+    tile.cut = kMaxLevel;
+    return self;
+  }
+  tile.cut = uint8_t(level + contentLevels);
+  const int shift = 3 * (deepestLevel - (level + 1));
+  std::vector<uint32_t> children;
+  for (size_t first = 0; first < leaves.size();) {
+    const uint64_t child = leaves[first].deepKey >> shift;
+    size_t last = first + 1;
+    while (last < leaves.size() && (leaves[last].deepKey >> shift) == child) ++last;
+    children.push_back(addTiles(tiles, leaves.subspan(first, last - first), uint8_t(depth + 1),
+                                uint8_t(level + 1), child, deepestLevel, contentLevels,
+                                finestLeaves, self));
+    first = last;
+  }
+  tiles[self].children = std::move(children);  // (tiles grew: `tile` may have moved)
+  return self;
+}
+
+// The tileset's tree: above the frame's cell cut `contentLevels` below it, `coarser` tiles of
+// that cell cut a level coarser each (each a level of the tileset: the error halves from one to
+// the next there too), then the cells.
+std::vector<Tile> tileTree(std::span<const SurfaceLeaf> leaves, uint8_t deepestLevel,
+                           int contentLevels, uint64_t finestLeaves, int coarser) {
+  std::vector<Tile> tiles;
+  coarser = std::max(0, std::min(coarser, contentLevels - 1));
+  for (int d = 0; d < coarser; ++d) {
+    Tile& tile = tiles.emplace_back();
+    tile.depth = uint8_t(d);
+    tile.cut = uint8_t(contentLevels - coarser + d);
+    tile.parent = d > 0 ? uint32_t(d - 1) : kNoNode;
+    for (const SurfaceLeaf& leaf : leaves) tile.deepest = std::max(tile.deepest, leaf.level);
+    tile.children = {uint32_t(d + 1)};
+  }
+  addTiles(tiles, leaves, uint8_t(coarser), 0, 0, deepestLevel, contentLevels, finestLeaves,
+           coarser > 0 ? uint32_t(coarser - 1) : kNoNode);
+  if (coarser > 0 && tiles[size_t(coarser)].finest()) {  // (a shallow file: no coarser tiles)
+    tiles.erase(tiles.begin(), tiles.begin() + coarser);
+    tiles[0].depth = 0;
+    tiles[0].parent = kNoNode;
+  }
+  return tiles;
 }
 
 // Skirts: where the mesh's open border runs along one of `faces` of the tile's box (low and high
@@ -128,108 +248,136 @@ size_t addSkirts(TriangleMesh& mesh, MeshAttributes& attributes, const glm::dvec
   return edges;
 }
 
-// How deep a tile's skirts hang: three times the largest chunk error (its simplification is within
-// one more, and a finer neighbour's fitted corners may move its border by a third) of the tiles
-// that may be drawn unrefined beside it, the tile itself when it has children,
-// its siblings and its parent's siblings with children; 0 when none has (refinement replaces a
-// parent by all its children at once, so tiles of one parent that have none are drawn together).
-double skirtHeight(const std::vector<Tile>& tiles, uint32_t i) {
-  double error = tiles[i].children.empty() ? 0.0 : tiles[i].chunkError;
-  for (uint32_t up = i, generation = 0; generation < 2 && tiles[up].parent != kNoNode;
-       ++generation) {
-    up = tiles[up].parent;
-    for (uint32_t sibling : tiles[up].children)
-      if (!tiles[sibling].children.empty()) error = std::max(error, tiles[sibling].chunkError);
-  }
-  return 3.0 * error;
+// The largest distance from `from` to `onto` (null: no surface), sampled at its triangles' vertices and on
+// each triangle at a grid of `grid` steps an edge (1: its centre), searched within `limit`
+// (beyond: limit).
+double largestDistance(const TriangleMesh& from, const Shape* onto, int grid, double limit) {
+  if (from.triangles.empty()) return 0.0;
+  if (!onto) return limit;
+  const auto distance = [&](const glm::dvec3& p) {
+    const std::optional<ClosestPoint> c = onto->closestWithin(p, limit);
+    return c ? c->distance : limit;
+  };
+  std::vector<uint8_t> used(from.vertices.size(), 0);  // (a skirt's vertices are not)
+  for (const auto& t : from.triangles)
+    for (uint32_t v : t) used[v] = 1;
+  const double vertices = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, from.vertices.size(), 2048), 0.0,
+      [&](const tbb::blocked_range<size_t>& r, double worst) {
+        for (size_t v = r.begin(); v < r.end(); ++v)
+          if (used[v]) worst = std::max(worst, distance(from.vertices[v]));
+        return worst;
+      },
+      [](double a, double b) { return std::max(a, b); });
+  const double inside = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, from.triangles.size(), 512), 0.0,
+      [&](const tbb::blocked_range<size_t>& r, double worst) {
+        for (size_t t = r.begin(); t < r.end(); ++t) {
+          const auto& tri = from.triangles[t];
+          const auto& p = from.vertices;
+          if (grid <= 1) {
+            if (grid == 1)
+              worst = std::max(worst, distance((p[tri[0]] + p[tri[1]] + p[tri[2]]) / 3.0));
+            continue;
+          }
+          for (int i = 0; i <= grid; ++i)
+            for (int j = 0; i + j <= grid; ++j) {
+              if (i == grid || j == grid || i + j == 0) continue;  // corners
+              worst = std::max(worst, distance((double(i) * p[tri[0]] + double(j) * p[tri[1]] +
+                                                double(grid - i - j) * p[tri[2]]) /
+                                               double(grid)));
+            }
+        }
+        return worst;
+      },
+      [](double a, double b) { return std::max(a, b); });
+  return std::max(vertices, inside);
 }
 
-// A tile's content: the chunk's surface at its last level (the cut a viewer draws when it stops
-// at this chunk), from the chunks around its cell so that neighbours agree on shared faces;
-// simplified within `budget` where it has one (the coarser tiles), else collapsed within the
-// options' share of its leaves' edge (the finest); positions on a grid of a share of that edge.
-std::vector<uint8_t> makeContent(const Reader& reader, const SurfaceModel::ChunkSource& source,
-                                 Tile& tile, double budget, double skirt,
-                                 std::span<const SurfaceModel::Region> without,
-                                 const TilesOptions& options) {
-  const std::shared_ptr<const SurfaceChunk> chunk = source(tile.chunk);
-  const uint8_t cut = uint8_t(chunk->topology.startLevel + chunk->topology.depth - 1);
+std::unique_ptr<Shape> shapeOf(TriangleMesh mesh) {
+  if (mesh.triangles.empty()) return nullptr;
+  return makeMeshShape(std::move(mesh));
+}
+
+// The distance between two meshes both ways: `coarse` sampled on a grid, `fine` at its vertices
+// and triangles' centres.
+double distanceBothWays(const TriangleMesh& coarse, const TriangleMesh& fine, double limit) {
+  const std::unique_ptr<Shape> fineShape = shapeOf(fine), coarseShape = shapeOf(coarse);
+  return std::max(largestDistance(coarse, fineShape.get(), kCoarseGrid, limit),
+                  largestDistance(fine, coarseShape.get(), kFineGrid, limit));
+}
+
+void append(TriangleMesh& to, const TriangleMesh& mesh) {
+  const uint32_t base = uint32_t(to.vertices.size());
+  to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
+  for (const auto& t : mesh.triangles) to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
+struct Making {
+  const Reader& reader;
+  const SurfaceModel::ChunkSource& source;
+  const TilesOptions& options;
+  std::optional<BakedAppearance> baked;
+  std::vector<Tile>& tiles;
+  const std::function<void()>& step;
+};
+
+// A tile's content: its cell's surface at its cut, from the chunks around the cell so that
+// neighbours of one cut agree on shared faces; collapsed within a share of the cut's leaf edge
+// where it has children, else of its deepest leaves' edge (unmeasured: makeTile measures it).
+void makeContent(const Making& m, Tile& tile) {
   const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
-  // What is loaded: the cell, or for a rest tile the box of the chunk's own leaves outside its
-  // children's cells (the leaves of its cut there; none: no content), so that a rest tile near
-  // the root does not load the whole file at full detail.
-  SurfaceModel::Region load = region;
-  if (tile.rest) {
-    const SurfaceModel own = SurfaceModel::load(reader, region, source, cut);
-    bool any = false;
-    for (const SurfaceModel::Leaf& leaf : own.leaves()) {
-      if (leaf.level >= kMaxLevel || leaf.level > cut) continue;
-      const SurfaceModel::Region cell = cellRegion(leaf.level, leaf.key);
-      const auto inside = [&](const SurfaceModel::Region& r) {
-        for (size_t a = 0; a < 3; ++a)
-          if (cell.lo[a] < r.lo[a] || cell.hi[a] > r.hi[a]) return false;
-        return true;
-      };
-      if (!inside(region) || std::any_of(without.begin(), without.end(), inside)) continue;
-      for (size_t a = 0; a < 3; ++a) {
-        load.lo[a] = any ? std::min(load.lo[a], cell.lo[a]) : cell.lo[a];
-        load.hi[a] = any ? std::max(load.hi[a], cell.hi[a]) : cell.hi[a];
-      }
-      any = true;
-    }
-    if (!any) return {};
-  }
-  // The finest tiles' neighbours at full detail too, whatever their chunks' depths, so that they
-  // agree on the faces they share.
-  const SurfaceModel model =
-      SurfaceModel::load(reader, load, source, tile.children.empty() ? kMaxLevel : cut);
+  const SurfaceModel model = SurfaceModel::load(m.reader, region, m.source, tile.cut);
   std::vector<uint32_t> vertexLeaves;
-  TriangleMesh mesh = extractMesh(model, nullptr, &vertexLeaves, &region, without);
-  if (mesh.triangles.empty()) return {};
-  const std::optional<BakedAppearance> baked = bakedAppearance(reader);
-  MeshAttributes attributes = meshAttributes(model, mesh, vertexLeaves, baked ? &*baked : nullptr);
-  const Frame& frame = reader.header().frame;
-  const double leaf = std::ldexp(frame.size, -int(cut));
-  if (budget > 0.0)
-    tile.simplified = simplifyMesh(mesh, attributes, budget);
-  else
-    collapseMesh(mesh, attributes, options.finestCollapse * leaf);
-  optimizeMeshOrder(mesh, attributes);
-  const size_t surface = mesh.triangles.size();
-  if (options.skirts && skirt > 0.0) {
-    glm::dvec3 lo, hi;
-    std::array<std::array<bool, 2>, 3> inside{};
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = frame.origin[size_t(a)] + region.lo[size_t(a)] * frame.size;
-      hi[a] = frame.origin[size_t(a)] + region.hi[size_t(a)] * frame.size;
-      inside[size_t(a)] = {region.lo[size_t(a)] > 0.0, region.hi[size_t(a)] < 1.0};
-    }
-    tile.skirtEdges = addSkirts(mesh, attributes, lo, hi, inside, skirt);
+  tile.mesh = extractMesh(model, nullptr, &vertexLeaves, &region);
+  if (tile.mesh.triangles.empty()) return;
+  tile.attributes = meshAttributes(model, tile.mesh, vertexLeaves, m.baked ? &*m.baked : nullptr);
+  const Frame& frame = m.reader.header().frame;
+  if (tile.finest()) {
+    collapseMesh(tile.mesh, tile.attributes,
+                 m.options.finestCollapse * std::ldexp(frame.size, -int(tile.deepest)));
+  } else {
+    collapseMesh(tile.mesh, tile.attributes,
+                 m.options.coarseCollapse * std::ldexp(frame.size, -int(tile.cut)));
   }
-  tile.triangles = surface;
-  GlbOptions glb;
-  glb.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
-  glb.yUp = true;
-  glb.unlit = baked.has_value();
-  // One grid for every tile (the finest leaves' share): a vertex tiles share lands on one point
-  // in each, whatever their cuts (16 bits over a coarse tile's box where it reaches too far).
-  glb.positionStep = options.positionStep * std::ldexp(frame.size, -int(reader.header().maxLevel));
-  glb.skirtsFrom = surface;
-  GlbStats stats;
-  std::vector<uint8_t> bytes = encodeGlb(mesh, attributes, glb, &stats);
-  tile.quantization = 0.5 * std::sqrt(3.0) * stats.positionStep;
-  return bytes;
+  optimizeMeshOrder(tile.mesh, tile.attributes);
 }
 
-// Geometric errors, children first: a leaf tile's is 0 (nothing refines it); another's is its
-// chunk's error plus its simplification, and never below a child's.
-double finishErrors(std::vector<Tile>& tiles, uint32_t i) {
-  Tile& tile = tiles[i];
-  double error =
-      tile.children.empty() ? 0.0 : tile.chunkError + tile.simplified + tile.quantization;
-  for (uint32_t child : tile.children) error = std::max(error, finishErrors(tiles, child));
-  tiles[i].geometricError = error;
-  return error;
+// The tile and those below it, children first (in parallel). A tile's stated error bounds its
+// content's distance to the finest tiles in its cell, as a client decodes them: 0 for the
+// finest; otherwise its measured distance to its children's content (both ways, on their 16-bit
+// grids) and the largest child's error (the triangle inequality), and at least twice any
+// child's.
+void makeTile(const Making& m, uint32_t i) {
+  tbb::parallel_for(size_t(0), m.tiles[i].children.size(),
+                    [&](size_t c) { makeTile(m, m.tiles[i].children[c]); });
+  Tile& tile = m.tiles[i];
+  makeContent(m, tile);
+  const Frame& frame = m.reader.header().frame;
+  const double cellEdge = std::ldexp(frame.size, -int(tile.level));
+  // Positions on the content's 16-bit grid (what a client decodes is what is measured): the
+  // finest leaves' share, or 16 bits over the box where that needs more (skirts stay inside it;
+  // the grid's first point may lie a step below the box).
+  tile.positionStep =
+      std::max(m.options.positionStep * std::ldexp(frame.size, -int(m.reader.header().maxLevel)),
+               cellEdge / 65532.0);
+  const glm::dvec3 origin(frame.origin[0], frame.origin[1], frame.origin[2]);
+  for (glm::dvec3& v : tile.mesh.vertices)
+    v = origin + glm::round((v - origin) / tile.positionStep) * tile.positionStep;
+  if (!tile.finest()) {
+    TriangleMesh below;
+    double childError = 0.0;
+    for (uint32_t c : tile.children) {
+      append(below, m.tiles[c].mesh);
+      childError = std::max(childError, m.tiles[c].geometricError);
+    }
+      tile.toChildren = distanceBothWays(tile.mesh, below, 2.0 * std::sqrt(3.0) * cellEdge);
+    // (and a step of its grid for the rounding of a client's float decoding)
+    const double measured = tile.toChildren + childError + tile.positionStep;
+    tile.geometricError = std::max(measured, childError / kChildShare);
+    tile.raised = childError / kChildShare > measured;
+  }
+  m.step();
 }
 
 nlohmann::json tileJson(const std::vector<Tile>& tiles, uint32_t i, const Frame& frame) {
@@ -248,7 +396,7 @@ nlohmann::json tileJson(const std::vector<Tile>& tiles, uint32_t i, const Frame&
   if (!tile.children.empty()) {
     out["children"] = nlohmann::json::array();
     for (uint32_t child : tile.children)
-      if (!(tiles[child].rest && tiles[child].bytes == 0))  // (all in the other children)
+      if (tiles[child].bytes > 0 || !tiles[child].children.empty())
         out["children"].push_back(tileJson(tiles, child, frame));
   }
   return out;
@@ -259,42 +407,14 @@ nlohmann::json tileJson(const std::vector<Tile>& tiles, uint32_t i, const Frame&
 TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directory,
                       const TilesOptions& options,
                       const std::function<void(size_t, size_t)>& progress) {
+  if (options.finestLeaves < 1) throw UsageError("a finest tile holds at least one leaf");
+  if (options.contentLevels < 0 || options.contentLevels > kMostContentLevels)
+    throw UsageError("the tiles' content levels must be 0 (chosen) to " +
+                     std::to_string(kMostContentLevels));
   const Frame& frame = reader.header().frame;
-  std::vector<Tile> tiles;
-  std::map<uint32_t, uint32_t> tileOf;  // chunk id → tile
-  for (const ChunkInfo& info : reader.chunks())
-    if (info.kind == uint8_t(ChunkKind::Surface)) {
-      tileOf[info.id] = uint32_t(tiles.size());
-      Tile& tile = tiles.emplace_back();
-      tile.chunk = info.id;
-      tile.level = info.level;
-      tile.key = info.key;
-      tile.chunkError = double(info.geometricError) * frame.size;
-    }
-  uint32_t root = kNoNode;
-  for (uint32_t i = 0; i < tiles.size(); ++i) {
-    const uint32_t parent = reader.chunk(tiles[i].chunk).parent;
-    if (parent == kNoParent)
-      root = i;
-    else {
-      tiles[tileOf.at(parent)].children.push_back(i);
-      tiles[i].parent = tileOf.at(parent);
-    }
-  }
-  if (root == kNoNode) throw FileError(reader.name(), std::nullopt, "has no surface");
-  for (uint32_t i = 0, chunks = uint32_t(tiles.size()); i < chunks; ++i) {
-    if (tiles[i].children.empty()) continue;
-    Tile rest = tiles[i];
-    rest.children.clear();
-    rest.parent = i;
-    rest.rest = true;
-    rest.chunkError = 0.0;
-    tiles[i].children.push_back(uint32_t(tiles.size()));
-    tiles.push_back(std::move(rest));
-  }
 
   // Decoded chunks, shared by the tiles around them (each loads the chunks around its cell): the
-  // last kCachedChunks used (tiles go in file order, which is spatial, a subrange a thread).
+  // last kCachedChunks used (tiles are made depth first, which is spatial).
   std::mutex caching;
   std::list<std::pair<uint32_t, std::shared_ptr<const SurfaceChunk>>> recent;  // newest first
   std::map<uint32_t, decltype(recent)::iterator> cached;
@@ -319,106 +439,228 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
     }
     return std::shared_ptr<const SurfaceChunk>(std::move(chunk));
   };
+
+  const std::vector<SurfaceLeaf> leaves = surfaceLeaves(reader, source);
+  if (leaves.empty()) throw FileError(reader.name(), std::nullopt, "has no surface");
+  const int contentLevels = options.contentLevels > 0
+                                ? options.contentLevels
+                                : contentLevelsFor(leaves, reader.header().maxLevel,
+                                                   4 * options.finestLeaves, kMostContentLevels);
+  std::vector<Tile> tiles =
+      tileTree(leaves, reader.header().maxLevel, contentLevels, options.finestLeaves,
+               options.coarserTiles);
+
   std::mutex reporting;
   size_t done = 0;
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, tiles.size(), 1), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
-          Tile& tile = tiles[i];
-          const double budget = tile.children.empty() ? 0.0 : tile.chunkError;
-          const double skirt = skirtHeight(tiles, uint32_t(i));
-          // A rest tile leaves out its siblings' cells.
-          std::vector<SurfaceModel::Region> without;
-          if (tile.rest)
-            for (uint32_t sibling : tiles[tile.parent].children)
-              if (!tiles[sibling].rest)
-                without.push_back(cellRegion(tiles[sibling].level, tiles[sibling].key));
-          const std::vector<uint8_t> content =
-              makeContent(reader, source, tile, budget, skirt, without, options);
-          if (!content.empty()) {
-            writeFileBytes(directory / contentName(tile), content);
-            tile.bytes = content.size();
-          }
-          const std::lock_guard lock(reporting);
-          ++done;
-          if (progress) progress(done, tiles.size());
+  const size_t steps = 2 * tiles.size();
+  const std::function<void()> step = [&] {
+    const std::lock_guard lock(reporting);
+    ++done;
+    if (progress) progress(done, steps);
+  };
+  const Making making{reader, source, options, bakedAppearance(reader), tiles, step};
+  makeTile(making, 0);
+
+  // The contents, with skirts as deep as the tile's own error and twice its parent's (a
+  // neighbour drawn unrefined beside it: up to two levels coarser), into their files.
+  tbb::parallel_for(size_t(0), tiles.size(), [&](size_t i) {
+    Tile& tile = tiles[i];
+    if (!tile.mesh.triangles.empty()) {
+      TriangleMesh mesh = std::move(tile.mesh);
+      MeshAttributes attributes = std::move(tile.attributes);
+      const size_t surface = mesh.triangles.size();
+      if (options.skirts && tile.parent != kNoNode) {
+        const SurfaceModel::Region region = cellRegion(tile.level, tile.key);
+        glm::dvec3 lo, hi;
+        std::array<std::array<bool, 2>, 3> inside{};
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = frame.origin[size_t(a)] + region.lo[size_t(a)] * frame.size;
+          hi[a] = frame.origin[size_t(a)] + region.hi[size_t(a)] * frame.size;
+          inside[size_t(a)] = {region.lo[size_t(a)] > 0.0, region.hi[size_t(a)] < 1.0};
         }
-      });
-  finishErrors(tiles, root);
+        const double height = tile.geometricError + 2.0 * tiles[tile.parent].geometricError;
+        tile.skirtEdges = addSkirts(mesh, attributes, lo, hi, inside, height);
+      }
+      tile.triangles = surface;
+      GlbOptions glb;
+      glb.origin = glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+      glb.yUp = true;
+      glb.unlit = making.baked.has_value();
+      // One grid for the tiles of a level, and for all where the finest leaves' share reaches
+      // over the box: a vertex tiles share lands on one point in each, whatever their cuts.
+      glb.positionStep = tile.positionStep;
+      glb.skirtsFrom = surface;
+      const std::vector<uint8_t> bytes = encodeGlb(mesh, attributes, glb);
+      writeFileBytes(directory / contentName(tile), bytes);
+      tile.bytes = bytes.size();
+    }
+    step();
+  });
 
   // The root's transform puts the frame's origin back: UTM or ECEF coordinates land where they
   // are, and the tiles' own numbers stay small.
-  nlohmann::json rootJson = tileJson(tiles, root, frame);
+  nlohmann::json rootJson = tileJson(tiles, 0, frame);
   rootJson["transform"] = {
       1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, frame.origin[0], frame.origin[1], frame.origin[2], 1};
+  const double rootError = tiles[0].geometricError;
   const nlohmann::json tileset = {
       {"asset", {{"version", "1.1"}, {"generator", "iso export"}}},
-      {"geometricError", std::sqrt(3.0) * frame.size},  // nothing drawn: off by the frame at most
+      // Nothing drawn: off by the frame's diagonal at most (and never below the root's).
+      {"geometricError", std::max(std::sqrt(3.0) * frame.size, rootError / kChildShare)},
       {"root", rootJson}};
   const std::string text = tileset.dump(1);
   writeFileBytes(directory / "tileset.json", std::vector<uint8_t>(text.begin(), text.end()));
 
   TilesStats stats;
   std::map<int, TilesLevel> levels;
+  std::map<int, std::vector<double>> errors;
   for (const Tile& tile : tiles) {
-    if (tile.rest && tile.bytes == 0) continue;  // (not in the tileset)
-    stats.restTiles += tile.rest;
-    TilesLevel& l = levels[tile.level];
-    l.level = tile.level;
+    if (tile.bytes == 0 && tile.children.empty()) continue;  // (not in the tileset)
+    TilesLevel& l = levels[tile.depth];
+    l.level = tile.depth;
     ++l.tiles;
+    l.finest += tile.finest();
     l.triangles += tile.triangles;
     l.bytes += tile.bytes;
+    l.largestTriangles = std::max(l.largestTriangles, tile.triangles);
+    l.largestBytes = std::max(l.largestBytes, tile.bytes);
     l.geometricError = std::max(l.geometricError, tile.geometricError);
-    l.simplified = std::max(l.simplified, tile.simplified);
+    l.toChildren = std::max(l.toChildren, tile.toChildren);
+    errors[tile.depth].push_back(tile.geometricError);
     stats.tiles += 1;
+    stats.raised += tile.raised;
     stats.skirtEdges += tile.skirtEdges;
     stats.triangles += tile.triangles;
     stats.bytes += tile.bytes;
+    if (tile.parent != kNoNode && tiles[tile.parent].geometricError > 0.0)
+      stats.largestChildRatio = std::max(stats.largestChildRatio,
+                                         tile.geometricError / tiles[tile.parent].geometricError);
   }
   stats.bytes += text.size();
-  for (const auto& [level, l] : levels) stats.levels.push_back(l);
+  for (auto& [level, l] : levels) {
+    std::vector<double>& e = errors[level];
+    std::nth_element(e.begin(), e.begin() + ptrdiff_t(e.size() / 2), e.end());
+    l.medianError = e[e.size() / 2];
+    stats.levels.push_back(l);
+  }
   return stats;
 }
 
 namespace {
 
-void addCut(const std::filesystem::path& directory, const nlohmann::json& tile, int depth, int at,
-            const glm::dvec3& offset, bool skirts, TilesetCut& cut) {
-  const bool leaf = !tile.contains("children") || tile["children"].empty();
-  if (leaf || at == depth) {
+struct TilesetFile {
+  std::filesystem::path directory;
+  nlohmann::json root;
+  glm::dvec3 offset{0.0};
+};
+
+TilesetFile readTileset(const std::filesystem::path& directory) {
+  const std::filesystem::path path = directory / "tileset.json";
+  const std::vector<uint8_t> text = readFileBytes(path);
+  TilesetFile file{directory, {}, glm::dvec3(0.0)};
+  try {
+    const nlohmann::json tileset = nlohmann::json::parse(text.begin(), text.end());
+    file.root = tileset.at("root");
+    if (file.root.contains("transform"))
+      for (int a = 0; a < 3; ++a)
+        file.offset[a] = file.root["transform"].at(size_t(12 + a)).get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    throw FileError(path.string(), std::nullopt, std::string("is not a tileset: ") + e.what());
+  }
+  return file;
+}
+
+bool hasChildren(const nlohmann::json& tile) {
+  return tile.contains("children") && !tile["children"].empty();
+}
+
+// A tile's content in world units (z up), with its skirts when asked; none without content.
+TriangleMesh tileMesh(const TilesetFile& file, const nlohmann::json& tile, bool skirts) {
+  TriangleMesh out;
+  if (!tile.contains("content")) return out;
+  const std::filesystem::path path =
+      file.directory / tile["content"].at("uri").get<std::string>();
+  const TriangleMesh mesh = decodeGlb(readFileBytes(path), path.string(), !skirts);
+  // (without the skirts' vertices when they are left out)
+  std::vector<uint32_t> index(mesh.vertices.size(), kNoNode);
+  out.triangles.reserve(mesh.triangles.size());
+  for (auto t : mesh.triangles) {
+    for (uint32_t& v : t) {
+      if (index[v] == kNoNode) {
+        index[v] = uint32_t(out.vertices.size());
+        const glm::dvec3& g = mesh.vertices[v];  // glTF's y up back to z up
+        out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + file.offset);
+      }
+      v = index[v];
+    }
+    out.triangles.push_back(t);
+  }
+  return out;
+}
+
+void addCut(const TilesetFile& file, const nlohmann::json& tile, int depth, int at, bool skirts,
+            TilesetCut& cut) {
+  if (!hasChildren(tile) || at == depth) {
     cut.geometricError = std::max(cut.geometricError, tile.at("geometricError").get<double>());
     ++cut.tiles;
-    if (!tile.contains("content")) return;
-    const std::filesystem::path path = directory / tile["content"].at("uri").get<std::string>();
-    const TriangleMesh mesh = decodeGlb(readFileBytes(path), path.string(), !skirts);
-    const uint32_t base = uint32_t(cut.mesh.vertices.size());
-    for (const glm::dvec3& g : mesh.vertices)  // glTF's y up back to z up
-      cut.mesh.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
-    for (const auto& t : mesh.triangles)
-      cut.mesh.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    append(cut.mesh, tileMesh(file, tile, skirts));
     return;
   }
-  for (const nlohmann::json& child : tile["children"])
-    addCut(directory, child, depth, at + 1, offset, skirts, cut);
+  for (const nlohmann::json& child : tile["children"]) addCut(file, child, depth, at + 1, skirts, cut);
+}
+
+// The finest tiles at or below a tile, as one mesh.
+void addFinest(const TilesetFile& file, const nlohmann::json& tile, TriangleMesh& out) {
+  if (!hasChildren(tile)) {
+    append(out, tileMesh(file, tile, false));
+    return;
+  }
+  for (const nlohmann::json& child : tile["children"]) addFinest(file, child, out);
+}
+
+void checkCut(const TilesetFile& file, const nlohmann::json& tile, int depth, int at,
+              TilesetCheck& check) {
+  if (hasChildren(tile) && at < depth) {
+    for (const nlohmann::json& child : tile["children"]) checkCut(file, child, depth, at + 1, check);
+    return;
+  }
+  ++check.tiles;
+  if (!hasChildren(tile)) return;  // the finest itself
+  const double stated = tile.at("geometricError").get<double>();
+  TriangleMesh finest;
+  addFinest(file, tile, finest);
+  const nlohmann::json& box = tile.at("boundingVolume").at("box");
+  const double limit = 4.0 * std::sqrt(3.0) * box.at(3).get<double>();
+  const double d = distanceBothWays(tileMesh(file, tile, false), finest, limit);
+  check.largest = std::max(check.largest, d);
+  check.beyond += d > stated;
+  if (stated > 0.0) check.worstRatio = std::max(check.worstRatio, d / stated);
 }
 
 }  // namespace
 
 TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth, bool skirts) {
-  const std::filesystem::path path = directory / "tileset.json";
-  const std::vector<uint8_t> text = readFileBytes(path);
+  const TilesetFile file = readTileset(directory);
   TilesetCut cut;
   try {
-    const nlohmann::json tileset = nlohmann::json::parse(text.begin(), text.end());
-    const nlohmann::json& root = tileset.at("root");
-    glm::dvec3 offset(0.0);
-    if (root.contains("transform"))
-      for (int a = 0; a < 3; ++a) offset[a] = root["transform"].at(size_t(12 + a)).get<double>();
-    addCut(directory, root, depth, 0, offset, skirts, cut);
+    addCut(file, file.root, depth, 0, skirts, cut);
   } catch (const nlohmann::json::exception& e) {
-    throw FileError(path.string(), std::nullopt, std::string("is not a tileset: ") + e.what());
+    throw FileError((directory / "tileset.json").string(), std::nullopt,
+                    std::string("is not a tileset: ") + e.what());
   }
   return cut;
+}
+
+TilesetCheck checkTilesetCut(const std::filesystem::path& directory, int depth) {
+  const TilesetFile file = readTileset(directory);
+  TilesetCheck check;
+  try {
+    checkCut(file, file.root, depth, 0, check);
+  } catch (const nlohmann::json::exception& e) {
+    throw FileError((directory / "tileset.json").string(), std::nullopt,
+                    std::string("is not a tileset: ") + e.what());
+  }
+  return check;
 }
 
 }  // namespace iso

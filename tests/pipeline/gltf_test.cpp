@@ -303,36 +303,75 @@ void collectTiles(const nlohmann::json& tile, int parent,
     for (const nlohmann::json& child : tile["children"]) collectTiles(child, self, out);
 }
 
-TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurface) {
+// A 40k-point sphere's tileset with small tiles (many levels): cut 2 levels below each cell,
+// at most 300 leaves a finest tile, two coarser tiles of the frame.
+TilesOptions smallTiles() {
+  TilesOptions options;
+  options.contentLevels = 2;
+  options.finestLeaves = 300;
+  options.coarserTiles = 2;
+  return options;
+}
+
+// A tile's content as written (16-bit positions back in world units, z up), surface only.
+TriangleMesh contentOf(const std::filesystem::path& directory, const nlohmann::json& tile,
+                       const glm::dvec3& offset, bool skirts) {
+  const std::filesystem::path path = directory / tile["content"]["uri"].get<std::string>();
+  const std::vector<std::byte> raw = test::readFile(path);
+  const TriangleMesh mesh =
+      decodeGlb(std::vector<uint8_t>(reinterpret_cast<const uint8_t*>(raw.data()),
+                                     reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()),
+                path.string(), !skirts);
+  TriangleMesh out{{}, mesh.triangles};
+  for (const glm::dvec3& g : mesh.vertices) out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
+  return out;
+}
+
+// The largest distance from points of `from` (a grid of `grid` steps an edge on each triangle) to
+// `onto`, by its closest points: an independent, denser sampling than the exporter's.
+double denseDistance(const TriangleMesh& from, const Shape& onto, int grid) {
+  double worst = 0.0;
+  for (const auto& t : from.triangles)
+    for (int i = 0; i <= grid; ++i)
+      for (int j = 0; i + j <= grid; ++j) {
+        const glm::dvec3 q = (double(i) * from.vertices[t[0]] + double(j) * from.vertices[t[1]] +
+                              double(grid - i - j) * from.vertices[t[2]]) /
+                             double(grid);
+        worst = std::max(worst, onto.closest(q).distance);
+      }
+  return worst;
+}
+
+void appendMesh(TriangleMesh& to, const TriangleMesh& mesh) {
+  const uint32_t base = uint32_t(to.vertices.size());
+  to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
+  for (const auto& t : mesh.triangles) to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
+TEST(Tiles, followTheOctreeWithErrorsMeasuredAgainstTheFinestThatHalveLevelByLevel) {
   test::TempDir dir;
-  BuildOptions options;
-  options.chunkNodes = 2000;  // many chunks, over several levels
-  const test::Converted c =
-      test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso", options);
+  const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso");
   const Reader reader = Reader::open(dir / "s.iso");
   std::filesystem::create_directories(dir / "tiles");
   size_t calls = 0;
-  const TilesStats stats = writeTiles(reader, dir / "tiles", {}, [&](size_t done, size_t total) {
-    ++calls;
-    EXPECT_LE(done, total);
-  });
-  size_t surfaceChunks = 0;
-  for (const ChunkInfo& info : reader.chunks())
-    surfaceChunks += info.kind == uint8_t(ChunkKind::Surface);
-  ASSERT_GT(surfaceChunks, 8u);
-  // A tile a chunk, and one for the rest of each chunk with children that has leaves of its own
-  // outside theirs.
-  EXPECT_EQ(stats.tiles, surfaceChunks + stats.restTiles);
+  const TilesStats stats =
+      writeTiles(reader, dir / "tiles", smallTiles(), [&](size_t done, size_t total) {
+        ++calls;
+        EXPECT_LE(done, total);
+      });
   EXPECT_GE(calls, stats.tiles);
-  EXPECT_GE(stats.levels.size(), 2u);
+  ASSERT_GE(stats.levels.size(), 5u);
+  EXPECT_LE(stats.largestChildRatio, 0.5 + 1e-12);
 
   const nlohmann::json tileset =
       nlohmann::json::parse(std::ifstream(dir / "tiles" / "tileset.json"));
   EXPECT_EQ(tileset["asset"]["version"], "1.1");
   const Frame& frame = reader.header().frame;
   const nlohmann::json& transform = tileset["root"]["transform"];
+  const glm::dvec3 offset(frame.origin[0], frame.origin[1], frame.origin[2]);
   for (int a = 0; a < 3; ++a)
     EXPECT_DOUBLE_EQ(transform[12 + a].get<double>(), frame.origin[size_t(a)]);
+  EXPECT_GE(tileset["geometricError"].get<double>(), tileset["root"]["geometricError"].get<double>());
   std::vector<std::pair<nlohmann::json, int>> tiles;
   collectTiles(tileset["root"], -1, tiles);
   EXPECT_EQ(tiles.size(), stats.tiles);
@@ -348,81 +387,84 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
     const double half = box[3].get<double>();
     EXPECT_EQ(tile["refine"], "REPLACE");
     const double error = tile["geometricError"].get<double>();
-    if (parent >= 0) {  // inside the parent's box, with no larger an error
+    if (parent >= 0) {  // the parent's cell or an octant of it; at most half its error
       const nlohmann::json& outer = tiles[size_t(parent)].first;
       const nlohmann::json& pbox = outer["boundingVolume"]["box"];
+      const double phalf = pbox[3].get<double>();
+      EXPECT_TRUE(std::abs(half - phalf) < 1e-12 * phalf || std::abs(2 * half - phalf) < 1e-12 * phalf);
       for (int a = 0; a < 3; ++a) {
-        EXPECT_GE(centre[a] - half, pbox[a].get<double>() - pbox[3].get<double>() - 1e-12);
-        EXPECT_LE(centre[a] + half, pbox[a].get<double>() + pbox[3].get<double>() + 1e-12);
+        EXPECT_GE(centre[a] - half, pbox[a].get<double>() - phalf - 1e-12);
+        EXPECT_LE(centre[a] + half, pbox[a].get<double>() + phalf + 1e-12);
       }
-      EXPECT_LE(error, outer["geometricError"].get<double>());
+      EXPECT_LE(error, 0.5 * outer["geometricError"].get<double>() * (1 + 1e-12));
     }
     const bool finest = !tile.contains("children");
     if (finest) {
       EXPECT_EQ(error, 0.0);
+    } else {
+      EXPECT_GT(error, 0.0);
     }
     if (!tile.contains("content")) continue;
-    // The content: y up in the file (x, z, -y), about the frame's origin; inside the box, and for
-    // the finest tiles within half a spacing of the unit sphere.
-    const std::filesystem::path path = dir / "tiles" / tile["content"]["uri"].get<std::string>();
-    const std::vector<std::byte> raw = test::readFile(path);
-    const Glb glb =
-        parseGlb(std::vector<uint8_t>(reinterpret_cast<const uint8_t*>(raw.data()),
-                                      reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()));
-    const nlohmann::json& node = glb.json["nodes"][0];
-    const glm::dvec3 t(node["translation"][0], node["translation"][1], node["translation"][2]);
-    const double step = node["scale"][0].get<double>();
-    const std::vector<uint8_t> positions = viewBytes(glb, 0);
-    const size_t count = glb.json["accessors"][0]["count"].get<size_t>();
-    for (size_t i = 0; i < count; ++i) {
-      uint16_t q[3];
-      std::memcpy(q, positions.data() + 8 * i, 6);
-      const glm::dvec3 up = t + step * glm::dvec3(q[0], q[1], q[2]);
-      const glm::dvec3 local(up.x, -up.z, up.y);  // back to z up
-      for (int a = 0; a < 3; ++a) {
-        ASSERT_GE(local[a], centre[a] - half - step);
-        ASSERT_LE(local[a], centre[a] + half + step);
+    const TriangleMesh content = contentOf(dir / "tiles", tile, offset, true);
+    const double step = 2.0 * half / 65532.0 + 1e-12;  // at most
+    for (const auto& t : content.triangles)
+      for (uint32_t v : t) {
+        const glm::dvec3 local = content.vertices[v] - offset;
+        for (int a = 0; a < 3; ++a) {  // inside the box (skirts too)
+          ASSERT_GE(local[a], centre[a] - half - step);
+          ASSERT_LE(local[a], centre[a] + half + step);
+        }
       }
-      if (finest) {
-        const glm::dvec3 world =
-            local + glm::dvec3(frame.origin[0], frame.origin[1], frame.origin[2]);
+    if (!finest) continue;
+    const TriangleMesh surface = contentOf(dir / "tiles", tile, offset, false);
+    finestTriangles += surface.triangles.size();
+    for (const auto& t : surface.triangles)
+      for (uint32_t v : t) {
+        const glm::dvec3& world = surface.vertices[v];
         ASSERT_LT(std::abs(glm::length(world) - 1.0), 0.5 * spacing);
+        const glm::dvec3 local = world - offset;
         for (int a = 0; a < 3; ++a)  // on a face of the tile's box: shared with a neighbour
-          if (std::abs(std::abs(local[a] - centre[a]) - half) <= step) {
+          if (std::abs(std::abs(local[a] - centre[a]) - half) <= 1e-9 * half) {
             onFaces.push_back({local, k});
             break;
           }
-        largestStep = std::max(largestStep, step);
       }
-    }
-    if (finest)  // the first primitive's (the second holds skirts)
-      finestTriangles +=
-          glb.json["accessors"][glb.json["meshes"][0]["primitives"][0]["indices"].get<size_t>()]
-                  ["count"]
-                      .get<size_t>() /
-          3;
+    largestStep = std::max(largestStep, step);
   }
-  // The finest tiles together are the whole surface's mesh, cut by chunk and collapsed; read back
-  // as one mesh (world units), on the sphere. A coarser cut is within its stated error of the
-  // finest surface, which is within half a spacing of the sphere.
+  // The finest tiles together are the whole surface's mesh, cut by cell and collapsed.
   const size_t whole = extractMesh(c.surface).triangles.size();
   EXPECT_LT(finestTriangles, whole * 3 / 4);
   EXPECT_GT(finestTriangles, whole / 20);
-  std::printf("finest tiles: %zu triangles (%zu unsimplified)\n", finestTriangles, whole);
+  std::printf("%llu tiles over %zu levels; finest tiles: %zu triangles (%zu unsimplified)\n",
+              static_cast<unsigned long long>(stats.tiles), stats.levels.size(), finestTriangles,
+              whole);
   const TilesetCut finestCut = readTilesetCut(dir / "tiles");
   EXPECT_EQ(finestCut.mesh.triangles.size(), finestTriangles);
   EXPECT_EQ(finestCut.geometricError, 0.0);
-  for (const glm::dvec3& v : finestCut.mesh.vertices)
-    ASSERT_LT(std::abs(glm::length(v) - 1.0), 0.5 * spacing);
-  const TilesetCut top = readTilesetCut(dir / "tiles", 0);
-  EXPECT_EQ(top.tiles, 1u);
-  ASSERT_GT(top.geometricError, 0.0);
-  double topWorst = 0.0;
-  for (const glm::dvec3& v : top.mesh.vertices)
-    topWorst = std::max(topWorst, std::abs(glm::length(v) - 1.0));
-  std::printf("the root tile: %zu triangles, %.4f from the sphere, stated error %.4f\n",
-              top.mesh.triangles.size(), topWorst, top.geometricError);
-  EXPECT_LE(topWorst, top.geometricError + 0.5 * spacing);
+  // Every depth: each tile within its stated error of the finest tiles below it, as the tileset
+  // checks it and sampled three times as densely both ways here.
+  const std::unique_ptr<Shape> finestShape = makeMeshShape(finestCut.mesh);
+  for (int depth = 0; depth < int(stats.levels.size()); ++depth) {
+    const TilesetCheck check = checkTilesetCut(dir / "tiles", depth);
+    EXPECT_EQ(check.beyond, 0u) << "depth " << depth;
+    EXPECT_LE(check.worstRatio, 1.0) << "depth " << depth;
+    const TilesetCut cut = readTilesetCut(dir / "tiles", depth);
+    std::printf("depth %d: %llu tiles, %zu triangles, stated %.5f, measured %.5f\n", depth,
+                static_cast<unsigned long long>(cut.tiles), cut.mesh.triangles.size(),
+                cut.geometricError, check.largest);
+    if (depth > 0) continue;
+    // The root: dense samples of it to the finest, of the finest to it, and both to the sphere.
+    const std::unique_ptr<Shape> rootShape = makeMeshShape(cut.mesh);
+    const double dense = std::max(denseDistance(cut.mesh, *finestShape, 12),
+                                  denseDistance(finestCut.mesh, *rootShape, 3));
+    std::printf("the root: %.5f from the finest (dense samples), stated %.5f\n", dense,
+                cut.geometricError);
+    EXPECT_LE(dense, cut.geometricError);
+    double worst = 0.0;
+    for (const glm::dvec3& v : cut.mesh.vertices)
+      worst = std::max(worst, std::abs(glm::length(v) - 1.0));
+    EXPECT_LE(worst, cut.geometricError + 0.5 * spacing);
+  }
   // Where two finest tiles meet, every vertex on one's face is a vertex of another (within the
   // two tiles' 16-bit steps): no cracks between them.
   std::sort(onFaces.begin(), onFaces.end(),
@@ -446,87 +488,87 @@ TEST(Tiles, followTheChunkTreeWithContentInsideEachTilesBoxAndTheFinestOnTheSurf
   EXPECT_EQ(matched, onFaces.size());
 }
 
-// A cut that mixes levels: depth first, every other tile with children refined, the rest drawn
-// as they are; its tiles' triangles in world units (with their skirts when asked).
-void addMixedCut(const std::filesystem::path& directory, const nlohmann::json& tile,
-                 const glm::dvec3& offset, bool skirts, size_t& turn, TriangleMesh& out) {
-  const bool children = tile.contains("children") && !tile["children"].empty();
-  if (children && turn++ % 2 == 0) {
+// What a client draws from `eye`: a tile is refined (replaced by its children) where its
+// screen-space error, its geometric error over the distance to its box in pixels of a 40°
+// 768-pixel-high view, exceeds `target` pixels (3d-tiles-renderer's rule); the tiles drawn, in
+// world units, with their skirts when asked, and the depths they are at.
+void screenCut(const std::filesystem::path& directory, const nlohmann::json& tile,
+               const glm::dvec3& offset, const glm::dvec3& eye, double target, bool skirts,
+               int depth, TriangleMesh& out, std::set<int>& depths) {
+  const nlohmann::json& box = tile["boundingVolume"]["box"];
+  const glm::dvec3 centre = glm::dvec3(box[0], box[1], box[2]) + offset;
+  const double half = box[3].get<double>();
+  const glm::dvec3 outside = glm::max(glm::abs(eye - centre) - glm::dvec3(half), glm::dvec3(0.0));
+  const double distance = std::max(glm::length(outside), 1e-9);
+  const double pixels = tile["geometricError"].get<double>() /
+                        (distance * 2.0 * std::tan(20.0 * M_PI / 180.0) / 768.0);
+  if (tile.contains("children") && pixels > target) {
     for (const nlohmann::json& child : tile["children"])
-      addMixedCut(directory, child, offset, skirts, turn, out);
+      screenCut(directory, child, offset, eye, target, skirts, depth + 1, out, depths);
     return;
   }
-  if (!tile.contains("content")) return;
-  const std::filesystem::path path = directory / tile["content"]["uri"].get<std::string>();
-  const std::vector<std::byte> raw = test::readFile(path);
-  const TriangleMesh mesh =
-      decodeGlb(std::vector<uint8_t>(reinterpret_cast<const uint8_t*>(raw.data()),
-                                     reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()),
-                path.string(), !skirts);
-  const uint32_t base = uint32_t(out.vertices.size());
-  for (const glm::dvec3& g : mesh.vertices)
-    out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
-  for (const auto& t : mesh.triangles)
-    out.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  depths.insert(depth);
+  if (tile.contains("content")) appendMesh(out, contentOf(directory, tile, offset, skirts));
 }
 
-TEST(Tiles, skirtsCloseTheCracksWhereTilesOfDifferentCutsMeet) {
-  // The sphere is closed: a ray from outside aimed at its centre meets any cut of its tiles,
-  // unless it goes through a crack between tiles of different levels of detail.
+TEST(Tiles, skirtsCloseTheCracksWhereAClientDrawsTilesOfDifferentLevelsSideBySide) {
+  // What a client draws from six cameras close to the sphere, at three screen-space errors (cuts
+  // that mix levels), against the finest tiles: a ray from the camera that meets the finest
+  // surface inside its silhouette but none of the tiles drawn near there goes through a crack
+  // between tiles of different levels of detail.
   test::TempDir dir;
-  BuildOptions options;
-  options.chunkNodes = 100;  // tiles over three levels of the chunk tree
-  const test::Converted c =
-      test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso", options);
+  const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso");
   const Reader reader = Reader::open(dir / "s.iso");
-  constexpr int kRays = 100000;
-  const auto raysThrough = [&](const TriangleMesh& mesh) {
-    const std::unique_ptr<Shape> shape = makeMeshShape(mesh);
+  const Frame& frame = reader.header().frame;
+  const glm::dvec3 offset(frame.origin[0], frame.origin[1], frame.origin[2]);
+  constexpr int kRays = 50000;
+  const auto raysThrough = [&](const TriangleMesh& drawn, const Shape& finest,
+                               const glm::dvec3& eye) {
+    const std::unique_ptr<Shape> shape = makeMeshShape(drawn);
     std::mt19937_64 rng(7);
     std::normal_distribution<double> normal;
     size_t through = 0;
-    for (int r = 0; r < kRays; ++r) {
-      const glm::dvec3 d = glm::normalize(glm::dvec3(normal(rng), normal(rng), normal(rng)));
-      through += !shape->intersect(3.0 * d, -d, 0.0, 3.0).has_value();
+    for (int r = 0; r < kRays; ++r) {  // towards points of the unit sphere's ball
+      const glm::dvec3 aim = 1.05 * glm::normalize(glm::dvec3(normal(rng), normal(rng), normal(rng))) *
+                             std::cbrt(std::uniform_real_distribution<double>(0.0, 1.0)(rng));
+      const glm::dvec3 d = glm::normalize(aim - eye);
+      // Meeting the finest surface (about the unit sphere) well inside its silhouette, the
+      // drawn tiles must be met within 0.2 of it (their errors are smaller); through a crack the
+      // ray goes on to the far side.
+      const std::optional<double> t = finest.intersect(eye, d, 0.0, 10.0);
+      if (!t || std::abs(glm::dot(d, glm::normalize(eye + *t * d))) < 0.5) continue;
+      through += !shape->intersect(eye, d, 0.0, *t + 0.2).has_value();
     }
     return through;
   };
+  const std::vector<glm::dvec3> eyes = {{1.6, 0, 0}, {-1.2, 0.9, 0.3}, {0, 0, 1.7},
+                                        {0.3, -1.5, 0.4}, {-0.8, -0.8, -1.0}, {0.9, 0.9, -0.9}};
   std::map<bool, size_t> misses;
   for (const bool skirts : {false, true}) {
     const std::filesystem::path out = dir / (skirts ? "with" : "without");
     std::filesystem::create_directories(out);
-    TilesOptions tiles;
-    tiles.skirts = skirts;
-    const TilesStats stats = writeTiles(reader, out, tiles);
+    TilesOptions options = smallTiles();
+    options.skirts = skirts;
+    const TilesStats stats = writeTiles(reader, out, options);
     EXPECT_EQ(stats.skirtEdges > 0, skirts);
-    if (!skirts) {
-      ASSERT_GE(stats.levels.size(), 3u);
-      size_t grandchildren = 0;
-      for (const ChunkInfo& info : reader.chunks())
-        grandchildren += info.kind == uint8_t(ChunkKind::Surface) && info.parent != kNoParent &&
-                         reader.chunk(info.parent).parent != kNoParent;
-      ASSERT_GT(grandchildren, 0u);
-    }
     const nlohmann::json tileset = nlohmann::json::parse(std::ifstream(out / "tileset.json"));
-    const nlohmann::json& transform = tileset["root"]["transform"];
-    const glm::dvec3 offset(transform[12], transform[13], transform[14]);
-    TriangleMesh mixed;
-    size_t turn = 0;
-    addMixedCut(out, tileset["root"], offset, true, turn, mixed);
-    misses[skirts] = raysThrough(mixed);
-    // The finest tiles (and the rest of a chunk beside its children's) and the cut at depth 1:
-    // none through them either with skirts; the finest agree on their faces without any.
-    const size_t finest = raysThrough(readTilesetCut(out).mesh);
-    const size_t depth1 = raysThrough(readTilesetCut(out, 1, true).mesh);
-    std::printf(
-        "%s skirts (%llu border edges, %llu rest tiles): of %d rays, %zu through the "
-        "mixed cut, %zu through the finest, %zu through the cut at depth 1\n",
-        skirts ? "with" : "without", static_cast<unsigned long long>(stats.skirtEdges),
-        static_cast<unsigned long long>(stats.restTiles), kRays, misses[skirts], finest, depth1);
-    EXPECT_EQ(finest, 0u);
-    if (skirts) {
-      EXPECT_EQ(depth1, 0u);
-    }
+    const std::unique_ptr<Shape> finest = makeMeshShape(readTilesetCut(out).mesh);
+    size_t mixed = 0;
+    for (const double target : {4.0, 32.0, 128.0})
+      for (const glm::dvec3& eye : eyes) {
+        TriangleMesh drawn;
+        std::set<int> depths;
+        screenCut(out, tileset["root"], offset, eye, target, true, 0, drawn, depths);
+        mixed += depths.size() >= 2;
+        const size_t through = raysThrough(drawn, *finest, eye);
+        misses[skirts] += through;
+        std::printf(
+            "%s skirts, %.0f pixels from (%.1f, %.1f, %.1f): depths %d to %d, %zu of %d rays "
+            "through\n",
+            skirts ? "with" : "without", target, eye.x, eye.y, eye.z, *depths.begin(),
+            *depths.rbegin(), through, kRays);
+      }
+    EXPECT_GE(mixed, 12u);  // of the 18 cuts
   }
   EXPECT_GT(misses[false], 0u);  // there are cracks to close
   EXPECT_EQ(misses[true], 0u);
@@ -534,7 +576,7 @@ TEST(Tiles, skirtsCloseTheCracksWhereTilesOfDifferentCutsMeet) {
   {
     const tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
     std::filesystem::create_directories(dir / "one");
-    writeTiles(reader, dir / "one", {});
+    writeTiles(reader, dir / "one", smallTiles());
   }
   size_t files = 0;
   for (const auto& entry : std::filesystem::directory_iterator(dir / "with")) {

@@ -234,11 +234,17 @@ int run(Options& o) {
       TilesetCut cut = readTilesetCut(o.tiles, o.depth);
       if (cut.mesh.triangles.empty())
         throw FileError(o.tiles, std::nullopt, "has no triangles at that depth");
-      const nlohmann::json tiles = {{"directory", o.tiles},
-                                    {"depth", o.depth},
-                                    {"tiles", cut.tiles},
-                                    {"triangles", cut.mesh.triangles.size()},
-                                    {"geometric_error", cut.geometricError}};
+      nlohmann::json tiles = {{"directory", o.tiles},
+                              {"depth", o.depth},
+                              {"tiles", cut.tiles},
+                              {"triangles", cut.mesh.triangles.size()},
+                              {"geometric_error", cut.geometricError}};
+      if (o.depth >= 0) {  // each tile of the cut against the finest tiles below it
+        const TilesetCheck check = checkTilesetCut(o.tiles, o.depth);
+        tiles["to_finest"] = {{"max", check.largest},
+                              {"tiles_beyond_their_error", check.beyond},
+                              {"worst_ratio_to_stated", check.worstRatio}};
+      }
       result = evaluateAgainstShape(surface, *makeMeshShape(std::move(cut.mesh)), spacing, o.eval);
       result["tiles"] = tiles;
     } else {
@@ -282,7 +288,8 @@ void addEvalCommand(CLI::App& app, int& exitCode) {
   c->add_option("--depth", o->depth,
                 "With --tiles: what the tileset draws when it refines to this depth of its tree "
                 "(the root is 0; -1: the finest), and the largest geometric error those tiles "
-                "state")
+                "state; with a depth, also each tile's distance to the finest tiles below it "
+                "against the error it states")
       ->check(CLI::Range(-1, 64));
   c->add_flag("--per-level", o->perLevel,
               "With --points: the error of every level-of-detail cut, coarsest first");

@@ -33,6 +33,7 @@ struct Options {
   double band = 3.0;
   std::optional<int> level;        // --level: the level-of-detail cut the mesh is made at
   std::optional<double> maxError;  // --max-error: simplified within this (world units)
+  std::optional<uint64_t> tileLeaves;  // --tile-leaves: at most this many leaves a finest tile
   bool force = false, json = false, noMeshopt = false;
 };
 
@@ -205,7 +206,9 @@ void writeTileset(const Reader& reader, const Options& o, OutputDirectory& out,
   say("writing the tileset");
   const auto started = std::chrono::steady_clock::now();
   const bool terminal = ::isatty(STDERR_FILENO) == 1;
-  const TilesStats stats = writeTiles(reader, out.path(), {}, [&](size_t done, size_t total) {
+  TilesOptions options;
+  if (o.tileLeaves) options.finestLeaves = *o.tileLeaves;
+  const TilesStats stats = writeTiles(reader, out.path(), options, [&](size_t done, size_t total) {
     if (terminal) fmt::print(stderr, "\rtiles: {} of {}", done, total);
   });
   if (terminal) fmt::print(stderr, "\n");
@@ -213,13 +216,18 @@ void writeTileset(const Reader& reader, const Options& o, OutputDirectory& out,
   for (const TilesLevel& l : stats.levels)
     levels.push_back({{"level", l.level},
                       {"tiles", l.tiles},
+                      {"finest_tiles", l.finest},
                       {"triangles", l.triangles},
                       {"bytes", l.bytes},
+                      {"largest_tile_triangles", l.largestTriangles},
+                      {"largest_tile_bytes", l.largestBytes},
                       {"geometric_error", l.geometricError},
-                      {"simplified", l.simplified}});
+                      {"median_geometric_error", l.medianError},
+                      {"to_children", l.toChildren}});
   summary["tiles"] = {{"path", o.tiles},
                       {"tiles", stats.tiles},
-                      {"rest_tiles", stats.restTiles},
+                      {"raised_errors", stats.raised},
+                      {"largest_child_error_ratio", stats.largestChildRatio},
                       {"skirt_edges", stats.skirtEdges},
                       {"triangles", stats.triangles},
                       {"bytes", stats.bytes},
@@ -237,6 +245,9 @@ int run(const Options& o) {
   if ((o.level || o.maxError || o.noMeshopt) && o.mesh.empty())
     throw UsageError("--level, --max-error and --no-meshopt shape the --mesh output: give --mesh");
   if (o.noMeshopt && !isGlb(o.mesh)) throw UsageError("--no-meshopt is for a .glb --mesh");
+  if (o.tileLeaves && o.tiles.empty()) throw UsageError("--tile-leaves shapes --tiles: give --tiles");
+  if (o.tileLeaves && (*o.tileLeaves < 16 || *o.tileLeaves > (uint64_t{1} << 24)))
+    throw UsageError("--tile-leaves must be 16 to 16,777,216");
   if (o.maxError && !(*o.maxError > 0.0 && std::isfinite(*o.maxError)))
     throw UsageError("--max-error must be a positive length (world units)");
   if (o.level && (*o.level < 0 || *o.level > int(kMaxLevel)))
@@ -322,20 +333,21 @@ int print(const nlohmann::json& summary, const Options& o) {
   if (summary.contains("tiles")) {
     const auto& t = summary["tiles"];
     fmt::print(
-        "{}: 3D Tiles 1.1, {} tiles ({} of them a chunk's rest beside its children), {} "
-        "triangles, skirts on {} border edges, {} in {:.2f} s\n",
-        o.tiles, withSeparators(t["tiles"].get<uint64_t>()),
-        withSeparators(t["rest_tiles"].get<uint64_t>()),
+        "{}: 3D Tiles 1.1, {} tiles over {} levels, {} triangles, skirts on {} border edges, "
+        "{} in {:.2f} s\n",
+        o.tiles, withSeparators(t["tiles"].get<uint64_t>()), t["levels"].size(),
         withSeparators(t["triangles"].get<uint64_t>()),
         withSeparators(t["skirt_edges"].get<uint64_t>()), byteSize(t["bytes"].get<uint64_t>()),
         t["seconds"].get<double>());
     for (const auto& l : t["levels"])
       fmt::print(
-          "  level {:>2}: {:>5} tiles, {:>10} triangles, {:>10}, geometric error {:.4g} "
-          "(simplified within {:.4g})\n",
-          l["level"].get<int>(), l["tiles"].get<uint64_t>(),
-          withSeparators(l["triangles"].get<uint64_t>()), byteSize(l["bytes"].get<uint64_t>()),
-          l["geometric_error"].get<double>(), l["simplified"].get<double>());
+          "  level {:>2}: {:>6} tiles ({} finest), {:>10} triangles (at most {} a tile), {:>10}, "
+          "geometric error {:.4g} (median {:.4g})\n",
+          l["level"].get<int>(), l["tiles"].get<uint64_t>(), l["finest_tiles"].get<uint64_t>(),
+          withSeparators(l["triangles"].get<uint64_t>()),
+          withSeparators(l["largest_tile_triangles"].get<uint64_t>()),
+          byteSize(l["bytes"].get<uint64_t>()), l["geometric_error"].get<double>(),
+          l["median_geometric_error"].get<double>());
   }
   for (const char* key : {"points", "volume_points"}) {
     if (!summary.contains(key)) continue;
@@ -375,9 +387,14 @@ void addExportCommand(CLI::App& app, int& exitCode) {
                 "(16-bit positions, normals and colors, meshopt-compressed), else binary PLY");
   c->add_option("--tiles", o->tiles,
                 "3D Tiles 1.1 tileset (a directory: tileset.json and a .glb a tile): a tile for "
-                "each chunk of the file, its surface at the chunk's level of detail, simplified "
-                "within the chunk's geometric error (the finest tiles within 1/32 of a leaf's "
-                "edge, by meshoptimizer's estimate; `iso eval --tiles` measures them)");
+                "each octree cell with surface from the frame's cube down (and coarser tiles of "
+                "the frame above), its content the cell's surface cut some levels below it, "
+                "simplified; a level of tiles for each halving of the error, each tile's "
+                "geometric error measured against the finest tiles below it (`iso eval --tiles "
+                "--depth D` checks them)");
+  c->add_option("--tile-leaves", o->tileLeaves,
+                "With --tiles: the most leaves with surface a finest tile holds (about 4 "
+                "triangles a leaf; coarser tiles' contents are about as large); default 16384");
   c->add_option("--level", o->level,
                 "Make the mesh from the level-of-detail cut at this octree level (the leaves "
                 "above it and the nodes at it) instead of the finest leaves");
