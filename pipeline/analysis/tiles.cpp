@@ -38,7 +38,7 @@ constexpr double kChildShare = 0.5;
 constexpr int kMostContentLevels = 10;
 // Points a triangle edge is cut into when sampling a coarser tile against its children (finer
 // triangles: their corners and centre).
-constexpr int kCoarseGrid = 4, kFineGrid = 0;
+constexpr int kCoarseGrid = 3, kFineGrid = 0;
 
 struct Tile {
   uint8_t depth = 0;  // in the tileset (the root at 0)
@@ -192,9 +192,11 @@ size_t addSkirts(TriangleMesh& mesh, MeshAttributes& attributes, const glm::dvec
                  const glm::dvec3& hi, const std::array<std::array<bool, 2>, 3>& faces,
                  double height) {
   // The open edges, in their triangle's direction.
-  std::map<std::pair<uint32_t, uint32_t>, int> uses;
+  std::vector<uint64_t> uses;  // a << 32 | b, sorted
+  uses.reserve(3 * mesh.triangles.size());
   for (const auto& t : mesh.triangles)
-    for (size_t e = 0; e < 3; ++e) ++uses[{t[e], t[(e + 1) % 3]}];
+    for (size_t e = 0; e < 3; ++e) uses.push_back(uint64_t(t[e]) << 32 | t[(e + 1) % 3]);
+  std::sort(uses.begin(), uses.end());
   const double tolerance = 1e-9 * std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
   // The face (2 axis + side) both ends lie on, or -1.
   const auto faceOf = [&](const glm::dvec3& a, const glm::dvec3& b) {
@@ -234,9 +236,13 @@ size_t addSkirts(TriangleMesh& mesh, MeshAttributes& attributes, const glm::dvec
     return it->second;
   };
   size_t edges = 0;
-  for (const auto& [edge, count] : uses) {
-    const auto [a, b] = edge;
-    if (count != 1 || uses.count({b, a}) || a == b) continue;
+  for (size_t i = 0; i < uses.size(); ++i) {
+    const uint32_t a = uint32_t(uses[i] >> 32), b = uint32_t(uses[i]);
+    const bool once = (i == 0 || uses[i - 1] != uses[i]) &&
+                      (i + 1 == uses.size() || uses[i + 1] != uses[i]);
+    if (!once || a == b ||
+        std::binary_search(uses.begin(), uses.end(), uint64_t(b) << 32 | a))
+      continue;
     const int face = faceOf(mesh.vertices[a], mesh.vertices[b]);
     if (face < 0) continue;
     // The strip runs b → a, as the triangle across it would.
@@ -522,6 +528,7 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
     l.finest += tile.finest();
     l.triangles += tile.triangles;
     l.bytes += tile.bytes;
+    if (tile.finest()) l.finestBytes += tile.bytes;
     l.largestTriangles = std::max(l.largestTriangles, tile.triangles);
     l.largestBytes = std::max(l.largestBytes, tile.bytes);
     l.geometricError = std::max(l.geometricError, tile.geometricError);

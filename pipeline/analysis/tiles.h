@@ -45,6 +45,7 @@ struct TilesOptions {
 struct TilesLevel {  // the tiles at one depth of the tileset
   int level = 0;
   uint64_t tiles = 0, finest = 0, triangles = 0, bytes = 0;
+  uint64_t finestBytes = 0;  // of the finest tiles among them
   uint64_t largestTriangles = 0, largestBytes = 0;  // of one tile
   double geometricError = 0.0;  // the largest of these tiles' stated errors (world units)
   double medianError = 0.0;     // their median

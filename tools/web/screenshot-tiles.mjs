@@ -2,7 +2,9 @@
 // Serve TILESET_DIR and the page tiles/main.js (bundled with esbuild) on localhost, load it in
 // Debian's headless Chromium (playwright-core), wait until the tiles the view needs are drawn and
 // save the canvas as OUT.png. EYE, TARGET and UP are "x,y,z" in world units. Prints one JSON line
-// (the tiles' models and triangles drawn); exits 1 on any error. LOOK: silhouette (white on
+// (the models loaded so far, the tiles drawn and their triangles); exits 1 on any error. With
+// several eyes ("x,y,z;x,y,z;..."): a fly-through, one view after another in one page (tiles
+// loaded stay loaded), OUT a name with %d for the view's number, a JSON line a view. LOOK: silhouette (white on
 // black, the default) or own (the tiles' own materials: a baked scan's lit colors).
 import { createServer } from 'node:http';
 import { readFile, writeFile } from 'node:fs/promises';
@@ -62,13 +64,23 @@ try {
   const query = new URLSearchParams({ tileset: `${address}/tiles/tileset.json`, eye, target, up,
     fov, width, height, look: look ?? 'silhouette' });
   await tab.goto(`${address}/?${query}`);
-  const ready = await tab.waitForFunction(
+  const first = await tab.waitForFunction(
     () => window.tilesReady ?? (window.tilesError ? { error: window.tilesError } : null),
     null, { timeout: 240000, polling: 250 });
-  const result = await ready.jsonValue();
-  if (result.error || errors.length) throw new Error(result.error ?? errors.join('; '));
-  await writeFile(out, await tab.locator('canvas').screenshot());
-  console.log(JSON.stringify(result));
+  const views = eye.split(';').length;
+  for (let i = 0; i < views; i++) {
+    const ready = i === 0 ? first : await (async () => {
+      await tab.evaluate((view) => window.view(view), i);
+      return tab.waitForFunction(
+        () => window.tilesReady ?? (window.tilesError ? { error: window.tilesError } : null),
+        null, { timeout: 240000, polling: 250 });
+    })();
+    const result = await ready.jsonValue();
+    if (result.error || errors.length) throw new Error(result.error ?? errors.join('; '));
+    await writeFile(views > 1 ? out.replace('%d', String(i)) : out,
+      await tab.locator('canvas').screenshot());
+    console.log(JSON.stringify(views > 1 ? { view: i, ...result } : result));
+  }
 } catch (error) {
   console.error(`screenshot-tiles: ${error.message ?? error}`);
   failed = true;
