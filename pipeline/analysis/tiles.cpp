@@ -484,7 +484,7 @@ TilesStats writeTiles(const Reader& reader, const std::filesystem::path& directo
           hi[a] = frame.origin[size_t(a)] + region.hi[size_t(a)] * frame.size;
           inside[size_t(a)] = {region.lo[size_t(a)] > 0.0, region.hi[size_t(a)] < 1.0};
         }
-        const double height = tile.geometricError + 2.0 * tiles[tile.parent].geometricError;
+        const double height = tile.geometricError + tiles[tile.parent].geometricError;
         tile.skirtEdges = addSkirts(mesh, attributes, lo, hi, inside, height);
       }
       tile.triangles = surface;

@@ -19,7 +19,7 @@ namespace iso {
 struct TilesOptions {
   // A tile is one of the finest where its cell holds at most this many leaves with surface (a
   // mesh makes about 4 triangles a leaf), or where none is deeper than its content's cut.
-  uint64_t finestLeaves = 16384;
+  uint64_t finestLeaves = 8192;
   // A tile's content is its cell's surface cut this many levels (K) below the cell; 0: the most
   // at which the frame holds at most 4 × finestLeaves cells with surface (then every tile's
   // content is about that size, a few triangles a cell after simplification).

@@ -395,7 +395,7 @@ void addExportCommand(CLI::App& app, int& exitCode) {
                 "--depth D` checks them)");
   c->add_option("--tile-leaves", o->tileLeaves,
                 "With --tiles: the most leaves with surface a finest tile holds (about 4 "
-                "triangles a leaf; coarser tiles' contents are about as large); default 16384");
+                "triangles a leaf; coarser tiles' contents are about as large); default 8192");
   c->add_option("--level", o->level,
                 "Make the mesh from the level-of-detail cut at this octree level (the leaves "
                 "above it and the nodes at it) instead of the finest leaves");
