@@ -186,8 +186,9 @@ uint64_t glbTriangles(const std::filesystem::path& path) {
   const std::vector<std::byte> raw = test::readFile(path);
   uint32_t length = 0;
   std::memcpy(&length, raw.data() + 12, 4);
-  const nlohmann::json json = nlohmann::json::parse(
-      reinterpret_cast<const char*>(raw.data()) + 20, reinterpret_cast<const char*>(raw.data()) + 20 + length);
+  const nlohmann::json json =
+      nlohmann::json::parse(reinterpret_cast<const char*>(raw.data()) + 20,
+                            reinterpret_cast<const char*>(raw.data()) + 20 + length);
   uint64_t indices = 0;
   for (const auto& primitive : json["meshes"][0]["primitives"])
     indices += json["accessors"][primitive["indices"].get<size_t>()]["count"].get<uint64_t>();
@@ -213,11 +214,12 @@ TileNode readTileNode(const std::filesystem::path& directory, const nlohmann::js
 // rule: a tile is replaced by its children where its error over its box's distance, in pixels of
 // the view's height, exceeds the target), of the tiles in the view's frustum.
 uint64_t fewestTriangles(const TileNode& tile, const glm::dvec3& eye, const glm::dvec3& forward,
-                         const glm::dvec3& right, const glm::dvec3& up, double fov,
-                         double aspect, double height) {
+                         const glm::dvec3& right, const glm::dvec3& up, double fov, double aspect,
+                         double height) {
   // Outside the frustum: every corner beyond one of its four side planes.
   const double ty = std::tan(0.5 * fov), tx = ty * aspect;
-  const std::array<glm::dvec3, 4> planes = {  // inward normals through the eye
+  const std::array<glm::dvec3, 4> planes = {
+      // inward normals through the eye
       glm::normalize(forward * tx + right), glm::normalize(forward * tx - right),
       glm::normalize(forward * ty + up), glm::normalize(forward * ty - up)};
   for (const glm::dvec3& n : planes) {
@@ -229,7 +231,8 @@ uint64_t fewestTriangles(const TileNode& tile, const glm::dvec3& eye, const glm:
     }
     if (outside) return 0;
   }
-  const glm::dvec3 gap = glm::max(glm::abs(eye - tile.centre) - glm::dvec3(tile.half), glm::dvec3(0.0));
+  const glm::dvec3 gap =
+      glm::max(glm::abs(eye - tile.centre) - glm::dvec3(tile.half), glm::dvec3(0.0));
   const double distance = glm::length(gap);
   const bool refine = !tile.children.empty() &&
                       (distance <= 0.0 || tile.error / (distance * 2.0 * ty / height) > 1.0);
@@ -257,7 +260,8 @@ void flyThrough(const std::filesystem::path& scan, const test::TempDir& dir) {
   constexpr double kFov = 40.0 * M_PI / 180.0;
   const std::vector<double> distances = {3.0, 2.0, 1.3, 0.9, 0.65};  // frame sizes
   std::string eyes;
-  for (double d : distances) eyes += (eyes.empty() ? "" : ";") + triple(centre + d * frame.size * direction);
+  for (double d : distances)
+    eyes += (eyes.empty() ? "" : ";") + triple(centre + d * frame.size * direction);
   const std::filesystem::path web = ISO_WEB_TOOLS_DIR;
   run = test::runCommand("node " + quoted(web / "screenshot-tiles.mjs") + " " +
                          quoted(dir / "tiles") + " " + quoted(dir / "browser-%d.png") + " '" +
@@ -269,7 +273,8 @@ void flyThrough(const std::filesystem::path& scan, const test::TempDir& dir) {
   for (std::string line; std::getline(lines, line);)
     if (!line.empty()) views.push_back(nlohmann::json::parse(line));
   ASSERT_EQ(views.size(), distances.size());
-  const nlohmann::json tileset = nlohmann::json::parse(std::ifstream(dir / "tiles" / "tileset.json"));
+  const nlohmann::json tileset =
+      nlohmann::json::parse(std::ifstream(dir / "tiles" / "tileset.json"));
   const TileNode root = readTileNode(dir / "tiles", tileset["root"], origin);
   {
     std::ofstream scene(dir / "silhouette.json");
@@ -285,25 +290,27 @@ void flyThrough(const std::filesystem::path& scan, const test::TempDir& dir) {
     const std::filesystem::path viewer = dir / ("viewer-" + std::to_string(i) + ".png");
     run = runIso("view " + iso + " --cpu --width " + std::to_string(kWidth) + " --height " +
                  std::to_string(kHeight) + " --fov 40 --camera=" + triple(eye) + "," +
-                 triple(centre) + "," + triple(up) + " --scene " +
-                 quoted(dir / "silhouette.json") + " --out " + quoted(viewer));
+                 triple(centre) + "," + triple(up) + " --scene " + quoted(dir / "silhouette.json") +
+                 " --out " + quoted(viewer));
     ASSERT_EQ(run.exitCode, 0) << run.err;
     const double iou = intersectionOverUnion(
         silhouette(viewer, kWidth, kHeight),
         silhouette(dir / ("browser-" + std::to_string(i) + ".png"), kWidth, kHeight));
     const uint64_t drawn = views[i]["triangles"].get<uint64_t>();
-    std::printf("%s at %.2f frame sizes: %d tiles loaded so far, %d drawn, %llu triangles (the "
-                "fewest at 1 pixel: %llu, %.2fx); silhouette IoU %.4f\n",
-                scan.filename().c_str(), distances[i], views[i]["models"].get<int>(),
-                views[i]["tiles"].get<int>(), static_cast<unsigned long long>(drawn),
-                static_cast<unsigned long long>(fewest), double(drawn) / double(fewest), iou);
+    std::printf(
+        "%s at %.2f frame sizes: %d tiles loaded so far, %d drawn, %llu triangles (the "
+        "fewest at 1 pixel: %llu, %.2fx); silhouette IoU %.4f\n",
+        scan.filename().c_str(), distances[i], views[i]["models"].get<int>(),
+        views[i]["tiles"].get<int>(), static_cast<unsigned long long>(drawn),
+        static_cast<unsigned long long>(fewest), double(drawn) / double(fewest), iou);
     EXPECT_GE(iou, 0.95) << distances[i];
     EXPECT_LE(double(drawn), 2.0 * double(fewest)) << distances[i];
     EXPECT_GE(double(drawn), 0.5 * double(fewest)) << distances[i];
   }
 }
 
-TEST(CliWeb, aFlightOverTheLionAndTheDragonDrawsWhatTheScreenSpaceErrorNeedsWithTheViewersSilhouette) {
+TEST(CliWeb,
+     aFlightOverTheLionAndTheDragonDrawsWhatTheScreenSpaceErrorNeedsWithTheViewersSilhouette) {
   const std::filesystem::path data = ISO_SHARED_DATA_DIR;
   if (!std::filesystem::exists(data / "lion_rgb.las"))
     GTEST_SKIP() << "needs " << data.string() << " (the shared scans)";

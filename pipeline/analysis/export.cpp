@@ -300,7 +300,8 @@ void Extractor::leaf(uint32_t id, bool emit) {
     coarseAcross[size_t(face)] = centre >= 0 && centre <= level;
     if (coarseAcross[size_t(face)]) continue;
     for (int q = 0; q < 4; ++q)
-      fineQuarter[size_t(face)][size_t(q)] = across(q & 1 ? 0.75 : 0.25, q & 2 ? 0.75 : 0.25) > level;
+      fineQuarter[size_t(face)][size_t(q)] =
+          across(q & 1 ? 0.75 : 0.25, q & 2 ? 0.75 : 0.25) > level;
     const auto& f = fineQuarter[size_t(face)];
     stats.splitFaces += emit && (f[0] || f[1] || f[2] || f[3]);
   }

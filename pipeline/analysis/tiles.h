@@ -45,11 +45,11 @@ struct TilesOptions {
 struct TilesLevel {  // the tiles at one depth of the tileset
   int level = 0;
   uint64_t tiles = 0, finest = 0, triangles = 0, bytes = 0;
-  uint64_t finestBytes = 0;  // of the finest tiles among them
+  uint64_t finestBytes = 0;                         // of the finest tiles among them
   uint64_t largestTriangles = 0, largestBytes = 0;  // of one tile
   double geometricError = 0.0;  // the largest of these tiles' stated errors (world units)
   double medianError = 0.0;     // their median
-  double toChildren = 0.0;  // the largest measured distance to the children's content (world)
+  double toChildren = 0.0;      // the largest measured distance to the children's content (world)
 };
 
 struct TilesStats {
@@ -86,9 +86,9 @@ TilesetCut readTilesetCut(const std::filesystem::path& directory, int depth = -1
 // Each tile of the cut at `depth` against the finest tiles below it, both ways (sampled: every
 // vertex, and a grid on each triangle), beside the error it states.
 struct TilesetCheck {
-  uint64_t tiles = 0;     // in the cut
-  uint64_t beyond = 0;    // tiles farther from the finest below them than they state
-  double largest = 0.0;   // the largest distance of a tile (world units)
+  uint64_t tiles = 0;       // in the cut
+  uint64_t beyond = 0;      // tiles farther from the finest below them than they state
+  double largest = 0.0;     // the largest distance of a tile (world units)
   double worstRatio = 0.0;  // the largest distance / stated error of a tile with an error
 };
 TilesetCheck checkTilesetCut(const std::filesystem::path& directory, int depth);

@@ -323,7 +323,8 @@ TriangleMesh contentOf(const std::filesystem::path& directory, const nlohmann::j
                                      reinterpret_cast<const uint8_t*>(raw.data()) + raw.size()),
                 path.string(), !skirts);
   TriangleMesh out{{}, mesh.triangles};
-  for (const glm::dvec3& g : mesh.vertices) out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
+  for (const glm::dvec3& g : mesh.vertices)
+    out.vertices.push_back(glm::dvec3(g.x, -g.z, g.y) + offset);
   return out;
 }
 
@@ -345,7 +346,8 @@ double denseDistance(const TriangleMesh& from, const Shape& onto, int grid) {
 void appendMesh(TriangleMesh& to, const TriangleMesh& mesh) {
   const uint32_t base = uint32_t(to.vertices.size());
   to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
-  for (const auto& t : mesh.triangles) to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  for (const auto& t : mesh.triangles)
+    to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
 }
 
 TEST(Tiles, followTheOctreeWithErrorsMeasuredAgainstTheFinestThatHalveLevelByLevel) {
@@ -371,7 +373,8 @@ TEST(Tiles, followTheOctreeWithErrorsMeasuredAgainstTheFinestThatHalveLevelByLev
   const glm::dvec3 offset(frame.origin[0], frame.origin[1], frame.origin[2]);
   for (int a = 0; a < 3; ++a)
     EXPECT_DOUBLE_EQ(transform[12 + a].get<double>(), frame.origin[size_t(a)]);
-  EXPECT_GE(tileset["geometricError"].get<double>(), tileset["root"]["geometricError"].get<double>());
+  EXPECT_GE(tileset["geometricError"].get<double>(),
+            tileset["root"]["geometricError"].get<double>());
   std::vector<std::pair<nlohmann::json, int>> tiles;
   collectTiles(tileset["root"], -1, tiles);
   EXPECT_EQ(tiles.size(), stats.tiles);
@@ -391,7 +394,8 @@ TEST(Tiles, followTheOctreeWithErrorsMeasuredAgainstTheFinestThatHalveLevelByLev
       const nlohmann::json& outer = tiles[size_t(parent)].first;
       const nlohmann::json& pbox = outer["boundingVolume"]["box"];
       const double phalf = pbox[3].get<double>();
-      EXPECT_TRUE(std::abs(half - phalf) < 1e-12 * phalf || std::abs(2 * half - phalf) < 1e-12 * phalf);
+      EXPECT_TRUE(std::abs(half - phalf) < 1e-12 * phalf ||
+                  std::abs(2 * half - phalf) < 1e-12 * phalf);
       for (int a = 0; a < 3; ++a) {
         EXPECT_GE(centre[a] - half, pbox[a].get<double>() - phalf - 1e-12);
         EXPECT_LE(centre[a] + half, pbox[a].get<double>() + phalf + 1e-12);
@@ -529,7 +533,8 @@ TEST(Tiles, skirtsCloseTheCracksWhereAClientDrawsTilesOfDifferentLevelsSideBySid
     std::normal_distribution<double> normal;
     size_t through = 0;
     for (int r = 0; r < kRays; ++r) {  // towards points of the unit sphere's ball
-      const glm::dvec3 aim = 1.05 * glm::normalize(glm::dvec3(normal(rng), normal(rng), normal(rng))) *
+      const glm::dvec3 aim = 1.05 *
+                             glm::normalize(glm::dvec3(normal(rng), normal(rng), normal(rng))) *
                              std::cbrt(std::uniform_real_distribution<double>(0.0, 1.0)(rng));
       const glm::dvec3 d = glm::normalize(aim - eye);
       // Meeting the finest surface (about the unit sphere) well inside its silhouette, the
@@ -541,7 +546,7 @@ TEST(Tiles, skirtsCloseTheCracksWhereAClientDrawsTilesOfDifferentLevelsSideBySid
     }
     return through;
   };
-  const std::vector<glm::dvec3> eyes = {{1.6, 0, 0}, {-1.2, 0.9, 0.3}, {0, 0, 1.7},
+  const std::vector<glm::dvec3> eyes = {{1.6, 0, 0},      {-1.2, 0.9, 0.3},   {0, 0, 1.7},
                                         {0.3, -1.5, 0.4}, {-0.8, -0.8, -1.0}, {0.9, 0.9, -0.9}};
   std::map<bool, size_t> misses;
   for (const bool skirts : {false, true}) {

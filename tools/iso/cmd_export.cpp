@@ -246,7 +246,8 @@ int run(const Options& o) {
   if ((o.level || o.maxError || o.noMeshopt) && o.mesh.empty())
     throw UsageError("--level, --max-error and --no-meshopt shape the --mesh output: give --mesh");
   if (o.noMeshopt && !isGlb(o.mesh)) throw UsageError("--no-meshopt is for a .glb --mesh");
-  if (o.tileLeaves && o.tiles.empty()) throw UsageError("--tile-leaves shapes --tiles: give --tiles");
+  if (o.tileLeaves && o.tiles.empty())
+    throw UsageError("--tile-leaves shapes --tiles: give --tiles");
   if (o.tileLeaves && (*o.tileLeaves < 16 || *o.tileLeaves > (uint64_t{1} << 24)))
     throw UsageError("--tile-leaves must be 16 to 16,777,216");
   if (o.maxError && !(*o.maxError > 0.0 && std::isfinite(*o.maxError)))
