@@ -471,6 +471,13 @@ MeshAttributes meshAttributes(const SurfaceModel& surface, const TriangleMesh& m
   return out;
 }
 
+void appendMesh(TriangleMesh& to, const TriangleMesh& mesh) {
+  const uint32_t base = uint32_t(to.vertices.size());
+  to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
+  for (const auto& t : mesh.triangles)
+    to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
 uint64_t openEdges(const TriangleMesh& mesh) {
   FlatMap<Key128, uint32_t> uses(mesh.triangles.size() * 2);
   for (const auto& t : mesh.triangles)

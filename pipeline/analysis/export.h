@@ -97,6 +97,9 @@ std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface);
 // The edges used by one triangle only: where the surface is open (or leaves the filled leaves).
 uint64_t openEdges(const TriangleMesh& mesh);
 
+// `mesh`'s vertices and triangles added to `to`'s.
+void appendMesh(TriangleMesh& to, const TriangleMesh& mesh);
+
 struct VdbStats {
   uint64_t activeVoxels = 0;
   double voxelSize = 0.0;  // world units: the finest leaf's edge

@@ -312,13 +312,6 @@ double distanceBothWays(const TriangleMesh& coarse, const TriangleMesh& fine, do
                   largestDistance(fine, coarseShape.get(), kFineGrid, limit));
 }
 
-void append(TriangleMesh& to, const TriangleMesh& mesh) {
-  const uint32_t base = uint32_t(to.vertices.size());
-  to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
-  for (const auto& t : mesh.triangles)
-    to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-}
-
 struct Making {
   const Reader& reader;
   const SurfaceModel::ChunkSource& source;
@@ -374,7 +367,7 @@ void makeTile(const Making& m, uint32_t i) {
     TriangleMesh below;
     double childError = 0.0;
     for (uint32_t c : tile.children) {
-      append(below, m.tiles[c].mesh);
+      appendMesh(below, m.tiles[c].mesh);
       childError = std::max(childError, m.tiles[c].geometricError);
     }
     tile.toChildren = distanceBothWays(tile.mesh, below, 2.0 * std::sqrt(3.0) * cellEdge);
@@ -608,7 +601,7 @@ void addCut(const TilesetFile& file, const nlohmann::json& tile, int depth, int 
   if (!hasChildren(tile) || at == depth) {
     cut.geometricError = std::max(cut.geometricError, tile.at("geometricError").get<double>());
     ++cut.tiles;
-    append(cut.mesh, tileMesh(file, tile, skirts));
+    appendMesh(cut.mesh, tileMesh(file, tile, skirts));
     return;
   }
   for (const nlohmann::json& child : tile["children"])
@@ -618,7 +611,7 @@ void addCut(const TilesetFile& file, const nlohmann::json& tile, int depth, int 
 // The finest tiles at or below a tile, as one mesh.
 void addFinest(const TilesetFile& file, const nlohmann::json& tile, TriangleMesh& out) {
   if (!hasChildren(tile)) {
-    append(out, tileMesh(file, tile, false));
+    appendMesh(out, tileMesh(file, tile, false));
     return;
   }
   for (const nlohmann::json& child : tile["children"]) addFinest(file, child, out);

@@ -343,13 +343,6 @@ double denseDistance(const TriangleMesh& from, const Shape& onto, int grid) {
   return worst;
 }
 
-void appendMesh(TriangleMesh& to, const TriangleMesh& mesh) {
-  const uint32_t base = uint32_t(to.vertices.size());
-  to.vertices.insert(to.vertices.end(), mesh.vertices.begin(), mesh.vertices.end());
-  for (const auto& t : mesh.triangles)
-    to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-}
-
 TEST(Tiles, followTheOctreeWithErrorsMeasuredAgainstTheFinestThatHalveLevelByLevel) {
   test::TempDir dir;
   const test::Converted c = test::convertAndLoad(test::scanOf("sphere", 40000), dir / "s.iso");
