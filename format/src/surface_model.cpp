@@ -517,9 +517,16 @@ std::optional<Vec3> SurfaceModel::bisectSignChange(Vec3 a, Vec3 b) const {
 }
 
 std::vector<ZeroSetSample> SurfaceModel::sampleZeroSet(int linesPerEdge) const {
+  std::vector<uint32_t> all(leaves_.size());
+  for (uint32_t id = 0; id < all.size(); ++id) all[id] = id;
+  return sampleZeroSet(linesPerEdge, all);
+}
+
+std::vector<ZeroSetSample> SurfaceModel::sampleZeroSet(int linesPerEdge,
+                                                       std::span<const uint32_t> leaves) const {
   std::vector<ZeroSetSample> samples;
   const int m = std::max(1, linesPerEdge);
-  for (uint32_t id = 0; id < leaves_.size(); ++id) {
+  for (const uint32_t id : leaves) {
     const Leaf& leaf = leaves_[id];
     const auto cell = mortonDecode(leaf.key);
     const double size = std::ldexp(1.0, -leaf.level);

@@ -7,9 +7,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -22,6 +24,9 @@
 
 namespace iso {
 namespace {
+
+// Loops of open edges longer than this are never closed (capSmallHoles): a bound on the walk.
+constexpr size_t kCapEdges = 64;
 
 using Point = std::array<int64_t, 3>;  // on the grid of kMaxLevel
 
@@ -379,6 +384,104 @@ void Extractor::leaf(uint32_t id, bool emit) {
   }
 }
 
+// Whether a lattice cell next to p (frame units; one of the 8 around it, a quarter of a finest
+// leaf away) is empty: there the zero set leaves the filled leaves.
+bool besideEmptySpace(const SurfaceModel& surface, const glm::dvec3& p, double finestLeaf) {
+  for (int corner = 0; corner < 8; ++corner) {
+    Vec3 q{};
+    for (int a = 0; a < 3; ++a)
+      q[size_t(a)] = p[a] + ((corner >> a & 1) ? 0.25 : -0.25) * finestLeaf;
+    if (surface.findLeaf(q) == kNoNode) return true;
+  }
+  return false;
+}
+
+// The mesh's open edges, each as its triangle runs it.
+std::vector<std::pair<uint32_t, uint32_t>> openDirectedEdges(const TriangleMesh& mesh) {
+  FlatMap<Key128, uint32_t> uses(mesh.triangles.size() * 2);
+  for (const auto& t : mesh.triangles)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
+      ++*uses.insert({std::min(a, b), std::max(a, b)}, 0).first;
+    }
+  std::vector<std::pair<uint32_t, uint32_t>> open;
+  for (const auto& t : mesh.triangles)
+    for (int e = 0; e < 3; ++e) {
+      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
+      if (*uses.find({std::min(a, b), std::max(a, b)}) == 1) open.emplace_back(a, b);
+    }
+  return open;
+}
+
+// Close the mesh's small holes where the file's zero set leaves its filled leaves (a sharp edge's
+// fin whose tip runs out of them, or a zero set pinched through a corner whose value is 0): every
+// loop of open edges that is simple, runs
+// along empty space all round and is no wider (its box's diagonal) than twice the edge of the
+// coarsest leaf it borders is fanned from its centroid: the zero set left those leaves through a
+// face or two.
+// Borders of a region's mesh (with leaves beyond them), rims of sheets and holes wider than their
+// leaves stay open. Returns the loops closed.
+uint64_t capSmallHoles(const SurfaceModel& surface, TriangleMesh& mesh,
+                       std::vector<uint32_t>& vertexLeaf) {
+  const std::vector<std::pair<uint32_t, uint32_t>> open = openDirectedEdges(mesh);
+  if (open.empty()) return 0;
+  FlatMap<uint32_t, uint32_t> next(open.size() * 2), outgoing(open.size() * 2);
+  for (const auto& [a, b] : open) {
+    next.insert(a, b);
+    ++*outgoing.insert(a, 0).first;
+  }
+  int finest = 0;
+  for (const auto& leaf : surface.leaves()) finest = std::max(finest, int(leaf.level));
+  const Frame& frame = surface.header().frame;
+  const glm::dvec3 origin(frame.origin[0], frame.origin[1], frame.origin[2]);
+  const double finestEdge = std::ldexp(1.0, -finest);
+  FlatMap<uint32_t, uint8_t> seen(open.size() * 2);
+  uint64_t capped = 0;
+  for (const auto& edge : open) {
+    const uint32_t start = edge.first;
+    if (seen.find(start)) continue;
+    std::vector<uint32_t> loop;
+    bool simple = true;
+    for (uint32_t v = start;;) {
+      seen.insert(v, 1);
+      loop.push_back(v);
+      const uint32_t* out = outgoing.find(v);
+      const uint32_t* w = next.find(v);
+      if (!out || *out != 1 || !w || loop.size() > kCapEdges) {
+        simple = false;
+        break;
+      }
+      if (*w == start) break;
+      if (seen.find(*w)) {
+        simple = false;
+        break;
+      }
+      v = *w;
+    }
+    if (!simple || loop.size() < 3) continue;
+    bool alongEmpty = true;
+    glm::dvec3 centroid(0.0), lo(1e300), hi(-1e300);
+    int coarsest = finest;
+    for (size_t i = 0; i < loop.size() && alongEmpty; ++i) {
+      const glm::dvec3& p = mesh.vertices[loop[i]];
+      const glm::dvec3 mid = (p + mesh.vertices[loop[(i + 1) % loop.size()]]) * 0.5;
+      alongEmpty = besideEmptySpace(surface, (mid - origin) / frame.size, finestEdge);
+      centroid += p;
+      lo = glm::min(lo, p);
+      hi = glm::max(hi, p);
+      coarsest = std::min(coarsest, int(surface.leaves()[vertexLeaf[loop[i]]].level));
+    }
+    if (!alongEmpty || glm::distance(lo, hi) / frame.size > std::ldexp(2.0, -coarsest)) continue;
+    const uint32_t c = uint32_t(mesh.vertices.size());
+    mesh.vertices.push_back(centroid / double(loop.size()));
+    vertexLeaf.push_back(vertexLeaf[loop[0]]);
+    for (size_t i = 0; i < loop.size(); ++i)  // each open edge run the other way
+      mesh.triangles.push_back({loop[(i + 1) % loop.size()], loop[i], c});
+    ++capped;
+  }
+  return capped;
+}
+
 }  // namespace
 
 std::vector<uint32_t> leavesCoarseFirst(const SurfaceModel& surface) {
@@ -417,6 +520,7 @@ TriangleMesh extractMesh(const SurfaceModel& surface, MeshStats* stats,
   };
 
   for (uint32_t id : order) extractor.leaf(id, inside(surface.leaves()[id]));
+  extractor.stats.cappedHoles = capSmallHoles(surface, extractor.mesh, extractor.vertexLeaf);
   if (stats) *stats = extractor.stats;
   if (vertexLeaves) *vertexLeaves = std::move(extractor.vertexLeaf);
   return std::move(extractor.mesh);

@@ -22,6 +22,7 @@ struct MeshStats {
   uint64_t leaves = 0;      // filled leaves
   uint64_t tetrahedra = 0;  // the leaves are cut into
   uint64_t splitFaces = 0;  // leaf faces next to finer leaves
+  uint64_t cappedHoles = 0;  // small holes closed where the zero set leaves the filled leaves
 };
 
 // The zero set as triangles (world coordinates, counter-clockwise seen from outside, where the

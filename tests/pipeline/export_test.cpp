@@ -7,6 +7,7 @@
 #include <map>
 #include <numbers>
 #include <random>
+#include <string>
 
 #include "pipeline/analysis/evaluate.h"
 #include "pipeline/analysis/export.h"
@@ -146,23 +147,30 @@ TEST(MeshExport, theTorusAndAnOpenSheetToo) {
 
 // The scans of `tools/run bench accuracy` (200k points, noise of 0.3 spacings, no normals) with
 // the default conversion: the closed shapes' meshes are closed, and no farther from the truth than
-// the file's own surface and half a spacing more (both ways, as the benchmark measures them).
+// the file's own surface and half a spacing more (both ways, as the benchmark measures them). The
+// cube's zero set runs out of its filled leaves at a few places along its sharp edges (fins):
+// there the mesh closes the small holes itself.
 TEST(MeshExport, noisyClosedShapesExportClosedMeshesAsCloseAsTheirFiles) {
-  for (const char* name : {"sphere", "torus"}) {
+  for (const char* name : {"sphere", "torus", "cube"}) {
     test::TempDir dir;
     const test::Converted c =
         test::convertAndLoad(test::scanOf(name, 200000, false, 0.3), dir / "s.iso");
     ShapeParams params;
     params.name = name;
     const std::unique_ptr<Shape> truth = makeShape(params);
-    const TriangleMesh mesh = extractMesh(c.surface);
+    MeshStats stats;
+    const TriangleMesh mesh = extractMesh(c.surface, &stats);
     const MeshCheck m = check(mesh, c.surface);
     const double spacing = c.report["spacing"].get<double>();
     const double file = test::evaluate(c, *truth)["max_over_spacing"].get<double>();
     const double meshMax =
         evaluateMeshAgainstShape(mesh, *truth, spacing)["max_over_spacing"].get<double>();
-    std::printf("%s: %zu open edges; max %.3f spacings (mesh), %.3f (file)\n", name,
-                m.boundaryEdges, meshMax, file);
+    std::printf(
+        "%s: %zu open edges, %llu small holes closed; max %.3f spacings (mesh), %.3f (file)\n",
+        name, m.boundaryEdges, static_cast<unsigned long long>(stats.cappedHoles), meshMax, file);
+    if (std::string(name) == "cube") {
+      EXPECT_GT(stats.cappedHoles, 0u);
+    }
     expectCrackFree(m, name);
     EXPECT_EQ(m.boundaryEdges, 0u) << name;
     EXPECT_LE(meshMax, file + 0.5) << name;

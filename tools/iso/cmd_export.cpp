@@ -168,6 +168,7 @@ void writeMesh(const Reader& reader, const SurfaceModel& surface, bool doubles, 
                      {"tetrahedra", stats.tetrahedra},
                      {"split_faces", stats.splitFaces},
                      {"open_edges", openEdges(mesh)},
+                     {"capped_holes", stats.cappedHoles},
                      {"double_positions", doubles && !glb},
                      {"seconds", secondsSince(started)}};
   if (o.level) summary["mesh"]["level"] = *o.level;
@@ -313,6 +314,9 @@ int print(const nlohmann::json& summary, const Options& o) {
                withSeparators(m["leaves"].get<uint64_t>()), m["seconds"].get<double>());
     fmt::print("  open edges: {}{}\n", withSeparators(open),
                open > 0 ? " (where the surface is open or leaves the filled leaves)" : " (closed)");
+    if (const uint64_t capped = m["capped_holes"].get<uint64_t>(); capped > 0)
+      fmt::print("  closed {} small holes where the zero set leaves the filled leaves\n",
+                 withSeparators(capped));
     if (m.contains("level"))
       fmt::print("  level-of-detail cut at level {}\n", m["level"].get<int>());
     if (m.contains("simplified")) {

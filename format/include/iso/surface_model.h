@@ -117,6 +117,9 @@ class SurfaceModel {
   // Points of the zero set: roots along axis-aligned lines, `linesPerEdge` per leaf edge, each kept
   // by the axis most aligned with the gradient and weighted by the area it stands for.
   std::vector<ZeroSetSample> sampleZeroSet(int linesPerEdge) const;
+  // The same, in the given leaves only.
+  std::vector<ZeroSetSample> sampleZeroSet(int linesPerEdge,
+                                           std::span<const uint32_t> leaves) const;
 
  private:
   struct Node {
