@@ -415,12 +415,10 @@ std::vector<std::pair<uint32_t, uint32_t>> openDirectedEdges(const TriangleMesh&
 
 // Close the mesh's small holes where the file's zero set leaves its filled leaves (a sharp edge's
 // fin whose tip runs out of them, or a zero set pinched through a corner whose value is 0): every
-// loop of open edges that is simple, runs
-// along empty space all round and is no wider (its box's diagonal) than twice the edge of the
-// coarsest leaf it borders is fanned from its centroid: the zero set left those leaves through a
-// face or two.
-// Borders of a region's mesh (with leaves beyond them), rims of sheets and holes wider than their
-// leaves stay open. Returns the loops closed.
+// loop of open edges that is simple, runs along empty space all round and is no wider (its box's
+// diagonal) than twice the edge of the coarsest leaf it borders is fanned from its centroid: the
+// zero set left those leaves through a face or two. Borders of a region's mesh (with leaves beyond
+// them), rims of sheets and holes wider than their leaves stay open. Returns the loops closed.
 uint64_t capSmallHoles(const SurfaceModel& surface, TriangleMesh& mesh,
                        std::vector<uint32_t>& vertexLeaf) {
   const std::vector<std::pair<uint32_t, uint32_t>> open = openDirectedEdges(mesh);
@@ -582,16 +580,6 @@ void appendMesh(TriangleMesh& to, const TriangleMesh& mesh) {
     to.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
 }
 
-uint64_t openEdges(const TriangleMesh& mesh) {
-  FlatMap<Key128, uint32_t> uses(mesh.triangles.size() * 2);
-  for (const auto& t : mesh.triangles)
-    for (int e = 0; e < 3; ++e) {
-      const uint32_t a = t[size_t(e)], b = t[size_t((e + 1) % 3)];
-      ++*uses.insert({std::min(a, b), std::max(a, b)}, 0).first;
-    }
-  uint64_t open = 0;
-  uses.forEach([&](const Key128&, uint32_t count) { open += count == 1; });
-  return open;
-}
+uint64_t openEdges(const TriangleMesh& mesh) { return openDirectedEdges(mesh).size(); }
 
 }  // namespace iso
