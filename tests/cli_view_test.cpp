@@ -330,7 +330,7 @@ TEST(CliView, aPointSetSurfaceWindowTracesWhatChangesAndOrbits) {
 }
 
 // More read than fits --vram in a window: the points of the close view it opens at (part of
-// the scan out of sight), then, once the camera has flown back and rests, those of the view it
+// the scan out of sight), then, once the camera has backed off and rests, those of the view it
 // rests at (all of the scan in sight), each within the budget.
 TEST(CliView, aWindowDrawsThePointsOfEachViewTheCameraRestsAtWhenNotAllFit) {
   SKIP_WITHOUT_XDOTOOL();

@@ -251,8 +251,11 @@ TEST(HardCases, openSurfaceOverhangsItsBoundaryByLittle) {
   nlohmann::json report;
   const nlohmann::json e =
       convertAndMeasure(test::scanOf("plane", 40000), *shape("plane"), &report);
-  // The surface may reach past the boundary by about a radius of influence, not more.
-  EXPECT_LE(e["iso_to_truth"]["max"].get<double>(), 2.0 * report["median_radius"].get<double>());
+  // The surface may reach past the boundary by about a radius of influence and a passive leaf (2
+  // radii), √2 of it at the square's corners. The points lie on a face of the octree's grid: the
+  // coverage test must see the zero set there (without that, 6.6 radii, to the frame's edge).
+  EXPECT_LE(e["iso_to_truth"]["max"].get<double>(),
+            2.0 * std::sqrt(2.0) * report["median_radius"].get<double>());
 }
 
 // The largest distance from the zero set (its area-weighted samples) to the nearest input point,
