@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <regex>
@@ -128,12 +129,21 @@ TEST(CliView, theKernelsFollowTheDeviceUnlessNamed) {
   EXPECT_TRUE(twoPasses("--wavefront").first);
 }
 
+// `xvfb-run` on a virtual screen of the given size. `-a` alone picks the first free display
+// number, and two tests that start at once can both pick it (one of them then finds no display):
+// each test process starts its search at its own number (-n before -a: xvfb-run searches when it
+// reads -a).
+std::string xvfbRun(const std::string& screen) {
+  return "xvfb-run -n " + std::to_string(100 + getpid() % 4000) + " -a -s '-screen 0 " + screen +
+         "' ";
+}
+
 // Runs the window session tests/viewer/SCRIPT on FILE under xvfb-run in DIR (its out.txt and
 // err.txt there); whether it ended well (else a failure with what it said).
 bool windowSession(const std::string& script, const std::filesystem::path& file,
                    const std::filesystem::path& dir, const std::string& more = "") {
   const std::string command =
-      "xvfb-run -a -s '-screen 0 800x600x24' " +
+      xvfbRun("800x600x24") +
       quoted(std::filesystem::path(ISO_TEST_DATA_DIR) / ".." / "viewer" / script) + " " +
       std::string(ISO_BINARY) + " " + quoted(file) + " " + quoted(dir) + " " + more + " 2>" +
       quoted(dir / "session.txt");
@@ -153,10 +163,10 @@ TEST(CliView, aWindowOpensUnderXvfbAndItsScreenshotIsNotBlank) {
     GTEST_SKIP() << "xvfb-run is not installed (tools/run setup installs it)";
   TempDir dir;
   const auto shot = dir / "shot.png";
-  const std::string command = "xvfb-run -a -s '-screen 0 640x480x24' " + std::string(ISO_BINARY) +
-                              " view " + quoted(kittenIso()) + " --frames 12 --screenshot " +
-                              quoted(shot) + " --width 160 --height 120 >" + quoted(dir / "out") +
-                              " 2>" + quoted(dir / "err");
+  const std::string command = xvfbRun("640x480x24") + std::string(ISO_BINARY) + " view " +
+                              quoted(kittenIso()) + " --frames 12 --screenshot " + quoted(shot) +
+                              " --width 160 --height 120 >" + quoted(dir / "out") + " 2>" +
+                              quoted(dir / "err");
   const int status = std::system(command.c_str());
   ASSERT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 0) << slurp(dir / "err");
   EXPECT_NE(slurp(dir / "out").find("chunks"), std::string::npos) << slurp(dir / "out");
