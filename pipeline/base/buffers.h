@@ -42,6 +42,11 @@ struct DefaultInitAllocator {
 template <typename T>
 using UninitializedVector = std::vector<T, DefaultInitAllocator<T>>;
 
+// Blocks of 256 KiB or more get mappings of their own from now on, returned to the system when
+// freed (glibc's threshold otherwise grows to 32 MiB, and freed heap memory stays resident).
+// Process-wide; a SpillArea with a limit calls it, and so does `iso convert` before it reads.
+void keepLargeBlocksOutOfTheHeap();
+
 // ---- Spilled arrays (specs/pipeline.md §15, "Memory").
 // The per-point arrays of a conversion (SpillVector: the prepared points and their index) may live
 // in temporary files mapped into memory instead of anonymous memory. While a SpillArea exists,

@@ -3,12 +3,14 @@
 // cannot be made.
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <malloc.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <numeric>
 
@@ -75,6 +77,24 @@ TEST(SpillArea, thePagerKeepsTheProcessNearItsLimit) {
   EXPECT_GT(SpillArea::stats().releases, 0u);
   EXPECT_LT(residentFileBytes(), before + (uint64_t{64} << 20)) << "the array is still resident";
   for (size_t i = 0; i < values.size(); i += 4099) ASSERT_EQ(values[i], uint32_t(i));
+}
+
+// Under a limit, freed blocks of 256 KiB or more go back to the system: a block of 1 MiB after a
+// freed one of 16 MiB is a mapping of its own (glibc alone would have raised its threshold to 16
+// MiB and served it from the heap, where it stays resident once freed).
+TEST(SpillArea, aLimitKeepsLargeBlocksOutOfTheHeap) {
+  test::TempDir dir;
+  SpillArea area(dir.path(), uint64_t{1} << 50, uint64_t{1} << 20);
+  void* large = std::malloc(size_t{16} << 20);
+  ASSERT_NE(large, nullptr);
+  static_cast<volatile char*>(large)[0] = 1;
+  std::free(large);
+  const size_t mapped = mallinfo2().hblkhd;
+  void* block = std::malloc(size_t{1} << 20);
+  ASSERT_NE(block, nullptr);
+  EXPECT_GE(mallinfo2().hblkhd, mapped + (size_t{1} << 20)) << "the block came from the heap";
+  std::free(block);
+  EXPECT_EQ(mallinfo2().hblkhd, mapped);
 }
 
 // Past the limit, the pager makes the threads that call spillPause wait while it drops pages;

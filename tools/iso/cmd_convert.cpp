@@ -12,6 +12,7 @@
 #include "iso/error.h"
 #include "iso/points.h"
 #include "iso/temporary_files.h"
+#include "pipeline/base/buffers.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
@@ -20,9 +21,9 @@
 #include "pipeline/octree/octree.h"
 #include "pipeline/outofcore/spill.h"
 #include "tools/iso/commands.h"
-#include "tools/iso/light_bake.h"
 #include "tools/iso/inputs.h"
 #include "tools/iso/interrupt.h"
+#include "tools/iso/light_bake.h"
 #include "tools/iso/text.h"
 
 namespace iso::cli {
@@ -373,6 +374,7 @@ int run(Options& o) {
     scalar.clear();
     o.build.keepScalar.clear();
   }
+  keepLargeBlocksOutOfTheHeap();  // the reader's buffers too (pipeline/base/buffers.h)
   const ReadSummary loaded = readPoints(
       files, read, &progress,
       [&](bool normals, bool colors) {
