@@ -1646,5 +1646,105 @@ TEST_F(CliPipeline, impossibleScalarAndVolumeOptionsAreRefusedBeforeAnyWork) {
   }
 }
 
+// kill -9 at several moments of a conversion run with --resume; run again with --resume, it goes on
+// from the last checkpoint it finds whole and writes the same bytes as a run that went through.
+TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSameBytes) {
+  const fs::path in = dir_ / "torus.ply", out = dir_ / "out.iso";
+  const fs::path state = dir_ / ".out.iso.resume";
+  ASSERT_EQ(runIso("gen torus -n 200000 -o " + quoted(in)).exitCode, 0);
+  ASSERT_EQ(runIso("convert -q " + quoted(in) + " -o " + quoted(dir_ / "ref.iso")).exitCode, 0);
+  const std::string reference = test::slurp(dir_ / "ref.iso");
+  const auto killIn = [&](const std::string& stage) {
+    fs::remove(dir_ / "err");  // not read before the new run makes it
+    const pid_t pid = startIso(
+        {"convert", "--resume", "-f", "--progress", "json", in.string(), "-o", out.string()},
+        dir_ / "err");
+    const bool caught = waitUntil(pid, [&] {
+      return fs::exists(dir_ / "err") &&
+             test::slurp(dir_ / "err").find("\"stage\":\"" + stage + "\"") != std::string::npos;
+    });
+    if (caught) kill(pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+    return caught;
+  };
+  const auto resume = [&](const std::string& more = "") {
+    const auto run =
+        runIso("convert --resume -f --json " + more + quoted(in) + " -o " + quoted(out));
+    EXPECT_EQ(run.exitCode, 0) << run.err;
+    EXPECT_FALSE(fs::exists(state)) << "the state outlived the run it was kept for";
+    return std::pair{nlohmann::json::parse(run.out, nullptr, false), run.err};
+  };
+  // The stage killed in, and the checkpoint the next run goes on from ("" for none).
+  for (const auto& [stage, from] :
+       std::vector<std::pair<std::string, std::string>>{{"points", ""},
+                                                        {"octree", "points"},
+                                                        {"corners", "points"},
+                                                        {"lod", "corners"},
+                                                        {"write", "corners"}}) {
+    SCOPED_TRACE(stage);
+    ASSERT_TRUE(killIn(stage)) << "the conversion ended before the " << stage << " stage";
+    EXPECT_TRUE(fs::is_directory(state));
+    const auto [report, err] = resume();
+    if (from.empty())
+      EXPECT_FALSE(report.contains("resumed")) << report.dump();
+    else
+      EXPECT_EQ(report["resumed"]["from"], from) << report.dump();
+    EXPECT_TRUE(test::slurp(out) == reference);
+  }
+
+  // A damaged checkpoint is removed and never used: the run goes on from the one before.
+  ASSERT_TRUE(killIn("lod"));
+  {
+    std::fstream f(state / "corners.checkpoint", std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(std::streamoff(fs::file_size(state / "corners.checkpoint") / 2));
+    f.put('\x5a');
+  }
+  auto [report, err] = resume();
+  EXPECT_EQ(report["resumed"]["from"], "points") << report.dump();
+  EXPECT_NE(err.find("corners.checkpoint: section corner"), std::string::npos) << err;
+  EXPECT_TRUE(test::slurp(out) == reference);
+
+  // The state of a run with other options is not resumed from.
+  ASSERT_TRUE(killIn("lod"));
+  std::tie(report, err) = resume("--smoothing 1.5 ");
+  EXPECT_FALSE(report.contains("resumed")) << report.dump();
+  EXPECT_NE(err.find("a checkpoint of another conversion"), std::string::npos) << err;
+  EXPECT_FALSE(test::slurp(out) == reference);
+}
+
+// A distributed run on MPI (Debian's OpenMPI): two ranks share the point stages' chunks and write
+// the same bytes as one process, strays that change the frame included; an error ends both.
+TEST_F(CliPipeline, twoMpiRanksWriteTheSameBytesAsOneProcess) {
+  if (test::runCommand("command -v mpirun").exitCode != 0)
+    GTEST_SKIP() << "no mpirun (tools/run setup)";
+  const fs::path in = dir_ / "torus.ply", far = dir_ / "far.xyz";
+  ASSERT_EQ(runIso("gen torus -n 200000 -o " + quoted(in)).exitCode, 0);
+  put(far, "5 5 5\n5.01 5 5\n");  // strays that held the bounds: every chunk runs again
+  // Chunks of at most 34,952 points (--memory 20M) and orientation blocks that fit them.
+  const std::string options = " --memory 20M --orient-block-points 20000 -f --json " + quoted(in) +
+                              " " + quoted(far) + " -o ";
+  const auto one = runIso("convert" + options + quoted(dir_ / "one.iso"));
+  ASSERT_EQ(one.exitCode, 0) << one.err;
+  // As root (a container, CI) OpenMPI asks for these; --oversubscribe: fewer cores than ranks.
+  const std::string mpirun =
+      "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
+      "OMPI_MCA_rmaps_base_oversubscribe=1 "
+      "mpirun -np 2 " +
+      std::string(ISO_BINARY) + " convert";
+  const auto two = test::runCommand(mpirun + options + quoted(dir_ / "two.iso"));
+  ASSERT_EQ(two.exitCode, 0) << two.err;
+  const nlohmann::json report = nlohmann::json::parse(two.out);
+  EXPECT_EQ(report["out_of_core"]["ranks"], 2);
+  EXPECT_GT(report["out_of_core"]["chunks"].get<int>(), 4);
+  EXPECT_EQ(report["points"]["outliers_removed"], 2);
+  EXPECT_TRUE(test::slurp(dir_ / "two.iso") == test::slurp(dir_ / "one.iso"));
+  EXPECT_TRUE(temporariesUnder(dir_.path()).empty());
+
+  const auto refused = test::runCommand(mpirun + " --resume" + options + quoted(dir_ / "x.iso"));
+  EXPECT_NE(refused.exitCode, 0);
+  EXPECT_NE(refused.err.find("cannot be used with 2 ranks"), std::string::npos) << refused.err;
+  EXPECT_FALSE(fs::exists(dir_ / "x.iso"));
+}
+
 }  // namespace
 }  // namespace iso

@@ -18,6 +18,7 @@
 #include "pipeline/base/options.h"
 #include "pipeline/base/process.h"
 #include "pipeline/base/progress.h"
+#include "pipeline/convert/checkpoints.h"
 #include "pipeline/io/image.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
@@ -308,7 +309,17 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   report["stages"] = nlohmann::json::array();
   StageTimer timer(report["stages"], source);
   if (source.readSeconds > 0.0) timer.add("read", source.readSeconds);
-  ReadyPoints ready = prepare(timer);
+  std::optional<ReadyPoints> resumed;
+  if (source.resume != nullptr && source.resume->has(kPointsCheckpoint)) {
+    timer.next("resume points", inputPoints);
+    resumed = loadPoints(*source.resume);
+    if (resumed) report["resumed"] = {{"from", "points"}, {"state", source.resume->directory()}};
+  }
+  ReadyPoints ready = resumed ? std::move(*resumed) : prepare(timer);
+  if (source.resume != nullptr && !resumed) {
+    timer.next("checkpoint");
+    savePoints(*source.resume, ready);
+  }
   if (source.onStrays) source.onStrays(std::move(ready.strays));
   return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), keep, source,
                        timer, report, started);
@@ -367,7 +378,7 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
           timer.next(name, total);
         };
         ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage,
-                                             bool(source.onStrays));
+                                             bool(source.onStrays), source.ranks);
         requireSurface(ready.points);  // known once every chunk's duplicates are merged
         return ready;
       },
@@ -375,6 +386,15 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
         return keepPoints(writer, raw, directory, header, options.pointBits, budget.maxChunkPoints,
                           options.keptPointsPerChunk, &prepared, keptValues(options));
       });
+}
+
+void prepareAsRank(const RawSpill& raw, SpillDirectory& directory, const OutOfCoreBudget& budget,
+                   const BuildOptions& options, const Ranks& ranks, bool collectStrays) {
+  std::optional<SpillArea> area;
+  if (budget.memory > 0) area.emplace(directory.path(), budget.memory, budget.minSpilledBytes);
+  prepareOutOfCore(
+      raw, directory, options, budget.maxChunkPoints, [](const std::string&, uint64_t) {},
+      collectStrays, &ranks);
 }
 
 namespace {
@@ -481,6 +501,40 @@ void requireFrame(const Frame& frame) {
                      ") is beyond what an .iso file holds: " + std::string(problem->reason));
 }
 
+// The octree stages before the level of detail: the tree, passive leaves, balance, the corners
+// closed and fitted, trimming.
+CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
+                                     const BuildOptions& options, const RadiusStats& radii,
+                                     StageTimer& timer) {
+  timer.next("octree");
+  CornerStageResults r;
+  // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
+  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made and the arrays are
+  // reserved for half a point (they double where there are more): out of core, reserved room is
+  // temporary disk.
+  CornerField cornerField(points.size() / 2, points.size() / 2);
+  r.octree = buildOctree(points, sdf, options, radii, cornerField, &r.stats);
+  points.roughness = {};  // only the octree's tolerance reads it
+  Octree& octree = r.octree;
+  timer.next("passive+balance");
+  r.passive = markPassiveLeaves(octree, points);
+  r.splits = balanceOctree(octree, points);
+  timer.next("corners");
+  r.closure = sampleClosedSurface(octree, points, sdf, std::move(cornerField));
+  Closure& closure = r.closure;
+  {
+    std::vector<uint8_t> wasNegative(closure.corners.size());
+    for (size_t e = 0; e < wasNegative.size(); ++e)
+      wasNegative[e] = closure.corners.value[e].distance < 0.0f;
+    if (fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit) > 0)
+      closeAgain(octree, points, sdf, closure, wasNegative);
+  }
+  r.trimmed =
+      options.fillHoles ? 0 : trimFarSurface(octree, points, sdf, closure, options.trimReach);
+  octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
+  return r;
+}
+
 nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
                              const std::filesystem::path& output, const BuildOptions& options,
                              std::optional<LinearImage> textureImage, const KeepPoints& keep,
@@ -495,33 +549,25 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   const bool inputColors = points.hasColors();
   std::optional<TriplanarTexture> texture =
       textureOf(std::move(textureImage), options.texture, points, frame, timer, report);
-  timer.next("octree");
 
   // The signed distance and its point index are needed until the level-of-detail corners.
   auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
-  OctreeStats octreeStats;
-  // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
-  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made and the arrays are
-  // reserved for half a point (they double where there are more): out of core, reserved room is
-  // temporary disk.
-  CornerField cornerField(points.size() / 2, points.size() / 2);
-  Octree octree = buildOctree(points, *sdf, options, radii, cornerField, &octreeStats);
-  points.roughness = {};  // only the octree's tolerance reads it
-  timer.next("passive+balance");
-  const size_t passive = markPassiveLeaves(octree, points);
-  const size_t splits = balanceOctree(octree, points);
-  timer.next("corners");
-  Closure closure = sampleClosedSurface(octree, points, *sdf, std::move(cornerField));
-  {
-    std::vector<uint8_t> wasNegative(closure.corners.size());
-    for (size_t e = 0; e < wasNegative.size(); ++e)
-      wasNegative[e] = closure.corners.value[e].distance < 0.0f;
-    if (fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit) > 0)
-      closeAgain(octree, points, *sdf, closure, wasNegative);
+  std::optional<CornerStageResults> resumed;
+  if (source.resume != nullptr && report.contains("resumed") &&
+      source.resume->has(kCornersCheckpoint)) {
+    timer.next("resume corners");
+    resumed = loadCornerStage(*source.resume);
+    if (resumed) report["resumed"]["from"] = "corners";
   }
-  const size_t trimmed =
-      options.fillHoles ? 0 : trimFarSurface(octree, points, *sdf, closure, options.trimReach);
-  octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
+  CornerStageResults built =
+      resumed ? std::move(*resumed) : buildCornerStages(points, *sdf, options, radii, timer);
+  if (source.resume != nullptr && !resumed) {
+    timer.next("checkpoint");
+    saveCornerStage(*source.resume, built);
+  }
+  points.roughness = {};  // a resumed run's points have it still
+  Octree& octree = built.octree;
+  Closure& closure = built.closure;
   const CornerField& corners = closure.corners;
   const HangingCorners& hanging = closure.hanging;
   timer.next("lod");
@@ -539,10 +585,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
 
   const double spacing = radii.spacing * frame.size;
   reportPoints(ready, inputPoints + source.nonFiniteDropped, source.nonFiniteDropped, report);
-  report["octree"] = octreeJson(octree, octreeStats, passive, splits);
+  report["octree"] = octreeJson(octree, built.stats, built.passive, built.splits);
   report["octree"]["closure_filled"] = closure.filled;
   report["octree"]["closure_refilled"] = closure.refilled;
-  report["octree"]["trimmed"] = trimmed;
+  report["octree"]["trimmed"] = built.trimmed;
   report["corners"] = {
       {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
 
@@ -600,7 +646,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   // input gives the same bytes on any machine and any number of threads.
   const auto metadata = [&](nlohmann::json r) {
     for (const char* key :
-         {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core"})
+         {"stages", "seconds", "points_per_second", "peak_rss_bytes", "out_of_core", "resumed"})
       r.erase(key);
     if (r.contains("lighting")) r["lighting"].erase("timing");
     nlohmann::json m{{"generator", std::string("iso ") + ISO_VERSION},

@@ -16,6 +16,9 @@
 
 namespace iso {
 
+class ResumeState;
+struct Ranks;
+
 // Input that does not define a surface (no points, fewer than 3 distinct ones, all on a line).
 class ConvertError : public std::runtime_error {
  public:
@@ -39,6 +42,14 @@ struct ConvertSource {
   // BuildOptions::keepScalar): written as volume points chunks with their values, never used to
   // build the surface (specs/iso-format.md, "Volume points").
   const PointCloud* volumePoints = nullptr;
+  // When set (`iso convert --resume`): the conversion goes on from the last checkpoint of this
+  // state that it finds whole, and writes a checkpoint as the point stages and as the octree
+  // stages before the level of detail end (pipeline/convert/checkpoints.h). The report says what
+  // it resumed from under "resumed".
+  ResumeState* resume = nullptr;
+  // When set, this is rank 0 of a distributed run: the point stages are shared with the other
+  // ranks, which call prepareAsRank (pipeline/outofcore/outofcore.h, Ranks).
+  const Ranks* ranks = nullptr;
 };
 
 // The coordinate system of a conversion's inputs (ConvertSource::inputs): the first input's that
@@ -77,6 +88,10 @@ struct OutOfCoreBudget {
 nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
+// A rank other than 0 of a distributed run: its share of the point stages of the conversion rank 0
+// runs with the same raw points, budget and options (convertSpilled with ConvertSource::ranks).
+void prepareAsRank(const RawSpill& raw, SpillDirectory& directory, const OutOfCoreBudget& budget,
+                   const BuildOptions& options, const Ranks& ranks, bool collectStrays);
 
 // Throws UsageError naming the option (as on the command line) that is out of range.
 void validateOptions(const BuildOptions& options);

@@ -11,10 +11,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <glm/common.hpp>
 #include <limits>
 
 #include "iso/check.h"
+#include "pipeline/base/checkpoint.h"
 #include "pipeline/base/options.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/points/points.h"
@@ -494,6 +496,142 @@ void joinEdgesOut(Accumulated& done, uint64_t rawSize) {
   SpillVector<std::array<uint32_t, 2>>().swap(done.edgesOut);
 }
 
+// ---- a distributed run's share of the chunks (Ranks)
+
+constexpr const char* kShareFingerprint = "the point stages' results of a rank";
+
+// The chunks [first, last) of a rank: ranges in Morton order of about equal points.
+std::pair<size_t, size_t> chunksOfRank(const std::vector<SpillChunk>& chunks, int rank, int count) {
+  uint64_t total = 0;
+  for (const SpillChunk& c : chunks) total += c.size();
+  const auto start = [&](int r) {
+    const uint64_t target = total * uint64_t(r) / uint64_t(count);
+    uint64_t before = 0;
+    size_t c = 0;
+    while (c < chunks.size() && before < target) before += chunks[c++].size();
+    return c;
+  };
+  return {start(rank), start(rank + 1)};
+}
+
+void saveShare(const std::filesystem::path& file, Accumulated& a) {
+  CheckpointWriter out(file, kShareFingerprint);
+  out.json(
+      "counts",
+      {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
+  out.array("chunks", a.chunks);
+  writeColumns(out, a.points);
+  out.array("first", a.firstDistance);
+  out.array("boundary", a.boundarySource);
+  out.array("boundary.near", a.boundaryNeighbor);
+  out.array("of", a.components.of);
+  out.array("anchored", a.components.anchored);
+  out.array("votes", a.components.seedVote);
+  out.array("kth", a.kth);
+  out.array("edges", a.edgesOut);
+  SpillVector<uint32_t> roots;  // each point's group, by its place: in its own chunk
+  if (a.groups)
+    for (size_t i = 0; i < a.points.size(); ++i) roots.push_back(a.groups->root(uint32_t(i)));
+  out.array("roots", roots);
+  out.commit();
+}
+
+// Append a rank's results (in chunk order after those of `to`); `to.groups`, when finding strays,
+// covers every point of the distribution.
+void appendShare(const std::filesystem::path& file, Accumulated& to) {
+  Accumulated from;
+  SpillVector<uint32_t> roots;
+  try {
+    CheckpointReader in(file, kShareFingerprint);
+    const nlohmann::json counts = in.json("counts");
+    from.k = counts["k"];
+    from.haloPoints = counts["halo"];
+    from.widenings = counts["widenings"];
+    from.maxLoaded = counts["loaded"];
+    in.array("chunks", from.chunks);
+    readColumns(in, from.points);
+    in.array("first", from.firstDistance);
+    in.array("boundary", from.boundarySource);
+    in.array("boundary.near", from.boundaryNeighbor);
+    in.array("of", from.components.of);
+    in.array("anchored", from.components.anchored);
+    in.array("votes", from.components.seedVote);
+    in.array("kth", from.kth);
+    in.array("edges", from.edgesOut);
+    in.array("roots", roots);
+    in.finish();
+  } catch (const CheckpointError& e) {
+    throw std::runtime_error(std::string("a rank's results cannot be read: ") + e.what());
+  }
+  const auto pointBase = uint32_t(to.points.size());
+  const auto componentBase = uint32_t(to.components.anchored.size());
+  const size_t boundaryBase = to.boundarySource.size();
+  appendRange(to.points, from.points, 0, uint32_t(from.points.size()));
+  const auto append = [](auto& dst, const auto& src) {
+    dst.insert(dst.end(), src.begin(), src.end());
+  };
+  append(to.firstDistance, from.firstDistance);
+  append(to.boundarySource, from.boundarySource);
+  append(to.boundaryNeighbor, from.boundaryNeighbor);
+  for (const uint32_t of : from.components.of)
+    to.components.of.push_back(of == kNoNode ? kNoNode : of + componentBase);
+  append(to.components.anchored, from.components.anchored);
+  append(to.components.seedVote, from.components.seedVote);
+  append(to.kth, from.kth);
+  for (const auto& [place, other] : from.edgesOut)
+    to.edgesOut.push_back({place + pointBase, other});
+  if (to.groups)
+    for (size_t i = 0; i < roots.size(); ++i)
+      to.groups->join(pointBase + uint32_t(i), pointBase + roots[i]);
+  for (ChunkRecord record : from.chunks) {
+    record.pointBegin += pointBase;
+    record.pointEnd += pointBase;
+    record.componentBegin += componentBase;
+    record.componentEnd += componentBase;
+    record.boundaryBegin += boundaryBase;
+    record.boundaryEnd += boundaryBase;
+    to.chunks.push_back(record);
+  }
+  if (from.points.size() > 0) to.k = from.k;
+  to.haloPoints += from.haloPoints;
+  to.widenings += from.widenings;
+  to.maxLoaded = std::max(to.maxLoaded, from.maxLoaded);
+}
+
+// Each rank runs its range of the chunks; rank 0's results go to `done`, the others' to files in
+// the shared directory, which rank 0 then appends in order.
+void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks& ranks,
+              const PointLayout& layout, bool findingOutliers, Accumulated& done) {
+  const auto [first, last] = chunksOfRank(distribution.chunks(), ranks.rank, ranks.count);
+  if (ranks.rank == 0) {
+    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], done);
+  } else {
+    Accumulated mine;
+    uint64_t points = 0;
+    for (size_t c = first; c < last; ++c) points += distribution.chunks()[c].size();
+    reserveFor(mine, points, layout);
+    if (findingOutliers) mine.groups = std::make_unique<PointGroups>(points);
+    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], mine);
+    saveShare(ranks.shared / ("rank-" + std::to_string(ranks.rank)), mine);
+  }
+  ranks.barrier();
+  if (ranks.rank != 0) return;
+  for (int r = 1; r < ranks.count; ++r) {
+    const std::filesystem::path file = ranks.shared / ("rank-" + std::to_string(r));
+    appendShare(file, done);
+    std::filesystem::remove(file);
+  }
+}
+
+// Rank 0's word to the others once it has judged the strays: empty when they are done, else the
+// new frame and which input points to keep, for running every chunk again.
+std::vector<std::byte> againMessage(const Frame& frame, const std::vector<uint8_t>& keep) {
+  std::vector<std::byte> message(sizeof(Frame) + keep.size());
+  std::memcpy(message.data(), &frame, sizeof(Frame));
+  std::memcpy(message.data() + sizeof(Frame), keep.data(), keep.size());
+  return message;
+}
+
 // Every k-th kept input point (world units), for the accuracy measure, as in core.
 std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<uint8_t>& keep) {
   size_t kept = 0;
@@ -515,7 +653,7 @@ std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<ui
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                              const BuildOptions& options, uint64_t maxChunkPoints,
                              const std::function<void(const std::string&, uint64_t)>& stage,
-                             bool collectStrays) {
+                             bool collectStrays, const Ranks* ranks) {
   if (raw.size() >= uint64_t(std::numeric_limits<uint32_t>::max()))
     throw std::length_error("more than 4,294,967,294 input points in one conversion");
   // Orientation blocks must nest in chunks: a chunk holds at least a block's points.
@@ -527,6 +665,12 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   uint64_t peakTemporary = 0;
   Accumulated done;
   size_t chunks = 0, preparedAgain = 0;
+  const bool shared = ranks != nullptr && ranks->count > 1;
+  const bool worker = shared && ranks->rank != 0;
+  // Rank 0's word to the others once it has judged the strays (againMessage).
+  const auto tell = [&](std::vector<std::byte> word) {
+    if (shared) ranks->broadcast(word);
+  };
   for (;;) {
     stage("distribute", 2 * raw.size());
     const Distribution distribution(directory, raw, ready.frame, maxChunkPoints,
@@ -535,17 +679,33 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     chunks = distribution.chunks().size();
     stage("points", distribution.size());
     done = Accumulated{};
-    reserveFor(done, distribution.size(), raw.layout());
-    if (findingOutliers) done.groups = std::make_unique<PointGroups>(distribution.size());
+    if (!worker) reserveFor(done, distribution.size(), raw.layout());
+    if (findingOutliers && !worker)
+      done.groups = std::make_unique<PointGroups>(distribution.size());
     ChunkRunner runner(distribution, ready.frame, options, raw.layout().normals);
-    if (findingOutliers && distribution.chunks().size() == 1) runner.deferRest();
-    for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
+    const bool one = distribution.chunks().size() == 1;  // rank 0 runs it alone
+    if (findingOutliers && one) runner.deferRest();
+    if (shared && !one)
+      runShare(distribution, runner, *ranks, raw.layout(), findingOutliers, done);
+    else if (!worker)
+      for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
     if (!findingOutliers) break;
+    findingOutliers = false;
+    if (worker) {
+      std::vector<std::byte> word;
+      ranks->broadcast(word);
+      if (word.empty()) break;
+      std::memcpy(&ready.frame, word.data(), sizeof(Frame));
+      keep.assign(word.size() - sizeof(Frame), 0);
+      std::memcpy(keep.data(), word.data() + sizeof(Frame), keep.size());
+      continue;
+    }
     joinEdgesOut(done, raw.size());
     const Strays found = flagStrays(done.kth, *done.groups, options.strayGroupPoints);
     done.groups.reset();
     done.kth = {};
     if (found.sparse + found.grouped == 0) {
+      tell({});
       if (runner.pending()) runner.finish(done);
       break;
     }
@@ -576,12 +736,13 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
       }
     });
     ready.outliers = {strays.size(), found.sparse, found.grouped};
-    findingOutliers = false;
     const Frame frame = chooseFrame(lo, hi);
     if (frame.origin != ready.frame.origin || frame.size != ready.frame.size) {
       ready.frame = frame;
+      tell(againMessage(frame, keep));
       continue;
     }
+    tell({});                                    // the chunks that held strays run here alone
     stage("points again", distribution.size());  // the chunks that held strays, without them
     preparedAgain = stoppedEarly ? prepareWholeAgain(distribution, ready.frame, options,
                                                      raw.layout(), keep, done)
@@ -589,6 +750,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                                                        raw.layout().normals, keep, strays, done);
     break;
   }
+  if (worker) return {};
   size_t blocks = 0;
   for (const ChunkRecord& record : done.chunks) {
     blocks += record.blocks;
@@ -618,8 +780,21 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                      {"halo_widenings", done.widenings},
                      {"boundary_points", done.boundarySource.size()},
                      {"chunks_prepared_again", preparedAgain},
+                     {"ranks", shared ? ranks->count : 1},
                      {"temporary_bytes_peak", peakTemporary}};
   return ready;
+}
+
+void writeColumns(CheckpointWriter& out, const PointSet& points) {
+  int column = 0;
+  PointSet::forEachColumn(
+      [&](const auto& values) { out.array("points." + std::to_string(column++), values); }, points);
+}
+
+void readColumns(CheckpointReader& in, PointSet& points) {
+  int column = 0;
+  PointSet::forEachColumn(
+      [&](auto& values) { in.array("points." + std::to_string(column++), values); }, points);
 }
 
 }  // namespace iso

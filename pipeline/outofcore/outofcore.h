@@ -3,7 +3,9 @@
 // Distribution; both give the same points, bit for bit (specs/pipeline.md, "Out of core").
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -16,6 +18,9 @@
 #include "pipeline/points/points.h"
 
 namespace iso {
+
+class CheckpointReader;
+class CheckpointWriter;
 
 // Points ready for the octree stages.
 struct ReadyPoints {
@@ -35,15 +40,35 @@ struct ReadyPoints {
   nlohmann::json outOfCore = nullptr;  // chunks, halos, temporary bytes (streamed only)
 };
 
+// The ranks of a distributed run (`mpirun -np N iso convert`; the engine's calls are in
+// tools/iso/ranks.cpp). The point stages' chunks are split between them in Morton order, ranges
+// of about equal points; each rank runs its range and leaves its results in `shared`, which rank 0
+// joins in chunk order, so that the results are those of one process. Rank 0 alone judges the
+// strays (the others run the chunks again when they change the frame) and goes on to the octree
+// stages.
+struct Ranks {
+  int rank = 0, count = 1;
+  std::filesystem::path shared;  // a directory every rank sees
+  std::function<void()> barrier;
+  // Rank 0's bytes to every rank (resized on the others).
+  std::function<void(std::vector<std::byte>&)> broadcast;
+};
+
 // Every point of `raw` (minus far outliers) prepared chunk by chunk: chunks of at most
 // maxChunkPoints points (at least options.orientBlockPoints) are loaded with a halo wide enough
 // that every neighbourhood a chunk's points need lies inside it (checked; widened when not).
 // `stage` is called as each phase begins, with its name and amount of work. With collectStrays
-// the removed input points are kept in ReadyPoints::strays.
+// the removed input points are kept in ReadyPoints::strays. With `ranks`, each rank calls it
+// with the same arguments; on ranks other than 0 it returns empty points once rank 0 needs them no
+// more.
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                              const BuildOptions& options, uint64_t maxChunkPoints,
                              const std::function<void(const std::string&, uint64_t)>& stage,
-                             bool collectStrays = false);
+                             bool collectStrays = false, const Ranks* ranks = nullptr);
+
+// Every column of a point set as a checkpoint's sections, in PointSet::forEachColumn's order.
+void writeColumns(CheckpointWriter& out, const PointSet& points);
+void readColumns(CheckpointReader& in, PointSet& points);
 
 // Input points sampled for the accuracy measure: every ceil(n / kAccuracySamples)-th.
 inline constexpr size_t kAccuracySamples = 100000;

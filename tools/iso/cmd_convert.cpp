@@ -12,7 +12,9 @@
 #include "iso/error.h"
 #include "iso/points.h"
 #include "iso/temporary_files.h"
+#include "iso/version.h"
 #include "pipeline/base/buffers.h"
+#include "pipeline/base/checkpoint.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
@@ -24,6 +26,7 @@
 #include "tools/iso/inputs.h"
 #include "tools/iso/interrupt.h"
 #include "tools/iso/light_bake.h"
+#include "tools/iso/ranks.h"
 #include "tools/iso/text.h"
 
 namespace iso::cli {
@@ -47,6 +50,7 @@ struct Options {
   int bounces = LightBakeOptions{}.bounces, bakeRays = LightBakeOptions{}.rays;
   int threads = 0;                             // 0: all cores
   bool force = false, json = false, quiet = false, keepOutliers = false;
+  bool resume = false;  // --resume
   BuildOptions build;
 };
 
@@ -63,6 +67,10 @@ void printReport(const nlohmann::json& r, const Options& o) {
     fmt::print("  {:<16} {:>8.3f} {:>14}\n", s["name"].get<std::string>(), seconds,
                seconds > 0 ? withSeparators(uint64_t(double(input) / seconds)) : "-");
   }
+  if (r.contains("resumed"))
+    fmt::print("  resumed: from the end of the {} stages, kept in {}\n",
+               r["resumed"]["from"] == "points" ? "point" : "corner",
+               r["resumed"]["state"].get<std::string>());
   const auto& p = r["points"];
   fmt::print("  points: {} used ({} duplicates merged, {} strays removed, {} non-finite dropped)\n",
              withSeparators(p["used"].get<uint64_t>()),
@@ -319,14 +327,45 @@ std::filesystem::path temporaryDirectory(const Options& o, std::optional<MadeDir
   return tmp;
 }
 
+// What a conversion's results depend on, for --resume: the version, every file it reads (path,
+// size, time of last change) and every option that changes what it computes.
+std::string fingerprint(const Options& o, const std::vector<std::filesystem::path>& files) {
+  const auto identity = [](const std::filesystem::path& file) {
+    std::error_code error;
+    const std::filesystem::path path = std::filesystem::weakly_canonical(file, error);
+    const auto changed = std::filesystem::last_write_time(file, error).time_since_epoch().count();
+    return nlohmann::json{{"file", (error ? file : path).string()},
+                          {"bytes", std::filesystem::is_regular_file(file, error)
+                                        ? std::filesystem::file_size(file, error)
+                                        : 0},
+                          {"changed", changed}};
+  };
+  nlohmann::json f{{"version", ISO_VERSION},
+                   {"options", optionsJson(o.build)},
+                   {"columns", o.columns},
+                   {"strays_kept", !o.writeStrays.empty()}};
+  for (const auto& file : files) f["inputs"].push_back(identity(file));
+  for (const std::string& more : {o.texture, o.volumePoints, o.bakeLight})
+    if (!more.empty()) f["also"].push_back(identity(more));
+  return f.dump();
+}
+
+// Where --resume keeps its checkpoints: ".NAME.resume" beside the temporary files.
+std::filesystem::path resumeDirectory(const Options& o, const std::filesystem::path& tmp) {
+  return tmp / ("." + std::filesystem::path(o.output).filename().string() + ".resume");
+}
+
 // What Ctrl-C leaves at each stage, said when it comes (tools/iso/interrupt.h).
 std::function<void(const std::string&)> interruptMessages(const Options& o, ProgressMode mode,
-                                                          const MadeDirectories* made) {
+                                                          const MadeDirectories* made,
+                                                          const std::filesystem::path& state) {
   const std::string left = std::filesystem::exists(o.output) ? o.output + " keeps what it held"
                                                              : std::string("nothing was written");
   std::string removed = "temporary files removed";
   if (made != nullptr && !made->made().empty())
     removed += ", with the directory " + made->made().front().string() + " made for them";
+  if (!state.empty())
+    removed += "; the stages done are kept in " + state.string() + " (run again with --resume)";
   const bool live = mode == ProgressMode::Line;
   return [=](const std::string& stage) {
     const std::string when = stage.empty()     ? "before reading the points"
@@ -336,7 +375,16 @@ std::function<void(const std::string&)> interruptMessages(const Options& o, Prog
   };
 }
 
-int run(Options& o) {
+// One conversion; `mpi` when this process is one of a distributed run's ranks.
+int runConversion(Options& o, const MpiRanks* mpi) {
+  const bool worker = mpi != nullptr && mpi->rank() != 0;
+  if (worker) {  // rank 0 speaks for the run
+    o.quiet = true;
+    o.progress = "none";
+  }
+  if (mpi != nullptr && o.resume)
+    throw UsageError("--resume keeps one process's state: it cannot be used with " +
+                     std::to_string(mpi->count()) + " ranks (mpirun)");
   checkOptions(o);
   const ProgressMode mode =
       o.progress == "auto"
@@ -346,7 +394,10 @@ int run(Options& o) {
   const std::filesystem::path output(o.output);
   std::optional<MadeDirectories> made;
   const std::filesystem::path tmp = temporaryDirectory(o, made);
-  const auto interrupted = interruptMessages(o, mode, made ? &*made : nullptr);
+  std::optional<ResumeState> state;
+  if (o.resume) state.emplace(resumeDirectory(o, tmp), fingerprint(o, files));
+  const auto interrupted = interruptMessages(o, mode, made && !state ? &*made : nullptr,
+                                             state ? state->directory() : "");
   interrupted("");
   std::optional<tbb::global_control> threads;
   if (o.threads > 0)
@@ -358,6 +409,9 @@ int run(Options& o) {
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
   SpillDirectory spill(tmp);
+  // The ranks' results go to rank 0's directory.
+  std::optional<Ranks> ranks;
+  if (mpi != nullptr) ranks = mpi->ranks(spill.path());
   std::unique_ptr<RawSpill> raw;
   const PointCloud volume =
       o.volumePoints.empty() ? PointCloud{} : readVolumePoints(o, files);
@@ -388,6 +442,11 @@ int run(Options& o) {
     for (const std::string& note : loaded.notes) fmt::print(stderr, "note: {}\n", note);
   }
   reportCoordinateSystem(coordinateSystemOf(loaded.inputs), o.quiet || mode == ProgressMode::Json);
+  if (worker) {
+    prepareAsRank(*raw, spill, OutOfCoreBudget::forMemory(memory), o.build, *ranks,
+                  !o.writeStrays.empty());
+    return kExitOk;
+  }
   // The octree stages keep their arrays and hash tables in spilled files, but their work lists
   // stay in memory (specs/pipeline.md §15): about 5 bytes per point at 100M points of a sampled
   // scan (0.54 GiB). Say so before a long run when that alone exceeds the budget.
@@ -408,6 +467,8 @@ int run(Options& o) {
     source.onStage = [](const std::string& stage, double seconds) {
       if (stage != "read") fmt::print(stderr, "  {:<16} {:.3f} s\n", stage, seconds);
     };
+  source.resume = state ? &*state : nullptr;
+  source.ranks = ranks ? &*ranks : nullptr;
   PointCloud strays;
   if (!o.writeStrays.empty())
     source.onStrays = [&](PointCloud removed) { strays = std::move(removed); };
@@ -420,6 +481,11 @@ int run(Options& o) {
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
     throw FileError(names, std::nullopt, error.what());
   }
+  if (state) {
+    if (!o.quiet)
+      for (const std::string& note : state->notes()) fmt::print(stderr, "note: {}\n", note);
+    state->finish();
+  }
   setInterruptMessage("iso convert: interrupted after writing " + o.output);
   if (!o.report.empty()) writeTextFile(o.report, report.dump(2) + "\n");
   if (!o.writeStrays.empty()) writePly(o.writeStrays, strays);
@@ -428,6 +494,19 @@ int run(Options& o) {
   else
     printReport(report, o);
   return kExitOk;
+}
+
+// A run under an MPI launcher is one rank of a distributed conversion: an error on any rank ends
+// them all (the others would wait for it).
+int run(Options& o) {
+  if (launchedRanks() <= 1) return runConversion(o, nullptr);
+  MpiRanks mpi;
+  try {
+    return runConversion(o, &mpi);
+  } catch (const std::exception& error) {
+    fmt::print(stderr, "iso convert (rank {} of {}): {}\n", mpi.rank(), mpi.count(), error.what());
+    mpi.abort(dynamic_cast<const UsageError*>(&error) ? kExitUsage : kExitFailure);
+  }
 }
 
 }  // namespace
@@ -570,6 +649,11 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "Directory for temporary files (default: the output's; made with its parents "
                 "when missing): the points as read, sorted, and their arrays; all removed "
                 "afterwards, with the directories made for them");
+  c->add_flag("--resume", o->resume,
+              "Keep the stages done in .NAME.resume beside the temporary files (checkpoints as the "
+              "point stages and the corner stage end), so that a run killed or stopped and started "
+              "again with --resume goes on from the last one; the same bytes as a run that went "
+              "through. The state is removed when the file is written");
   c->add_option("--max-temp", o->maxTemp,
                 "Most temporary disk the conversion may use (e.g. 20G; auto: 90 % of the free "
                 "space in --tmp); it stops with an error, removing its files, before going past")

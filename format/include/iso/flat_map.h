@@ -145,6 +145,7 @@ class KeyIndex {
 
   size_t size() const { return keys_.size(); }
   const Key& key(uint32_t number) const { return keys_[number]; }
+  const auto& keys() const { return keys_; }  // in number order
 
  private:
   void rehash(size_t capacity) {

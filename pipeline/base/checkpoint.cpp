@@ -1,0 +1,232 @@
+#include "pipeline/base/checkpoint.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <system_error>
+
+#define XXH_INLINE_ALL
+#include <xxhash.h>
+
+#include "iso/error.h"
+#include "pipeline/base/buffers.h"
+
+namespace iso {
+namespace {
+
+constexpr char kMagic[8] = {'I', 'S', 'O', 'C', 'K', 'P', 'T', '1'};
+constexpr size_t kBufferBytes = size_t{8} << 20;
+
+uint64_t hashOf(const std::string& text) { return XXH3_64bits(text.data(), text.size()); }
+
+[[noreturn]] void fileFailure(const std::filesystem::path& path, const std::string& what,
+                              int error) {
+  throw FileError(path.string(), std::nullopt, what + ": " + std::strerror(error));
+}
+
+template <typename T>
+std::span<const std::byte> bytesOf(const T& value) {
+  return {reinterpret_cast<const std::byte*>(&value), sizeof(T)};
+}
+
+}  // namespace
+
+// ---- writer
+
+CheckpointWriter::CheckpointWriter(std::filesystem::path final, const std::string& fingerprint)
+    : final_(std::move(final)) {
+  staged_ = final_;
+  staged_ += ".part";
+  registration_ = TemporaryRegistration(staged_);
+  fd_ = ::open(staged_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) fileFailure(staged_, "cannot write the checkpoint", errno);
+  buffer_.reserve(kBufferBytes);
+  put({reinterpret_cast<const std::byte*>(kMagic), sizeof kMagic});
+  put(bytesOf(hashOf(fingerprint)));
+}
+
+CheckpointWriter::~CheckpointWriter() {
+  if (fd_ < 0) return;  // committed
+  ::close(fd_);
+  std::error_code ignored;
+  std::filesystem::remove(staged_, ignored);
+  refundTemporaryDisk(written_);
+}
+
+void CheckpointWriter::put(std::span<const std::byte> data) {
+  chargeTemporaryDisk(data.size(), staged_);
+  written_ += data.size();
+  while (!data.empty()) {
+    const size_t n = std::min(data.size(), kBufferBytes - buffer_.size());
+    buffer_.insert(buffer_.end(), data.begin(), data.begin() + ptrdiff_t(n));
+    data = data.subspan(n);
+    if (buffer_.size() < kBufferBytes) break;
+    for (size_t done = 0; done < buffer_.size();) {
+      const ssize_t w = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) fileFailure(staged_, "cannot write the checkpoint", w < 0 ? errno : ENOSPC);
+      done += size_t(w);
+    }
+    buffer_.clear();
+  }
+}
+
+void CheckpointWriter::bytes(const std::string& name, std::span<const std::byte> data) {
+  const auto nameLength = uint32_t(name.size());
+  put(bytesOf(nameLength));
+  put({reinterpret_cast<const std::byte*>(name.data()), name.size()});
+  put(bytesOf(uint64_t(data.size())));
+  put(data);
+  put(bytesOf(uint64_t(XXH3_64bits(data.data(), data.size()))));
+}
+
+void CheckpointWriter::json(const std::string& name, const nlohmann::json& value) {
+  const std::string text = value.dump();
+  bytes(name, {reinterpret_cast<const std::byte*>(text.data()), text.size()});
+}
+
+uint64_t CheckpointWriter::commit() {
+  put(bytesOf(uint32_t{0}));  // the end
+  for (size_t done = 0; done < buffer_.size();) {
+    const ssize_t w = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) fileFailure(staged_, "cannot write the checkpoint", w < 0 ? errno : ENOSPC);
+    done += size_t(w);
+  }
+  buffer_ = {};
+  if (::fdatasync(fd_) != 0) fileFailure(staged_, "cannot write the checkpoint", errno);
+  ::close(fd_);
+  fd_ = -1;
+  std::error_code error;
+  std::filesystem::rename(staged_, final_, error);
+  if (error) fileFailure(final_, "cannot keep the checkpoint", error.value());
+  // The rename reaches the disk with the directory.
+  if (const int dir = ::open(final_.parent_path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+      dir >= 0) {
+    ::fsync(dir);
+    ::close(dir);
+  }
+  registration_ = {};
+  return written_;
+}
+
+// ---- reader
+
+CheckpointReader::CheckpointReader(const std::filesystem::path& path,
+                                   const std::string& fingerprint)
+    : path_(path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) fail(std::strerror(errno));
+  const off_t end = ::lseek(fd_, 0, SEEK_END);
+  if (end < 0) fail(std::strerror(errno));
+  size_ = uint64_t(end);
+  char magic[sizeof kMagic];
+  uint64_t hash = 0;
+  read({reinterpret_cast<std::byte*>(magic), sizeof magic});
+  if (std::memcmp(magic, kMagic, sizeof magic) != 0) fail("not a checkpoint");
+  read({reinterpret_cast<std::byte*>(&hash), sizeof hash});
+  if (hash != hashOf(fingerprint))
+    fail("a checkpoint of another conversion (its inputs, options or version differ)");
+}
+
+CheckpointReader::~CheckpointReader() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void CheckpointReader::fail(const std::string& why) const {
+  throw CheckpointError(path_.string() + ": " + why);
+}
+
+void CheckpointReader::read(std::span<std::byte> data) {
+  if (data.size() > size_ - offset_) fail("cut short");
+  for (size_t done = 0; done < data.size();) {
+    const ssize_t r = ::pread(fd_, data.data() + done, data.size() - done, off_t(offset_ + done));
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) fail(r < 0 ? std::strerror(errno) : "cut short");
+    done += size_t(r);
+  }
+  offset_ += data.size();
+}
+
+uint64_t CheckpointReader::begin(const std::string& name) {
+  uint32_t nameLength = 0;
+  read({reinterpret_cast<std::byte*>(&nameLength), sizeof nameLength});
+  if (nameLength != name.size()) fail("expected the section " + name);
+  std::string found(nameLength, '\0');
+  read({reinterpret_cast<std::byte*>(found.data()), found.size()});
+  if (found != name) fail("expected the section " + name + ", found " + found);
+  uint64_t size = 0;
+  read({reinterpret_cast<std::byte*>(&size), sizeof size});
+  // Its data and checksum must be there before anything is made that large.
+  if (size > size_ - offset_ || size_ - offset_ - size < sizeof(uint64_t))
+    fail("section " + name + " cut short");
+  return size;
+}
+
+nlohmann::json CheckpointReader::json(const std::string& name) {
+  std::string text(begin(name), '\0');
+  read({reinterpret_cast<std::byte*>(text.data()), text.size()});
+  check(name, {reinterpret_cast<const std::byte*>(text.data()), text.size()});
+  nlohmann::json value = nlohmann::json::parse(text, nullptr, false);
+  if (value.is_discarded()) fail("section " + name + " is not JSON");
+  return value;
+}
+
+void CheckpointReader::check(const std::string& name, std::span<const std::byte> data) {
+  uint64_t stored = 0;
+  read({reinterpret_cast<std::byte*>(&stored), sizeof stored});
+  if (stored != XXH3_64bits(data.data(), data.size())) fail("section " + name + " is damaged");
+}
+
+void CheckpointReader::finish() {
+  uint32_t end = 1;
+  read({reinterpret_cast<std::byte*>(&end), sizeof end});
+  if (end != 0 || offset_ != size_) fail("more sections than expected");
+}
+
+// ---- the directory
+
+ResumeState::ResumeState(std::filesystem::path directory, std::string fingerprint)
+    : directory_(std::move(directory)), fingerprint_(std::move(fingerprint)) {
+  std::error_code error;
+  std::filesystem::create_directory(directory_, error);
+  if (error || !std::filesystem::is_directory(directory_))
+    throw FileError(directory_.string(), std::nullopt,
+                    "cannot keep the state to resume from there: " +
+                        (error ? error.message() : std::string("not a directory")));
+}
+
+bool ResumeState::has(const std::string& name) const {
+  std::error_code error;
+  return std::filesystem::exists(path(name), error);
+}
+
+std::unique_ptr<CheckpointReader> ResumeState::open(const std::string& name) {
+  const std::filesystem::path file = path(name);
+  if (!has(name)) return nullptr;
+  try {
+    return std::make_unique<CheckpointReader>(file, fingerprint_);
+  } catch (const CheckpointError& e) {
+    discard(name, e.what());
+    return nullptr;
+  }
+}
+
+std::unique_ptr<CheckpointWriter> ResumeState::create(const std::string& name) const {
+  return std::make_unique<CheckpointWriter>(path(name), fingerprint_);
+}
+
+void ResumeState::discard(const std::string& name, const std::string& why) {
+  std::error_code ignored;
+  std::filesystem::remove(path(name), ignored);
+  notes_.push_back("not resumed from " + why + "; removed it");
+}
+
+void ResumeState::finish() {
+  std::error_code ignored;
+  std::filesystem::remove_all(directory_, ignored);
+}
+
+}  // namespace iso
