@@ -75,11 +75,11 @@ uint64_t fineCellOf(const glm::dvec3& world, const Frame& frame) {
 
 // ---- SpillDirectory
 
-SpillDirectory::SpillDirectory(const std::filesystem::path& parent) {
+SpillDirectory::SpillDirectory(const std::filesystem::path& parent, const std::string& tag) {
   static std::atomic<uint64_t> sequence{0};
   const std::filesystem::path base = parent.empty() ? "." : parent;
-  path_ = base / (".iso-spill." + std::to_string(::getpid()) + "-" + std::to_string(sequence++) +
-                  ".isotmp");
+  path_ = base / (".iso-spill" + (tag.empty() ? "" : "-" + tag) + "." + std::to_string(::getpid()) +
+                  "-" + std::to_string(sequence++) + ".isotmp");
   registrations_.emplace_back(path_);  // unlinked (if empty) last, after the files
   std::error_code error;
   if (!std::filesystem::create_directory(path_, error) || error)

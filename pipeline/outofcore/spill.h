@@ -29,8 +29,10 @@ namespace iso {
 // A directory for temporary files, removed with everything in it when destroyed.
 class SpillDirectory {
  public:
-  // Creates ".iso-spill.PID-N.isotmp" under parent (which must exist).
-  explicit SpillDirectory(const std::filesystem::path& parent);
+  // Creates ".iso-spill.PID-N.isotmp" under parent (which must exist); with a tag,
+  // ".iso-spill-TAG.PID-N.isotmp" (the ranks of a distributed run, whose PIDs may be the same on
+  // different machines).
+  explicit SpillDirectory(const std::filesystem::path& parent, const std::string& tag = "");
   ~SpillDirectory();
   SpillDirectory(const SpillDirectory&) = delete;
   SpillDirectory& operator=(const SpillDirectory&) = delete;

@@ -304,10 +304,16 @@ std::vector<std::filesystem::path> checkPaths(const Options& o) {
 
 // Where the temporary files go: --tmp (made when missing, with its parents) or the output's
 // directory. Files left there by runs that were killed (kill -9, power loss) are removed.
-std::filesystem::path temporaryDirectory(const Options& o, std::optional<MadeDirectories>& made) {
+// Not in a distributed run: the other ranks' files, on other machines, belong to processes this
+// machine does not know.
+std::filesystem::path temporaryDirectory(const Options& o, std::optional<MadeDirectories>& made,
+                                         bool removeStale) {
   const std::filesystem::path output(o.output);
   const std::filesystem::path outputDirectory =
       output.has_parent_path() ? output.parent_path() : std::filesystem::path(".");
+  const auto removeStaleTemporaries = [&](const std::filesystem::path& directory) {
+    return removeStale ? iso::removeStaleTemporaries(directory) : size_t{0};
+  };
   size_t stale = removeStaleTemporaries(outputDirectory);
   std::filesystem::path tmp = outputDirectory;
   if (!o.tmp.empty()) {
@@ -393,7 +399,7 @@ int runConversion(Options& o, const MpiRanks* mpi) {
   const std::vector<std::filesystem::path> files = checkPaths(o);
   const std::filesystem::path output(o.output);
   std::optional<MadeDirectories> made;
-  const std::filesystem::path tmp = temporaryDirectory(o, made);
+  const std::filesystem::path tmp = temporaryDirectory(o, made, mpi == nullptr);
   std::optional<ResumeState> state;
   if (o.resume) state.emplace(resumeDirectory(o, tmp), fingerprint(o, files));
   const auto interrupted = interruptMessages(o, mode, made && !state ? &*made : nullptr,
@@ -408,10 +414,13 @@ int runConversion(Options& o, const MpiRanks* mpi) {
   TemporaryDiskLimit temporaryLimit(temporaryDiskLimit(o.maxTemp, tmp));
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
-  SpillDirectory spill(tmp);
-  // The ranks' results go to rank 0's directory.
+  // The ranks' results go to rank 0's directory, and the other ranks keep their files in it.
+  std::optional<SpillDirectory> directory;
   std::optional<Ranks> ranks;
-  if (mpi != nullptr) ranks = mpi->ranks(spill.path());
+  if (!worker) directory.emplace(tmp);
+  if (mpi != nullptr) ranks = mpi->ranks(worker ? "" : directory->path());
+  if (worker) directory.emplace(ranks->shared, "rank-" + std::to_string(ranks->rank));
+  SpillDirectory& spill = *directory;
   std::unique_ptr<RawSpill> raw;
   const PointCloud volume =
       o.volumePoints.empty() ? PointCloud{} : readVolumePoints(o, files);
