@@ -5,6 +5,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <fstream>
 #include <system_error>
 
 #define XXH_INLINE_ALL
@@ -196,6 +197,23 @@ ResumeState::ResumeState(std::filesystem::path directory, std::string fingerprin
     throw FileError(directory_.string(), std::nullopt,
                     "cannot keep the state to resume from there: " +
                         (error ? error.message() : std::string("not a directory")));
+  // The run the state is of, by its fingerprint's hash: a state of another is removed whole.
+  const std::filesystem::path of = directory_ / "fingerprint";
+  const std::string hash = std::to_string(hashOf(fingerprint_));
+  std::string found;
+  if (std::ifstream in(of); in) std::getline(in, found);
+  if (found == hash) return;
+  bool removed = false;
+  for (const auto& entry : std::filesystem::directory_iterator(directory_, error))
+    removed |= entry.path() != of && std::filesystem::remove(entry.path(), error);
+  if (removed)
+    notes_.push_back("the state in " + directory_.string() +
+                     " was of another conversion (its inputs, options or version differ): "
+                     "removed it, starting over");
+  std::ofstream out(of, std::ios::trunc);
+  out << hash << "\n";
+  if (!out.flush())
+    throw FileError(of.string(), std::nullopt, "cannot keep the state to resume from there");
 }
 
 bool ResumeState::has(const std::string& name) const {
@@ -222,6 +240,14 @@ void ResumeState::discard(const std::string& name, const std::string& why) {
   std::error_code ignored;
   std::filesystem::remove(path(name), ignored);
   notes_.push_back("not resumed from " + why + "; removed it");
+}
+
+void ResumeState::removeStartingWith(const std::string& prefix) {
+  std::error_code error;
+  std::vector<std::filesystem::path> names;
+  for (const auto& entry : std::filesystem::directory_iterator(directory_, error))
+    if (entry.path().filename().string().starts_with(prefix)) names.push_back(entry.path());
+  for (const auto& name : names) std::filesystem::remove(name, error);
 }
 
 void ResumeState::finish() {

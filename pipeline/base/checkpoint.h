@@ -98,7 +98,8 @@ class CheckpointReader {
 // checkpoints by finish() when the run succeeds; a run that is interrupted or fails keeps it.
 class ResumeState {
  public:
-  // `fingerprint`: what the run's results depend on (inputs, options, version), as text.
+  // `fingerprint`: what the run's results depend on (inputs, options, version), as text. A state
+  // of another fingerprint found there is removed (with a note).
   ResumeState(std::filesystem::path directory, std::string fingerprint);
   const std::filesystem::path& directory() const { return directory_; }
   const std::string& fingerprint() const { return fingerprint_; }
@@ -111,6 +112,8 @@ class ResumeState {
   std::unique_ptr<CheckpointWriter> create(const std::string& name) const;
   // A checkpoint that turned out damaged while it was read: removed, with a note.
   void discard(const std::string& name, const std::string& why);
+  // Remove the checkpoints whose names start so.
+  void removeStartingWith(const std::string& prefix);
   // Remove every checkpoint and the directory.
   void finish();
   // What the run should be told about the state it found (checkpoints it could not use).

@@ -319,6 +319,7 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
   if (source.resume != nullptr && !resumed) {
     timer.next("checkpoint");
     savePoints(*source.resume, ready);
+    source.resume->removeStartingWith("chunk-");  // the points' checkpoint holds them all
   }
   if (source.onStrays) source.onStrays(std::move(ready.strays));
   return buildAndWrite(ready, inputPoints, output, options, std::move(textureImage), keep, source,
@@ -378,7 +379,7 @@ nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
           timer.next(name, total);
         };
         ReadyPoints ready = prepareOutOfCore(raw, directory, options, budget.maxChunkPoints, stage,
-                                             bool(source.onStrays), source.ranks);
+                                             bool(source.onStrays), source.ranks, source.resume);
         requireSurface(ready.points);  // known once every chunk's duplicates are merged
         return ready;
       },

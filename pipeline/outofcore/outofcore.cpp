@@ -514,8 +514,8 @@ std::pair<size_t, size_t> chunksOfRank(const std::vector<SpillChunk>& chunks, in
   return {start(rank), start(rank + 1)};
 }
 
-void saveShare(const std::filesystem::path& file, Accumulated& a) {
-  CheckpointWriter out(file, kShareFingerprint);
+void saveShare(const std::filesystem::path& file, const std::string& fingerprint, Accumulated& a) {
+  CheckpointWriter out(file, fingerprint);
   out.json(
       "counts",
       {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
@@ -536,33 +536,41 @@ void saveShare(const std::filesystem::path& file, Accumulated& a) {
   out.commit();
 }
 
-// Append a rank's results (in chunk order after those of `to`); `to.groups`, when finding strays,
-// covers every point of the distribution.
-void appendShare(const std::filesystem::path& file, Accumulated& to) {
-  Accumulated from;
+// Results of some chunks, with each point's group root (by place) when strays are looked for.
+struct Share {
+  Accumulated results;
   SpillVector<uint32_t> roots;
-  try {
-    CheckpointReader in(file, kShareFingerprint);
-    const nlohmann::json counts = in.json("counts");
-    from.k = counts["k"];
-    from.haloPoints = counts["halo"];
-    from.widenings = counts["widenings"];
-    from.maxLoaded = counts["loaded"];
-    in.array("chunks", from.chunks);
-    readColumns(in, from.points);
-    in.array("first", from.firstDistance);
-    in.array("boundary", from.boundarySource);
-    in.array("boundary.near", from.boundaryNeighbor);
-    in.array("of", from.components.of);
-    in.array("anchored", from.components.anchored);
-    in.array("votes", from.components.seedVote);
-    in.array("kth", from.kth);
-    in.array("edges", from.edgesOut);
-    in.array("roots", roots);
-    in.finish();
-  } catch (const CheckpointError& e) {
-    throw std::runtime_error(std::string("a rank's results cannot be read: ") + e.what());
-  }
+};
+
+// CheckpointError when the file is not whole.
+Share loadShare(const std::filesystem::path& file, const std::string& fingerprint) {
+  Share share;
+  Accumulated& from = share.results;
+  CheckpointReader in(file, fingerprint);
+  const nlohmann::json counts = in.json("counts");
+  from.k = counts["k"];
+  from.haloPoints = counts["halo"];
+  from.widenings = counts["widenings"];
+  from.maxLoaded = counts["loaded"];
+  in.array("chunks", from.chunks);
+  readColumns(in, from.points);
+  in.array("first", from.firstDistance);
+  in.array("boundary", from.boundarySource);
+  in.array("boundary.near", from.boundaryNeighbor);
+  in.array("of", from.components.of);
+  in.array("anchored", from.components.anchored);
+  in.array("votes", from.components.seedVote);
+  in.array("kth", from.kth);
+  in.array("edges", from.edgesOut);
+  in.array("roots", share.roots);
+  in.finish();
+  return share;
+}
+
+// Append a share's results (in chunk order after those of `to`); `to.groups`, when finding
+// strays, covers every point of the distribution.
+void appendShare(const Share& share, Accumulated& to) {
+  const Accumulated& from = share.results;
   const auto pointBase = uint32_t(to.points.size());
   const auto componentBase = uint32_t(to.components.anchored.size());
   const size_t boundaryBase = to.boundarySource.size();
@@ -581,8 +589,8 @@ void appendShare(const std::filesystem::path& file, Accumulated& to) {
   for (const auto& [place, other] : from.edgesOut)
     to.edgesOut.push_back({place + pointBase, other});
   if (to.groups)
-    for (size_t i = 0; i < roots.size(); ++i)
-      to.groups->join(pointBase + uint32_t(i), pointBase + roots[i]);
+    for (size_t i = 0; i < share.roots.size(); ++i)
+      to.groups->join(pointBase + uint32_t(i), pointBase + share.roots[i]);
   for (ChunkRecord record : from.chunks) {
     record.pointBegin += pointBase;
     record.pointEnd += pointBase;
@@ -598,6 +606,46 @@ void appendShare(const std::filesystem::path& file, Accumulated& to) {
   to.maxLoaded = std::max(to.maxLoaded, from.maxLoaded);
 }
 
+// Results of `points` points to come, as one process would hold them.
+Accumulated resultsFor(uint64_t points, const PointLayout& layout, bool findingOutliers) {
+  Accumulated a;
+  reserveFor(a, points, layout);
+  if (findingOutliers) a.groups = std::make_unique<PointGroups>(points);
+  return a;
+}
+
+// A resumable run's chunks (ResumeState): each chunk's results are a checkpoint of their own
+// ("chunk-P-C", P the pass: strays that change the frame make a second), so that a run killed in
+// the point stages keeps the chunks it finished. Returns how many it kept.
+size_t runResumable(const Distribution& distribution, ChunkRunner& runner, ResumeState& resume,
+                    int pass, const PointLayout& layout, bool findingOutliers, Accumulated& done) {
+  size_t kept = 0;
+  const std::string fingerprint = resume.fingerprint() + " pass " + std::to_string(pass);
+  for (size_t c = 0; c < distribution.chunks().size(); ++c) {
+    const SpillChunk& chunk = distribution.chunks()[c];
+    const std::string name = "chunk-" + std::to_string(pass) + "-" + std::to_string(c);
+    std::optional<Share> share;
+    if (resume.has(name)) try {
+        share = loadShare(resume.path(name), fingerprint);
+        progressAdvance(chunk.size());
+        ++kept;
+      } catch (const CheckpointError& e) {
+        resume.discard(name, e.what());
+      }
+    if (!share) {
+      share.emplace();
+      share->results = resultsFor(chunk.size(), layout, findingOutliers);
+      runner.run(chunk, share->results);
+      saveShare(resume.path(name), fingerprint, share->results);
+      if (share->results.groups)
+        for (size_t i = 0; i < share->results.points.size(); ++i)
+          share->roots.push_back(share->results.groups->root(uint32_t(i)));
+    }
+    appendShare(*share, done);
+  }
+  return kept;
+}
+
 // Each rank runs its range of the chunks; rank 0's results go to `done`, the others' to files in
 // the shared directory, which rank 0 then appends in order.
 void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks& ranks,
@@ -606,19 +654,21 @@ void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks
   if (ranks.rank == 0) {
     for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], done);
   } else {
-    Accumulated mine;
     uint64_t points = 0;
     for (size_t c = first; c < last; ++c) points += distribution.chunks()[c].size();
-    reserveFor(mine, points, layout);
-    if (findingOutliers) mine.groups = std::make_unique<PointGroups>(points);
+    Accumulated mine = resultsFor(points, layout, findingOutliers);
     for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], mine);
-    saveShare(ranks.shared / ("rank-" + std::to_string(ranks.rank)), mine);
+    saveShare(ranks.shared / ("rank-" + std::to_string(ranks.rank)), kShareFingerprint, mine);
   }
   ranks.barrier();
   if (ranks.rank != 0) return;
   for (int r = 1; r < ranks.count; ++r) {
     const std::filesystem::path file = ranks.shared / ("rank-" + std::to_string(r));
-    appendShare(file, done);
+    try {
+      appendShare(loadShare(file, kShareFingerprint), done);
+    } catch (const CheckpointError& e) {
+      throw std::runtime_error(std::string("a rank's results cannot be read: ") + e.what());
+    }
     std::filesystem::remove(file);
   }
 }
@@ -653,7 +703,7 @@ std::vector<glm::dvec3> accuracySample(const RawSpill& raw, const std::vector<ui
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                              const BuildOptions& options, uint64_t maxChunkPoints,
                              const std::function<void(const std::string&, uint64_t)>& stage,
-                             bool collectStrays, const Ranks* ranks) {
+                             bool collectStrays, const Ranks* ranks, ResumeState* resume) {
   if (raw.size() >= uint64_t(std::numeric_limits<uint32_t>::max()))
     throw std::length_error("more than 4,294,967,294 input points in one conversion");
   // Orientation blocks must nest in chunks: a chunk holds at least a block's points.
@@ -666,6 +716,8 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   Accumulated done;
   size_t chunks = 0, preparedAgain = 0;
   const bool shared = ranks != nullptr && ranks->count > 1;
+  int pass = 0;        // of the chunks: a second when strays change the frame
+  size_t resumed = 0;  // chunks whose results a resumable run kept
   const bool worker = shared && ranks->rank != 0;
   // Rank 0's word to the others once it has judged the strays (againMessage).
   const auto tell = [&](std::vector<std::byte> word) {
@@ -687,8 +739,12 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     if (findingOutliers && one) runner.deferRest();
     if (shared && !one)
       runShare(distribution, runner, *ranks, raw.layout(), findingOutliers, done);
+    else if (resume != nullptr && !one)
+      resumed +=
+          runResumable(distribution, runner, *resume, pass, raw.layout(), findingOutliers, done);
     else if (!worker)
       for (const SpillChunk& chunk : distribution.chunks()) runner.run(chunk, done);
+    ++pass;
     if (!findingOutliers) break;
     findingOutliers = false;
     if (worker) {
@@ -781,6 +837,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                      {"boundary_points", done.boundarySource.size()},
                      {"chunks_prepared_again", preparedAgain},
                      {"ranks", shared ? ranks->count : 1},
+                     {"chunks_resumed", resumed},
                      {"temporary_bytes_peak", peakTemporary}};
   return ready;
 }

@@ -21,6 +21,7 @@ namespace iso {
 
 class CheckpointReader;
 class CheckpointWriter;
+class ResumeState;
 
 // Points ready for the octree stages.
 struct ReadyPoints {
@@ -60,11 +61,13 @@ struct Ranks {
 // `stage` is called as each phase begins, with its name and amount of work. With collectStrays
 // the removed input points are kept in ReadyPoints::strays. With `ranks`, each rank calls it
 // with the same arguments; on ranks other than 0 it returns empty points once rank 0 needs them no
-// more.
+// more. With `resume`, each chunk's results are kept in it as they are made (chunk-P-C), and a
+// chunk whose results are there whole is not run again.
 ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
                              const BuildOptions& options, uint64_t maxChunkPoints,
                              const std::function<void(const std::string&, uint64_t)>& stage,
-                             bool collectStrays = false, const Ranks* ranks = nullptr);
+                             bool collectStrays = false, const Ranks* ranks = nullptr,
+                             ResumeState* resume = nullptr);
 
 // Every column of a point set as a checkpoint's sections, in PointSet::forEachColumn's order.
 void writeColumns(CheckpointWriter& out, const PointSet& points);

@@ -82,10 +82,22 @@ TEST(Checkpoint, aWriterNotCommittedLeavesNothing) {
   EXPECT_TRUE(fs::is_empty(dir.path()));
 }
 
+TEST(Checkpoint, theStateOfAnotherRunIsRemovedWhole) {
+  test::TempDir dir;
+  write(ResumeState(dir / "state", "run 0").path("a"), "run 0");
+  ResumeState again(dir / "state", "run 0");
+  EXPECT_TRUE(again.has("a"));
+  EXPECT_TRUE(again.notes().empty());
+  ResumeState other(dir / "state", "run 1");
+  EXPECT_FALSE(other.has("a"));
+  ASSERT_EQ(other.notes().size(), 1u);
+  EXPECT_NE(other.notes()[0].find("of another conversion"), std::string::npos);
+}
+
 TEST(Checkpoint, theStateSetsAsideACheckpointItCannotUse) {
   test::TempDir dir;
   ResumeState state(dir / "state", "run 1");
-  write(state.path("a"), "run 0");
+  write(state.path("a"), "run 0");  // as if made by another run
   EXPECT_TRUE(state.has("a"));
   EXPECT_EQ(state.open("a"), nullptr);
   EXPECT_FALSE(state.has("a"));
