@@ -14,6 +14,7 @@
 #include <cstring>
 #include <glm/common.hpp>
 #include <limits>
+#include <type_traits>
 
 #include "iso/check.h"
 #include "pipeline/base/checkpoint.h"
@@ -514,55 +515,60 @@ std::pair<size_t, size_t> chunksOfRank(const std::vector<SpillChunk>& chunks, in
   return {start(rank), start(rank + 1)};
 }
 
-void saveShare(const std::filesystem::path& file, const std::string& fingerprint, Accumulated& a) {
-  CheckpointWriter out(file, fingerprint);
-  out.json(
-      "counts",
-      {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
-  out.array("chunks", a.chunks);
-  writeColumns(out, a.points);
-  out.array("first", a.firstDistance);
-  out.array("boundary", a.boundarySource);
-  out.array("boundary.near", a.boundaryNeighbor);
-  out.array("of", a.components.of);
-  out.array("anchored", a.components.anchored);
-  out.array("votes", a.components.seedVote);
-  out.array("kth", a.kth);
-  out.array("edges", a.edgesOut);
-  SpillVector<uint32_t> roots;  // each point's group, by its place: in its own chunk
-  if (a.groups)
-    for (size_t i = 0; i < a.points.size(); ++i) roots.push_back(a.groups->root(uint32_t(i)));
-  out.array("roots", roots);
-  out.commit();
-}
-
-// Results of some chunks, with each point's group root (by place) when strays are looked for.
+// Results of some chunks, with each point's group root (by place; a root is in the point's own
+// chunk) when strays are looked for.
 struct Share {
   Accumulated results;
   SpillVector<uint32_t> roots;
 };
 
+void takeRoots(Share& share) {
+  const Accumulated& a = share.results;
+  if (a.groups)
+    for (size_t i = 0; i < a.points.size(); ++i) share.roots.push_back(a.groups->root(uint32_t(i)));
+}
+
+// A share's arrays, in a checkpoint's order: written with a CheckpointWriter, read with a reader.
+template <typename Io>
+void shareArrays(Io& io, Share& share) {
+  Accumulated& a = share.results;
+  io.array("chunks", a.chunks);
+  if constexpr (std::is_same_v<Io, CheckpointWriter>)
+    writeColumns(io, a.points);
+  else
+    readColumns(io, a.points);
+  io.array("first", a.firstDistance);
+  io.array("boundary", a.boundarySource);
+  io.array("boundary.near", a.boundaryNeighbor);
+  io.array("of", a.components.of);
+  io.array("anchored", a.components.anchored);
+  io.array("votes", a.components.seedVote);
+  io.array("kth", a.kth);
+  io.array("edges", a.edgesOut);
+  io.array("roots", share.roots);
+}
+
+void saveShare(const std::filesystem::path& file, const std::string& fingerprint, Share& share) {
+  const Accumulated& a = share.results;
+  CheckpointWriter out(file, fingerprint);
+  out.json(
+      "counts",
+      {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
+  shareArrays(out, share);
+  out.commit();
+}
+
 // CheckpointError when the file is not whole.
 Share loadShare(const std::filesystem::path& file, const std::string& fingerprint) {
   Share share;
-  Accumulated& from = share.results;
+  Accumulated& a = share.results;
   CheckpointReader in(file, fingerprint);
   const nlohmann::json counts = in.json("counts");
-  from.k = counts["k"];
-  from.haloPoints = counts["halo"];
-  from.widenings = counts["widenings"];
-  from.maxLoaded = counts["loaded"];
-  in.array("chunks", from.chunks);
-  readColumns(in, from.points);
-  in.array("first", from.firstDistance);
-  in.array("boundary", from.boundarySource);
-  in.array("boundary.near", from.boundaryNeighbor);
-  in.array("of", from.components.of);
-  in.array("anchored", from.components.anchored);
-  in.array("votes", from.components.seedVote);
-  in.array("kth", from.kth);
-  in.array("edges", from.edgesOut);
-  in.array("roots", share.roots);
+  a.k = counts["k"];
+  a.haloPoints = counts["halo"];
+  a.widenings = counts["widenings"];
+  a.maxLoaded = counts["loaded"];
+  shareArrays(in, share);
   in.finish();
   return share;
 }
@@ -636,10 +642,8 @@ size_t runResumable(const Distribution& distribution, ChunkRunner& runner, Resum
       share.emplace();
       share->results = resultsFor(chunk.size(), layout, findingOutliers);
       runner.run(chunk, share->results);
-      saveShare(resume.path(name), fingerprint, share->results);
-      if (share->results.groups)
-        for (size_t i = 0; i < share->results.points.size(); ++i)
-          share->roots.push_back(share->results.groups->root(uint32_t(i)));
+      takeRoots(*share);
+      saveShare(resume.path(name), fingerprint, *share);
     }
     appendShare(*share, done);
   }
@@ -656,8 +660,9 @@ void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks
   } else {
     uint64_t points = 0;
     for (size_t c = first; c < last; ++c) points += distribution.chunks()[c].size();
-    Accumulated mine = resultsFor(points, layout, findingOutliers);
-    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], mine);
+    Share mine{resultsFor(points, layout, findingOutliers), {}};
+    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], mine.results);
+    takeRoots(mine);
     saveShare(ranks.shared / ("rank-" + std::to_string(ranks.rank)), kShareFingerprint, mine);
   }
   ranks.barrier();
