@@ -94,6 +94,10 @@ struct BuildOptions {
   uint32_t strayGroupPoints = 64;
   // Points per orientation block (orientNormals); part of the result, so a parameter.
   uint32_t orientBlockPoints = 1u << 20;
+  // Points a chunk job of the octree stages owns, about (pipeline/convert/corner_stages.h): inputs
+  // with more run as chunk jobs over cells of about this many points with their halos; part of the
+  // result, so a parameter.
+  uint32_t octreeChunkPoints = 1u << 21;
   TextureOptions texture;      // a triplanar texture baked into the colors (output/texture.h)
   OcclusionOptions occlusion;  // ambient occlusion baked into the corners (output/occlusion.h)
   LightBakeOptions lighting;   // light maps in lighting chunks (output/lighting.h)

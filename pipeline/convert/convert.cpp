@@ -19,6 +19,7 @@
 #include "pipeline/base/process.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/convert/checkpoints.h"
+#include "pipeline/convert/corner_stages.h"
 #include "pipeline/io/image.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
@@ -56,6 +57,11 @@ class StageTimer {
     name_.clear();
     start_ = now;
   }
+  // End the current stage without recording it (its parts are added instead).
+  void discard() {
+    name_.clear();
+    end();
+  }
   void add(const std::string& name, double seconds) {
     stages_.push_back({{"name", name}, {"seconds", seconds}});
     if (source_.onStage) source_.onStage(name, seconds);
@@ -84,6 +90,7 @@ void validateOptions(const BuildOptions& o) {
   require(o.chunkNodes >= 64, "--chunk-nodes must be at least 64");
   require(o.zstdLevel >= 1 && o.zstdLevel <= 19, "--zstd-level must be 1 to 19");
   require(o.orientBlockPoints >= 16, "--orient-block-points must be at least 16");
+  require(o.octreeChunkPoints >= 1024, "--octree-chunk-points must be at least 1024");
   const TextureOptions& t = o.texture;
   require(std::isfinite(t.scale) && t.scale >= 0.0, "--texture-scale must be positive");
   require(std::isfinite(t.sharpness) && t.sharpness >= 0.0 && t.sharpness <= 64.0,
@@ -215,7 +222,8 @@ nlohmann::json optionsJson(const BuildOptions& o) {
                         {"zstd_level", o.zstdLevel},
                         {"remove_outliers", o.removeOutliers},
                         {"stray_group_points", o.strayGroupPoints},
-                        {"orient_block_points", o.orientBlockPoints}};
+                        {"orient_block_points", o.orientBlockPoints},
+                        {"octree_chunk_points", o.octreeChunkPoints}};
   // Bakes are listed only when asked for, so files without them keep their bytes.
   if (o.texture.enabled())
     out["texture"] = {{"image", o.texture.image.filename().string()},
@@ -502,37 +510,35 @@ void requireFrame(const Frame& frame) {
                      ") is beyond what an .iso file holds: " + std::string(problem->reason));
 }
 
-// The octree stages before the level of detail: the tree, passive leaves, balance, the corners
-// closed and fitted, trimming.
+// The octree stages before the level of detail (pipeline/convert/corner_stages.h): in one run, or
+// as chunk jobs when the points are many, with their counts and times in the report.
 CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                                      const BuildOptions& options, const RadiusStats& radii,
-                                     StageTimer& timer) {
-  timer.next("octree");
-  CornerStageResults r;
-  // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
-  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made and the arrays are
-  // reserved for half a point (they double where there are more): out of core, reserved room is
-  // temporary disk.
-  CornerField cornerField(points.size() / 2, points.size() / 2);
-  r.octree = buildOctree(points, sdf, options, radii, cornerField, &r.stats);
-  points.roughness = {};  // only the octree's tolerance reads it
-  Octree& octree = r.octree;
-  timer.next("passive+balance");
-  r.passive = markPassiveLeaves(octree, points);
-  r.splits = balanceOctree(octree, points);
-  timer.next("corners");
-  r.closure = sampleClosedSurface(octree, points, sdf, std::move(cornerField));
-  Closure& closure = r.closure;
-  {
-    std::vector<uint8_t> wasNegative(closure.corners.size());
-    for (size_t e = 0; e < wasNegative.size(); ++e)
-      wasNegative[e] = closure.corners.value[e].distance < 0.0f;
-    if (fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit) > 0)
-      closeAgain(octree, points, sdf, closure, wasNegative);
+                                     StageTimer& timer, nlohmann::json& report) {
+  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
+  if (plan.chunks() == 1) {
+    CornerStageResults r = runCornerStages(points, sdf, options, radii, 0,
+                                           [&](const char* stage) { timer.next(stage); });
+    points.roughness = {};  // only the octree's tolerance reads it
+    return r;
   }
-  r.trimmed =
-      options.fillHoles ? 0 : trimFarSurface(octree, points, sdf, closure, options.trimReach);
-  octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
+  timer.next("octree chunks", plan.chunks());
+  CornerStageSeconds seconds;
+  ChunkRunStats stats;
+  CornerStageResults r = runCornerStagesByChunk(points, plan, sdf, options, radii, seconds, stats,
+                                                [] { progressAdvance(1); });
+  points.roughness = {};
+  timer.discard();  // recorded by part below
+  timer.add("chunk points", seconds.load);
+  timer.add("octree", seconds.octree);
+  timer.add("passive+balance", seconds.passiveBalance);
+  timer.add("corners", seconds.corners);
+  timer.add("chunk merge", seconds.merge);
+  report["octree_chunks"] = {{"chunks", plan.chunks()},
+                             {"cell_level", plan.cellLevel},
+                             {"halo_level", plan.haloLevel},
+                             {"halo_points", stats.haloPoints},
+                             {"seam_splits", stats.seamSplits}};
   return r;
 }
 
@@ -561,7 +567,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     if (resumed) report["resumed"]["from"] = "corners";
   }
   CornerStageResults built =
-      resumed ? std::move(*resumed) : buildCornerStages(points, *sdf, options, radii, timer);
+      resumed ? std::move(*resumed)
+              : buildCornerStages(points, *sdf, options, radii, timer, report);
   if (source.resume != nullptr && !resumed) {
     timer.next("checkpoint");
     saveCornerStage(*source.resume, built);

@@ -117,8 +117,9 @@ Octree buildOctree(const PointSet& points, const SdfEvaluator& sdf, const BuildO
 // Whether the disk of point i (center, normal, radius r_i) touches the box.
 bool diskTouchesBox(const PointSet& points, uint32_t i, const glm::dvec3& lo, const glm::dvec3& hi);
 bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node);
-// Mark Empty children of Internal nodes Passive when a disk touches them; returns how many.
-size_t markPassiveLeaves(Octree& tree, const PointSet& points);
+// Mark Empty children of Internal nodes at minLevel or deeper Passive when a disk touches them;
+// returns how many. (A chunk run marks none above the level its chunks own cells of.)
+size_t markPassiveLeaves(Octree& tree, const PointSet& points, uint8_t minLevel = 0);
 
 // ---- balance.cpp
 // Split filled leaves until face-, edge- and corner-adjacent filled leaves differ by at most one

@@ -81,10 +81,10 @@ bool isCoveredByDisk(const Octree& tree, const PointSet& points, uint32_t node) 
                            [&](uint32_t i) { return diskTouchesBox(points, i, lo, hi); });
 }
 
-size_t markPassiveLeaves(Octree& tree, const PointSet& points) {
+size_t markPassiveLeaves(Octree& tree, const PointSet& points, uint8_t minLevel) {
   std::vector<uint32_t> empty;
   for (const OctreeNode& node : tree.nodes)
-    if (node.kind == NodeKind::Internal)
+    if (node.kind == NodeKind::Internal && node.level + 1 >= minLevel)
       for (uint32_t c = 0; c < 8; ++c)
         if (tree.nodes[node.firstChild + c].kind == NodeKind::Empty)
           empty.push_back(node.firstChild + c);

@@ -111,6 +111,16 @@ TEST(OutOfCore, hundredsOfChunksWriteTheSameFileAsInCoreWithoutNormals) {
   expectSameFiles(test::scanOf("torus", 100000, false, 0.3), options, 300, 200);
 }
 
+TEST(OutOfCore, chunkRunsOfTheOctreeStagesWriteTheSameFileInCoreAndOutOfCore) {
+  BuildOptions options;
+  options.orientBlockPoints = 256;
+  options.octreeChunkPoints = 8000;  // chunk jobs of the octree stages, as at 20M points
+  options.maxTestedEdge = 24.0;
+  const nlohmann::json report =
+      expectSameFiles(test::scanOf("torus", 100000, false, 0.3), options, 300, 200);
+  EXPECT_GE(report["octree_chunks"]["chunks"].get<size_t>(), 8u);
+}
+
 TEST(OutOfCore, sameFileWithInputNormalsSomeFlippedColorsAndDuplicates) {
   PointCloud cloud = test::scanOf("sphere", 60000, true, 0.2, 7);
   cloud.colors.resize(cloud.size());

@@ -670,6 +670,10 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
   c->add_option("--orient-block-points", o->build.orientBlockPoints,
                 "Points per block of normal orientation (a parameter of the result)")
       ->capture_default_str();
+  c->add_option("--octree-chunk-points", o->build.octreeChunkPoints,
+                "Points a chunk job of the octree stages owns, about: larger inputs run those "
+                "stages chunk by chunk, each with a halo (a parameter of the result)")
+      ->capture_default_str();
   c->add_option("--report", o->report,
                 "Also write the report (with stage times and memory) as JSON to this file");
   c->add_flag("--json", o->json, "Print the report as JSON");

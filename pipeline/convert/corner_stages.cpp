@@ -1,0 +1,383 @@
+// The octree stages before the level of detail, in one run or as chunk jobs (specs/pipeline.md §15,
+// "Chunk runs of the octree stages").
+//
+// Why chunk jobs read a bounded neighbourhood: a node wider than maxTestedEdge spacings, or holding
+// more than maxTestedPoints points, is subdivided without a test, so every node whose decision
+// reads points is at most a cell of the halo level wide, and the halo's cells, loaded whole, hold
+// all of its points. The signed distance, coverage and disk queries of a chunk's own nodes read a
+// few radii around them, well inside one halo cell; what reaches farther (closure chains, balance
+// cascades) starts at the halo's outer edge, a halo cell away from the owned cells. Where two
+// chunks still leave their filled leaves more than a level apart, the merge balances them.
+#include "pipeline/convert/corner_stages.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "iso/check.h"
+#include "pipeline/base/progress.h"
+#include "pipeline/points/knn.h"
+
+namespace iso {
+
+CornerStageResults runCornerStages(PointSet& points, const SdfEvaluator& sdf,
+                                   const BuildOptions& options, const RadiusStats& radii,
+                                   uint8_t minPassiveLevel,
+                                   const std::function<void(const char*)>& stage) {
+  stage("octree");
+  CornerStageResults r;
+  // One field for the corners the octree tests and those of the leaves: 0.40 a point on the 3M
+  // dragon, 0.67 on the lion, 0.87 on the lone-star scan. The table is made and the arrays are
+  // reserved for half a point (they double where there are more): out of core, reserved room is
+  // temporary disk.
+  CornerField cornerField(points.size() / 2, points.size() / 2);
+  r.octree = buildOctree(points, sdf, options, radii, cornerField, &r.stats);
+  Octree& octree = r.octree;
+  stage("passive+balance");
+  r.passive = markPassiveLeaves(octree, points, minPassiveLevel);
+  r.splits = balanceOctree(octree, points);
+  stage("corners");
+  r.closure = sampleClosedSurface(octree, points, sdf, std::move(cornerField));
+  Closure& closure = r.closure;
+  {
+    std::vector<uint8_t> wasNegative(closure.corners.size());
+    for (size_t e = 0; e < wasNegative.size(); ++e)
+      wasNegative[e] = closure.corners.value[e].distance < 0.0f;
+    if (fitCornersToPoints(closure.corners, closure.hanging, octree, points, options.cornerFit) > 0)
+      closeAgain(octree, points, sdf, closure, wasNegative);
+  }
+  r.trimmed =
+      options.fillHoles ? 0 : trimFarSurface(octree, points, sdf, closure, options.trimReach);
+  octree.nodes.shrink_to_fit();  // no more splits: the room grown for them is not needed
+  return r;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int shiftOf(uint8_t level) { return 3 * (kMaxLevel - level); }
+
+// Calls f(cellKey, begin, end) for every cell of `level` that holds points, in key order.
+template <typename F>
+void forEachCell(const PointSet& points, uint8_t level, F&& f) {
+  const int shift = shiftOf(level);
+  const auto keys = points.key.begin();
+  size_t i = 0;
+  while (i < points.size()) {
+    const uint64_t cell = keys[ptrdiff_t(i)] >> shift;
+    const size_t end =
+        size_t(std::partition_point(keys + ptrdiff_t(i), points.key.end(),
+                                    [&](uint64_t k) { return (k >> shift) <= cell; }) -
+               keys);
+    f(cell, uint32_t(i), uint32_t(end));
+    i = end;
+  }
+}
+
+// The chunk owning a cell of the plan's level.
+size_t ownerOf(const OctreeChunkPlan& plan, uint64_t cell) {
+  return size_t(std::upper_bound(plan.firstCell.begin(), plan.firstCell.end(), cell) -
+                plan.firstCell.begin()) -
+         1;
+}
+
+using PointRange = std::pair<uint32_t, uint32_t>;
+
+// The halo of every chunk: its ranges of points in key order.
+std::vector<std::vector<PointRange>> haloRanges(const PointSet& points,
+                                                const OctreeChunkPlan& plan) {
+  std::vector<std::vector<PointRange>> halos(plan.chunks());
+  const int up = 3 * (plan.haloLevel - plan.cellLevel);
+  const int64_t cells = int64_t{1} << plan.haloLevel;
+  forEachCell(points, plan.haloLevel, [&](uint64_t cell, uint32_t begin, uint32_t end) {
+    const size_t own = ownerOf(plan, cell >> up);
+    const auto c = mortonDecode(cell);
+    std::array<size_t, 27> touched{};
+    size_t count = 0;
+    for (int d = 0; d < 27; ++d) {
+      const std::array<int64_t, 3> n = {int64_t(c[0]) + d % 3 - 1, int64_t(c[1]) + (d / 3) % 3 - 1,
+                                        int64_t(c[2]) + d / 9 - 1};
+      if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells)
+        continue;
+      const size_t chunk =
+          ownerOf(plan, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])) >> up);
+      if (chunk != own && std::find(touched.begin(), touched.begin() + ptrdiff_t(count), chunk) ==
+                              touched.begin() + ptrdiff_t(count))
+        touched[count++] = chunk;
+    }
+    for (size_t k = 0; k < count; ++k) halos[touched[k]].push_back({begin, end});
+  });
+  return halos;
+}
+
+// The points of the ranges (sorted, disjoint), in key order.
+PointSet gather(const PointSet& points, const std::vector<PointRange>& ranges) {
+  PointSet local;
+  size_t n = 0;
+  for (const PointRange& r : ranges) n += r.second - r.first;
+  PointSet::forEachColumn(
+      [&](auto& to, const auto& from) {
+        if (from.empty()) return;
+        to.reserve(n);
+        for (const PointRange& r : ranges)
+          to.insert(to.end(), from.begin() + r.first, from.begin() + r.second);
+      },
+      local, points);
+  return local;
+}
+
+// Builds the merged tree and corner field from the chunks' owned parts.
+class ChunkMerger {
+ public:
+  ChunkMerger(const PointSet& points, const OctreeChunkPlan& plan)
+      : points_(points),
+        plan_(plan),
+        cellLevel_(plan.cellLevel),
+        field_(points.size() / 2, points.size() / 2) {
+    OctreeNode root;
+    root.pointEnd = uint32_t(points.size());
+    root.kind = NodeKind::Empty;
+    tree_.nodes.push_back(root);
+  }
+
+  // Take the nodes of chunk `index` (run over local points whose owned ones start at ownLocal;
+  // they start at ownGlobal in all points) below the cells [firstCell, endCell) of the plan's
+  // level.
+  void add(const CornerStageResults& chunk, size_t index, uint64_t firstCell, uint64_t endCell,
+           uint32_t ownLocal, uint32_t ownGlobal) {
+    std::vector<uint32_t> roots;
+    ownedRoots(chunk.octree, 0, firstCell, endCell, roots);
+    const int64_t offset = int64_t(ownGlobal) - int64_t(ownLocal);
+    std::vector<std::pair<uint32_t, uint32_t>> filled;  // (merged node, chunk node)
+    for (const uint32_t root : roots) {
+      const OctreeNode& r = chunk.octree.nodes[root];
+      copySubtree(chunk.octree, root, slotAt(r.key), offset, filled);
+    }
+    const CornerField& corners = chunk.closure.corners;
+    for (const auto& [merged, own] : filled) {
+      const OctreeNode& leaf = chunk.octree.nodes[own];
+      for (int c = 0; c < kCorners; ++c) {
+        const Key128 key = gridKey(cornerPoint(leaf.level, leaf.key, c));
+        const auto [entry, added] = field_.insert(key);
+        if (!added) continue;
+        const uint32_t from = corners.find(key);
+        ISO_CHECK(from != kNoNode);  // every filled leaf's corners are in its field
+        field_.value[entry] = corners.value[from];
+      }
+      if (touchesOtherChunk(tree_.nodes[merged], index)) seamLeaves_.push_back(merged);
+    }
+  }
+
+  // The merged tree and field: cells above the plan's level with nothing filled below emptied,
+  // seams balanced (new leaves sampled with `sdf`), hanging corners found and snapped.
+  CornerStageResults finish(const SdfEvaluator& sdf, size_t& seamSplits) {
+    for (size_t i = placeholders_.size(); i-- > 0;) {
+      OctreeNode& node = tree_.nodes[placeholders_[i]];
+      bool any = false;
+      for (uint32_t c = 0; c < 8 && !any; ++c)
+        any = tree_.nodes[node.firstChild + c].kind != NodeKind::Empty;
+      if (!any) node.kind = NodeKind::Empty;
+    }
+    std::vector<uint32_t> created;
+    seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
+    addLeafCorners(field_, tree_, created, sdf);
+    CornerStageResults r;
+    r.octree = std::move(tree_);
+    r.closure.corners = std::move(field_);
+    refreshCorners(r.octree, r.closure);
+    r.octree.nodes.shrink_to_fit();
+    return r;
+  }
+
+ private:
+  // The non-empty nodes of the plan's level in [firstCell, endCell), in key order.
+  void ownedRoots(const Octree& tree, uint32_t id, uint64_t firstCell, uint64_t endCell,
+                  std::vector<uint32_t>& out) const {
+    const OctreeNode& node = tree.nodes[id];
+    if (node.kind == NodeKind::Empty) return;
+    const int down = 3 * (cellLevel_ - node.level);
+    const uint64_t lo = node.key << down, hi = (node.key + 1) << down;
+    if (hi <= firstCell || lo >= endCell) return;
+    if (node.level == cellLevel_) {
+      out.push_back(id);
+      return;
+    }
+    // Leaves with points are never this coarse (nodes wider than the halo cells are split) and
+    // passive leaves are not marked above the plan's level.
+    ISO_CHECK(node.kind == NodeKind::Internal);
+    for (uint32_t c = 0; c < 8; ++c) ownedRoots(tree, node.firstChild + c, firstCell, endCell, out);
+  }
+
+  // Whether a cell next to the leaf (same level, across a face, an edge or a corner) lies in a cell
+  // of the plan's level that another chunk owns.
+  bool touchesOtherChunk(const OctreeNode& leaf, size_t chunk) const {
+    const int up = 3 * (leaf.level - cellLevel_);
+    const auto c = mortonDecode(leaf.key);
+    const uint32_t last = (1u << (leaf.level - cellLevel_)) - 1;
+    if ((c[0] & last) != 0 && (c[0] & last) != last && (c[1] & last) != 0 &&
+        (c[1] & last) != last && (c[2] & last) != 0 && (c[2] & last) != last)
+      return false;  // inside its owned cell
+    const int64_t cells = int64_t{1} << leaf.level;
+    for (int d = 0; d < 27; ++d) {
+      const std::array<int64_t, 3> n = {int64_t(c[0]) + d % 3 - 1, int64_t(c[1]) + (d / 3) % 3 - 1,
+                                        int64_t(c[2]) + d / 9 - 1};
+      if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells)
+        continue;
+      const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
+      if (ownerOf(plan_, key >> up) != chunk) return true;
+    }
+    return false;
+  }
+
+  // The merged tree's node for the cell (cellLevel_, key), made a placeholder on first use.
+  uint32_t slotAt(uint64_t key) {
+    uint32_t id = 0;
+    for (int l = 0; l < cellLevel_; ++l) {
+      if (tree_.nodes[id].kind != NodeKind::Internal) {
+        tree_.split(id, points_);
+        placeholders_.push_back(id);
+        const uint32_t first = tree_.nodes[id].firstChild;
+        for (uint32_t c = 0; c < 8; ++c) tree_.nodes[first + c].kind = NodeKind::Empty;
+      }
+      id = tree_.nodes[id].firstChild + uint32_t((key >> (3 * (cellLevel_ - 1 - l))) & 7);
+    }
+    return id;
+  }
+
+  void copySubtree(const Octree& from, uint32_t root, uint32_t slot, int64_t offset,
+                   std::vector<std::pair<uint32_t, uint32_t>>& filled) {
+    std::vector<std::pair<uint32_t, uint32_t>> queue = {{root, slot}};
+    for (size_t q = 0; q < queue.size(); ++q) {
+      const auto [own, merged] = queue[q];
+      OctreeNode node = from.nodes[own];
+      node.pointBegin = uint32_t(int64_t(node.pointBegin) + offset);
+      node.pointEnd = uint32_t(int64_t(node.pointEnd) + offset);
+      if (node.kind == NodeKind::Internal) {
+        const uint32_t first = uint32_t(tree_.nodes.size());
+        tree_.nodes.resize(first + 8);
+        for (uint32_t c = 0; c < 8; ++c) queue.push_back({node.firstChild + c, first + c});
+        node.firstChild = first;
+      } else {
+        node.firstChild = kNoNode;
+      }
+      if (node.isFilled()) filled.push_back({merged, own});
+      tree_.nodes[merged] = node;
+    }
+  }
+
+  const PointSet& points_;
+  const OctreeChunkPlan& plan_;
+  uint8_t cellLevel_;
+  Octree tree_;
+  CornerField field_;
+  std::vector<uint32_t> placeholders_;  // nodes above the plan's level, parents first
+  std::vector<uint32_t> seamLeaves_;    // filled leaves next to another chunk's cells
+};
+
+}  // namespace
+
+OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radii,
+                                 const BuildOptions& options) {
+  OctreeChunkPlan plan;
+  plan.firstCell = {0};
+  plan.firstPoint = {0, uint32_t(points.size())};
+  const double maxEdge = options.maxTestedEdge * radii.spacing;
+  if (points.size() <= options.octreeChunkPoints || !(maxEdge > 0.0)) return plan;
+  // The halo level: the coarsest whose cells are tested (no wider than maxEdge); chunks own cells
+  // four times wider, so that a halo cell is a quarter of an owned cell at most.
+  int halo = 0;
+  while (halo < kMaxLevel && std::ldexp(1.0, -halo) > maxEdge) ++halo;
+  if (halo < 3 || halo > options.maxDepth) return plan;
+  plan.haloLevel = uint8_t(halo);
+  plan.cellLevel = uint8_t(halo - 2);
+  uint64_t inChunk = 0;
+  plan.firstPoint.pop_back();
+  forEachCell(points, plan.cellLevel, [&](uint64_t cell, uint32_t begin, uint32_t end) {
+    if (inChunk > 0 && inChunk + (end - begin) > options.octreeChunkPoints) {
+      plan.firstCell.push_back(cell);
+      plan.firstPoint.push_back(begin);
+      inChunk = 0;
+    }
+    inChunk += end - begin;
+  });
+  plan.firstPoint.push_back(uint32_t(points.size()));
+  if (plan.chunks() == 1) plan.cellLevel = plan.haloLevel = 0;
+  return plan;
+}
+
+CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
+                                          const SdfEvaluator& sdf, const BuildOptions& options,
+                                          const RadiusStats& radii, CornerStageSeconds& seconds,
+                                          ChunkRunStats& stats,
+                                          const std::function<void()>& onChunk) {
+  auto start = Clock::now();
+  double* current = nullptr;
+  const auto lap = [&](double* next) {
+    const auto now = Clock::now();
+    if (current != nullptr) *current += std::chrono::duration<double>(now - start).count();
+    start = now;
+    current = next;
+  };
+  const auto stage = [&](const char* name) {
+    const std::string s = name;
+    lap(s == "octree" ? &seconds.octree
+                      : (s == "passive+balance" ? &seconds.passiveBalance : &seconds.corners));
+  };
+  lap(&seconds.load);
+  const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
+  ChunkMerger merger(points, plan);
+  CornerStageResults sum;
+  for (size_t c = 0; c < plan.chunks(); ++c) {
+    lap(&seconds.load);
+    const PointRange own = {plan.firstPoint[c], plan.firstPoint[c + 1]};
+    std::vector<PointRange> ranges;
+    uint32_t ownLocal = 0;
+    bool ownPlaced = false;
+    for (const PointRange& r : halos[c]) {
+      if (!ownPlaced && r.first >= own.second) {
+        ranges.push_back(own);
+        ownPlaced = true;
+      }
+      if (!ownPlaced) ownLocal += r.second - r.first;
+      ranges.push_back(r);
+    }
+    if (!ownPlaced) ranges.push_back(own);
+    for (const PointRange& r : halos[c]) stats.haloPoints += r.second - r.first;
+    PointSet local = gather(points, ranges);
+    auto index = std::make_unique<PointIndex>(local.position);
+    const SdfEvaluator localSdf(local, *index, options.smoothing, options.fit);
+    const CornerStageResults chunk =
+        runCornerStages(local, localSdf, options, radii, plan.cellLevel, stage);
+    lap(&seconds.merge);
+    const uint64_t endCell = c + 1 < plan.chunks() ? plan.firstCell[c + 1]
+                                                   : uint64_t{1} << (3 * plan.cellLevel);
+    merger.add(chunk, c, plan.firstCell[c], endCell, ownLocal, own.first);
+    sum.stats.testedPatches += chunk.stats.testedPatches;
+    sum.stats.tooFar += chunk.stats.tooFar;
+    sum.stats.uncovered += chunk.stats.uncovered;
+    sum.stats.thinSplits += chunk.stats.thinSplits;
+    sum.passive += chunk.passive;
+    sum.splits += chunk.splits;
+    sum.trimmed += chunk.trimmed;
+    sum.closure.filled += chunk.closure.filled;
+    sum.closure.refilled += chunk.closure.refilled;
+    sum.closure.passes = std::max(sum.closure.passes, chunk.closure.passes);
+    if (onChunk) onChunk();
+  }
+  lap(&seconds.merge);
+  CornerStageResults r = merger.finish(sdf, stats.seamSplits);
+  r.stats = sum.stats;
+  r.passive = sum.passive;
+  r.splits = sum.splits + stats.seamSplits;
+  r.trimmed = sum.trimmed;
+  r.closure.filled = sum.closure.filled;
+  r.closure.refilled = sum.closure.refilled;
+  r.closure.passes = sum.closure.passes;
+  lap(nullptr);
+  return r;
+}
+
+}  // namespace iso

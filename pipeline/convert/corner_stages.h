@@ -1,0 +1,64 @@
+// The octree stages before the level of detail (octree, passive leaves, balance, the corners closed
+// and fitted, trimming): one run over all points, or independent chunk jobs, each over an owned
+// Morton range of cells and a halo of whole cells around it, whose owned parts are merged into one
+// tree and one corner field (specs/pipeline.md §15, "Chunk runs of the octree stages").
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "pipeline/base/options.h"
+#include "pipeline/convert/checkpoints.h"
+#include "pipeline/octree/field.h"
+#include "pipeline/octree/octree.h"
+#include "pipeline/points/points.h"
+
+namespace iso {
+
+// Seconds spent in each part of the stages (summed over chunk jobs).
+struct CornerStageSeconds {
+  double load = 0.0, octree = 0.0, passiveBalance = 0.0, corners = 0.0, merge = 0.0;
+};
+
+// The stages over these points in one run; `stage` is called with "octree", "passive+balance" and
+// "corners" as each begins. Passive leaves are marked at levels >= minPassiveLevel only (0: at
+// every level).
+CornerStageResults runCornerStages(PointSet& points, const SdfEvaluator& sdf,
+                                   const BuildOptions& options, const RadiusStats& radii,
+                                   uint8_t minPassiveLevel,
+                                   const std::function<void(const char*)>& stage);
+
+// The partition of a chunked run: chunk c owns the cells of level cellLevel whose keys lie in
+// [firstCell[c], firstCell[c + 1]) (the last one up to 8^cellLevel), so the chunks cover the
+// frame; its halo is every cell of level haloLevel with points that touches (by a face, an edge
+// or a corner) a cell of that level it owns. A function of the points and the options only.
+struct OctreeChunkPlan {
+  uint8_t cellLevel = 0, haloLevel = 0;
+  std::vector<uint64_t> firstCell;   // one a chunk
+  std::vector<uint32_t> firstPoint;  // one a chunk, then the number of points
+  size_t chunks() const { return firstCell.size(); }
+};
+// One chunk when the points are at most options.octreeChunkPoints or the tree is too shallow to
+// cut; else Morton ranges of cells of about that many points each.
+OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radii,
+                                 const BuildOptions& options);
+
+struct ChunkRunStats {
+  uint64_t haloPoints = 0;  // points loaded beside the owned ones, over all chunks
+  size_t seamSplits = 0;    // leaves the merge split for balance where two chunks met
+};
+// The stages as chunk jobs, one after the other (each parallel inside), then the merge: the owned
+// nodes of each chunk become the tree below the cells of the plan's level, corners are taken from
+// the chunk that made them first (chunk order), hanging corners are found and snapped again over
+// the whole tree, and filled leaves that two chunks left more than one level apart are balanced
+// (their corners from `sdf`, the signed distance over all points). `onChunk` is called as each
+// chunk ends.
+CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
+                                          const SdfEvaluator& sdf, const BuildOptions& options,
+                                          const RadiusStats& radii, CornerStageSeconds& seconds,
+                                          ChunkRunStats& stats,
+                                          const std::function<void()>& onChunk = {});
+
+}  // namespace iso
