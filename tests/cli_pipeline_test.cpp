@@ -1721,6 +1721,24 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
   EXPECT_LT(report["out_of_core"]["chunks_resumed"], report["out_of_core"]["chunks"]);
   EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "chunked.iso"));
 
+  // Killed in the chunk jobs of the octree stages, it keeps the jobs it finished.
+  const std::string octreeChunks = "--octree-chunk-points 20000 ";
+  ASSERT_EQ(runIso("convert -q " + octreeChunks + quoted(in) + " -o " +
+                   quoted(dir_ / "octree-chunks.iso"))
+                .exitCode,
+            0);
+  const pid_t jobs = startIso({"convert", "--resume", "-f", "--octree-chunk-points", "20000",
+                               in.string(), "-o", out.string()},
+                              dir_ / "err");
+  ASSERT_TRUE(waitUntil(jobs, [&] { return fs::exists(state / "octree-chunk-2"); }));
+  kill(jobs, SIGKILL);
+  waitpid(jobs, nullptr, 0);
+  EXPECT_FALSE(fs::exists(state / "corners.checkpoint"));
+  std::tie(report, err) = resume(octreeChunks);
+  EXPECT_GE(report["resumed"]["octree_chunks"].get<int>(), 2) << report.dump();
+  EXPECT_LT(report["resumed"]["octree_chunks"], report["octree_chunks"]["chunks"]);
+  EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "octree-chunks.iso"));
+
   // The state of a run with other options is not resumed from.
   ASSERT_TRUE(killIn("lod"));
   std::tie(report, err) = resume("--smoothing 1.5 ");

@@ -9,7 +9,7 @@ namespace {
 
 template <typename Load>
 std::optional<std::invoke_result_t<Load, CheckpointReader&>> loadFrom(ResumeState& state,
-                                                                      const char* name,
+                                                                      const std::string& name,
                                                                       Load&& load) {
   const std::unique_ptr<CheckpointReader> reader = state.open(name);
   if (!reader) return std::nullopt;
@@ -74,8 +74,9 @@ std::optional<ReadyPoints> loadPoints(ResumeState& state) {
   });
 }
 
-void saveCornerStage(const ResumeState& state, const CornerStageResults& r) {
-  const std::unique_ptr<CheckpointWriter> out = state.create(kCornersCheckpoint);
+void saveCornerStage(const ResumeState& state, const CornerStageResults& r,
+                     const std::string& name) {
+  const std::unique_ptr<CheckpointWriter> out = state.create(name);
   const Closure& c = r.closure;
   out->json(
       "counts",
@@ -92,8 +93,8 @@ void saveCornerStage(const ResumeState& state, const CornerStageResults& r) {
   out->commit();
 }
 
-std::optional<CornerStageResults> loadCornerStage(ResumeState& state) {
-  return loadFrom(state, kCornersCheckpoint, [&state](CheckpointReader& in) {
+std::optional<CornerStageResults> loadCornerStage(ResumeState& state, const std::string& name) {
+  return loadFrom(state, name, [&state, &name](CheckpointReader& in) {
     CornerStageResults r;
     const nlohmann::json counts = in.json("counts");
     r.stats = {counts["stats"][0], counts["stats"][1], counts["stats"][2], counts["stats"][3]};
@@ -115,7 +116,7 @@ std::optional<CornerStageResults> loadCornerStage(ResumeState& state) {
     in.array("corner.values", c.corners.value);
     if (c.corners.coarsestLevel.size() != c.corners.size() ||
         c.corners.value.size() != c.corners.size())
-      throw CheckpointError(state.path(kCornersCheckpoint).string() +
+      throw CheckpointError(state.path(name).string() +
                             ": the corner field's arrays differ in length");
     in.array("hanging", c.hanging);
     return r;

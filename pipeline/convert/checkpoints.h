@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <memory>
 #include <optional>
+#include <string>
 
 #include "pipeline/base/checkpoint.h"
 #include "pipeline/octree/field.h"
@@ -33,7 +34,17 @@ void savePoints(const ResumeState& state, const ReadyPoints& ready);
 // there is none or it cannot be used.
 std::optional<ReadyPoints> loadPoints(ResumeState& state);
 
-void saveCornerStage(const ResumeState& state, const CornerStageResults& results);
-std::optional<CornerStageResults> loadCornerStage(ResumeState& state);
+// The corner stage's results under `name`: kCornersCheckpoint for the whole run, or a chunk job's
+// (octreeChunkCheckpoint).
+void saveCornerStage(const ResumeState& state, const CornerStageResults& results,
+                     const std::string& name = kCornersCheckpoint);
+std::optional<CornerStageResults> loadCornerStage(ResumeState& state,
+                                                  const std::string& name = kCornersCheckpoint);
+// A finished chunk job of the octree stages (pipeline/convert/corner_stages.h), kept until the
+// corners' checkpoint holds them all.
+inline constexpr const char* kOctreeChunkPrefix = "octree-chunk-";
+inline std::string octreeChunkCheckpoint(size_t chunk) {
+  return kOctreeChunkPrefix + std::to_string(chunk);
+}
 
 }  // namespace iso

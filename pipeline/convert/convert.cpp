@@ -514,7 +514,8 @@ void requireFrame(const Frame& frame) {
 // as chunk jobs when the points are many, with their counts and times in the report.
 CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                                      const BuildOptions& options, const RadiusStats& radii,
-                                     StageTimer& timer, nlohmann::json& report) {
+                                     StageTimer& timer, nlohmann::json& report,
+                                     ResumeState* resume) {
   const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
   if (plan.chunks() == 1) {
     CornerStageResults r = runCornerStages(points, sdf, options, radii, 0,
@@ -526,7 +527,8 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
   CornerStageSeconds seconds;
   ChunkRunStats stats;
   CornerStageResults r = runCornerStagesByChunk(points, plan, sdf, options, radii, seconds, stats,
-                                                [] { progressAdvance(1); });
+                                                [] { progressAdvance(1); }, resume);
+  if (stats.resumed > 0) report["resumed"]["octree_chunks"] = stats.resumed;
   points.roughness = {};
   timer.discard();  // recorded by part below
   timer.add("chunk points", seconds.load);
@@ -568,10 +570,11 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   }
   CornerStageResults built =
       resumed ? std::move(*resumed)
-              : buildCornerStages(points, *sdf, options, radii, timer, report);
+              : buildCornerStages(points, *sdf, options, radii, timer, report, source.resume);
   if (source.resume != nullptr && !resumed) {
     timer.next("checkpoint");
     saveCornerStage(*source.resume, built);
+    source.resume->removeStartingWith(kOctreeChunkPrefix);  // the corners' checkpoint holds them
   }
   points.roughness = {};  // a resumed run's points have it still
   Octree& octree = built.octree;

@@ -1,19 +1,22 @@
 // The octree stages before the level of detail, in one run or as chunk jobs (specs/pipeline.md §15,
 // "Chunk runs of the octree stages").
 //
-// Why chunk jobs read a bounded neighbourhood: a node wider than maxTestedEdge spacings, or holding
-// more than maxTestedPoints points, is subdivided without a test, so every node whose decision
-// reads points is at most a cell of the halo level wide, and the halo's cells, loaded whole, hold
-// all of its points. The signed distance, coverage and disk queries of a chunk's own nodes read a
-// few radii around them, well inside one halo cell; what reaches farther (closure chains, balance
-// cascades) starts at the halo's outer edge, a halo cell away from the owned cells. Where two
-// chunks still leave their filled leaves more than a level apart, the merge balances them.
+// Why a chunk job reads a bounded neighbourhood: a node wider than maxTestedEdge spacings, or
+// holding more than maxTestedPoints points, is subdivided without a test, so every node whose
+// decision reads points is at most a tested cell wide. The signed distance, coverage and disk
+// queries of a chunk's own nodes read a few radii around them, well inside its halo (cells half a
+// tested cell wide around its owned cells); nodes cut by the halo's outer edge may decide
+// otherwise than with all their points, and what follows from them (closure chains, balance
+// cascades) starts there, half a tested cell from the owned cells. Where two chunks still leave
+// their filled leaves more than a level apart, the merge balances them. Whatever the halo holds,
+// the result is a function of the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 
 #include "iso/check.h"
@@ -57,6 +60,10 @@ CornerStageResults runCornerStages(PointSet& points, const SdfEvaluator& sdf,
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Halo cells this many levels below the coarsest tested level (specs/pipeline.md §15 measures 0
+// and 1).
+constexpr int kHaloBelowTested = 1;
 
 int shiftOf(uint8_t level) { return 3 * (kMaxLevel - level); }
 
@@ -277,6 +284,27 @@ class ChunkMerger {
   std::vector<uint32_t> seamLeaves_;    // filled leaves next to another chunk's cells
 };
 
+// The stages over the chunk's own points and its halo.
+CornerStageResults runChunk(const PointSet& points, const PointRange& own,
+                            const std::vector<PointRange>& halo, const BuildOptions& options,
+                            const RadiusStats& radii, const OctreeChunkPlan& plan,
+                            const std::function<void(const char*)>& stage) {
+  std::vector<PointRange> ranges;
+  bool ownPlaced = false;
+  for (const PointRange& r : halo) {
+    if (!ownPlaced && r.first >= own.second) {
+      ranges.push_back(own);
+      ownPlaced = true;
+    }
+    ranges.push_back(r);
+  }
+  if (!ownPlaced) ranges.push_back(own);
+  PointSet local = gather(points, ranges);
+  const auto index = std::make_unique<PointIndex>(local.position);
+  const SdfEvaluator sdf(local, *index, options.smoothing, options.fit);
+  return runCornerStages(local, sdf, options, radii, plan.cellLevel, stage);
+}
+
 }  // namespace
 
 OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radii,
@@ -286,13 +314,13 @@ OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radi
   plan.firstPoint = {0, uint32_t(points.size())};
   const double maxEdge = options.maxTestedEdge * radii.spacing;
   if (points.size() <= options.octreeChunkPoints || !(maxEdge > 0.0)) return plan;
-  // The halo level: the coarsest whose cells are tested (no wider than maxEdge); chunks own cells
-  // four times wider, so that a halo cell is a quarter of an owned cell at most.
-  int halo = 0;
-  while (halo < kMaxLevel && std::ldexp(1.0, -halo) > maxEdge) ++halo;
-  if (halo < 3 || halo > options.maxDepth) return plan;
-  plan.haloLevel = uint8_t(halo);
-  plan.cellLevel = uint8_t(halo - 2);
+  // The coarsest tested level (cells no wider than maxEdge): chunks own cells four times wider, and
+  // their halos are cells half as wide, so that a halo cell is an eighth of an owned cell.
+  int tested = 0;
+  while (tested < kMaxLevel && std::ldexp(1.0, -tested) > maxEdge) ++tested;
+  if (tested < 3 || tested + 1 > options.maxDepth) return plan;
+  plan.haloLevel = uint8_t(tested + kHaloBelowTested);
+  plan.cellLevel = uint8_t(tested - 2);
   uint64_t inChunk = 0;
   plan.firstPoint.pop_back();
   forEachCell(points, plan.cellLevel, [&](uint64_t cell, uint32_t begin, uint32_t end) {
@@ -312,7 +340,8 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
-                                          const std::function<void()>& onChunk) {
+                                          const std::function<void()>& onChunk,
+                                          ResumeState* resume) {
   auto start = Clock::now();
   double* current = nullptr;
   const auto lap = [&](double* next) {
@@ -333,24 +362,18 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
   for (size_t c = 0; c < plan.chunks(); ++c) {
     lap(&seconds.load);
     const PointRange own = {plan.firstPoint[c], plan.firstPoint[c + 1]};
-    std::vector<PointRange> ranges;
+    const std::string checkpoint = octreeChunkCheckpoint(c);
+    std::optional<CornerStageResults> kept;
+    if (resume != nullptr && resume->has(checkpoint)) kept = loadCornerStage(*resume, checkpoint);
+    stats.resumed += kept.has_value();
     uint32_t ownLocal = 0;
-    bool ownPlaced = false;
     for (const PointRange& r : halos[c]) {
-      if (!ownPlaced && r.first >= own.second) {
-        ranges.push_back(own);
-        ownPlaced = true;
-      }
-      if (!ownPlaced) ownLocal += r.second - r.first;
-      ranges.push_back(r);
+      if (r.first < own.first) ownLocal += r.second - r.first;
+      stats.haloPoints += r.second - r.first;
     }
-    if (!ownPlaced) ranges.push_back(own);
-    for (const PointRange& r : halos[c]) stats.haloPoints += r.second - r.first;
-    PointSet local = gather(points, ranges);
-    auto index = std::make_unique<PointIndex>(local.position);
-    const SdfEvaluator localSdf(local, *index, options.smoothing, options.fit);
     const CornerStageResults chunk =
-        runCornerStages(local, localSdf, options, radii, plan.cellLevel, stage);
+        kept ? std::move(*kept) : runChunk(points, own, halos[c], options, radii, plan, stage);
+    if (resume != nullptr && !kept) saveCornerStage(*resume, chunk, checkpoint);
     lap(&seconds.merge);
     const uint64_t endCell = c + 1 < plan.chunks() ? plan.firstCell[c + 1]
                                                    : uint64_t{1} << (3 * plan.cellLevel);

@@ -47,6 +47,7 @@ OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radi
 
 struct ChunkRunStats {
   uint64_t haloPoints = 0;  // points loaded beside the owned ones, over all chunks
+  size_t resumed = 0;       // chunks taken from their checkpoints
   size_t seamSplits = 0;    // leaves the merge split for balance where two chunks met
 };
 // The stages as chunk jobs, one after the other (each parallel inside), then the merge: the owned
@@ -54,11 +55,13 @@ struct ChunkRunStats {
 // the chunk that made them first (chunk order), hanging corners are found and snapped again over
 // the whole tree, and filled leaves that two chunks left more than one level apart are balanced
 // (their corners from `sdf`, the signed distance over all points). `onChunk` is called as each
-// chunk ends.
+// chunk ends. With `resume`, each chunk's results are kept in it as it ends
+// (octreeChunkCheckpoint), and a chunk whose results are there whole is not run again.
 CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
-                                          const std::function<void()>& onChunk = {});
+                                          const std::function<void()>& onChunk = {},
+                                          ResumeState* resume = nullptr);
 
 }  // namespace iso

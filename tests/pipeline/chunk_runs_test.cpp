@@ -50,10 +50,11 @@ TEST(ChunkRuns, thePlanCoversTheFrameWithMortonRangesOfAboutTheChunkPoints) {
   const BuildOptions options = chunked();
   const OctreeChunkPlan plan = planOctreeChunks(p.points, p.radii, options);
   ASSERT_GE(plan.chunks(), 8u);
-  EXPECT_EQ(plan.cellLevel + 2, plan.haloLevel);
-  // Halo cells are the coarsest tested ones: no wider than maxTestedEdge spacings, their parents
-  // wider.
-  const double edge = std::ldexp(1.0, -plan.haloLevel) / p.radii.spacing;
+  // Chunks own cells four times as wide as the coarsest tested ones (no wider than maxTestedEdge
+  // spacings, their parents wider); halo cells are half as wide as those.
+  const int tested = plan.haloLevel - 1;
+  EXPECT_EQ(plan.cellLevel + 2, tested);
+  const double edge = std::ldexp(1.0, -tested) / p.radii.spacing;
   EXPECT_LE(edge, options.maxTestedEdge);
   EXPECT_GT(2.0 * edge, options.maxTestedEdge);
   EXPECT_EQ(plan.firstCell[0], 0u);
