@@ -1775,6 +1775,20 @@ TEST_F(CliPipeline, twoMpiRanksWriteTheSameBytesAsOneProcess) {
   EXPECT_TRUE(test::slurp(dir_ / "two.iso") == test::slurp(dir_ / "one.iso"));
   EXPECT_TRUE(temporariesUnder(dir_.path()).empty());
 
+  // The octree stages as chunk jobs, shared by the ranks too.
+  const std::string jobs = " --octree-chunk-points 20000" + options;
+  const auto oneJobs = runIso("convert" + jobs + quoted(dir_ / "one-jobs.iso"));
+  ASSERT_EQ(oneJobs.exitCode, 0) << oneJobs.err;
+  const auto twoJobs = test::runCommand(mpirun + jobs + quoted(dir_ / "two-jobs.iso"));
+  ASSERT_EQ(twoJobs.exitCode, 0) << twoJobs.err;
+  const nlohmann::json jobsReport = nlohmann::json::parse(twoJobs.out);
+  EXPECT_GT(jobsReport["octree_chunks"]["chunks"].get<int>(), 2);
+  bool waited = false;
+  for (const nlohmann::json& stage : jobsReport["stages"]) waited |= stage["name"] == "ranks";
+  EXPECT_TRUE(waited) << jobsReport["stages"].dump();
+  EXPECT_TRUE(test::slurp(dir_ / "two-jobs.iso") == test::slurp(dir_ / "one-jobs.iso"));
+  EXPECT_TRUE(temporariesUnder(dir_.path()).empty());
+
   const auto refused = test::runCommand(mpirun + " --resume" + options + quoted(dir_ / "x.iso"));
   EXPECT_NE(refused.exitCode, 0);
   EXPECT_NE(refused.err.find("cannot be used with 2 ranks"), std::string::npos) << refused.err;

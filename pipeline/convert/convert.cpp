@@ -404,6 +404,7 @@ void prepareAsRank(const RawSpill& raw, SpillDirectory& directory, const OutOfCo
   prepareOutOfCore(
       raw, directory, options, budget.maxChunkPoints, [](const std::string&, uint64_t) {},
       collectStrays, &ranks);
+  runCornerStagesAsRank(options, ranks);
 }
 
 namespace {
@@ -515,19 +516,27 @@ void requireFrame(const Frame& frame) {
 CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                                      const BuildOptions& options, const RadiusStats& radii,
                                      StageTimer& timer, nlohmann::json& report,
-                                     ResumeState* resume) {
+                                     const ConvertSource& source) {
   const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
+  const Ranks* ranks =
+      source.ranks != nullptr && source.ranks->count > 1 ? source.ranks : nullptr;
   if (plan.chunks() == 1) {
+    if (ranks != nullptr) tellRanks(*ranks, nullptr, radii);  // rank 0 runs them alone
     CornerStageResults r = runCornerStages(points, sdf, options, radii, 0,
                                            [&](const char* stage) { timer.next(stage); });
     points.roughness = {};  // only the octree's tolerance reads it
     return r;
   }
+  if (ranks != nullptr) {
+    timer.next("ranks");
+    tellRanks(*ranks, &points, radii);
+  }
   timer.next("octree chunks", plan.chunks());
   CornerStageSeconds seconds;
   ChunkRunStats stats;
-  CornerStageResults r = runCornerStagesByChunk(points, plan, sdf, options, radii, seconds, stats,
-                                                [] { progressAdvance(1); }, resume);
+  CornerStageResults r = runCornerStagesByChunk(
+      points, plan, sdf, options, radii, seconds, stats, [] { progressAdvance(1); },
+      source.resume, ranks);
   if (stats.resumed > 0) report["resumed"]["octree_chunks"] = stats.resumed;
   points.roughness = {};
   timer.discard();  // recorded by part below
@@ -535,6 +544,7 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
   timer.add("octree", seconds.octree);
   timer.add("passive+balance", seconds.passiveBalance);
   timer.add("corners", seconds.corners);
+  if (ranks != nullptr) timer.add("ranks", seconds.ranks);
   timer.add("chunk merge", seconds.merge);
   report["octree_chunks"] = {{"chunks", plan.chunks()},
                              {"cell_level", plan.cellLevel},
@@ -570,7 +580,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   }
   CornerStageResults built =
       resumed ? std::move(*resumed)
-              : buildCornerStages(points, *sdf, options, radii, timer, report, source.resume);
+              : buildCornerStages(points, *sdf, options, radii, timer, report, source);
   if (source.resume != nullptr && !resumed) {
     timer.next("checkpoint");
     saveCornerStage(*source.resume, built);

@@ -88,8 +88,9 @@ struct OutOfCoreBudget {
 nlohmann::json convertSpilled(const RawSpill& raw, SpillDirectory& directory,
                               const OutOfCoreBudget& budget, const std::filesystem::path& output,
                               const BuildOptions& options, const ConvertSource& source = {});
-// A rank other than 0 of a distributed run: its share of the point stages of the conversion rank 0
-// runs with the same raw points, budget and options (convertSpilled with ConvertSource::ranks).
+// A rank other than 0 of a distributed run: its share of the point stages, and then of the octree
+// stages' chunk jobs, of the conversion rank 0 runs with the same raw points, budget and options
+// (convertSpilled with ConvertSource::ranks).
 void prepareAsRank(const RawSpill& raw, SpillDirectory& directory, const OutOfCoreBudget& budget,
                    const BuildOptions& options, const Ranks& ranks, bool collectStrays);
 

@@ -284,6 +284,26 @@ class ChunkMerger {
   std::vector<uint32_t> seamLeaves_;    // filled leaves next to another chunk's cells
 };
 
+// What the ranks share: the points, and the chunk jobs' results, as checkpoints in a directory of
+// rank 0's temporary directory.
+constexpr const char* kShareFingerprint = "the octree stages' chunk jobs of one run";
+constexpr const char* kSharedPoints = "points";
+
+ResumeState sharedState(const Ranks& ranks) {
+  return ResumeState(ranks.shared / "octree-chunks", kShareFingerprint);
+}
+
+// The chunks [first, last) of a rank: Morton ranges of about equal points.
+std::pair<size_t, size_t> chunksOfRank(const OctreeChunkPlan& plan, int rank, int count) {
+  const auto start = [&](int r) {
+    const uint64_t target = uint64_t(plan.firstPoint.back()) * uint64_t(r) / uint64_t(count);
+    size_t c = 0;
+    while (c < plan.chunks() && plan.firstPoint[c] < target) ++c;
+    return c;
+  };
+  return {start(rank), start(rank + 1)};
+}
+
 // The stages over the chunk's own points and its halo.
 CornerStageResults runChunk(const PointSet& points, const PointRange& own,
                             const std::vector<PointRange>& halo, const BuildOptions& options,
@@ -341,7 +361,7 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
                                           const std::function<void()>& onChunk,
-                                          ResumeState* resume) {
+                                          ResumeState* resume, const Ranks* ranks) {
   auto start = Clock::now();
   double* current = nullptr;
   const auto lap = [&](double* next) {
@@ -359,13 +379,31 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
   const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
   ChunkMerger merger(points, plan);
   CornerStageResults sum;
+  // Rank 0 runs the first chunks; the others' results are there once every rank is done.
+  const bool shared = ranks != nullptr && ranks->count > 1;
+  std::optional<ResumeState> share;
+  if (shared) share.emplace(sharedState(*ranks));
+  const size_t mine = shared ? chunksOfRank(plan, 0, ranks->count).second : plan.chunks();
   for (size_t c = 0; c < plan.chunks(); ++c) {
     lap(&seconds.load);
     const PointRange own = {plan.firstPoint[c], plan.firstPoint[c + 1]};
     const std::string checkpoint = octreeChunkCheckpoint(c);
     std::optional<CornerStageResults> kept;
-    if (resume != nullptr && resume->has(checkpoint)) kept = loadCornerStage(*resume, checkpoint);
-    stats.resumed += kept.has_value();
+    if (c == mine && shared) {
+      lap(&seconds.ranks);
+      ranks->barrier();
+      lap(&seconds.load);
+    }
+    if (c >= mine) {
+      kept = loadCornerStage(*share, checkpoint);
+      if (!kept)
+        throw std::runtime_error("a rank's results of octree chunk " + std::to_string(c) +
+                                 " cannot be read" +
+                                 (share->notes().empty() ? "" : ": " + share->notes().back()));
+    } else if (resume != nullptr && resume->has(checkpoint)) {
+      kept = loadCornerStage(*resume, checkpoint);
+      stats.resumed += kept.has_value();
+    }
     uint32_t ownLocal = 0;
     for (const PointRange& r : halos[c]) {
       if (r.first < own.first) ownLocal += r.second - r.first;
@@ -391,6 +429,7 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
     if (onChunk) onChunk();
   }
   lap(&seconds.merge);
+  if (share) share->finish();
   CornerStageResults r = merger.finish(sdf, stats.seamSplits);
   r.stats = sum.stats;
   r.passive = sum.passive;
@@ -401,6 +440,48 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
   r.closure.passes = sum.closure.passes;
   lap(nullptr);
   return r;
+}
+
+void tellRanks(const Ranks& ranks, const PointSet* points, const RadiusStats& radii) {
+  std::vector<std::byte> word;
+  if (points != nullptr) {
+    ResumeState share = sharedState(ranks);
+    const std::unique_ptr<CheckpointWriter> out = share.create(kSharedPoints);
+    out->json("radii", {radii.spacing, radii.medianRadius});
+    writeColumns(*out, *points);
+    out->commit();
+    word.push_back(std::byte{1});
+  }
+  ranks.broadcast(word);
+}
+
+void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks) {
+  std::vector<std::byte> word;
+  ranks.broadcast(word);
+  if (word.empty()) return;  // the octree stages run in one, on rank 0
+  ResumeState share = sharedState(ranks);
+  PointSet points;
+  RadiusStats radii;
+  {
+    const std::unique_ptr<CheckpointReader> in = share.open(kSharedPoints);
+    if (!in) throw std::runtime_error("rank 0's points cannot be read from " +
+                                      share.path(kSharedPoints).string());
+    const nlohmann::json r = in->json("radii");
+    radii = {r[0].get<double>(), r[1].get<double>()};
+    readColumns(*in, points);
+    in->finish();
+  }
+  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
+  const auto [first, last] = chunksOfRank(plan, ranks.rank, ranks.count);
+  if (first < last) {
+    const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
+    for (size_t c = first; c < last; ++c)
+      saveCornerStage(share,
+                      runChunk(points, {plan.firstPoint[c], plan.firstPoint[c + 1]}, halos[c],
+                               options, radii, plan, [](const char*) {}),
+                      octreeChunkCheckpoint(c));
+  }
+  ranks.barrier();
 }
 
 }  // namespace iso

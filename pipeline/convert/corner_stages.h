@@ -11,6 +11,7 @@
 
 #include "pipeline/base/options.h"
 #include "pipeline/convert/checkpoints.h"
+#include "pipeline/outofcore/outofcore.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/points/points.h"
@@ -20,6 +21,7 @@ namespace iso {
 // Seconds spent in each part of the stages (summed over chunk jobs).
 struct CornerStageSeconds {
   double load = 0.0, octree = 0.0, passiveBalance = 0.0, corners = 0.0, merge = 0.0;
+  double ranks = 0.0;  // rank 0 waiting for the other ranks' chunks
 };
 
 // The stages over these points in one run; `stage` is called with "octree", "passive+balance" and
@@ -56,12 +58,24 @@ struct ChunkRunStats {
 // the whole tree, and filled leaves that two chunks left more than one level apart are balanced
 // (their corners from `sdf`, the signed distance over all points). `onChunk` is called as each
 // chunk ends. With `resume`, each chunk's results are kept in it as it ends
-// (octreeChunkCheckpoint), and a chunk whose results are there whole is not run again.
+// (octreeChunkCheckpoint), and a chunk whose results are there whole is not run again. With
+// `ranks` (rank 0 of several), the chunks are shared: see runCornerStagesAsRank.
 CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
                                           const std::function<void()>& onChunk = {},
-                                          ResumeState* resume = nullptr);
+                                          ResumeState* resume = nullptr,
+                                          const Ranks* ranks = nullptr);
+
+// The chunk jobs shared by the ranks of a distributed run (specs/pipeline.md §15, "Ranks"). Rank 0
+// tells the others, once its point stages are done, whether the octree stages run as chunk jobs:
+// it calls tellRanks with the points (nothing when they run in one), which keeps them in its
+// shared directory, and then runCornerStagesByChunk with `ranks`. Every other rank calls
+// runCornerStagesAsRank after its point stages: it reads the points, makes the same plan, runs
+// the chunks of its range (Morton ranges of about equal points, rank 0's first) and keeps their
+// results in the shared directory, where rank 0 takes them in chunk order once all are done.
+void tellRanks(const Ranks& ranks, const PointSet* points, const RadiusStats& radii);
+void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks);
 
 }  // namespace iso
