@@ -12,7 +12,10 @@
 // the result is a function of the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -163,19 +166,28 @@ class ChunkMerger {
       const OctreeNode& r = chunk.octree.nodes[root];
       copySubtree(chunk.octree, root, slotAt(r.key), offset, filled);
     }
+    // The corners the owned filled leaves use, each taken once (a corner is shared by up to 8),
+    // in the chunk field's order.
     const CornerField& corners = chunk.closure.corners;
-    for (const auto& [merged, own] : filled) {
-      const OctreeNode& leaf = chunk.octree.nodes[own];
-      for (int c = 0; c < kCorners; ++c) {
-        const Key128 key = gridKey(cornerPoint(leaf.level, leaf.key, c));
-        const auto [entry, added] = field_.insert(key);
-        if (!added) continue;
-        const uint32_t from = corners.find(key);
-        ISO_CHECK(from != kNoNode);  // every filled leaf's corners are in its field
-        field_.value[entry] = corners.value[from];
-      }
-      if (touchesOtherChunk(tree_.nodes[merged], index)) seamLeaves_.push_back(merged);
+    std::vector<uint8_t> used(corners.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, filled.size(), 4096),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i) {
+                          const OctreeNode& leaf = chunk.octree.nodes[filled[i].second];
+                          for (int c = 0; c < kCorners; ++c) {
+                            const uint32_t e = corners.find(cornerPoint(leaf.level, leaf.key, c));
+                            ISO_CHECK(e != kNoNode);  // a filled leaf's corners are in its field
+                            std::atomic_ref<uint8_t>(used[e]).store(1, std::memory_order_relaxed);
+                          }
+                        }
+                      });
+    for (uint32_t e = 0; e < used.size(); ++e) {
+      if (!used[e]) continue;
+      const auto [entry, added] = field_.insert(corners.index.key(e));
+      if (added) field_.value[entry] = corners.value[e];
     }
+    for (const auto& [merged, own] : filled)
+      if (touchesOtherChunk(tree_.nodes[merged], index)) seamLeaves_.push_back(merged);
   }
 
   // The merged tree and field: cells above the plan's level with nothing filled below emptied,
