@@ -531,11 +531,11 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
     timer.next("ranks");
     tellRanks(*ranks, &points, radii);
   }
-  timer.next("octree chunks", plan.chunks());
+  timer.next("octree chunks", points.size());
   CornerStageSeconds seconds;
   ChunkRunStats stats;
   CornerStageResults r = runCornerStagesByChunk(
-      points, plan, sdf, options, radii, seconds, stats, [] { progressAdvance(1); },
+      points, plan, sdf, options, radii, seconds, stats, [](uint64_t done) { progressAdvance(done); },
       source.resume, ranks);
   if (stats.resumed > 0) report["resumed"]["octree_chunks"] = stats.resumed;
   points.roughness = {};
@@ -594,10 +594,15 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   timer.next("lod");
   // The points' signed distance and index go once the levels that read them are done: the writer
   // reads points, not neighbours.
-  LodField lod = sampleLodCorners(octree, points, *sdf, options, [&] {
-    sdf.reset();
-    ready.index.reset();
-  });
+  // A chunk run's corners by chunk (cell_index.h), in the order its tree's nodes come.
+  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
+  LodField lod = sampleLodCorners(
+      octree, points, *sdf, options,
+      [&] {
+        sdf.reset();
+        ready.index.reset();
+      },
+      plan.chunks() > 1 ? plan.cut() : CellCut{});
   if (texture && options.texture.at == TextureAt::Corners) {
     timer.next("texture", corners.size() + lod.value.size());
     textureCorners(closure.corners, lod, frame, *texture, inputColors);

@@ -146,7 +146,10 @@ class ChunkMerger {
       : points_(points),
         plan_(plan),
         cellLevel_(plan.cellLevel),
-        field_(points.size() / 2, points.size() / 2) {
+        field_(1024, points.size() / 2) {
+    // Each chunk's corners get their own stretch of the table (cell_index.h): the merge and the
+    // stages after it find corners in Morton order.
+    field_.index.cutByCells(plan.cut(), points.size() / 2);
     OctreeNode root;
     root.pointEnd = uint32_t(points.size());
     root.kind = NodeKind::Empty;
@@ -181,6 +184,7 @@ class ChunkMerger {
                           }
                         }
                       });
+    field_.index.openPart(index, size_t(std::count(used.begin(), used.end(), uint8_t{1})));
     for (uint32_t e = 0; e < used.size(); ++e) {
       if (!used[e]) continue;
       const auto [entry, added] = field_.insert(corners.index.key(e));
@@ -200,6 +204,7 @@ class ChunkMerger {
         any = tree_.nodes[node.firstChild + c].kind != NodeKind::Empty;
       if (!any) node.kind = NodeKind::Empty;
     }
+    field_.index.closeParts();
     std::vector<uint32_t> created;
     seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
     addLeafCorners(field_, tree_, created, sdf);
@@ -331,6 +336,7 @@ CornerStageResults runChunk(const PointSet& points, const PointRange& own,
     ranges.push_back(r);
   }
   if (!ownPlaced) ranges.push_back(own);
+  const ProgressMute mute;  // the job counts its own points when it ends
   PointSet local = gather(points, ranges);
   const auto index = std::make_unique<PointIndex>(local.position);
   const SdfEvaluator sdf(local, *index, options.smoothing, options.fit);
@@ -372,7 +378,7 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
-                                          const std::function<void()>& onChunk,
+                                          const std::function<void(uint64_t)>& onChunk,
                                           ResumeState* resume, const Ranks* ranks) {
   auto start = Clock::now();
   double* current = nullptr;
@@ -438,7 +444,7 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
     sum.closure.filled += chunk.closure.filled;
     sum.closure.refilled += chunk.closure.refilled;
     sum.closure.passes = std::max(sum.closure.passes, chunk.closure.passes);
-    if (onChunk) onChunk();
+    if (onChunk) onChunk(own.second - own.first);
   }
   lap(&seconds.merge);
   if (share) share->finish();

@@ -41,6 +41,7 @@ struct OctreeChunkPlan {
   std::vector<uint64_t> firstCell;   // one a chunk
   std::vector<uint32_t> firstPoint;  // one a chunk, then the number of points
   size_t chunks() const { return firstCell.size(); }
+  CellCut cut() const { return {cellLevel, firstCell}; }
 };
 // One chunk when the points are at most options.octreeChunkPoints or the tree is too shallow to
 // cut; else Morton ranges of cells of about that many points each.
@@ -56,15 +57,15 @@ struct ChunkRunStats {
 // nodes of each chunk become the tree below the cells of the plan's level, corners are taken from
 // the chunk that made them first (chunk order), hanging corners are found and snapped again over
 // the whole tree, and filled leaves that two chunks left more than one level apart are balanced
-// (their corners from `sdf`, the signed distance over all points). `onChunk` is called as each
-// chunk ends. With `resume`, each chunk's results are kept in it as it ends
+// (their corners from `sdf`, the signed distance over all points). `onChunk` is called with the
+// chunk's own points as each chunk ends (the jobs' inner stages count no progress). With `resume`, each chunk's results are kept in it as it ends
 // (octreeChunkCheckpoint), and a chunk whose results are there whole is not run again. With
 // `ranks` (rank 0 of several), the chunks are shared: see runCornerStagesAsRank.
 CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,
                                           ChunkRunStats& stats,
-                                          const std::function<void()>& onChunk = {},
+                                          const std::function<void(uint64_t)>& onChunk = {},
                                           ResumeState* resume = nullptr,
                                           const Ranks* ranks = nullptr);
 

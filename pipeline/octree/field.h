@@ -23,10 +23,12 @@
 #include "iso/surface.h"
 #include "pipeline/base/buffers.h"
 #include "pipeline/base/options.h"
+#include "pipeline/octree/cell_index.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/points/points.h"
 
 static_assert(iso::KeyIndex<iso::Key128>::kNone == iso::kNoNode);
+static_assert(iso::CellKeyIndex::kNone == iso::kNoNode);
 
 namespace iso {
 
@@ -42,7 +44,7 @@ struct CornerField {
   CornerField(size_t expected, size_t reserved);
   // Spillable (pipeline/base/buffers.h): the entries are made in the key order of the leaves using
   // them, which the stages that read them follow; the hash table stays in memory.
-  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // gridKey → entry
+  CellKeyIndex index{1024};  // gridKey → entry
   SpillVector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
   SpillVector<CornerSample> value;
   uint32_t find(const GridPoint& p) const;
@@ -118,17 +120,19 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.
 struct LodField {
-  KeyIndex<Key128, SpillAllocator<Key128, true>> index{1024};  // lodKey → entry
+  CellKeyIndex index{1024};  // lodKey → entry
   SpillVector<CornerSample> value;
   uint32_t find(uint8_t level, const GridPoint& p) const;
   GridPoint point(uint32_t entry) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);
 // pointsSdfDone, when set, is called once pointsSdf is no longer needed (before any proxies are
-// made), so that it and its index can be freed.
+// made), so that it and its index can be freed. With a cut (a chunk run's parts, whose nodes come
+// in part order), each part's corners get their own stretch of the field's table.
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options,
-                          const std::function<void()>& pointsSdfDone = {});
+                          const std::function<void()>& pointsSdfDone = {},
+                          const CellCut& cut = {});
 // The largest distance of the points below an internal node to the node's own patch.
 float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
                      uint32_t node);

@@ -150,11 +150,32 @@ GridPoint LodField::point(uint32_t entry) const {
 }
 
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
-                          const BuildOptions& options, const std::function<void()>& pointsSdfDone) {
+                          const BuildOptions& options, const std::function<void()>& pointsSdfDone,
+                          const CellCut& cut) {
   LodField field;
+  // A part's stretch: room for 4 corners an internal node (8 a node, each shared by a few).
+  std::vector<size_t> internalOf(cut.firstCell.size(), 0);
+  if (!cut.firstCell.empty()) {
+    field.index.cutByCells(cut, 0);
+    for (const OctreeNode& node : tree.nodes)
+      if (const size_t p = cut.partOfNode(node.level, node.key);
+          node.kind == NodeKind::Internal && p != CellCut::kNoPart)
+        ++internalOf[p];
+  }
+  size_t part = CellCut::kNoPart;
   std::map<int, SpillVector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
   for (const OctreeNode& node : tree.nodes) {
     if (node.kind != NodeKind::Internal) continue;
+    if (!cut.firstCell.empty()) {
+      const size_t p = cut.partOfNode(node.level, node.key);
+      if (p != part) {
+        if (p == CellCut::kNoPart)
+          field.index.closeParts();
+        else
+          field.index.openPart(p, 4 * internalOf[p]);
+        part = p;
+      }
+    }
     for (int c = 0; c < kCorners; ++c) {
       const GridPoint p = cornerPoint(node.level, node.key, c);
       const auto [entry, inserted] = field.index.insert(lodKey(node.level, p));

@@ -6,9 +6,11 @@
 
 #include <cmath>
 #include <memory>
+#include <random>
 
 #include "pipeline/base/options.h"
 #include "pipeline/convert/corner_stages.h"
+#include "pipeline/octree/cell_index.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/points/knn.h"
@@ -43,6 +45,42 @@ Prepared prepare(const PointCloud& cloud) {
   p.radii = estimateRadii(p.points, neighbors);
   estimateRoughness(p.points, neighbors);
   return p;
+}
+
+// A table cut by space numbers and finds keys as one table does, whatever parts are open when
+// keys come (their own, another's, none) and however full their stretches get.
+TEST(CellKeyIndex, numbersAndFindsKeysAsOneTableWhateverTheCut) {
+  std::mt19937_64 random(7);
+  constexpr uint32_t kGrid = 1u << kMaxLevel;
+  std::vector<Key128> keys;
+  for (int i = 0; i < 60000; ++i) {
+    // Clustered grid points (a surface's are), on cell faces now and then, some repeated.
+    const uint32_t cx = uint32_t(random() % 5) * (kGrid / 8), jitter = uint32_t(random() % 4096);
+    const uint32_t x = std::min(kGrid, cx + jitter), y = uint32_t(random() % (kGrid + 1));
+    const uint32_t z = i % 7 == 0 ? kGrid / 2 : uint32_t(random() % (kGrid + 1));
+    keys.push_back({x | uint64_t(y) << 32, z | uint64_t(i % 3) << 32});
+    if (i % 5 == 0) keys.push_back(keys[size_t(random() % keys.size())]);
+  }
+  const CellCut cut{3, {0, 40, 41, 200, 333}};
+  KeyIndex<Key128> one(16);
+  CellKeyIndex cutIndex(16);
+  cutIndex.cutByCells(cut, 1000);
+  size_t inStretches = 0;
+  for (size_t i = 0; i < keys.size(); ++i) {
+    if (i % 9000 == 0) cutIndex.openPart((i / 9000) % cut.firstCell.size(), 1500);  // 3,000 slots
+    if (i == 50000) cutIndex.closeParts();
+    const auto a = one.insert(keys[i]);
+    const auto b = cutIndex.insert(keys[i]);
+    ASSERT_EQ(a, b) << i;
+    inStretches += b.second && i < 50000;
+  }
+  ASSERT_EQ(one.size(), cutIndex.size());
+  for (size_t n = 0; n < one.size(); ++n) {
+    ASSERT_EQ(cutIndex.find(one.key(uint32_t(n))), n);
+    ASSERT_EQ(cutIndex.key(uint32_t(n)), one.key(uint32_t(n)));
+  }
+  EXPECT_EQ(cutIndex.find({12345, 1}), CellKeyIndex::kNone);
+  EXPECT_GT(inStretches, 1000u);
 }
 
 TEST(ChunkRuns, thePlanCoversTheFrameWithMortonRangesOfAboutTheChunkPoints) {

@@ -456,11 +456,11 @@ int runConversion(Options& o, const MpiRanks* mpi) {
                   !o.writeStrays.empty());
     return kExitOk;
   }
-  // The octree stages keep their arrays and hash tables in spilled files, but their work lists
-  // stay in memory (specs/pipeline.md §15): about 5 bytes per point at 100M points of a sampled
-  // scan (0.54 GiB). Say so before a long run when that alone exceeds the budget.
+  // An octree run of all points (not chunk jobs) keeps its work lists in memory (specs/pipeline.md
+  // §15): about 5 bytes per point. Say so before a long run when that alone exceeds the budget.
   const uint64_t listBytes = raw->size() * 5;
-  if (listBytes > memory && !o.quiet && mode != ProgressMode::Json)
+  if (raw->size() <= o.build.octreeChunkPoints && listBytes > memory && !o.quiet &&
+      mode != ProgressMode::Json)
     fmt::print(stderr,
                "note: the octree stages' work lists stay in memory: about {} for {} points, "
                "more than --memory {}\n",
