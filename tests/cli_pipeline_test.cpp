@@ -1749,6 +1749,38 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
 
 // A distributed run on MPI (Debian's OpenMPI): two ranks share the point stages' chunks and write
 // the same bytes as one process, strays that change the frame included; an error ends both.
+// Real scans as chunk jobs of the octree stages (forced small: 8–18 chunks of these scans) are as
+// accurate and as closed to the viewer as in one run (specs/pipeline.md §15, item 6).
+TEST_F(CliPipeline, realScansAsChunkJobsAreAsAccurateAndAsClosedAsOneRun) {
+  const fs::path data = ISO_SHARED_DATA_DIR;
+  size_t scans = 0;
+  for (const char* name : {"table_scene_lms400.pcd", "lone_star_tls_utm.las", "lion_rgb.las"}) {
+    if (!fs::exists(data / name)) continue;
+    SCOPED_TRACE(name);
+    ++scans;
+    const auto convert = [&](const std::string& more) {
+      const auto run = runIso("convert -q -f --json " + more + quoted(data / name) + " -o " +
+                              quoted(dir_ / "scan.iso"));
+      EXPECT_EQ(run.exitCode, 0) << run.err;
+      return nlohmann::json::parse(run.out, nullptr, false);
+    };
+    const nlohmann::json one = convert("");
+    const nlohmann::json jobs = convert("--octree-chunk-points 20000 ");
+    ASSERT_FALSE(one.contains("octree_chunks"));
+    EXPECT_GE(jobs["octree_chunks"]["chunks"].get<int>(), 8) << jobs["octree_chunks"].dump();
+    for (const char* key : {"rms_over_spacing", "max_over_spacing"})
+      EXPECT_LE(jobs["accuracy"][key].get<double>(), 1.02 * one["accuracy"][key].get<double>())
+          << key;
+    for (const char* key : {"seen_through_fraction", "worst_view_fraction"})
+      EXPECT_LE(jobs["visibility"][key].get<double>(),
+                one["visibility"][key].get<double>() + 1e-4)
+          << key;
+    const double leaves = one["octree"]["leaves"].get<double>();
+    EXPECT_NEAR(jobs["octree"]["leaves"].get<double>(), leaves, 0.01 * leaves);
+  }
+  if (scans == 0) GTEST_SKIP() << "no " << data << " (the shared data folder)";
+}
+
 TEST_F(CliPipeline, twoMpiRanksWriteTheSameBytesAsOneProcess) {
   if (test::runCommand("command -v mpirun").exitCode != 0)
     GTEST_SKIP() << "no mpirun (tools/run setup)";

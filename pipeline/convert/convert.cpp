@@ -550,7 +550,8 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                              {"cell_level", plan.cellLevel},
                              {"halo_level", plan.haloLevel},
                              {"halo_points", stats.haloPoints},
-                             {"seam_splits", stats.seamSplits}};
+                             {"seam_splits", stats.seamSplits},
+                             {"seam_fills", stats.seamFills}};
   return r;
 }
 

@@ -3,13 +3,14 @@
 //
 // Why a chunk job reads a bounded neighbourhood: a node wider than maxTestedEdge spacings, or
 // holding more than maxTestedPoints points, is subdivided without a test, so every node whose
-// decision reads points is at most a tested cell wide. The signed distance, coverage and disk
-// queries of a chunk's own nodes read a few radii around them, well inside its halo (cells half a
-// tested cell wide around its owned cells); nodes cut by the halo's outer edge may decide
-// otherwise than with all their points, and what follows from them (closure chains, balance
-// cascades) starts there, half a tested cell from the owned cells. Where two chunks still leave
-// their filled leaves more than a level apart, the merge balances them. Whatever the halo holds,
-// the result is a function of the points and the options: the plan depends on nothing else.
+// decision reads points, and every leaf, is at most a tested cell wide. A chunk's halo is the
+// tested cells with points around its owned cells, loaded whole: the nodes next to the owned cells
+// hold all their points, and the signed distance, coverage, disk and corner-fit reads of the owned
+// nodes reach a few radii, inside the halo. Nodes cut by the halo's outer edge may decide otherwise
+// than with all their points, and what follows from them (closure chains, balance cascades) starts
+// a tested cell from the owned cells. Where two chunks still disagree at a seam, the merge balances
+// the leaves and closes the surface across it. Whatever the halo holds, the result is a function of
+// the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
 #include <tbb/parallel_for.h>
@@ -64,9 +65,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Halo cells this many levels below the coarsest tested level (specs/pipeline.md §15 measures 0
-// and 1).
-constexpr int kHaloBelowTested = 1;
 
 int shiftOf(uint8_t level) { return 3 * (kMaxLevel - level); }
 
@@ -195,8 +193,9 @@ class ChunkMerger {
   }
 
   // The merged tree and field: cells above the plan's level with nothing filled below emptied,
-  // seams balanced (new leaves sampled with `sdf`), hanging corners found and snapped.
-  CornerStageResults finish(const SdfEvaluator& sdf, size_t& seamSplits) {
+  // seams balanced and closed (new leaves sampled with `sdf`), hanging corners found and snapped.
+  CornerStageResults finish(const SdfEvaluator& sdf, const BuildOptions& options,
+                            ChunkRunStats& stats) {
     for (size_t i = placeholders_.size(); i-- > 0;) {
       OctreeNode& node = tree_.nodes[placeholders_[i]];
       bool any = false;
@@ -206,12 +205,36 @@ class ChunkMerger {
     }
     field_.index.closeParts();
     std::vector<uint32_t> created;
-    seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
-    addLeafCorners(field_, tree_, created, sdf);
+    stats.seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
     CornerStageResults r;
     r.octree = std::move(tree_);
     r.closure.corners = std::move(field_);
-    refreshCorners(r.octree, r.closure);
+    // The surface closed across the seams (a job may not have filled a cell of another chunk's
+    // that its own leaf's zero set runs into), from the seam leaves and the balance's new ones.
+    std::vector<uint32_t> fresh;
+    for (const uint32_t id : seamLeaves_)
+      if (r.octree.nodes[id].isFilled()) fresh.push_back(id);
+    fresh.insert(fresh.end(), created.begin(), created.end());
+    std::vector<uint8_t> wasFilled(r.octree.nodes.size());
+    for (size_t i = 0; i < wasFilled.size(); ++i) wasFilled[i] = r.octree.nodes[i].isFilled();
+    // Only exits into another chunk's cells: within its own cells, each job closed its surface.
+    const auto ownerOfNode = [&](uint8_t level, uint64_t key) {
+      return ownerOf(plan_, key >> (3 * (level - cellLevel_)));
+    };
+    closeFromLeaves(std::move(fresh), r.octree, points_, sdf, r.closure,
+                    [&](uint8_t leafLevel, uint64_t leafKey, uint8_t level, uint64_t key) {
+                      return ownerOfNode(leafLevel, leafKey) != ownerOfNode(level, key);
+                    });
+    // The jobs trimmed what their closures filled far from the points; so are the seams' fills.
+    std::vector<uint32_t> filled;
+    for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)
+      if (r.octree.nodes[i].isFilled() && (i >= wasFilled.size() || !wasFilled[i]))
+        filled.push_back(i);
+    const size_t trimmed =
+        options.fillHoles ? 0
+                          : trimFarSurface(r.octree, points_, sdf, r.closure, options.trimReach,
+                                           &filled);
+    stats.seamFills = filled.size() - trimmed;
     r.octree.nodes.shrink_to_fit();
     return r;
   }
@@ -353,11 +376,12 @@ OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radi
   const double maxEdge = options.maxTestedEdge * radii.spacing;
   if (points.size() <= options.octreeChunkPoints || !(maxEdge > 0.0)) return plan;
   // The coarsest tested level (cells no wider than maxEdge): chunks own cells four times wider, and
-  // their halos are cells half as wide, so that a halo cell is an eighth of an owned cell.
+  // their halos are cells of that level (half-width halos, measured, let a leaf next to a seam
+  // lose points: §15).
   int tested = 0;
   while (tested < kMaxLevel && std::ldexp(1.0, -tested) > maxEdge) ++tested;
-  if (tested < 3 || tested + 1 > options.maxDepth) return plan;
-  plan.haloLevel = uint8_t(tested + kHaloBelowTested);
+  if (tested < 3 || tested > options.maxDepth) return plan;
+  plan.haloLevel = uint8_t(tested);
   plan.cellLevel = uint8_t(tested - 2);
   uint64_t inChunk = 0;
   plan.firstPoint.pop_back();
@@ -448,12 +472,12 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
   }
   lap(&seconds.merge);
   if (share) share->finish();
-  CornerStageResults r = merger.finish(sdf, stats.seamSplits);
+  CornerStageResults r = merger.finish(sdf, options, stats);
   r.stats = sum.stats;
   r.passive = sum.passive;
   r.splits = sum.splits + stats.seamSplits;
   r.trimmed = sum.trimmed;
-  r.closure.filled = sum.closure.filled;
+  r.closure.filled = sum.closure.filled + stats.seamFills;
   r.closure.refilled = sum.closure.refilled;
   r.closure.passes = sum.closure.passes;
   lap(nullptr);

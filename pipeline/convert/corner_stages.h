@@ -34,8 +34,9 @@ CornerStageResults runCornerStages(PointSet& points, const SdfEvaluator& sdf,
 
 // The partition of a chunked run: chunk c owns the cells of level cellLevel whose keys lie in
 // [firstCell[c], firstCell[c + 1]) (the last one up to 8^cellLevel), so the chunks cover the
-// frame; its halo is every cell of level haloLevel with points that touches (by a face, an edge
-// or a corner) a cell of that level it owns. A function of the points and the options only.
+// frame; its halo is every cell of level haloLevel (the coarsest tested level, two below
+// cellLevel) with points that touches (by a face, an edge or a corner) a cell of that level it
+// owns. A function of the points and the options only.
 struct OctreeChunkPlan {
   uint8_t cellLevel = 0, haloLevel = 0;
   std::vector<uint64_t> firstCell;   // one a chunk
@@ -52,15 +53,17 @@ struct ChunkRunStats {
   uint64_t haloPoints = 0;  // points loaded beside the owned ones, over all chunks
   size_t resumed = 0;       // chunks taken from their checkpoints
   size_t seamSplits = 0;    // leaves the merge split for balance where two chunks met
+  size_t seamFills = 0;     // empty cells the merge filled where the surface ran across a seam
 };
 // The stages as chunk jobs, one after the other (each parallel inside), then the merge: the owned
 // nodes of each chunk become the tree below the cells of the plan's level, corners are taken from
-// the chunk that made them first (chunk order), hanging corners are found and snapped again over
-// the whole tree, and filled leaves that two chunks left more than one level apart are balanced
-// (their corners from `sdf`, the signed distance over all points). `onChunk` is called with the
-// chunk's own points as each chunk ends (the jobs' inner stages count no progress). With `resume`, each chunk's results are kept in it as it ends
-// (octreeChunkCheckpoint), and a chunk whose results are there whole is not run again. With
-// `ranks` (rank 0 of several), the chunks are shared: see runCornerStagesAsRank.
+// the chunk that made them first (chunk order), filled leaves that two chunks left more than one
+// level apart are balanced and the surface is closed from the leaves along the seams (new leaves'
+// corners from `sdf`, the signed distance over all points), and hanging corners are found and
+// snapped again over the whole tree. `onChunk` is called with the chunk's own points as each
+// chunk ends (the jobs' inner stages count no progress). With `resume`, each chunk's results are
+// kept in it as it ends (octreeChunkCheckpoint), and a chunk whose results are there whole is not
+// run again. With `ranks` (rank 0 of several), the chunks are shared: see runCornerStagesAsRank.
 CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeChunkPlan& plan,
                                           const SdfEvaluator& sdf, const BuildOptions& options,
                                           const RadiusStats& radii, CornerStageSeconds& seconds,

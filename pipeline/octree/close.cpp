@@ -177,10 +177,19 @@ void exitsOf(const Octree& tree, const PointSet& points, const SdfEvaluator& sdf
 // The cells are found in parallel on the tree as it stands and filled coarsest first, in key
 // order, so the result does not depend on the order of the leaves.
 std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                                const CornerField& field, const std::vector<uint32_t>& leaves) {
+                                const CornerField& field, const std::vector<uint32_t>& leaves,
+                                const ExitFilter& accept = {}) {
   std::vector<Exit> targets =
       collectInParallel<Exit>(leaves.size(), 1024, [&](size_t i, std::vector<Exit>& out) {
+        const size_t before = out.size();
         exitsOf(tree, points, sdf, field, leaves[i], out);
+        if (!accept) return;
+        const OctreeNode& leaf = tree.nodes[leaves[i]];
+        out.erase(std::remove_if(out.begin() + ptrdiff_t(before), out.end(),
+                                 [&](const Exit& e) {
+                                   return !accept(leaf.level, leaf.key, e.level, e.key);
+                                 }),
+                  out.end());
       });
   std::sort(targets.begin(), targets.end());
   targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
@@ -197,11 +206,12 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
 // Fill the exits of the given leaves, then of the leaves each pass adds, until none is left;
 // then set the corner levels from the final leaves and snap the hanging corners.
 void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points,
-               const SdfEvaluator& sdf, Closure& closure) {
+               const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {}) {
   addLeafCorners(closure.corners, tree, fresh, sdf);
   // Exits are found on the values as they are: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
-    std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh);
+    std::vector<uint32_t> filled = fillExits(tree, points, sdf, closure.corners, fresh,
+                                             closure.passes == 1 ? firstPass : ExitFilter{});
     if (filled.empty()) break;
     closure.filled += filled.size();
     std::vector<uint32_t> created;
@@ -231,6 +241,11 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
     if (tree.nodes[i].isFilled()) filled.push_back(i);
   closeFrom(std::move(filled), tree, points, sdf, closure);
   return closure;
+}
+
+void closeFromLeaves(std::vector<uint32_t> leaves, Octree& tree, const PointSet& points,
+                     const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass) {
+  closeFrom(std::move(leaves), tree, points, sdf, closure, firstPass);
 }
 
 void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,

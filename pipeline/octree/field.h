@@ -108,14 +108,25 @@ void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, C
 // After the tree's filled leaves changed: the corner levels set from the final leaves (every
 // corner they use is in the field), the hanging corners found again and snapped.
 void refreshCorners(const Octree& tree, Closure& closure);
+// Whether the closure fills the empty cell (level, key) that the zero set of the leaf (leafLevel,
+// leafKey) runs into.
+using ExitFilter = std::function<bool(uint8_t leafLevel, uint64_t leafKey, uint8_t level,
+                                      uint64_t key)>;
+// Close the surface from these filled leaves (where a chunk run's jobs met): their missing corners
+// sampled, then the closure's passes from them (the first pass filling only the cells `firstPass`
+// accepts, when given), then refreshCorners. The cells it fills are counted in closure.filled.
+void closeFromLeaves(std::vector<uint32_t> leaves, Octree& tree, const PointSet& points,
+                     const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {});
 
 // ---- trim.cpp
 // Empty the filled leaves without points whose zero set exists and lies, at half or more of the
 // places where it is sampled, farther than `reach` radii of influence from the nearest point
 // (sheets across holes), and the internal nodes left with nothing filled below; the closure's
-// corner levels and hanging corners are updated. Returns the leaves emptied.
+// corner levels and hanging corners are updated. Returns the leaves emptied. With `candidates`,
+// only those leaves are looked at.
 size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                      Closure& closure, double reach);
+                      Closure& closure, double reach,
+                      const std::vector<uint32_t>* candidates = nullptr);
 
 // ---- lod.cpp
 // Corners of internal nodes, keyed by (level, grid point), evaluated from point proxies.

@@ -92,13 +92,15 @@ void emptyBareInternalNodes(Octree& tree) {
 }  // namespace
 
 size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& sdf,
-                      Closure& closure, double reach) {
-  std::vector<uint8_t> far(tree.nodes.size(), 0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, tree.nodes.size(), 1024),
+                      Closure& closure, double reach, const std::vector<uint32_t>* candidates) {
+  const size_t count = candidates ? candidates->size() : tree.nodes.size();
+  const auto nodeAt = [&](size_t i) { return candidates ? (*candidates)[i] : uint32_t(i); };
+  std::vector<uint8_t> far(count, 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 1024),
                     [&](const tbb::blocked_range<size_t>& r) {
                       spillPause();
                       for (size_t i = r.begin(); i < r.end(); ++i) {
-                        const OctreeNode& leaf = tree.nodes[i];
+                        const OctreeNode& leaf = tree.nodes[nodeAt(i)];
                         if (!leaf.isFilled() || leaf.pointCount() > 0) continue;
                         std::array<double, 8> f{};
                         for (int c = 0; c < kCorners; ++c)
@@ -110,7 +112,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
   size_t trimmed = 0;
   for (size_t i = 0; i < far.size(); ++i)
     if (far[i]) {
-      tree.nodes[i].kind = NodeKind::Empty;
+      tree.nodes[nodeAt(i)].kind = NodeKind::Empty;
       ++trimmed;
     }
   if (trimmed == 0) return 0;

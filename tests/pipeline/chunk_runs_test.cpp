@@ -89,8 +89,8 @@ TEST(ChunkRuns, thePlanCoversTheFrameWithMortonRangesOfAboutTheChunkPoints) {
   const OctreeChunkPlan plan = planOctreeChunks(p.points, p.radii, options);
   ASSERT_GE(plan.chunks(), 8u);
   // Chunks own cells four times as wide as the coarsest tested ones (no wider than maxTestedEdge
-  // spacings, their parents wider); halo cells are half as wide as those.
-  const int tested = plan.haloLevel - 1;
+  // spacings, their parents wider), the halo's cells.
+  const int tested = plan.haloLevel;
   EXPECT_EQ(plan.cellLevel + 2, tested);
   const double edge = std::ldexp(1.0, -tested) / p.radii.spacing;
   EXPECT_LE(edge, options.maxTestedEdge);
