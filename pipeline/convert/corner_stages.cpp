@@ -3,14 +3,14 @@
 //
 // Why a chunk job reads a bounded neighbourhood: a node wider than maxTestedEdge spacings, or
 // holding more than maxTestedPoints points, is subdivided without a test, so every node whose
-// decision reads points, and every leaf, is at most a tested cell wide. A chunk's halo is the
-// tested cells with points around its owned cells, loaded whole: the nodes next to the owned cells
-// hold all their points, and the signed distance, coverage, disk and corner-fit reads of the owned
-// nodes reach a few radii, inside the halo. Nodes cut by the halo's outer edge may decide otherwise
-// than with all their points, and what follows from them (closure chains, balance cascades) starts
-// a tested cell from the owned cells. Where two chunks still disagree at a seam, the merge balances
-// the leaves and closes the surface across it. Whatever the halo holds, the result is a function of
-// the points and the options: the plan depends on nothing else.
+// decision reads points, and every leaf with points, is at most a tested cell wide. A chunk's halo
+// is the tested cells with points around its owned cells, loaded whole: the nodes next to the
+// owned cells hold all their points, and the signed distance, coverage, disk and corner-fit reads
+// of the owned nodes reach a few radii, inside the halo. Nodes cut by the halo's outer edge may
+// decide otherwise than with all their points, and what follows from them (closure chains,
+// balance cascades) starts a tested cell from the owned cells. Where two chunks still disagree at
+// a seam, the merge balances the leaves and closes the surface across it. Whatever the halo
+// holds, the result is a function of the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
 #include <tbb/parallel_for.h>
@@ -65,7 +65,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-
 int shiftOf(uint8_t level) { return 3 * (kMaxLevel - level); }
 
 // Calls f(cellKey, begin, end) for every cell of `level` that holds points, in key order.
@@ -85,6 +84,22 @@ void forEachCell(const PointSet& points, uint8_t level, F&& f) {
   }
 }
 
+// Calls f(neighbourKey) for the cells of `level` next to the cell `key` (across a face, an edge or
+// a corner) inside the frame.
+template <typename F>
+void forEachNeighbour(uint8_t level, uint64_t key, F&& f) {
+  const auto c = mortonDecode(key);
+  const int64_t cells = int64_t{1} << level;
+  for (int d = 0; d < 27; ++d) {
+    const std::array<int64_t, 3> n = {int64_t(c[0]) + d % 3 - 1, int64_t(c[1]) + (d / 3) % 3 - 1,
+                                      int64_t(c[2]) + d / 9 - 1};
+    if (d == 13 || n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells ||
+        n[2] >= cells)
+      continue;
+    f(mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])));
+  }
+}
+
 // The chunk owning a cell of the plan's level.
 size_t ownerOf(const OctreeChunkPlan& plan, uint64_t cell) {
   return size_t(std::upper_bound(plan.firstCell.begin(), plan.firstCell.end(), cell) -
@@ -99,23 +114,15 @@ std::vector<std::vector<PointRange>> haloRanges(const PointSet& points,
                                                 const OctreeChunkPlan& plan) {
   std::vector<std::vector<PointRange>> halos(plan.chunks());
   const int up = 3 * (plan.haloLevel - plan.cellLevel);
-  const int64_t cells = int64_t{1} << plan.haloLevel;
   forEachCell(points, plan.haloLevel, [&](uint64_t cell, uint32_t begin, uint32_t end) {
     const size_t own = ownerOf(plan, cell >> up);
-    const auto c = mortonDecode(cell);
-    std::array<size_t, 27> touched{};
+    std::array<size_t, 26> touched{};
     size_t count = 0;
-    for (int d = 0; d < 27; ++d) {
-      const std::array<int64_t, 3> n = {int64_t(c[0]) + d % 3 - 1, int64_t(c[1]) + (d / 3) % 3 - 1,
-                                        int64_t(c[2]) + d / 9 - 1};
-      if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells)
-        continue;
-      const size_t chunk =
-          ownerOf(plan, mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2])) >> up);
-      if (chunk != own && std::find(touched.begin(), touched.begin() + ptrdiff_t(count), chunk) ==
-                              touched.begin() + ptrdiff_t(count))
-        touched[count++] = chunk;
-    }
+    forEachNeighbour(plan.haloLevel, cell, [&](uint64_t neighbour) {
+      const size_t chunk = ownerOf(plan, neighbour >> up);
+      const auto seen = touched.begin() + ptrdiff_t(count);
+      if (chunk != own && std::find(touched.begin(), seen, chunk) == seen) touched[count++] = chunk;
+    });
     for (size_t k = 0; k < count; ++k) halos[touched[k]].push_back({begin, end});
   });
   return halos;
@@ -141,10 +148,7 @@ PointSet gather(const PointSet& points, const std::vector<PointRange>& ranges) {
 class ChunkMerger {
  public:
   ChunkMerger(const PointSet& points, const OctreeChunkPlan& plan)
-      : points_(points),
-        plan_(plan),
-        cellLevel_(plan.cellLevel),
-        field_(1024, points.size() / 2) {
+      : points_(points), plan_(plan), cellLevel_(plan.cellLevel), field_(1024, points.size() / 2) {
     // Each chunk's corners get their own stretch of the table (cell_index.h): the merge and the
     // stages after it find corners in Morton order.
     field_.index.cutByCells(plan.cut(), points.size() / 2);
@@ -230,10 +234,9 @@ class ChunkMerger {
     for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)
       if (r.octree.nodes[i].isFilled() && (i >= wasFilled.size() || !wasFilled[i]))
         filled.push_back(i);
-    const size_t trimmed =
-        options.fillHoles ? 0
-                          : trimFarSurface(r.octree, points_, sdf, r.closure, options.trimReach,
-                                           &filled);
+    const size_t trimmed = options.fillHoles ? 0
+                                             : trimFarSurface(r.octree, points_, sdf, r.closure,
+                                                              options.trimReach, &filled);
     stats.seamFills = filled.size() - trimmed;
     r.octree.nodes.shrink_to_fit();
     return r;
@@ -267,16 +270,10 @@ class ChunkMerger {
     if ((c[0] & last) != 0 && (c[0] & last) != last && (c[1] & last) != 0 &&
         (c[1] & last) != last && (c[2] & last) != 0 && (c[2] & last) != last)
       return false;  // inside its owned cell
-    const int64_t cells = int64_t{1} << leaf.level;
-    for (int d = 0; d < 27; ++d) {
-      const std::array<int64_t, 3> n = {int64_t(c[0]) + d % 3 - 1, int64_t(c[1]) + (d / 3) % 3 - 1,
-                                        int64_t(c[2]) + d / 9 - 1};
-      if (n[0] < 0 || n[1] < 0 || n[2] < 0 || n[0] >= cells || n[1] >= cells || n[2] >= cells)
-        continue;
-      const uint64_t key = mortonEncode(uint32_t(n[0]), uint32_t(n[1]), uint32_t(n[2]));
-      if (ownerOf(plan_, key >> up) != chunk) return true;
-    }
-    return false;
+    bool other = false;
+    forEachNeighbour(leaf.level, leaf.key,
+                     [&](uint64_t key) { other = other || ownerOf(plan_, key >> up) != chunk; });
+    return other;
   }
 
   // The merged tree's node for the cell (cellLevel_, key), made a placeholder on first use.
@@ -455,8 +452,8 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
         kept ? std::move(*kept) : runChunk(points, own, halos[c], options, radii, plan, stage);
     if (resume != nullptr && !kept) saveCornerStage(*resume, chunk, checkpoint);
     lap(&seconds.merge);
-    const uint64_t endCell = c + 1 < plan.chunks() ? plan.firstCell[c + 1]
-                                                   : uint64_t{1} << (3 * plan.cellLevel);
+    const uint64_t endCell =
+        c + 1 < plan.chunks() ? plan.firstCell[c + 1] : uint64_t{1} << (3 * plan.cellLevel);
     merger.add(chunk, c, plan.firstCell[c], endCell, ownLocal, own.first);
     sum.stats.testedPatches += chunk.stats.testedPatches;
     sum.stats.tooFar += chunk.stats.tooFar;
@@ -506,8 +503,9 @@ void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks) {
   RadiusStats radii;
   {
     const std::unique_ptr<CheckpointReader> in = share.open(kSharedPoints);
-    if (!in) throw std::runtime_error("rank 0's points cannot be read from " +
-                                      share.path(kSharedPoints).string());
+    if (!in)
+      throw std::runtime_error("rank 0's points cannot be read from " +
+                               share.path(kSharedPoints).string());
     const nlohmann::json r = in->json("radii");
     radii = {r[0].get<double>(), r[1].get<double>()};
     readColumns(*in, points);

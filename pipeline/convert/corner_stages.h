@@ -11,9 +11,9 @@
 
 #include "pipeline/base/options.h"
 #include "pipeline/convert/checkpoints.h"
-#include "pipeline/outofcore/outofcore.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
+#include "pipeline/outofcore/outofcore.h"
 #include "pipeline/points/points.h"
 
 namespace iso {

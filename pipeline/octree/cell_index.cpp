@@ -16,8 +16,7 @@ CellKeyIndex::CellKeyIndex(size_t expected) {
 size_t CellCut::partOfNode(uint8_t nodeLevel, uint64_t nodeKey) const {
   if (nodeLevel < level) return kNoPart;
   const uint64_t cell = nodeKey >> (3 * (nodeLevel - level));
-  return size_t(std::upper_bound(firstCell.begin(), firstCell.end(), cell) - firstCell.begin()) -
-         1;
+  return size_t(std::upper_bound(firstCell.begin(), firstCell.end(), cell) - firstCell.begin()) - 1;
 }
 
 void CellKeyIndex::cutByCells(const CellCut& cut, size_t expectedKeys) {
@@ -39,8 +38,8 @@ size_t CellKeyIndex::partOf(const Key128& key) const {
   const int shift = kMaxLevel - cut_.level;
   const uint32_t last = (1u << cut_.level) - 1;
   const auto cell = [&](uint32_t v) { return std::min(v >> shift, last); };
-  const uint64_t code = mortonEncode(cell(uint32_t(key.a)), cell(uint32_t(key.a >> 32)),
-                                     cell(uint32_t(key.b)));
+  const uint64_t code =
+      mortonEncode(cell(uint32_t(key.a)), cell(uint32_t(key.a >> 32)), cell(uint32_t(key.b)));
   return size_t(std::upper_bound(cut_.firstCell.begin(), cut_.firstCell.end(), code) -
                 cut_.firstCell.begin()) -
          1;

@@ -1,6 +1,7 @@
-// Chunk runs of the octree stages (pipeline/convert/corner_stages.h): the plan checked against brute
-// force, the merged tree checked for what one run guarantees (2:1 balance, patches that agree on
-// shared faces, every filled leaf's corners sampled), and whole conversions as accurate as one run.
+// Chunk runs of the octree stages (pipeline/convert/corner_stages.h): the plan checked against
+// brute force, the merged tree checked for what one run guarantees (2:1 balance, patches that agree
+// on shared faces, every filled leaf's corners sampled), and whole conversions as accurate as one
+// run.
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 

@@ -659,7 +659,8 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "when missing): the points as read, sorted, and their arrays; all removed "
                 "afterwards, with the directories made for them");
   c->add_flag("--resume", o->resume,
-              "Keep the stages done in .NAME.resume beside the temporary files (checkpoints as the "
+              "Keep the stages done in .NAME.resume beside the temporary files (each finished chunk "
+              "of the point stages and chunk job of the octree stages, and checkpoints as the "
               "point stages and the corner stage end), so that a run killed or stopped and started "
               "again with --resume goes on from the last one; the same bytes as a run that went "
               "through. The state is removed when the file is written");
