@@ -1704,40 +1704,37 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
   EXPECT_NE(err.find("corners.checkpoint: section corner"), std::string::npos) << err;
   EXPECT_TRUE(test::slurp(out) == reference);
 
+  // Converted straight with `more` (options, each followed by a space) into `straight`, then
+  // killed once `checkpoint` is in the state (`notYet`, the stage's checkpoint, not) and resumed:
+  // the report of the resumed run, whose file must be the same bytes.
+  const auto killAfter = [&](const std::string& more, const std::string& checkpoint,
+                             const std::string& notYet, const fs::path& straight) {
+    EXPECT_EQ(runIso("convert -q " + more + quoted(in) + " -o " + quoted(straight)).exitCode, 0);
+    std::vector<std::string> args = {"convert", "--resume", "-f"};
+    for (size_t at = 0, next; (next = more.find(' ', at)) != std::string::npos; at = next + 1)
+      args.push_back(more.substr(at, next - at));
+    args.insert(args.end(), {in.string(), "-o", out.string()});
+    const pid_t pid = startIso(args, dir_ / "err");
+    EXPECT_TRUE(waitUntil(pid, [&] { return fs::exists(state / checkpoint); }));
+    kill(pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+    EXPECT_FALSE(fs::exists(state / notYet));
+    auto resumed = resume(more);
+    EXPECT_TRUE(test::slurp(out) == test::slurp(straight));
+    return resumed.first;
+  };
+
   // Killed in the point stages of many chunks, it keeps the chunks it finished.
-  const std::string chunked = "--memory 20M --orient-block-points 20000 ";
-  ASSERT_EQ(
-      runIso("convert -q " + chunked + quoted(in) + " -o " + quoted(dir_ / "chunked.iso")).exitCode,
-      0);
-  const pid_t pid = startIso({"convert", "--resume", "-f", "--memory", "20M",
-                              "--orient-block-points", "20000", in.string(), "-o", out.string()},
-                             dir_ / "err");
-  ASSERT_TRUE(waitUntil(pid, [&] { return fs::exists(state / "chunk-0-2"); }));
-  kill(pid, SIGKILL);
-  waitpid(pid, nullptr, 0);
-  EXPECT_FALSE(fs::exists(state / "points.checkpoint"));
-  std::tie(report, err) = resume(chunked);
+  report = killAfter("--memory 20M --orient-block-points 20000 ", "chunk-0-2",
+                     "points.checkpoint", dir_ / "chunked.iso");
   EXPECT_GE(report["out_of_core"]["chunks_resumed"].get<int>(), 2) << report.dump();
   EXPECT_LT(report["out_of_core"]["chunks_resumed"], report["out_of_core"]["chunks"]);
-  EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "chunked.iso"));
 
   // Killed in the chunk jobs of the octree stages, it keeps the jobs it finished.
-  const std::string octreeChunks = "--octree-chunk-points 20000 ";
-  ASSERT_EQ(runIso("convert -q " + octreeChunks + quoted(in) + " -o " +
-                   quoted(dir_ / "octree-chunks.iso"))
-                .exitCode,
-            0);
-  const pid_t jobs = startIso({"convert", "--resume", "-f", "--octree-chunk-points", "20000",
-                               in.string(), "-o", out.string()},
-                              dir_ / "err");
-  ASSERT_TRUE(waitUntil(jobs, [&] { return fs::exists(state / "octree-chunk-2"); }));
-  kill(jobs, SIGKILL);
-  waitpid(jobs, nullptr, 0);
-  EXPECT_FALSE(fs::exists(state / "corners.checkpoint"));
-  std::tie(report, err) = resume(octreeChunks);
+  report = killAfter("--octree-chunk-points 20000 ", "octree-chunk-2", "corners.checkpoint",
+                     dir_ / "octree-chunks.iso");
   EXPECT_GE(report["resumed"]["octree_chunks"].get<int>(), 2) << report.dump();
   EXPECT_LT(report["resumed"]["octree_chunks"], report["octree_chunks"]["chunks"]);
-  EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "octree-chunks.iso"));
 
   // The state of a run with other options is not resumed from.
   ASSERT_TRUE(killIn("lod"));
