@@ -90,6 +90,7 @@ void saveCornerStage(const ResumeState& state, const CornerStageResults& r,
   out->array("corner.levels", c.corners.coarsestLevel);
   out->array("corner.values", c.corners.value);
   out->array("hanging", c.hanging);
+  out->array("lod", r.lod);
   out->commit();
 }
 
@@ -119,6 +120,7 @@ std::optional<CornerStageResults> loadCornerStage(ResumeState& state, const std:
       throw CheckpointError(state.path(name).string() +
                             ": the corner field's arrays differ in length");
     in.array("hanging", c.hanging);
+    in.array("lod", r.lod);
     return r;
   });
 }

@@ -26,6 +26,9 @@ struct CornerStageResults {
   Closure closure;
   OctreeStats stats;
   size_t passive = 0, splits = 0, trimmed = 0;
+  // Chunk jobs: the level-of-detail corners they could evaluate (sampleLodCornersWithin), in
+  // chunk order.
+  SpillVector<LodSample> lod;
 };
 
 // Write the prepared points (without their index, which is made again from them).

@@ -544,6 +544,7 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
   timer.add("octree", seconds.octree);
   timer.add("passive+balance", seconds.passiveBalance);
   timer.add("corners", seconds.corners);
+  timer.add("chunk lod", seconds.lod);
   if (ranks != nullptr) timer.add("ranks", seconds.ranks);
   timer.add("chunk merge", seconds.merge);
   report["octree_chunks"] = {{"chunks", plan.chunks()},
@@ -551,7 +552,8 @@ CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                              {"halo_level", plan.haloLevel},
                              {"halo_points", stats.haloPoints},
                              {"seam_splits", stats.seamSplits},
-                             {"seam_fills", stats.seamFills}};
+                             {"seam_fills", stats.seamFills},
+                             {"lod_samples", r.lod.size()}};
   return r;
 }
 
@@ -603,7 +605,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
         sdf.reset();
         ready.index.reset();
       },
-      plan.chunks() > 1 ? plan.cut() : CellCut{});
+      plan.chunks() > 1 ? plan.cut() : CellCut{}, &built.lod);
+  built.lod = {};
   if (texture && options.texture.at == TextureAt::Corners) {
     timer.next("texture", corners.size() + lod.value.size());
     textureCorners(closure.corners, lod, frame, *texture, inputColors);

@@ -16,12 +16,19 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <map>
 #include <memory>
 #include <optional>
 #include <stdexcept>
+#include <thread>
 
 #include "iso/check.h"
 #include "pipeline/base/progress.h"
@@ -194,6 +201,7 @@ class ChunkMerger {
     }
     for (const auto& [merged, own] : filled)
       if (touchesOtherChunk(tree_.nodes[merged], index)) seamLeaves_.push_back(merged);
+    lod_.insert(lod_.end(), chunk.lod.begin(), chunk.lod.end());
   }
 
   // The merged tree and field: cells above the plan's level with nothing filled below emptied,
@@ -213,6 +221,7 @@ class ChunkMerger {
     CornerStageResults r;
     r.octree = std::move(tree_);
     r.closure.corners = std::move(field_);
+    r.lod = std::move(lod_);
     // The surface closed across the seams (a job may not have filled a cell of another chunk's
     // that its own leaf's zero set runs into), from the seam leaves and the balance's new ones.
     std::vector<uint32_t> fresh;
@@ -319,6 +328,7 @@ class ChunkMerger {
   CornerField field_;
   std::vector<uint32_t> placeholders_;  // nodes above the plan's level, parents first
   std::vector<uint32_t> seamLeaves_;    // filled leaves next to another chunk's cells
+  SpillVector<LodSample> lod_;          // the jobs' level-of-detail corners, in chunk order
 };
 
 // What the ranks share: the points, and the chunk jobs' results, as checkpoints in a directory of
@@ -330,22 +340,27 @@ ResumeState sharedState(const Ranks& ranks) {
   return ResumeState(ranks.shared / "octree-chunks", kShareFingerprint);
 }
 
-// The chunks [first, last) of a rank: Morton ranges of about equal points.
-std::pair<size_t, size_t> chunksOfRank(const OctreeChunkPlan& plan, int rank, int count) {
-  const auto start = [&](int r) {
-    const uint64_t target = uint64_t(plan.firstPoint.back()) * uint64_t(r) / uint64_t(count);
-    size_t c = 0;
-    while (c < plan.chunks() && plan.firstPoint[c] < target) ++c;
-    return c;
-  };
-  return {start(rank), start(rank + 1)};
+// Chunk `c` for this rank: true for exactly one rank of the run (a file made with O_EXCL in the
+// shared directory, which every rank sees). Ranks claim chunks in chunk order as they become free,
+// so a rank that also merges (rank 0) takes fewer.
+bool claimChunk(const ResumeState& share, size_t c) {
+  const std::filesystem::path path = share.path("claim-" + std::to_string(c));
+  const int fd = ::open(path.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+  if (fd >= 0) {
+    ::close(fd);
+    return true;
+  }
+  if (errno == EEXIST) return false;
+  throw std::runtime_error(path.string() + ": cannot claim an octree chunk job: " +
+                           std::strerror(errno));
 }
 
 // The stages over the chunk's own points and its halo.
-CornerStageResults runChunk(const PointSet& points, const PointRange& own,
+CornerStageResults runChunk(const PointSet& points, size_t chunk,
                             const std::vector<PointRange>& halo, const BuildOptions& options,
                             const RadiusStats& radii, const OctreeChunkPlan& plan,
                             const std::function<void(const char*)>& stage) {
+  const PointRange own = {plan.firstPoint[chunk], plan.firstPoint[chunk + 1]};
   std::vector<PointRange> ranges;
   bool ownPlaced = false;
   for (const PointRange& r : halo) {
@@ -360,7 +375,22 @@ CornerStageResults runChunk(const PointSet& points, const PointRange& own,
   PointSet local = gather(points, ranges);
   const auto index = std::make_unique<PointIndex>(local.position);
   const SdfEvaluator sdf(local, *index, options.smoothing, options.fit);
-  return runCornerStages(local, sdf, options, radii, plan.cellLevel, stage);
+  CornerStageResults r = runCornerStages(local, sdf, options, radii, plan.cellLevel, stage);
+  // The level of detail of the owned nodes finer than the halo's cells, where it reads only points
+  // within a halo cell's width: the owned halo-level cell around such a corner and every cell next
+  // to it are loaded whole, so the job evaluates what the whole run would.
+  stage("lod");
+  const uint64_t firstCell = plan.firstCell[chunk];
+  const uint64_t endCell = chunk + 1 < plan.chunks() ? plan.firstCell[chunk + 1]
+                                                     : uint64_t{1} << (3 * plan.cellLevel);
+  r.lod = sampleLodCornersWithin(
+      r.octree, local, sdf, options, plan.lodProxyLevels, uint8_t(plan.haloLevel + 1),
+      [&](uint8_t level, uint64_t key) {
+        const uint64_t cell = key >> (3 * (level - plan.cellLevel));
+        return cell >= firstCell && cell < endCell;
+      },
+      0.999 * std::ldexp(1.0, -plan.haloLevel));
+  return r;
 }
 
 }  // namespace
@@ -391,7 +421,10 @@ OctreeChunkPlan planOctreeChunks(const PointSet& points, const RadiusStats& radi
     inChunk += end - begin;
   });
   plan.firstPoint.push_back(uint32_t(points.size()));
-  if (plan.chunks() == 1) plan.cellLevel = plan.haloLevel = 0;
+  if (plan.chunks() == 1)
+    plan.cellLevel = plan.haloLevel = 0;
+  else
+    plan.lodProxyLevels = lodProxyLevels(points);
   return plan;
 }
 
@@ -411,47 +444,23 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
   };
   const auto stage = [&](const char* name) {
     const std::string s = name;
-    lap(s == "octree" ? &seconds.octree
-                      : (s == "passive+balance" ? &seconds.passiveBalance : &seconds.corners));
+    lap(s == "octree"            ? &seconds.octree
+        : s == "passive+balance" ? &seconds.passiveBalance
+        : s == "lod"             ? &seconds.lod
+                                 : &seconds.corners);
   };
   lap(&seconds.load);
   const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
   ChunkMerger merger(points, plan);
   CornerStageResults sum;
-  // Rank 0 runs the first chunks; the others' results are there once every rank is done.
-  const bool shared = ranks != nullptr && ranks->count > 1;
-  std::optional<ResumeState> share;
-  if (shared) share.emplace(sharedState(*ranks));
-  const size_t mine = shared ? chunksOfRank(plan, 0, ranks->count).second : plan.chunks();
-  for (size_t c = 0; c < plan.chunks(); ++c) {
-    lap(&seconds.load);
+  const auto merge = [&](const CornerStageResults& chunk, size_t c) {
+    lap(&seconds.merge);
     const PointRange own = {plan.firstPoint[c], plan.firstPoint[c + 1]};
-    const std::string checkpoint = octreeChunkCheckpoint(c);
-    std::optional<CornerStageResults> kept;
-    if (c == mine && shared) {
-      lap(&seconds.ranks);
-      ranks->barrier();
-      lap(&seconds.load);
-    }
-    if (c >= mine) {
-      kept = loadCornerStage(*share, checkpoint);
-      if (!kept)
-        throw std::runtime_error("a rank's results of octree chunk " + std::to_string(c) +
-                                 " cannot be read" +
-                                 (share->notes().empty() ? "" : ": " + share->notes().back()));
-    } else if (resume != nullptr && resume->has(checkpoint)) {
-      kept = loadCornerStage(*resume, checkpoint);
-      stats.resumed += kept.has_value();
-    }
     uint32_t ownLocal = 0;
     for (const PointRange& r : halos[c]) {
       if (r.first < own.first) ownLocal += r.second - r.first;
       stats.haloPoints += r.second - r.first;
     }
-    const CornerStageResults chunk =
-        kept ? std::move(*kept) : runChunk(points, own, halos[c], options, radii, plan, stage);
-    if (resume != nullptr && !kept) saveCornerStage(*resume, chunk, checkpoint);
-    lap(&seconds.merge);
     const uint64_t endCell =
         c + 1 < plan.chunks() ? plan.firstCell[c + 1] : uint64_t{1} << (3 * plan.cellLevel);
     merger.add(chunk, c, plan.firstCell[c], endCell, ownLocal, own.first);
@@ -466,9 +475,62 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
     sum.closure.refilled += chunk.closure.refilled;
     sum.closure.passes = std::max(sum.closure.passes, chunk.closure.passes);
     if (onChunk) onChunk(own.second - own.first);
+  };
+  // A chunk of this process: from the resumed run's checkpoint, or run (and kept for a resume).
+  const auto runOwn = [&](size_t c) {
+    lap(&seconds.load);
+    const std::string checkpoint = octreeChunkCheckpoint(c);
+    if (resume != nullptr && resume->has(checkpoint))
+      if (std::optional<CornerStageResults> kept = loadCornerStage(*resume, checkpoint)) {
+        ++stats.resumed;
+        return std::move(*kept);
+      }
+    CornerStageResults chunk = runChunk(points, c, halos[c], options, radii, plan, stage);
+    if (resume != nullptr) saveCornerStage(*resume, chunk, checkpoint);
+    return chunk;
+  };
+  if (ranks == nullptr || ranks->count <= 1) {
+    for (size_t c = 0; c < plan.chunks(); ++c) merge(runOwn(c), c);
+  } else {
+    // Rank 0 runs a chunk whenever one is free and merges, in chunk order, what is done (its
+    // own, and the others' from their checkpoints in the shared directory), waiting only when
+    // nothing is left to claim. (--resume is refused with ranks.)
+    ISO_CHECK(resume == nullptr);
+    ResumeState share = sharedState(*ranks);
+    std::map<size_t, CornerStageResults> done;  // own chunks run ahead of the merge
+    size_t claimFrom = 0;
+    for (size_t next = 0; next < plan.chunks();) {
+      if (const auto own = done.find(next); own != done.end()) {
+        merge(own->second, next);
+        done.erase(own);
+        ++next;
+        continue;
+      }
+      if (const std::string checkpoint = octreeChunkCheckpoint(next); share.has(checkpoint)) {
+        lap(&seconds.load);
+        std::optional<CornerStageResults> kept = loadCornerStage(share, checkpoint);
+        if (!kept)
+          throw std::runtime_error("a rank's results of octree chunk " + std::to_string(next) +
+                                   " cannot be read" +
+                                   (share.notes().empty() ? "" : ": " + share.notes().back()));
+        merge(*kept, next);
+        ++next;
+        continue;
+      }
+      while (claimFrom < plan.chunks() && !claimChunk(share, claimFrom)) ++claimFrom;
+      if (claimFrom < plan.chunks()) {
+        done.emplace(claimFrom, runOwn(claimFrom));
+        ++claimFrom;
+        continue;
+      }
+      lap(&seconds.ranks);  // the next chunk is another rank's, still running
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    lap(&seconds.ranks);
+    ranks->barrier();
+    share.finish();
   }
   lap(&seconds.merge);
-  if (share) share->finish();
   CornerStageResults r = merger.finish(sdf, options, stats);
   r.stats = sum.stats;
   r.passive = sum.passive;
@@ -512,16 +574,12 @@ void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks) {
     in->finish();
   }
   const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
-  const auto [first, last] = chunksOfRank(plan, ranks.rank, ranks.count);
-  if (first < last) {
-    const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
-    for (size_t c = first; c < last; ++c)
-      saveCornerStage(share,
-                      runChunk(points, {plan.firstPoint[c], plan.firstPoint[c + 1]}, halos[c],
-                               options, radii, plan, [](const char*) {}),
+  const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
+  for (size_t c = 0; c < plan.chunks(); ++c)
+    if (claimChunk(share, c))
+      saveCornerStage(share, runChunk(points, c, halos[c], options, radii, plan, [](const char*) {}),
                       octreeChunkCheckpoint(c));
-  }
-  ranks.barrier();
+  ranks.barrier();  // rank 0 has merged every chunk
 }
 
 }  // namespace iso

@@ -20,7 +20,7 @@ namespace iso {
 
 // Seconds spent in each part of the stages (summed over chunk jobs).
 struct CornerStageSeconds {
-  double load = 0.0, octree = 0.0, passiveBalance = 0.0, corners = 0.0, merge = 0.0;
+  double load = 0.0, octree = 0.0, passiveBalance = 0.0, corners = 0.0, lod = 0.0, merge = 0.0;
   double ranks = 0.0;  // rank 0 waiting for the other ranks' chunks
 };
 
@@ -41,6 +41,7 @@ struct OctreeChunkPlan {
   uint8_t cellLevel = 0, haloLevel = 0;
   std::vector<uint64_t> firstCell;   // one a chunk
   std::vector<uint32_t> firstPoint;  // one a chunk, then the number of points
+  LodProxyLevels lodProxyLevels{};   // of all points: what the jobs' level of detail reads
   size_t chunks() const { return firstCell.size(); }
   CellCut cut() const { return {cellLevel, firstCell}; }
 };
@@ -57,7 +58,10 @@ struct ChunkRunStats {
 };
 // The stages as chunk jobs, one after the other (each parallel inside), then the merge: the owned
 // nodes of each chunk become the tree below the cells of the plan's level, corners are taken from
-// the chunk that made them first (chunk order), filled leaves that two chunks left more than one
+// the chunk that made them first (chunk order), the jobs' level-of-detail corners are kept in the
+// results (CornerStageResults::lod: the corners of owned nodes finer than the halo's cells whose
+// evaluation reads only points within a halo cell's width, as sampleLodCorners over all points
+// would evaluate them), filled leaves that two chunks left more than one
 // level apart are balanced and the surface is closed from the leaves along the seams (new leaves'
 // corners from `sdf`, the signed distance over all points), and hanging corners are found and
 // snapped again over the whole tree. `onChunk` is called with the chunk's own points as each
@@ -76,9 +80,10 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
 // tells the others, once its point stages are done, whether the octree stages run as chunk jobs:
 // it calls tellRanks with the points (nothing when they run in one), which keeps them in its
 // shared directory, and then runCornerStagesByChunk with `ranks`. Every other rank calls
-// runCornerStagesAsRank after its point stages: it reads the points, makes the same plan, runs
-// the chunks of its range (Morton ranges of about equal points, rank 0's first) and keeps their
-// results in the shared directory, where rank 0 takes them in chunk order once all are done.
+// runCornerStagesAsRank after its point stages: it reads the points and makes the same plan. Every
+// rank then claims the chunks in chunk order as it becomes free (a file made with O_EXCL in the
+// shared directory: each chunk runs once), and the others keep their results there. Rank 0 merges
+// in chunk order as results come, its own and the others', so it runs fewer chunks itself.
 void tellRanks(const Ranks& ranks, const PointSet* points, const RadiusStats& radii);
 void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks);
 

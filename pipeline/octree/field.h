@@ -137,13 +137,33 @@ struct LodField {
   GridPoint point(uint32_t entry) const;
 };
 Key128 lodKey(uint8_t level, const GridPoint& p);
+// One level-of-detail corner's value under its key (lodKey), as a chunk job gives it.
+struct LodSample {
+  Key128 key;
+  CornerSample value;
+};
+// For each node level, the level of the proxies its corners are evaluated from, or -1 where they
+// are evaluated from the points: a function of all the points (sorted by key).
+using LodProxyLevels = std::array<int8_t, kMaxLevel + 1>;
+LodProxyLevels lodProxyLevels(const PointSet& points);
 // pointsSdfDone, when set, is called once pointsSdf is no longer needed (before any proxies are
 // made), so that it and its index can be freed. With a cut (a chunk run's parts, whose nodes come
-// in part order), each part's corners get their own stretch of the field's table.
+// in part order), each part's corners get their own stretch of the field's table. Corners with a
+// value in `known` take it (the first one where several have the same key) and are not evaluated.
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options,
                           const std::function<void()>& pointsSdfDone = {},
-                          const CellCut& cut = {});
+                          const CellCut& cut = {}, const SpillVector<LodSample>* known = nullptr);
+// A chunk job's share of the level of detail: the corners of the internal nodes of `tree` at
+// levels >= minLevel for which owned(level, key) holds, each evaluated as sampleLodCorners
+// evaluates it over all points (the proxies of `proxyLevels`) where that reads no point farther
+// than `reach` from the corner (SdfEvaluator::evaluateWithin), in (level, key) order; the others
+// are left to sampleLodCorners. `points` (sorted by key) must hold every point of all points
+// within `reach` of each owned node's corners, and whole cells at the proxy levels.
+SpillVector<LodSample> sampleLodCornersWithin(
+    const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
+    const BuildOptions& options, const LodProxyLevels& proxyLevels, uint8_t minLevel,
+    const std::function<bool(uint8_t level, uint64_t key)>& owned, double reach);
 // The largest distance of the points below an internal node to the node's own patch.
 float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod,
                      uint32_t node);

@@ -8,7 +8,9 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
+#include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 
 #include <cmath>
@@ -16,6 +18,7 @@
 #include <glm/geometric.hpp>
 #include <map>
 #include <memory>
+#include <optional>
 
 #include "pipeline/base/buffers.h"
 #include "pipeline/base/options.h"
@@ -149,9 +152,76 @@ GridPoint LodField::point(uint32_t entry) const {
   return {uint32_t(k.a), uint32_t(k.a >> 32), uint32_t(k.b)};
 }
 
+LodProxyLevels lodProxyLevels(const PointSet& points) {
+  // Proxies where they hold 4 points or more on average; at finer levels the points themselves.
+  const std::array<size_t, kMaxLevel + 1> cells = occupiedCells(points);
+  LodProxyLevels proxyLevel{};
+  for (int level = 0; level <= kMaxLevel; ++level) {
+    const int proxy = std::min(level + kProxyLevels, int(kMaxLevel));
+    proxyLevel[size_t(level)] = 4 * cells[size_t(proxy)] > points.size() ? int8_t{-1} : int8_t(proxy);
+  }
+  return proxyLevel;
+}
+
+namespace {
+
+using LevelCorners = std::map<int, SpillVector<std::pair<uint32_t, GridPoint>>>;  // entry, point
+
+// Evaluates the corners of every level: those of levels without proxies first (each corner's
+// value depends on its level alone), so that the points' signed distance can go (pointsSdfDone)
+// before any proxies are made; then the proxies of one level at a time, each summed from the
+// points, made when a node level first needs them and freed when the next needs another.
+// evaluate(sdf, entry, point, minSigma) stores one corner's value.
+template <typename Evaluate>
+void evaluateLevels(const LevelCorners& byLevel, const PointSet& points,
+                    const SdfEvaluator& pointsSdf, const BuildOptions& options,
+                    const LodProxyLevels& proxyLevels, const std::function<void()>& pointsSdfDone,
+                    const Evaluate& evaluate) {
+  const auto evaluateLevel = [&](int level, const SdfEvaluator& sdf) {
+    const SpillVector<std::pair<uint32_t, GridPoint>>& corners = byLevel.at(level);
+    const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        spillPause();
+                        for (size_t i = r.begin(); i < r.end(); ++i)
+                          evaluate(sdf, corners[i].first, corners[i].second, minSigma);
+                      });
+  };
+  for (const auto& [level, corners] : byLevel)
+    if (proxyLevels[size_t(level)] < 0 && !corners.empty()) evaluateLevel(level, pointsSdf);
+  if (pointsSdfDone) pointsSdfDone();
+  int madeLevel = -1;
+  PointSet proxies;
+  std::unique_ptr<PointIndex> proxyIndex;
+  std::unique_ptr<SdfEvaluator> proxySdf;
+  for (const auto& [level, corners] : byLevel) {
+    const int proxyLevel = proxyLevels[size_t(level)];
+    if (proxyLevel < 0 || corners.empty()) continue;
+    if (proxyLevel != madeLevel) {
+      proxySdf.reset();
+      proxyIndex.reset();
+      proxies = PointSet{};
+      proxies = proxiesAt(points, proxyLevel);
+      proxyIndex = std::make_unique<PointIndex>(proxies.position);
+      proxySdf =
+          std::make_unique<SdfEvaluator>(proxies, *proxyIndex, options.smoothing, options.fit);
+      madeLevel = proxyLevel;
+    }
+    evaluateLevel(level, *proxySdf);
+  }
+}
+
+constexpr double kUnit = 1.0 / double(uint64_t{1} << kMaxLevel);  // a grid step in the frame
+
+glm::dvec3 framePoint(const GridPoint& p) {
+  return {double(p.x) * kUnit, double(p.y) * kUnit, double(p.z) * kUnit};
+}
+
+}  // namespace
+
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options, const std::function<void()>& pointsSdfDone,
-                          const CellCut& cut) {
+                          const CellCut& cut, const SpillVector<LodSample>* known) {
   LodField field;
   // A part's stretch: room for 4 corners an internal node (8 a node, each shared by a few).
   std::vector<size_t> internalOf(cut.firstCell.size(), 0);
@@ -163,7 +233,7 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
         ++internalOf[p];
   }
   size_t part = CellCut::kNoPart;
-  std::map<int, SpillVector<std::pair<uint32_t, GridPoint>>> byLevel;  // entry, point
+  LevelCorners byLevel;
   for (const OctreeNode& node : tree.nodes) {
     if (node.kind != NodeKind::Internal) continue;
     if (!cut.firstCell.empty()) {
@@ -184,53 +254,69 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
       byLevel[node.level].push_back({entry, p});
     }
   }
-  // Proxies where they hold 4 points or more on average; at finer levels the points themselves.
-  const std::array<size_t, kMaxLevel + 1> cells = occupiedCells(points);
-  std::map<int, int> proxyLevelOf;  // node level → proxy level (absent: the points)
-  for (const auto& entry : byLevel) {
-    const int proxy = std::min(entry.first + kProxyLevels, int(kMaxLevel));
-    if (4 * cells[size_t(proxy)] > points.size()) continue;
-    proxyLevelOf[entry.first] = proxy;
-  }
-  const double unit = std::ldexp(1.0, -kMaxLevel);
-  const auto evaluateLevel = [&](int level, const SdfEvaluator& sdf) {
-    const SpillVector<std::pair<uint32_t, GridPoint>>& corners = byLevel[level];
-    const float minSigma = kLodSigmaFraction * float(std::ldexp(1.0, -level));
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 256),
+  if (known != nullptr && !known->empty()) {
+    // The first sample of each entry (in parallel: the smallest sample number wins), then only
+    // the corners without one are evaluated.
+    constexpr uint32_t kNoSample = ~uint32_t{0};
+    SpillVector<uint32_t> first(field.value.size(), kNoSample);
+    const auto entryOf = [&](size_t i) { return field.index.find((*known)[i].key); };
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, known->size(), 4096),
                       [&](const tbb::blocked_range<size_t>& r) {
                         spillPause();
                         for (size_t i = r.begin(); i < r.end(); ++i) {
-                          const GridPoint& p = corners[i].second;
-                          field.value[corners[i].first] = sdf.evaluate(
-                              glm::dvec3(p.x * unit, p.y * unit, p.z * unit), minSigma);
+                          const uint32_t e = entryOf(i);
+                          if (e == CellKeyIndex::kNone) continue;
+                          std::atomic_ref<uint32_t> slot(first[e]);
+                          uint32_t seen = slot.load(std::memory_order_relaxed);
+                          while (uint32_t(i) < seen && !slot.compare_exchange_weak(seen, uint32_t(i))) {
+                          }
                         }
                       });
-  };
-  // The levels evaluated from the points first (each corner's value depends on its level alone),
-  // so that the points' signed distance and index can go before any proxies are made.
-  for (const auto& entry : byLevel)
-    if (!proxyLevelOf.contains(entry.first)) evaluateLevel(entry.first, pointsSdf);
-  if (pointsSdfDone) pointsSdfDone();
-  // The proxies of one level at a time, each summed from the points, made when a node level first
-  // needs them and freed when the next needs another.
-  int madeLevel = -1;
-  PointSet proxies;
-  std::unique_ptr<PointIndex> proxyIndex;
-  std::unique_ptr<SdfEvaluator> proxySdf;
-  for (const auto& [level, proxyLevel] : proxyLevelOf) {
-    if (proxyLevel != madeLevel) {
-      proxySdf.reset();
-      proxyIndex.reset();
-      proxies = PointSet{};
-      proxies = proxiesAt(points, proxyLevel);
-      proxyIndex = std::make_unique<PointIndex>(proxies.position);
-      proxySdf =
-          std::make_unique<SdfEvaluator>(proxies, *proxyIndex, options.smoothing, options.fit);
-      madeLevel = proxyLevel;
-    }
-    evaluateLevel(level, *proxySdf);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, first.size(), 4096),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        spillPause();
+                        for (size_t e = r.begin(); e < r.end(); ++e)
+                          if (first[e] != kNoSample) field.value[e] = (*known)[first[e]].value;
+                      });
+    for (auto& [level, corners] : byLevel)
+      std::erase_if(corners, [&](const auto& c) { return first[c.first] != kNoSample; });
   }
+  evaluateLevels(byLevel, points, pointsSdf, options, lodProxyLevels(points), pointsSdfDone,
+                 [&](const SdfEvaluator& sdf, uint32_t entry, const GridPoint& p, float minSigma) {
+                   field.value[entry] = sdf.evaluate(framePoint(p), minSigma);
+                 });
   return field;
+}
+
+SpillVector<LodSample> sampleLodCornersWithin(
+    const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
+    const BuildOptions& options, const LodProxyLevels& proxyLevels, uint8_t minLevel,
+    const std::function<bool(uint8_t level, uint64_t key)>& owned, double reach) {
+  std::vector<Key128> keys;
+  for (const OctreeNode& node : tree.nodes)
+    if (node.kind == NodeKind::Internal && node.level >= minLevel && owned(node.level, node.key))
+      for (int c = 0; c < kCorners; ++c)
+        keys.push_back(lodKey(node.level, cornerPoint(node.level, node.key, c)));
+  const auto order = [](const Key128& x, const Key128& y) {
+    return x.b >> 32 != y.b >> 32 ? x.b >> 32 < y.b >> 32 : (x.b != y.b ? x.b < y.b : x.a < y.a);
+  };
+  std::sort(keys.begin(), keys.end(), order);
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  LevelCorners byLevel;
+  for (uint32_t i = 0; i < keys.size(); ++i) {
+    const Key128& k = keys[i];
+    byLevel[int(k.b >> 32)].push_back(
+        {i, GridPoint{uint32_t(k.a), uint32_t(k.a >> 32), uint32_t(k.b)}});
+  }
+  std::vector<std::optional<CornerSample>> values(keys.size());
+  evaluateLevels(byLevel, points, pointsSdf, options, proxyLevels, {},
+                 [&](const SdfEvaluator& sdf, uint32_t i, const GridPoint& p, float minSigma) {
+                   values[i] = sdf.evaluateWithin(framePoint(p), minSigma, reach);
+                 });
+  SpillVector<LodSample> samples;
+  for (size_t i = 0; i < keys.size(); ++i)
+    if (values[i]) samples.push_back({keys[i], *values[i]});
+  return samples;
 }
 
 float nodePatchError(const Octree& tree, const PointSet& points, const LodField& lod, uint32_t id) {

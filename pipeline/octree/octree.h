@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <glm/vec3.hpp>
+#include <optional>
 #include <vector>
 
 #include "iso/format.h"
@@ -39,6 +40,11 @@ class SdfEvaluator {
   SdfEvaluator(const PointSet& points, const PointIndex& tree, double smoothing, FitMode fit);
   // minSigma widens every σ_i (level of detail: a fraction of the node size).
   CornerSample evaluate(const glm::dvec3& q, float minSigma) const;
+  // The same, or nullopt when it would read points farther than `reach` from q: evaluated over a
+  // subset of the points that holds every point within `reach` of q, it then gives what the whole
+  // set gives (up to the order of the sums).
+  std::optional<CornerSample> evaluateWithin(const glm::dvec3& q, float minSigma,
+                                             double reach) const;
   // The point nearest to q and its distance.
   uint32_t nearest(const glm::dvec3& q, float& distance) const;
   const PointSet& points() const { return points_; }
@@ -48,6 +54,7 @@ class SdfEvaluator {
   const PointIndex& tree_;
   double smoothing_;
   FitMode fit_;
+  std::optional<CornerSample> sample(const glm::dvec3& q, float minSigma, double reach) const;
   // 1 / 2(smoothing · r_i)², in float (computed when needed rather than stored: 4 bytes a point).
   float halfInverseSigma2(uint32_t i) const {
     const double sigma = smoothing_ * double(points_.radius[i]);

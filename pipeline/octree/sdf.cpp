@@ -196,13 +196,28 @@ uint32_t SdfEvaluator::nearest(const glm::dvec3& q, float& distance) const {
 }
 
 CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
+  return *sample(q, minSigma, HUGE_VAL);
+}
+
+std::optional<CornerSample> SdfEvaluator::evaluateWithin(const glm::dvec3& q, float minSigma,
+                                                         double reach) const {
+  return sample(q, minSigma, reach);
+}
+
+std::optional<CornerSample> SdfEvaluator::sample(const glm::dvec3& q, float minSigma,
+                                                 double reach) const {
   thread_local std::vector<std::pair<uint32_t, float>> found;
   thread_local std::vector<double> logWeight, weight;
   const glm::vec3 qf(q);
   std::array<uint32_t, kProbe> probe{};
   std::array<float, kProbe> probeD2{};
   const size_t probes = tree_.nearest(qf, kProbe, probe.data(), probeD2.data());
-  if (probes == 0) return {};
+  const bool bounded = reach < HUGE_VAL;
+  // Within a reach, the nearest points must be the same as those of any superset of these points
+  // that agrees with them inside the reach: all kProbe of them found, none farther than it.
+  if (bounded && (probes < kProbe || double(probeD2[kProbe - 1]) > reach * reach))
+    return std::nullopt;
+  if (probes == 0) return CornerSample{};
   // σ grows with the distance to the nearest point: far from the points a common scale ranks them
   // by distance, where their own radii would rank them by radius.
   const double floor = std::max(double(minSigma), kReach * std::sqrt(double(probeD2[0])));
@@ -216,6 +231,7 @@ CornerSample SdfEvaluator::evaluate(const glm::dvec3& q, float minSigma) const {
   const double sigma0 = sigmaOf(probe[0]);
   const double radius =
       sigmaMax * std::sqrt(double(probeD2[0]) / (sigma0 * sigma0) + 2.0 * kTruncation) * 1.0001;
+  if (bounded && radius > reach) return std::nullopt;
   tree_.withinRadius(qf, float(radius), found);
   if (found.empty()) found.push_back({probe[0], probeD2[0]});
 

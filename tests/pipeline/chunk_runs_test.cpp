@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cmath>
+#include <glm/geometric.hpp>
 #include <memory>
 #include <random>
 
@@ -216,6 +218,57 @@ TEST(ChunkRuns, theMergedTreeIsBalancedSampledAndCrackFreeAcrossSeams) {
         for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) ++covered[i];
     EXPECT_TRUE(std::all_of(covered.begin(), covered.end(), [](uint32_t n) { return n == 1; }))
         << shape;
+  }
+}
+
+// The jobs' level-of-detail corners are what the whole run's evaluation over all points gives
+// (up to the order of the sums), and they are most of the level of detail.
+TEST(ChunkRuns, theJobsLevelOfDetailIsWhatAllPointsGive) {
+  for (const char* shape : {"sphere", "torus"}) {
+    Prepared p = prepare(test::scanOf(shape, 100000, true, 0.2));
+    const PointSet& points = p.points;
+    const BuildOptions options = chunked();
+    const OctreeChunkPlan plan = planOctreeChunks(points, p.radii, options);
+    ASSERT_GE(plan.chunks(), 8u) << shape;
+    const SdfEvaluator sdf(points, *p.index, options.smoothing, options.fit);
+    CornerStageSeconds seconds;
+    ChunkRunStats stats;
+    const CornerStageResults merged =
+        runCornerStagesByChunk(points, plan, sdf, options, p.radii, seconds, stats);
+    const LodField all = sampleLodCorners(merged.octree, points, sdf, options, {}, plan.cut());
+    const LodField jobs =
+        sampleLodCorners(merged.octree, points, sdf, options, {}, plan.cut(), &merged.lod);
+    ASSERT_EQ(all.value.size(), jobs.value.size()) << shape;
+    // Every job sample of a corner in the tree: the value all points give at its level.
+    size_t matched = 0;
+    std::vector<uint8_t> fromJob(all.value.size(), 0);
+    for (const LodSample& sample : merged.lod) {
+      const uint32_t e = all.index.find(sample.key);
+      if (e == CellKeyIndex::kNone) continue;
+      ++matched;
+      fromJob[e] = 1;
+      EXPECT_NEAR(sample.value.distance, all.value[e].distance, 1e-6) << shape;
+      EXPECT_GT(glm::dot(sample.value.normal, all.value[e].normal), 0.9999f) << shape;
+    }
+    // The jobs evaluate the corners of nodes finer than the halo's cells (this small tree has
+    // few; a large scan's level of detail is nearly all of them).
+    size_t fine = 0, covered = 0;
+    for (uint32_t e = 0; e < all.value.size(); ++e)
+      if (all.index.key(e).b >> 32 > plan.haloLevel) {
+        ++fine;
+        covered += fromJob[e];
+      }
+    std::printf("%s: %zu level-of-detail corners, %zu finer than the halo's cells, %zu of them "
+                "from the jobs (%zu samples)\n",
+                shape, all.value.size(), fine, covered, merged.lod.size());
+    EXPECT_GT(matched, 0u) << shape;
+    EXPECT_GT(fine, 500u) << shape;
+    EXPECT_GE(double(covered), 0.95 * double(fine)) << shape;
+    // The field with the jobs' samples is the field without them.
+    double worst = 0.0;
+    for (uint32_t e = 0; e < all.value.size(); ++e)
+      worst = std::max(worst, double(std::abs(all.value[e].distance - jobs.value[e].distance)));
+    EXPECT_LT(worst, 1e-6) << shape;
   }
 }
 
