@@ -621,6 +621,7 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   report["octree"]["trimmed"] = built.trimmed;
   report["corners"] = {
       {"leaf", closure.cornersInUse}, {"hanging", hanging.size()}, {"lod", lod.value.size()}};
+  if (plan.chunks() > 1) report["corners"]["lod_from_jobs"] = lod.fromSamples;
 
   WriteInput write{.tree = &octree,
                    .points = &points,

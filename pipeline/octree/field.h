@@ -133,6 +133,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
 struct LodField {
   CellKeyIndex index{1024};  // lodKey → entry
   SpillVector<CornerSample> value;
+  size_t fromSamples = 0;  // entries whose value came from sampleLodCorners' `known`
   uint32_t find(uint8_t level, const GridPoint& p) const;
   GridPoint point(uint32_t entry) const;
 };

@@ -279,7 +279,8 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
                           if (first[e] != kNoSample) field.value[e] = (*known)[first[e]].value;
                       });
     for (auto& [level, corners] : byLevel)
-      std::erase_if(corners, [&](const auto& c) { return first[c.first] != kNoSample; });
+      field.fromSamples +=
+          std::erase_if(corners, [&](const auto& c) { return first[c.first] != kNoSample; });
   }
   evaluateLevels(byLevel, points, pointsSdf, options, lodProxyLevels(points), pointsSdfDone,
                  [&](const SdfEvaluator& sdf, uint32_t entry, const GridPoint& p, float minSigma) {

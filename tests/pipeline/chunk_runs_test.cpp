@@ -250,6 +250,8 @@ TEST(ChunkRuns, theJobsLevelOfDetailIsWhatAllPointsGive) {
       EXPECT_NEAR(sample.value.distance, all.value[e].distance, 1e-6) << shape;
       EXPECT_GT(glm::dot(sample.value.normal, all.value[e].normal), 0.9999f) << shape;
     }
+    EXPECT_EQ(jobs.fromSamples, size_t(std::count(fromJob.begin(), fromJob.end(), uint8_t{1})))
+        << shape;
     // The jobs evaluate the corners of nodes finer than the halo's cells (this small tree has
     // few; a large scan's level of detail is nearly all of them).
     size_t fine = 0, covered = 0;
