@@ -5,6 +5,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <numeric>
+#include <optional>
 #include <random>
 
 #include "pipeline/base/options.h"
@@ -275,6 +276,51 @@ TEST(SignedDistance, cornersBetweenOpposingSheetsSeeTheNearerSheet) {
     const double truth = std::abs(z) - gap / 2;  // negative between the sheets
     EXPECT_NEAR(f, truth, 0.05 * gap) << "z " << z;
   }
+}
+
+// Within a reach, the signed distance over any subset that holds every point within the reach of
+// the corner is the one over all points; beyond it, nothing is given (what a chunk job's level of
+// detail relies on).
+TEST(SignedDistance, withinAReachASubsetHoldingItsPointsGivesWhatAllPointsGive) {
+  const Evaluated e = withRadii(test::scanOf("sphere", 50000));
+  const SdfEvaluator all(e.points, *e.tree, 1.0, FitMode::Sphere);
+  std::mt19937_64 rng(11);
+  std::uniform_int_distribution<size_t> pick(0, e.points.size() - 1);
+  std::normal_distribution<double> g;
+  size_t given = 0, refused = 0;
+  for (int i = 0; i < 200; ++i) {
+    const glm::dvec3 q = glm::dvec3(e.points.position[pick(rng)]) +
+                         glm::dvec3(g(rng), g(rng), g(rng)) * 0.003;
+    const double reach = (i % 4 + 1) * 0.02;
+    const float minSigma = float(i % 3) * 0.001f;
+    std::vector<uint32_t> near;
+    for (uint32_t k = 0; k < e.points.size(); ++k)
+      if (glm::length(glm::dvec3(e.points.position[k]) - q) <= reach * 1.001) near.push_back(k);
+    PointSet subset;
+    PointSet::forEachColumn(
+        [&](auto& to, const auto& from) {
+          if (from.empty()) return;
+          for (const uint32_t k : near) to.push_back(from[k]);
+        },
+        subset, e.points);
+    const PointIndex index(subset.position);
+    const SdfEvaluator part(subset, index, 1.0, FitMode::Sphere);
+    const CornerSample whole = all.evaluate(q, minSigma);
+    const std::optional<CornerSample> fromAll = all.evaluateWithin(q, minSigma, reach);
+    const std::optional<CornerSample> fromPart = part.evaluateWithin(q, minSigma, reach);
+    ASSERT_EQ(fromAll.has_value(), fromPart.has_value()) << i;
+    if (!fromPart) {
+      ++refused;
+      continue;
+    }
+    ++given;
+    EXPECT_EQ(fromAll->distance, whole.distance) << i;
+    EXPECT_NEAR(fromPart->distance, whole.distance, 1e-7) << i;
+    EXPECT_GT(glm::dot(fromPart->normal, whole.normal), 0.99999f) << i;
+  }
+  std::printf("%zu corners given within their reach, %zu refused\n", given, refused);
+  EXPECT_GT(given, 50u);
+  EXPECT_GT(refused, 10u);
 }
 
 TEST(Passive, boxDiskTestMatchesDenseSampling) {
