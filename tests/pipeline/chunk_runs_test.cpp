@@ -190,18 +190,37 @@ TreeChecks check(const CornerStageResults& r) {
   return out;
 }
 
+// A shape scanned with noise, its points prepared and its octree stages run as chunk jobs and
+// merged (small chunks: chunked()).
+struct MergedRun {
+  Prepared p;
+  BuildOptions options = chunked();
+  OctreeChunkPlan plan;
+  std::unique_ptr<SdfEvaluator> sdf;
+  ChunkRunStats stats;
+  CornerStageResults merged;
+};
+
+std::unique_ptr<MergedRun> mergedRun(const char* shape) {
+  auto run = std::make_unique<MergedRun>();
+  run->p = prepare(test::scanOf(shape, 100000, true, 0.2));
+  run->plan = planOctreeChunks(run->p.points, run->p.radii, run->options);
+  run->sdf = std::make_unique<SdfEvaluator>(run->p.points, *run->p.index, run->options.smoothing,
+                                            run->options.fit);
+  CornerStageSeconds seconds;
+  run->merged = runCornerStagesByChunk(run->p.points, run->plan, *run->sdf, run->options,
+                                       run->p.radii, seconds, run->stats);
+  return run;
+}
+
 TEST(ChunkRuns, theMergedTreeIsBalancedSampledAndCrackFreeAcrossSeams) {
   for (const char* shape : {"sphere", "cube", "torus"}) {
-    Prepared p = prepare(test::scanOf(shape, 100000, true, 0.2));
-    const PointSet& points = p.points;
-    const BuildOptions options = chunked();
-    const OctreeChunkPlan plan = planOctreeChunks(points, p.radii, options);
+    const std::unique_ptr<MergedRun> run = mergedRun(shape);
+    const PointSet& points = run->p.points;
+    const OctreeChunkPlan& plan = run->plan;
+    const ChunkRunStats& stats = run->stats;
+    const CornerStageResults& merged = run->merged;
     ASSERT_GE(plan.chunks(), 8u) << shape;
-    const SdfEvaluator sdf(points, *p.index, options.smoothing, options.fit);
-    CornerStageSeconds seconds;
-    ChunkRunStats stats;
-    const CornerStageResults merged =
-        runCornerStagesByChunk(points, plan, sdf, options, p.radii, seconds, stats);
     const TreeChecks c = check(merged);
     std::printf("%s: %zu chunks, halo %llu points, %zu seam splits, %zu face pairs, worst %.3g\n",
                 shape, plan.chunks(), (unsigned long long)stats.haloPoints, stats.seamSplits,
@@ -225,16 +244,13 @@ TEST(ChunkRuns, theMergedTreeIsBalancedSampledAndCrackFreeAcrossSeams) {
 // (up to the order of the sums), and they are most of the level of detail.
 TEST(ChunkRuns, theJobsLevelOfDetailIsWhatAllPointsGive) {
   for (const char* shape : {"sphere", "torus"}) {
-    Prepared p = prepare(test::scanOf(shape, 100000, true, 0.2));
-    const PointSet& points = p.points;
-    const BuildOptions options = chunked();
-    const OctreeChunkPlan plan = planOctreeChunks(points, p.radii, options);
+    const std::unique_ptr<MergedRun> run = mergedRun(shape);
+    const PointSet& points = run->p.points;
+    const BuildOptions& options = run->options;
+    const OctreeChunkPlan& plan = run->plan;
+    const SdfEvaluator& sdf = *run->sdf;
+    const CornerStageResults& merged = run->merged;
     ASSERT_GE(plan.chunks(), 8u) << shape;
-    const SdfEvaluator sdf(points, *p.index, options.smoothing, options.fit);
-    CornerStageSeconds seconds;
-    ChunkRunStats stats;
-    const CornerStageResults merged =
-        runCornerStagesByChunk(points, plan, sdf, options, p.radii, seconds, stats);
     const LodField all = sampleLodCorners(merged.octree, points, sdf, options, {}, plan.cut());
     const LodField jobs =
         sampleLodCorners(merged.octree, points, sdf, options, {}, plan.cut(), &merged.lod);
