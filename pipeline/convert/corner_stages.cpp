@@ -13,12 +13,11 @@
 // holds, the result is a function of the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
-#include <tbb/parallel_for.h>
-
-#include <algorithm>
 #include <fcntl.h>
+#include <tbb/parallel_for.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -351,8 +350,8 @@ bool claimChunk(const ResumeState& share, size_t c) {
     return true;
   }
   if (errno == EEXIST) return false;
-  throw std::runtime_error(path.string() + ": cannot claim an octree chunk job: " +
-                           std::strerror(errno));
+  throw std::runtime_error(path.string() +
+                           ": cannot claim an octree chunk job: " + std::strerror(errno));
 }
 
 // The stages over the chunk's own points and its halo.
@@ -381,8 +380,8 @@ CornerStageResults runChunk(const PointSet& points, size_t chunk,
   // to it are loaded whole, so the job evaluates what the whole run would.
   stage("lod");
   const uint64_t firstCell = plan.firstCell[chunk];
-  const uint64_t endCell = chunk + 1 < plan.chunks() ? plan.firstCell[chunk + 1]
-                                                     : uint64_t{1} << (3 * plan.cellLevel);
+  const uint64_t endCell =
+      chunk + 1 < plan.chunks() ? plan.firstCell[chunk + 1] : uint64_t{1} << (3 * plan.cellLevel);
   r.lod = sampleLodCornersWithin(
       r.octree, local, sdf, options, plan.lodProxyLevels, uint8_t(plan.haloLevel + 1),
       [&](uint8_t level, uint64_t key) {
@@ -577,7 +576,8 @@ void runCornerStagesAsRank(const BuildOptions& options, const Ranks& ranks) {
   const std::vector<std::vector<PointRange>> halos = haloRanges(points, plan);
   for (size_t c = 0; c < plan.chunks(); ++c)
     if (claimChunk(share, c))
-      saveCornerStage(share, runChunk(points, c, halos[c], options, radii, plan, [](const char*) {}),
+      saveCornerStage(share,
+                      runChunk(points, c, halos[c], options, radii, plan, [](const char*) {}),
                       octreeChunkCheckpoint(c));
   ranks.barrier();  // rank 0 has merged every chunk
 }

@@ -158,7 +158,8 @@ LodProxyLevels lodProxyLevels(const PointSet& points) {
   LodProxyLevels proxyLevel{};
   for (int level = 0; level <= kMaxLevel; ++level) {
     const int proxy = std::min(level + kProxyLevels, int(kMaxLevel));
-    proxyLevel[size_t(level)] = 4 * cells[size_t(proxy)] > points.size() ? int8_t{-1} : int8_t(proxy);
+    proxyLevel[size_t(level)] =
+        4 * cells[size_t(proxy)] > points.size() ? int8_t{-1} : int8_t(proxy);
   }
   return proxyLevel;
 }
@@ -260,18 +261,19 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
     constexpr uint32_t kNoSample = ~uint32_t{0};
     SpillVector<uint32_t> first(field.value.size(), kNoSample);
     const auto entryOf = [&](size_t i) { return field.index.find((*known)[i].key); };
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, known->size(), 4096),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        spillPause();
-                        for (size_t i = r.begin(); i < r.end(); ++i) {
-                          const uint32_t e = entryOf(i);
-                          if (e == CellKeyIndex::kNone) continue;
-                          std::atomic_ref<uint32_t> slot(first[e]);
-                          uint32_t seen = slot.load(std::memory_order_relaxed);
-                          while (uint32_t(i) < seen && !slot.compare_exchange_weak(seen, uint32_t(i))) {
-                          }
-                        }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, known->size(), 4096),
+        [&](const tbb::blocked_range<size_t>& r) {
+          spillPause();
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            const uint32_t e = entryOf(i);
+            if (e == CellKeyIndex::kNone) continue;
+            std::atomic_ref<uint32_t> slot(first[e]);
+            uint32_t seen = slot.load(std::memory_order_relaxed);
+            while (uint32_t(i) < seen && !slot.compare_exchange_weak(seen, uint32_t(i))) {
+            }
+          }
+        });
     tbb::parallel_for(tbb::blocked_range<size_t>(0, first.size(), 4096),
                       [&](const tbb::blocked_range<size_t>& r) {
                         spillPause();

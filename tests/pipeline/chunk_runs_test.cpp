@@ -276,9 +276,10 @@ TEST(ChunkRuns, theJobsLevelOfDetailIsWhatAllPointsGive) {
         ++fine;
         covered += fromJob[e];
       }
-    std::printf("%s: %zu level-of-detail corners, %zu finer than the halo's cells, %zu of them "
-                "from the jobs (%zu samples)\n",
-                shape, all.value.size(), fine, covered, merged.lod.size());
+    std::printf(
+        "%s: %zu level-of-detail corners, %zu finer than the halo's cells, %zu of them "
+        "from the jobs (%zu samples)\n",
+        shape, all.value.size(), fine, covered, merged.lod.size());
     EXPECT_GT(matched, 0u) << shape;
     EXPECT_GT(fine, 500u) << shape;
     EXPECT_GE(double(covered), 0.95 * double(fine)) << shape;

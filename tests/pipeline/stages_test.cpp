@@ -289,8 +289,8 @@ TEST(SignedDistance, withinAReachASubsetHoldingItsPointsGivesWhatAllPointsGive) 
   std::normal_distribution<double> g;
   size_t given = 0, refused = 0;
   for (int i = 0; i < 200; ++i) {
-    const glm::dvec3 q = glm::dvec3(e.points.position[pick(rng)]) +
-                         glm::dvec3(g(rng), g(rng), g(rng)) * 0.003;
+    const glm::dvec3 q =
+        glm::dvec3(e.points.position[pick(rng)]) + glm::dvec3(g(rng), g(rng), g(rng)) * 0.003;
     const double reach = (i % 4 + 1) * 0.02;
     const float minSigma = float(i % 3) * 0.001f;
     std::vector<uint32_t> near;
