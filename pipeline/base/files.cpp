@@ -248,4 +248,15 @@ void MadeDirectories::removeMade() noexcept {
   registrations_.clear();
 }
 
+bool claimFile(const std::filesystem::path& path) {
+  const int fd = ::open(path.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+  if (fd >= 0) {
+    ::close(fd);
+    return true;
+  }
+  if (errno == EEXIST) return false;
+  throw FileError(path.string(), std::nullopt,
+                  std::string("cannot claim: ") + std::strerror(errno));
+}
+
 }  // namespace iso

@@ -33,6 +33,11 @@ void writeFileBytes(const std::filesystem::path& path, const std::vector<uint8_t
 // A whole file's bytes; a FileError naming path when it cannot be opened or read.
 std::vector<uint8_t> readFileBytes(const std::filesystem::path& path);
 
+// Claim a piece of work shared through a directory that several processes see: makes `path` with
+// O_EXCL and says whether this call made it (exactly one caller does); a FileError when it can
+// neither make it nor find it there.
+bool claimFile(const std::filesystem::path& path);
+
 // Outputs written together, all or none. Each is written under a temporary name beside its final
 // path (stage()); commit() renames them all into place once every one is complete. If a rename
 // fails, the renames done are undone, so that every final path holds what it held before, and

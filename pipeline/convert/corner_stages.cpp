@@ -13,16 +13,12 @@
 // holds, the result is a function of the points and the options: the plan depends on nothing else.
 #include "pipeline/convert/corner_stages.h"
 
-#include <fcntl.h>
 #include <tbb/parallel_for.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <map>
 #include <memory>
 #include <optional>
@@ -30,6 +26,7 @@
 #include <thread>
 
 #include "iso/check.h"
+#include "pipeline/base/files.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/points/knn.h"
 
@@ -339,19 +336,10 @@ ResumeState sharedState(const Ranks& ranks) {
   return ResumeState(ranks.shared / "octree-chunks", kShareFingerprint);
 }
 
-// Chunk `c` for this rank: true for exactly one rank of the run (a file made with O_EXCL in the
-// shared directory, which every rank sees). Ranks claim chunks in chunk order as they become free,
-// so a rank that also merges (rank 0) takes fewer.
+// Chunk `c` for this rank: true for exactly one rank of the run. Ranks claim chunks in chunk
+// order as they become free, so a rank that also merges (rank 0) takes fewer.
 bool claimChunk(const ResumeState& share, size_t c) {
-  const std::filesystem::path path = share.path("claim-" + std::to_string(c));
-  const int fd = ::open(path.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
-  if (fd >= 0) {
-    ::close(fd);
-    return true;
-  }
-  if (errno == EEXIST) return false;
-  throw std::runtime_error(path.string() +
-                           ": cannot claim an octree chunk job: " + std::strerror(errno));
+  return claimFile(share.path("claim-" + std::to_string(c)));
 }
 
 // The stages over the chunk's own points and its halo.

@@ -2,7 +2,11 @@
 // directories made for temporary files and removed again.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include "iso/error.h"
 #include "pipeline/base/files.h"
@@ -201,6 +205,26 @@ TEST(MadeDirectories, whatCannotBeMadeIsNamed) {
                          0),
             0u)
       << reason;
+}
+
+// Of many threads claiming the same pieces, exactly one gets each; a directory that is not there
+// is named in the error.
+TEST(ClaimFile, exactlyOneClaimantGetsEachPiece) {
+  test::TempDir dir;
+  constexpr int kPieces = 64, kClaimants = 4;
+  std::vector<std::atomic<int>> got(kPieces);
+  std::vector<std::thread> claimants;
+  for (int t = 0; t < kClaimants; ++t)
+    claimants.emplace_back([&] {
+      for (int p = 0; p < kPieces; ++p)
+        if (claimFile(dir / ("claim-" + std::to_string(p)))) ++got[size_t(p)];
+    });
+  for (std::thread& t : claimants) t.join();
+  for (int p = 0; p < kPieces; ++p) EXPECT_EQ(got[size_t(p)].load(), 1) << p;
+  EXPECT_FALSE(claimFile(dir / "claim-0"));
+  const auto [file, reason] = fileErrorOf([&] { claimFile(dir / "no" / "claim-0"); });
+  EXPECT_EQ(file, (dir / "no" / "claim-0").string());
+  EXPECT_NE(reason.find("cannot claim"), std::string::npos) << reason;
 }
 
 }  // namespace
