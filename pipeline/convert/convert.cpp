@@ -605,7 +605,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
         sdf.reset();
         ready.index.reset();
       },
-      plan.chunks() > 1 ? plan.cut() : CellCut{}, &built.lod);
+      plan.chunks() > 1 ? plan.cut() : CellCut{}, &built.lod,
+      plan.chunks() > 1 ? &plan.lodProxyLevels : nullptr);
   built.lod = {};
   if (texture && options.texture.at == TextureAt::Corners) {
     timer.next("texture", corners.size() + lod.value.size());

@@ -58,7 +58,7 @@ class CellKeyIndex {
 
  private:
   using Slots = std::vector<uint32_t, SpillAllocator<uint32_t, true>>;
-  static constexpr size_t kNoPart = ~size_t{0};
+  static constexpr size_t kNoPart = CellCut::kNoPart;
   struct Stretch {
     size_t offset = 0, capacity = 0, count = 0;  // capacity 0: never opened
   };

@@ -43,8 +43,8 @@ struct CornerField {
   // pages count once written; below that the arrays never grow by copying).
   CornerField(size_t expected, size_t reserved);
   // Spillable (pipeline/base/buffers.h): the entries are made in the key order of the leaves using
-  // them, which the stages that read them follow; the hash table stays in memory.
-  CellKeyIndex index{1024};  // gridKey → entry
+  // them, which the stages that read them follow; so are the index's keys and table.
+  CellKeyIndex index{1024};            // gridKey → entry
   SpillVector<uint8_t> coarsestLevel;  // of the filled leaves using the corner, or kUnusedCorner
   SpillVector<CornerSample> value;
   uint32_t find(const GridPoint& p) const;
@@ -110,8 +110,8 @@ void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, C
 void refreshCorners(const Octree& tree, Closure& closure);
 // Whether the closure fills the empty cell (level, key) that the zero set of the leaf (leafLevel,
 // leafKey) runs into.
-using ExitFilter = std::function<bool(uint8_t leafLevel, uint64_t leafKey, uint8_t level,
-                                      uint64_t key)>;
+using ExitFilter =
+    std::function<bool(uint8_t leafLevel, uint64_t leafKey, uint8_t level, uint64_t key)>;
 // Close the surface from these filled leaves (where a chunk run's jobs met): their missing corners
 // sampled, then the closure's passes from them (the first pass filling only the cells `firstPass`
 // accepts, when given), then refreshCorners. The cells it fills are counted in closure.filled.
@@ -151,10 +151,12 @@ LodProxyLevels lodProxyLevels(const PointSet& points);
 // made), so that it and its index can be freed. With a cut (a chunk run's parts, whose nodes come
 // in part order), each part's corners get their own stretch of the field's table. Corners with a
 // value in `known` take it (the first one where several have the same key) and are not evaluated.
+// `proxyLevels`: lodProxyLevels(points) when the caller has them (else made here).
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options,
-                          const std::function<void()>& pointsSdfDone = {},
-                          const CellCut& cut = {}, const SpillVector<LodSample>* known = nullptr);
+                          const std::function<void()>& pointsSdfDone = {}, const CellCut& cut = {},
+                          const SpillVector<LodSample>* known = nullptr,
+                          const LodProxyLevels* proxyLevels = nullptr);
 // A chunk job's share of the level of detail: the corners of the internal nodes of `tree` at
 // levels >= minLevel for which owned(level, key) holds, each evaluated as sampleLodCorners
 // evaluates it over all points (the proxies of `proxyLevels`) where that reads no point farther

@@ -222,7 +222,8 @@ glm::dvec3 framePoint(const GridPoint& p) {
 
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options, const std::function<void()>& pointsSdfDone,
-                          const CellCut& cut, const SpillVector<LodSample>* known) {
+                          const CellCut& cut, const SpillVector<LodSample>* known,
+                          const LodProxyLevels* proxyLevels) {
   LodField field;
   // A part's stretch: room for 4 corners an internal node (8 a node, each shared by a few).
   std::vector<size_t> internalOf(cut.firstCell.size(), 0);
@@ -284,7 +285,8 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
       field.fromSamples +=
           std::erase_if(corners, [&](const auto& c) { return first[c.first] != kNoSample; });
   }
-  evaluateLevels(byLevel, points, pointsSdf, options, lodProxyLevels(points), pointsSdfDone,
+  evaluateLevels(byLevel, points, pointsSdf, options,
+                 proxyLevels != nullptr ? *proxyLevels : lodProxyLevels(points), pointsSdfDone,
                  [&](const SdfEvaluator& sdf, uint32_t entry, const GridPoint& p, float minSigma) {
                    field.value[entry] = sdf.evaluate(framePoint(p), minSigma);
                  });
