@@ -1654,11 +1654,12 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
   ASSERT_EQ(runIso("gen torus -n 200000 -o " + quoted(in)).exitCode, 0);
   ASSERT_EQ(runIso("convert -q " + quoted(in) + " -o " + quoted(dir_ / "ref.iso")).exitCode, 0);
   const std::string reference = test::slurp(dir_ / "ref.iso");
-  const auto killIn = [&](const std::string& stage) {
+  const auto killIn = [&](const std::string& stage, std::vector<std::string> more = {}) {
     fs::remove(dir_ / "err");  // not read before the new run makes it
-    const pid_t pid = startIso(
-        {"convert", "--resume", "-f", "--progress", "json", in.string(), "-o", out.string()},
-        dir_ / "err");
+    std::vector<std::string> args = {"convert", "--resume", "-f", "--progress", "json"};
+    args.insert(args.end(), more.begin(), more.end());
+    args.insert(args.end(), {in.string(), "-o", out.string()});
+    const pid_t pid = startIso(args, dir_ / "err");
     const bool caught = waitUntil(pid, [&] {
       return fs::exists(dir_ / "err") &&
              test::slurp(dir_ / "err").find("\"stage\":\"" + stage + "\"") != std::string::npos;
@@ -1735,6 +1736,12 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
                      dir_ / "octree-chunks.iso");
   EXPECT_GE(report["resumed"]["octree_chunks"].get<int>(), 2) << report.dump();
   EXPECT_LT(report["resumed"]["octree_chunks"], report["octree_chunks"]["chunks"]);
+  // Killed after its jobs, a chunked run goes on from all of them: its jobs are its checkpoints.
+  ASSERT_TRUE(killIn("lod", {"--octree-chunk-points", "20000"}));
+  EXPECT_FALSE(fs::exists(state / "corners.checkpoint"));
+  report = resume("--octree-chunk-points 20000 ").first;
+  EXPECT_EQ(report["resumed"]["octree_chunks"], report["octree_chunks"]["chunks"]) << report.dump();
+  EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "octree-chunks.iso"));
 
   // The state of a run with other options is not resumed from.
   ASSERT_TRUE(killIn("lod"));

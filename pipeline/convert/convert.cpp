@@ -324,7 +324,9 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
     if (resumed) report["resumed"] = {{"from", "points"}, {"state", source.resume->directory()}};
   }
   ReadyPoints ready = resumed ? std::move(*resumed) : prepare(timer);
-  if (source.resume != nullptr && !resumed) {
+  // A chunked run's jobs are its checkpoints: a run killed after them redoes only the merge, which
+  // costs about three of the corners' checkpoint (specs/pipeline.md §15, "Resume").
+  if (source.resume != nullptr && !resumed && !report.contains("octree_chunks")) {
     timer.next("checkpoint");
     savePoints(*source.resume, ready);
     source.resume->removeStartingWith("chunk-");  // the points' checkpoint holds them all
@@ -584,7 +586,9 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   CornerStageResults built =
       resumed ? std::move(*resumed)
               : buildCornerStages(points, *sdf, options, radii, timer, report, source);
-  if (source.resume != nullptr && !resumed) {
+  // A chunked run's jobs are its checkpoints: a run killed after them redoes only the merge, which
+  // costs about three of the corners' checkpoint (specs/pipeline.md §15, "Resume").
+  if (source.resume != nullptr && !resumed && !report.contains("octree_chunks")) {
     timer.next("checkpoint");
     saveCornerStage(*source.resume, built);
     source.resume->removeStartingWith(kOctreeChunkPrefix);  // the corners' checkpoint holds them
