@@ -1,6 +1,6 @@
 // Image-space point rendering on the GPU (specs/viewer.md, "Image-space points"): the steps of
 // shaders/image.h, one stage a pipeline (specialization constant 0), over every point or pixel.
-// viewer/point_image_gpu.cpp records them in order; viewer/point_image.cpp runs the same steps
+// viewer/point_image_gpu.cpp records them in order; tracer/point_image.cpp runs the same steps
 // on the CPU.
 #version 450
 #extension GL_GOOGLE_include_directive : require

@@ -1,6 +1,6 @@
 // Image-space point rendering (Dobrev, Rosenthal and Linsen; specs/viewer.md "Image-space points"):
 // the per-point and per-pixel steps, one source for the GPU and for the CPU reference
-// (viewer/point_image.cpp), as trace.h is for the tracer.
+// (tracer/point_image.cpp), as trace.h is for the tracer.
 //
 // A layer is two images: each pixel's depth (distance to the viewpoint / far, in (0, 1]; 0 where
 // no point is: "background") and the index of the point whose values it shows (kImageNoPoint

@@ -1,5 +1,5 @@
 // Point set surfaces ray traced on the GPU (specs/viewer.md, "Point set surfaces"): an
-// invocation a pixel traces its camera ray through shaders/pss_trace.h, which viewer/pss.cpp
+// invocation a pixel traces its camera ray through shaders/pss_trace.h, which tracer/pss.cpp
 // runs on the CPU from the same source; viewer/pss_gpu.cpp records the one dispatch.
 #version 450
 #extension GL_GOOGLE_include_directive : require

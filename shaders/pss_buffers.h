@@ -2,8 +2,8 @@
 // ISO_PSS_BINDING to ISO_PSS_BINDING + kPssStorageBindings - 1, in the order of
 // viewer/pss_gpu.h's PssBuffers) and the accessors pss.h, pss_volume.h and pss_trace.h read them
 // by. The includer declares `PssParams Q` (a uniform or a storage buffer) and defines
-// ISO_PSS_BINDING first. GLSL only: the C++ builds read host arrays (viewer/pss.cpp,
-// viewer/cpu_tracer.cpp).
+// ISO_PSS_BINDING first. GLSL only: the C++ builds read host arrays (tracer/pss.cpp,
+// tracer/cpu_tracer.cpp).
 layout(std430, binding = ISO_PSS_BINDING) readonly buffer PssPositions { vec4 pssPositions[]; };  // xyz, h
 layout(std430, binding = ISO_PSS_BINDING + 1) readonly buffer PssNormals { vec4 pssNormals[]; };
 layout(std430, binding = ISO_PSS_BINDING + 2) readonly buffer PssColors { vec4 pssColors[]; };

@@ -1,5 +1,5 @@
 // The ray tracer of the viewer, one source for the GPU (trace.comp.glsl) and the CPU reference
-// tracer (viewer/cpu_tracer.cpp): the same statements run in both (specs/viewer.md, "Tracing").
+// tracer (tracer/cpu_tracer.cpp): the same statements run in both (specs/viewer.md, "Tracing").
 //
 // The includer provides, before including this file:
 //   FrameParams P;                       the frame's parameters

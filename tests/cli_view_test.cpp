@@ -12,7 +12,7 @@
 #include "pipeline/io/ply.h"
 #include "pipeline/io/readers.h"
 #include "tests/cli_support.h"
-#include "viewer/image.h"
+#include "base/image.h"
 
 namespace iso::test {
 namespace {
@@ -40,7 +40,7 @@ const std::filesystem::path& kittenIso() {
 std::vector<uint32_t> expectPicture(const std::filesystem::path& png, uint32_t width,
                                     uint32_t height) {
   uint32_t w = 0, h = 0;
-  auto pixels = viewer::readImage(png, w, h);
+  auto pixels = readRgba8Image(png, w, h);
   EXPECT_EQ(w, width);
   EXPECT_EQ(h, height);
   const std::set<uint32_t> colors(pixels.begin(), pixels.end());
@@ -182,8 +182,8 @@ TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
   expectPicture(dir / "iso-screenshot-1.png", 480, 260);
   expectPicture(dir / "final.png", 480, 260);
   uint32_t w = 0, h = 0;
-  const auto before = viewer::readImage(dir / "iso-screenshot-1.png", w, h);
-  const auto after = viewer::readImage(dir / "final.png", w, h);
+  const auto before = readRgba8Image(dir / "iso-screenshot-1.png", w, h);
+  const auto after = readRgba8Image(dir / "final.png", w, h);
   size_t changed = 0;
   for (size_t i = 0; i < before.size(); ++i) changed += before[i] != after[i];
   EXPECT_GT(changed, before.size() / 20);
@@ -249,7 +249,7 @@ TEST(CliView, rawScansDrawAsImageSpacePoints) {
   run = iso("view " + kitten + " --draw image --headless --out " + quoted(gpu) + size);
   ASSERT_EQ(run.exitCode, 0) << run.err;
   uint32_t w = 0, h = 0;
-  const auto a = viewer::readImage(cpu, w, h), b = viewer::readImage(gpu, w, h);
+  const auto a = readRgba8Image(cpu, w, h), b = readRgba8Image(gpu, w, h);
   ASSERT_EQ(a.size(), b.size());
   size_t differ = 0;
   for (size_t i = 0; i < a.size(); ++i)
@@ -425,7 +425,7 @@ TEST(CliView, keptPointsOfAnIsoFileDrawAsImageSpacePointsUnderTheBudget) {
   run = iso("view " + kitten + " --cpu --out " + quoted(fromScan) + size);
   ASSERT_EQ(run.exitCode, 0) << run.err;
   uint32_t w = 0, h = 0;
-  const auto a = viewer::readImage(fromIso, w, h), b = viewer::readImage(fromScan, w, h);
+  const auto a = readRgba8Image(fromIso, w, h), b = readRgba8Image(fromScan, w, h);
   const uint32_t sky = a[0];
   size_t both = 0, either = 0;
   for (size_t i = 0; i < a.size(); ++i) {
@@ -680,7 +680,7 @@ TEST(CliView, evalMeasuresTheIsoSurfaceAgainstThePointSetSurfaceOfItsPoints) {
       const auto b = expectPicture(pictures / (std::string("view") + axis + "-pss.png"), 96, 96);
       // The difference is mostly the background where the two agree: its size is what is checked.
       uint32_t w = 0, h = 0;
-      viewer::readImage(pictures / (std::string("view") + axis + "-difference.png"), w, h);
+      readRgba8Image(pictures / (std::string("view") + axis + "-difference.png"), w, h);
       EXPECT_EQ(w, 96u);
       EXPECT_EQ(h, 96u);
       for (size_t i = 0; i < a.size(); ++i) {
@@ -728,7 +728,7 @@ TEST(CliView, causticsPutAGroundUnderTheSurfaceAndSayHowManyPhotonsTheyTraced) {
   // and no caustics only where the light went through the glass.
   ASSERT_EQ(iso("view " + file + " --cpu" + glass + quoted(plain) + " --ground").exitCode, 0);
   uint32_t w = 0, h = 0;
-  const auto with = viewer::readImage(out, w, h), without = viewer::readImage(plain, w, h);
+  const auto with = readRgba8Image(out, w, h), without = readRgba8Image(plain, w, h);
   ASSERT_EQ(with.size(), without.size());
   size_t brighter = 0, darker = 0;
   for (size_t i = 0; i < with.size(); ++i) {

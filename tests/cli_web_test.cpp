@@ -15,7 +15,7 @@
 #include <string>
 
 #include "iso/reader.h"
-#include "pipeline/io/raster.h"
+#include "base/raster.h"
 #include "tests/cli_support.h"
 
 namespace iso {

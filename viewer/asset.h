@@ -7,9 +7,9 @@
 #include <optional>
 
 #include "iso/reader.h"
-#include "viewer/blob.h"
-#include "viewer/splats.h"
-#include "viewer/image.h"
+#include "tracer/blob.h"
+#include "tracer/splats.h"
+#include "base/image.h"
 #include "viewer/scene.h"
 
 namespace iso::viewer {

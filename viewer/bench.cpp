@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 #include <numeric>
 
-#include "pipeline/base/text.h"
-#include "viewer/cpu_tracer.h"
+#include "base/text.h"
+#include "tracer/cpu_tracer.h"
 #include "viewer/gpu_view.h"
 
 namespace iso::viewer {

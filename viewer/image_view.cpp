@@ -8,7 +8,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/point_image_gpu.h"
 #include "viewer/vulkan.h"
 
@@ -142,7 +142,7 @@ int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
       renderer.render(cameraOf(in, camera, o.width, o.height), lights,
                       budgeted(settingsOf(o.scene, image), o, scene.size(), lights.size()));
   const double wall = seconds(Clock::now() - t0);
-  writeImage(o.out, o.width, o.height, frame.pixels);
+  writeRgba8Image(o.out, o.width, o.height, frame.pixels);
   printInputs(in, scene.size());
   fmt::print("{}: {}x{} image-space points on {}, {} layer{}, {:.3f} s ({:.3f} s GPU), GPU memory "
              "{:.1f} MiB\n",
@@ -163,7 +163,7 @@ int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const Imag
       cameraOf(in, camera, o.width, o.height), lights,
       budgeted(settingsOf(o.scene, image), o, renderer.scene().size(), lights.size()));
   const double render = seconds(Clock::now() - t0);
-  writeImage(o.out, o.width, o.height, pixelsOf(r));
+  writeRgba8Image(o.out, o.width, o.height, pixelsOf(r));
   printInputs(in, renderer.scene().size());
   fmt::print("{}: {}x{} image-space points on the CPU reference, {} layer{}, {:.2f} s\n",
              o.out.string(), o.width, o.height, r.stats.layers, r.stats.layers == 1 ? "" : "s",

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "iso/format.h"
-#include "viewer/point_image.h"
+#include "tracer/point_image.h"
 #include "viewer/scene.h"
 #include "viewer/view.h"
 
@@ -60,7 +60,7 @@ int viewImageCpu(const ViewOptions& options, const ImageViewOptions& image,
 int viewImageBench(const ViewOptions& options, const ImageViewOptions& image,
                    const ImageInputs& inputs);
 
-// Point set surfaces (--draw pss; viewer/pss.h): the points' h is this many of their spacings.
+// Point set surfaces (--draw pss; tracer/pss.h): the points' h is this many of their spacings.
 inline constexpr float kPssSpacings = 2.0f;
 struct PssViewOptions {
   bool exact = false;          // --pss exact: camera and refracted rays projected onto the MLS surface

@@ -14,7 +14,7 @@
 #include <cstring>
 #include <optional>
 
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/image_view.h"
 #include "viewer/point_image_gpu.h"
 #include "viewer/window_parts.h"

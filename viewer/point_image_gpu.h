@@ -9,7 +9,7 @@
 #include <span>
 #include <vector>
 
-#include "viewer/point_image.h"
+#include "tracer/point_image.h"
 #include "viewer/vulkan.h"
 
 namespace iso::viewer {

@@ -1,5 +1,5 @@
 // Point set surfaces ray traced on the GPU (shaders/pss.comp.glsl: an invocation a pixel through
-// shaders/pss_trace.h, the source viewer/pss.cpp runs on the CPU): the surface's points,
+// shaders/pss_trace.h, the source tracer/pss.cpp runs on the CPU): the surface's points,
 // patches and grid uploaded once, a picture a call.
 #pragma once
 
@@ -9,7 +9,7 @@
 
 #include "shaders/shared.h"
 
-#include "viewer/pss.h"
+#include "tracer/pss.h"
 #include "viewer/vulkan.h"
 
 namespace iso::viewer {

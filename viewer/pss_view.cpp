@@ -1,5 +1,5 @@
 // `iso view FILE --draw pss` (image_view.h): the points as a point set surface, ray traced on the
-// CPU reference (viewer/pss.h) or the GPU (viewer/pss_gpu.h).
+// CPU reference (tracer/pss.h) or the GPU (viewer/pss_gpu.h).
 #include <fmt/core.h>
 
 #include <algorithm>
@@ -7,9 +7,9 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/image_view.h"
-#include "viewer/pss.h"
+#include "tracer/pss.h"
 #include "viewer/pss_gpu.h"
 #include "viewer/pss_view.h"
 #include "viewer/view.h"
@@ -124,7 +124,7 @@ int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInput
   const double render = seconds(Clock::now() - t0);
   std::vector<uint32_t> pixels(linear.size());
   for (size_t i = 0; i < linear.size(); ++i) pixels[i] = imagePixelWord(linear[i]);
-  writeImage(o.out, o.width, o.height, pixels);
+  writeRgba8Image(o.out, o.width, o.height, pixels);
   printScene(in, s);
   fmt::print("{}: {}x{} point set surface ({} mode) on the CPU reference, {:.2f} s ({:.2f} M "
              "camera rays/s)\n",
@@ -140,7 +140,7 @@ int viewPssHeadless(const ViewOptions& o, const PssViewOptions& pss, const Image
   double gpuSeconds = 0.0;
   const std::vector<uint32_t> pixels =
       renderer.render(pssRender(o, pss, in, s, sceneCamera(o.scene, in)), &gpuSeconds);
-  writeImage(o.out, o.width, o.height, pixels);
+  writeRgba8Image(o.out, o.width, o.height, pixels);
   printScene(in, s);
   fmt::print("{}: {}x{} point set surface ({} mode) on {}, {:.3f} s GPU, GPU memory {:.1f} MiB\n",
              o.out.string(), o.width, o.height, modeName(pss), gpu.properties.deviceName,

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "viewer/image_view.h"
-#include "viewer/pss.h"
+#include "tracer/pss.h"
 #include "viewer/scene.h"
 #include "viewer/view.h"
 

@@ -15,7 +15,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/image_view.h"
 #include "viewer/pss_gpu.h"
 #include "viewer/pss_view.h"

@@ -22,8 +22,8 @@
 #include <vector>
 
 #include "viewer/asset.h"
-#include "viewer/cpu_tracer.h"
-#include "viewer/image.h"
+#include "tracer/cpu_tracer.h"
+#include "base/image.h"
 #include "viewer/pss_gpu.h"
 #include "viewer/streaming.h"
 #include "viewer/vulkan.h"

@@ -13,7 +13,7 @@
 
 #include "iso/check.h"
 #include "iso/error.h"
-#include "viewer/splats.h"
+#include "tracer/splats.h"
 
 namespace iso::viewer {
 namespace {

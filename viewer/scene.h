@@ -14,9 +14,9 @@
 
 #include "iso/error.h"
 #include "iso/format.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 #include "shaders/shared.h"
-#include "viewer/blob.h"
+#include "tracer/blob.h"
 
 namespace iso::viewer {
 

@@ -17,8 +17,8 @@
 #include <vector>
 
 #include "iso/reader.h"
-#include "viewer/blob.h"
-#include "viewer/splats.h"
+#include "tracer/blob.h"
+#include "tracer/splats.h"
 
 namespace iso::viewer {
 

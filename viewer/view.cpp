@@ -11,11 +11,11 @@
 #include <optional>
 
 #include "iso/error.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 #include "viewer/asset.h"
-#include "viewer/cpu_tracer.h"
+#include "tracer/cpu_tracer.h"
 #include "viewer/gpu_view.h"
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/renderer.h"
 
 namespace iso::viewer {
@@ -130,7 +130,7 @@ int viewHeadless(const ViewOptions& options) {
   const FrameStats& s = renderer.stats();
   const auto pixels = renderer.pixels();
   const auto [photons, photonSeconds] = lastPhotons;
-  writeImage(options.out, options.width, options.height, pixels);
+  writeRgba8Image(options.out, options.width, options.height, pixels);
   fmt::print("{}: {}x{} on {}, {} frame{} in {:.2f} s ({}), last frame {:.1f} ms, {:.1f} Mrays/s\n",
              options.out.string(), options.width, options.height, gpu.properties.deviceName, frames,
              frames == 1 ? "" : "s", seconds(Clock::now() - start),
@@ -172,7 +172,7 @@ int viewCpu(const ViewOptions& options) {
   const auto t1 = Clock::now();
   const CpuFrame frame = renderCpu(pool, params, env ? &*env : nullptr);
   const double render = seconds(Clock::now() - t1);
-  writeImage(options.out, options.width, options.height, frame.pixels);
+  writeRgba8Image(options.out, options.width, options.height, frame.pixels);
   fmt::print(
       "{}: {}x{} on the CPU reference tracer, {:.2f} s ({:.1f} Mrays/s), chunks decoded in "
       "{:.2f} s\n",

@@ -17,7 +17,7 @@
 #include <future>
 
 #include "viewer/asset.h"
-#include "viewer/image.h"
+#include "base/image.h"
 #include "viewer/image_view.h"
 #include "viewer/point_image_gpu.h"
 #include "viewer/renderer.h"
@@ -231,7 +231,7 @@ struct ImageMode {
 // Save the last frame drawn (this waits for the frames in flight).
 void saveScreenshot(const std::filesystem::path& file, Renderer& renderer, bool bgra) {
   const std::vector<uint32_t> pixels = toRgba(renderer.pixels(), bgra);
-  writeImage(file, renderer.setup().width, renderer.setup().height, pixels);
+  writeRgba8Image(file, renderer.setup().width, renderer.setup().height, pixels);
   fmt::print("iso view: saved {}\n", file.string());
 }
 
@@ -302,7 +302,7 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
         (options.frames > 0 && frames >= options.frames) || glfwWindowShouldClose(window);
     const auto save = [&](const std::filesystem::path& file) {
       if (!points) return saveScreenshot(file, renderer, bgra);
-      writeImage(file, w.swapchain.extent.width, w.swapchain.extent.height, drawImage.lastPicture);
+      writeRgba8Image(file, w.swapchain.extent.width, w.swapchain.extent.height, drawImage.lastPicture);
       fmt::print("iso view: saved {}\n", file.string());
     };
     if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));

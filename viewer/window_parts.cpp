@@ -1,7 +1,7 @@
 // What the windows of `iso view` share (window_parts.h).
 #include "viewer/window_parts.h"
 
-#include "viewer/image.h"
+#include "base/image.h"
 
 #include <fmt/core.h>
 #include <glm/geometric.hpp>
@@ -310,7 +310,7 @@ std::vector<uint32_t> enlarged(const std::vector<uint32_t>& pixels, uint32_t fro
 void saveScreenshots(Input& input, const ViewOptions& options, bool lastFrame, uint32_t width,
                      uint32_t height, const std::vector<uint32_t>& picture, uint32_t& taken) {
   const auto save = [&](const std::filesystem::path& file) {
-    writeImage(file, width, height, picture);
+    writeRgba8Image(file, width, height, picture);
     fmt::print("iso view: saved {}\n", file.string());
   };
   if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++taken));

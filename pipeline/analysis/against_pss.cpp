@@ -11,8 +11,8 @@
 
 #include "iso/check.h"
 #include "pipeline/points/viewing.h"
-#include "viewer/cpu_tracer.h"
-#include "viewer/pss.h"
+#include "tracer/cpu_tracer.h"
+#include "tracer/pss.h"
 
 namespace iso {
 namespace {

@@ -1,6 +1,6 @@
 // The ISO surface against the point set surface of the points it was made from (`iso eval
 // FILE.iso --against-pss`): both ray traced from the same views on the CPU (the ISO by the
-// viewer's tracer at its finest level, the PSS in its exact mode, viewer/pss.h), compared pixel
+// viewer's tracer at its finest level, the PSS in its exact mode, tracer/pss.h), compared pixel
 // by pixel: silhouettes, depths, normals, the same shading's PSNR, and each one's rays/s.
 #pragma once
 

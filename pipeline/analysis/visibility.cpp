@@ -15,7 +15,7 @@
 #include "iso/check.h"
 #include "iso/reader.h"
 #include "pipeline/points/points.h"
-#include "viewer/cpu_tracer.h"
+#include "tracer/cpu_tracer.h"
 
 namespace iso {
 namespace {

@@ -22,7 +22,7 @@
 #include "iso/check.h"
 #include "pipeline/base/process.h"
 #include "pipeline/base/progress.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso {
 namespace {

@@ -8,7 +8,7 @@
 #include <filesystem>
 #include <vector>
 
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso {
 

@@ -8,7 +8,7 @@
 
 #include "pipeline/base/buffers.h"
 #include "pipeline/base/process.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso {
 namespace {

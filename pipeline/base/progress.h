@@ -16,7 +16,7 @@
 #include <string>
 #include <thread>
 
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso {
 

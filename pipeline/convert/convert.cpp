@@ -20,7 +20,7 @@
 #include "pipeline/base/progress.h"
 #include "pipeline/convert/checkpoints.h"
 #include "pipeline/convert/corner_stages.h"
-#include "pipeline/io/image.h"
+#include "base/image.h"
 #include "pipeline/octree/field.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/outofcore/outofcore.h"

@@ -7,7 +7,7 @@
 #include <array>
 #include <span>
 
-#include "pipeline/base/text.h"
+#include "base/text.h"
 #include "pipeline/io/little_endian.h"
 
 namespace iso::io {

@@ -16,7 +16,7 @@
 #include <string_view>
 
 #include "iso/error.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso::io {
 namespace {

@@ -1,7 +1,7 @@
 // LASzip's entropy coding (Amir Said's FastAC: a 32-bit arithmetic coder with adaptive models
 // updated periodically), as far as this project codes LAZ itself: the chunk table, which the
 // LAZ reader decodes (laz_chunks.cpp), and the test and benchmark writer of LAZ files
-// (tools/bench/laz_writer.cpp). The points themselves are decoded by laz-perf (laz_decoder.h).
+// (tests/support/laz_writer.cpp). The points themselves are decoded by laz-perf (laz_decoder.h).
 // Symbols are decoded by bisection, which selects the symbol LASzip's lookup tables select.
 #pragma once
 

@@ -29,7 +29,7 @@
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/quantize.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 #include "pipeline/io/color_table.h"
 #include "pipeline/io/e57_pages.h"
 #include "pipeline/io/e57_section.h"

@@ -1,5 +1,5 @@
 // Field splitting for text formats (PLY ASCII, XYZ-like files), without iostreams or locales;
-// numbers parsed by pipeline/base/text.h (std::from_chars).
+// numbers parsed by base/text.h (std::from_chars).
 #pragma once
 
 #include <charconv>
@@ -9,7 +9,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso::io {
 
@@ -33,7 +33,7 @@ bool nextField(std::string_view& rest, std::string_view& field) {
   return true;
 }
 
-// Numbers are parsed by pipeline/base/text.h, for every part of the project.
+// Numbers are parsed by base/text.h, for every part of the project.
 using iso::parseInteger;
 using iso::parseNumber;
 

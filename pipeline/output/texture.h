@@ -9,7 +9,7 @@
 #include "iso/format.h"
 #include "iso/surface.h"
 #include "pipeline/base/options.h"
-#include "pipeline/io/image.h"
+#include "base/image.h"
 
 namespace iso {
 

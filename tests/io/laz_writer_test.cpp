@@ -1,4 +1,4 @@
-// The benchmarks' LAZ writer (tools/bench/laz_writer.h): its chunks are the bytes laz-perf's own
+// The benchmarks' LAZ writer (tests/support/laz_writer.h): its chunks are the bytes laz-perf's own
 // compressor writes for the same points, and laz-perf decodes them to the LAS they came from.
 #include <cstring>
 #include <random>
@@ -9,7 +9,7 @@
 #include "pipeline/io/laz_decoder.h"
 #include "tests/io/io_test_util.h"
 #include "tests/io/las_file.h"
-#include "tools/bench/laz_writer.h"
+#include "tests/support/laz_writer.h"
 
 namespace iso {
 namespace {

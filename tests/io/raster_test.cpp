@@ -1,5 +1,5 @@
-// PNG and PPM/PGM files without OpenImageIO (pipeline/io/raster.h), held to what the image
-// functions of this build read and write (pipeline/io/image.h: OpenImageIO where the build has it),
+// PNG and PPM/PGM files without OpenImageIO (base/raster.h), held to what the image
+// functions of this build read and write (base/image.h: OpenImageIO where the build has it),
 // and the image functions of builds without OpenImageIO.
 #include <gtest/gtest.h>
 
@@ -8,8 +8,8 @@
 
 #include "iso/error.h"
 #include "iso/quantize.h"
-#include "pipeline/io/image.h"
-#include "pipeline/io/raster.h"
+#include "base/image.h"
+#include "base/raster.h"
 #include "tests/support/support.h"
 
 namespace iso::test {

@@ -4,7 +4,7 @@
 
 #include <limits>
 
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso {
 namespace {

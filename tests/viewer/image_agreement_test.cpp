@@ -11,8 +11,8 @@
 #include "pipeline/points/viewing.h"
 #include "tests/pipeline/pipeline_support.h"
 #include "viewer/asset.h"
-#include "viewer/cpu_tracer.h"
-#include "viewer/point_image.h"
+#include "tracer/cpu_tracer.h"
+#include "tracer/point_image.h"
 #include "viewer/scene.h"
 
 namespace iso::test {

@@ -1,7 +1,7 @@
-// Image-space point rendering (viewer/point_image.h) against analytic answers and brute force:
+// Image-space point rendering (tracer/point_image.h) against analytic answers and brute force:
 // hole filling against a sphere's silhouette, occluded filling, depth peeling against per-pixel
 // sorting, shadow textures against analytic shadows and penumbrae.
-#include "viewer/point_image.h"
+#include "tracer/point_image.h"
 
 #include <gtest/gtest.h>
 

@@ -6,7 +6,7 @@
 #include <numbers>
 #include <random>
 
-#include "viewer/point_image.h"
+#include "tracer/point_image.h"
 
 namespace iso::viewer {
 

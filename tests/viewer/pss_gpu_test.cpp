@@ -5,8 +5,8 @@
 
 #include "tests/viewer/point_scenes.h"
 #include "tests/viewer/test_gpu.h"
-#include "viewer/point_image.h"
-#include "viewer/pss.h"
+#include "tracer/point_image.h"
+#include "tracer/pss.h"
 #include "viewer/pss_gpu.h"
 
 namespace iso::viewer {

@@ -1,4 +1,4 @@
-// Point set surfaces (viewer/pss.h) against analytic shapes and brute force: the exact mode's
+// Point set surfaces (tracer/pss.h) against analytic shapes and brute force: the exact mode's
 // hits on a sampled sphere and torus lie within a tenth of a point spacing of the surface, the
 // fast mode's within the trust radius (its distribution printed), and the grid finds the same
 // first hit as every patch tested in turn, for rays from outside and from the surface (shadow and
@@ -11,7 +11,7 @@
 #include <numbers>
 #include <random>
 
-#include "viewer/pss.h"
+#include "tracer/pss.h"
 
 namespace iso::viewer {
 namespace {

@@ -13,7 +13,7 @@
 #include "pipeline/base/options.h"
 #include "pipeline/io/readers.h"
 #include "tests/pipeline/pipeline_support.h"
-#include "viewer/cpu_tracer.h"
+#include "tracer/cpu_tracer.h"
 
 namespace iso::test {
 namespace {

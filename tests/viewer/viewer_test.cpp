@@ -17,8 +17,8 @@
 #include "pipeline/io/readers.h"
 #include "tests/pipeline/pipeline_support.h"
 #include "viewer/asset.h"
-#include "viewer/cpu_tracer.h"
-#include "viewer/image.h"
+#include "tracer/cpu_tracer.h"
+#include "base/image.h"
 #include "viewer/renderer.h"
 #include "viewer/scene.h"
 #include "viewer/streaming.h"
@@ -230,7 +230,7 @@ TEST(ViewerGolden, shadowsReflectionsRefractionsAreaLightsAndEnvironmentMapsAgre
       bands[y * ew + x] = (band == 0 ? v : 40) | (band == 1 ? v : 40) << 8 |
                           (band == 2 ? v : 40) << 16 | 0xFF000000u;
     }
-  writeImage(dir / "sky.png", ew, eh, bands);
+  writeRgba8Image(dir / "sky.png", ew, eh, bands);
   const Environment env = loadEnvironment(dir / "sky.png");
   ASSERT_EQ(env.width, ew);
   const auto gpuPicture = renderGpu(*asset, scene, w, h, uint64_t(1) << 30, &env);
@@ -247,7 +247,7 @@ TEST(ViewerGolden, bakedTexturesAndAmbientOcclusionAgreeAndOcclusionDarkensTheAm
   // A torus textured with a 2 × 2 image (red, green; blue, white), once without and once with
   // occlusion baked within its whole size (the ring's inside sees its far side).
   TempDir dir;
-  writeImage(dir / "quad.png", 2, 2, {0xFF0000FFu, 0xFF00FF00u, 0xFFFF0000u, 0xFFFFFFFFu});
+  writeRgba8Image(dir / "quad.png", 2, 2, {0xFF0000FFu, 0xFF00FF00u, 0xFFFF0000u, 0xFFFFFFFFu});
   BuildOptions options;
   options.texture = {dir / "quad.png", 1.0, 4.0, TextureAt::Corners};
   const PointCloud torus = scanOf("torus", 30000);

@@ -1,6 +1,6 @@
 // iso-bench-read SCAN.las DIR [--repeat N]: every reader's speed on the same points. The points
 // of SCAN (LAS 1.0-1.3, point format 0: `iso gen --mesh ... -o SCAN.las`) are written once into
-// DIR as LAS (the scan itself), LAZ (LASzip chunks of 50,000 points, tools/bench/laz_writer.h),
+// DIR as LAS (the scan itself), LAZ (LASzip chunks of 50,000 points, tests/support/laz_writer.h),
 // PLY binary (double positions) and ASCII, PCD binary (float), text (x y z, 4 decimals), E57
 // (double cartesian, one scan) and Draco (20-bit positions), unless they are there already. Then
 // each is read N times (default 3) through openPointFile as `iso convert` reads it (batches of
@@ -33,7 +33,7 @@
 #include "pipeline/io/ply.h"
 #include "pipeline/io/readers.h"
 #include "tests/support/e57_file.h"
-#include "tools/bench/laz_writer.h"
+#include "tests/support/laz_writer.h"
 
 namespace {
 

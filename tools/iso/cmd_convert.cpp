@@ -18,7 +18,7 @@
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/convert/convert.h"
-#include "pipeline/io/image.h"
+#include "base/image.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/octree/octree.h"
 #include "pipeline/outofcore/spill.h"

@@ -15,7 +15,7 @@
 #include "pipeline/analysis/visibility.h"
 #include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
-#include "pipeline/io/image.h"
+#include "base/image.h"
 #include "pipeline/io/ply.h"
 #include "pipeline/output/keep_points.h"
 #include "pipeline/points/points.h"

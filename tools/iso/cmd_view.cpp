@@ -11,7 +11,7 @@
 #include "iso/points.h"
 #include "iso/reader.h"
 #include "pipeline/base/files.h"
-#include "pipeline/io/image.h"
+#include "base/image.h"
 #include "pipeline/output/keep_points.h"
 #include "tools/iso/inputs.h"
 #include "tools/iso/commands.h"

@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "iso/error.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 #include "pipeline/io/ply.h"
 
 namespace iso::cli {

@@ -1,5 +1,5 @@
 // Text for the command line: sizes and names of options checked, text files written (numbers
-// and names themselves: pipeline/base/text.h).
+// and names themselves: base/text.h).
 #pragma once
 
 #include <cstdint>
@@ -8,7 +8,7 @@
 #include <optional>
 #include <string>
 #include "iso/error.h"
-#include "pipeline/base/text.h"
+#include "base/text.h"
 
 namespace iso::cli {
 

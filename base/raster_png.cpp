@@ -6,7 +6,7 @@
 
 #include "iso/check.h"
 #include "iso/error.h"
-#include "pipeline/io/raster.h"
+#include "base/raster.h"
 
 namespace iso {
 

@@ -14,9 +14,9 @@
 
 #include "iso/reader.h"
 #include "shaders/shared.h"
-#include "viewer/blob.h"
-#include "viewer/image.h"
-#include "viewer/pss.h"
+#include "tracer/blob.h"
+#include "base/image.h"
+#include "tracer/pss.h"
 
 namespace iso::viewer {
 

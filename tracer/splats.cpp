@@ -1,5 +1,5 @@
 // Splat blobs and the splat index (splats.h).
-#include "viewer/splats.h"
+#include "tracer/splats.h"
 
 #include <algorithm>
 #include <bit>

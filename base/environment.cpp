@@ -1,23 +1,11 @@
-// Pictures in and out of the viewer (image.h), through pipeline/io/image.h.
-#include "viewer/image.h"
-
+// Environment maps (image.h): any image that reads, as float16 pairs.
 #include <glm/glm.hpp>
 #include <glm/packing.hpp>
 
+#include "base/image.h"
 #include "iso/error.h"
-#include "pipeline/io/image.h"
 
-namespace iso::viewer {
-
-void writeImage(const std::filesystem::path& path, uint32_t width, uint32_t height,
-                const std::vector<uint32_t>& rgba) {
-  writeRgba8Image(path, width, height, rgba);
-}
-
-std::vector<uint32_t> readImage(const std::filesystem::path& path, uint32_t& width,
-                                uint32_t& height) {
-  return readRgba8Image(path, width, height);
-}
+namespace iso {
 
 Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth) {
   const LinearImage image = readLinearImage(path, maxWidth);
@@ -35,4 +23,4 @@ Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth
   return env;
 }
 
-}  // namespace iso::viewer
+}  // namespace iso

@@ -1,5 +1,5 @@
 // Point set surfaces on the CPU (pss.h): shaders/pss.h's intersection, the fits, the grid.
-#include "viewer/pss.h"
+#include "tracer/pss.h"
 
 #include <tbb/parallel_for.h>
 

@@ -1,6 +1,6 @@
 // The CPU reference of image-space point rendering (point_image.h): shaders/image.h inside a C++
 // class, its steps run over every point and pixel with TBB.
-#include "viewer/point_image.h"
+#include "tracer/point_image.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

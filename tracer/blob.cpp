@@ -1,5 +1,5 @@
 // Building the GPU form of surface chunks (specs/viewer.md, "Chunks on the GPU").
-#include "viewer/blob.h"
+#include "tracer/blob.h"
 
 #include "iso/lighting.h"
 #include "iso/reader.h"

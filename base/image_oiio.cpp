@@ -1,5 +1,5 @@
 // Images through OpenImageIO (image.h): the builds with ISO_WITH_OPENIMAGEIO.
-#include "pipeline/io/image.h"
+#include "base/image.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

@@ -7,8 +7,8 @@
 #include "iso/atomic_file.h"
 #include "iso/error.h"
 #include "iso/quantize.h"
-#include "pipeline/io/image.h"
-#include "pipeline/io/raster.h"
+#include "base/image.h"
+#include "base/raster.h"
 
 namespace iso {
 namespace {

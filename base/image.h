@@ -40,4 +40,12 @@ void writeRgba8Image(const std::filesystem::path& path, uint32_t width, uint32_t
 std::vector<uint32_t> readRgba8Image(const std::filesystem::path& path, uint32_t& width,
                                      uint32_t& height);
 
+// An equirectangular environment map as linear RGB in float16 pairs (2 words a texel: RG, B0),
+// at most maxWidth wide (larger images are box-filtered down): what the tracers read.
+struct Environment {
+  uint32_t width = 0, height = 0;
+  std::vector<uint32_t> texels;
+};
+Environment loadEnvironment(const std::filesystem::path& path, uint32_t maxWidth = 2048);
+
 }  // namespace iso

@@ -1,4 +1,4 @@
-#include "tools/bench/laz_writer.h"
+#include "tests/support/laz_writer.h"
 
 #include <fmt/format.h>
 

@@ -1,5 +1,5 @@
 // The CPU reference tracer (cpu_tracer.h): shaders/trace.h inside a C++ class.
-#include "viewer/cpu_tracer.h"
+#include "tracer/cpu_tracer.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -14,7 +14,7 @@
 #include "iso/check.h"
 #include "iso/error.h"
 #include "iso/points.h"
-#include "viewer/splats.h"
+#include "tracer/splats.h"
 
 namespace iso::viewer {
 namespace shader {
