@@ -198,6 +198,38 @@ TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
   EXPECT_GT(redder(after), after.size() / 20);
 }
 
+// The window starts at the default view, as --headless draws it at the same size, and Home
+// brings it back there after an orbit.
+TEST(CliView, theWindowStartsAtTheDefaultViewAndHomeGoesBackToIt) {
+  SKIP_WITHOUT_XDOTOOL();
+  TempDir dir;
+  ASSERT_TRUE(windowSession("home_window_session.sh", kittenIso(), dir.path()));
+  const auto headless = dir / "headless.png";
+  const CommandResult run = iso("view " + quoted(kittenIso()) +
+                                " --headless --width 300 --height 200 --out " + quoted(headless));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  uint32_t w = 0, h = 0;
+  const auto start = readRgba8Image(dir / "iso-screenshot-1.png", w, h);
+  ASSERT_EQ(w * h, 300u * 200u);
+  const auto orbited = readRgba8Image(dir / "iso-screenshot-2.png", w, h);
+  const auto home = readRgba8Image(dir / "final.png", w, h);
+  const auto drawn = readRgba8Image(headless, w, h);
+  // Pixels whose channels differ by more than 8 of 255.
+  const auto differing = [](const std::vector<uint32_t>& a, const std::vector<uint32_t>& b) {
+    size_t n = 0;
+    for (size_t i = 0; i < a.size(); ++i)
+      for (int k = 0; k < 3; ++k)
+        if (std::abs(int(a[i] >> 8 * k & 255) - int(b[i] >> 8 * k & 255)) > 8) {
+          ++n;
+          break;
+        }
+    return n;
+  };
+  EXPECT_GT(differing(start, orbited), start.size() / 20);
+  EXPECT_LT(differing(start, home), start.size() / 100);
+  EXPECT_LT(differing(start, drawn), start.size() / 100);
+}
+
 TEST(CliView, badFilesGiveAClearErrorAndNoPicture) {
   TempDir dir;
   const std::vector<std::byte> good = readFile(kittenIso());

@@ -20,6 +20,8 @@ struct Asset {
   BlobOptions blob;
   Bounds bounds;  // world units: the cells of the coarsest chunk's deepest nodes and leaves
   glm::vec3 contentLo{0.0f}, contentHi{1.0f};  // the same box in frame units (exact)
+  std::vector<SurfaceCell> cells;  // the coarsest chunk's deepest nodes and leaves: what the
+                                   // default camera frames
   Vec3d up{0, 1, 0};
   std::optional<SplatIndex> splats;  // the kept points' splat index, when the file keeps points
 

@@ -36,11 +36,24 @@ ImageCamera cameraOf(const ImageInputs& in, const Camera& c, uint32_t width, uin
   return camera;
 }
 
-Camera sceneCamera(const Scene& s, const ImageInputs& in) {
-  Camera c = s.camera ? *s.camera
-                      : frameCamera(in.bounds, s.up.value_or(in.up), s.fovDegrees.value_or(40.0));
-  if (s.fovDegrees) c.fovDegrees = *s.fovDegrees;
-  return c;
+Camera sceneCamera(const Scene& s, const ImageInputs& in, double aspect) {
+  if (s.camera) {
+    Camera c = *s.camera;
+    if (s.fovDegrees) c.fovDegrees = *s.fovDegrees;
+    return c;
+  }
+  // The inputs' framing, or their points as cells of their spacing: at most about 200,000 of
+  // them, each as wide as the points it stands for.
+  std::vector<SurfaceCell> cells = in.framing;
+  if (cells.empty()) {
+    size_t points = 0;
+    for (const ImageObject& o : in.objects) points += o.positions.size();
+    const size_t stride = std::max<size_t>(1, points / 200000);
+    for (const ImageObject& o : in.objects)
+      for (size_t i = 0; i < o.positions.size(); i += stride)
+        cells.push_back({in.origin + Vec3d(o.positions[i]), o.spacing * std::sqrt(double(stride))});
+  }
+  return defaultCamera(cells, s.up.value_or(in.up), s.fovDegrees.value_or(40.0), aspect);
 }
 
 std::vector<ImageLight> lightsOf(const Scene& scene, const ImageInputs& in,
@@ -133,7 +146,7 @@ int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
                       const ImageInputs& in) {
   Gpu gpu = gpuFor(o);
   const PointImageScene scene(withOpacity(in.objects, o.scene.image));
-  const Camera camera = sceneCamera(o.scene, in);
+  const Camera camera = sceneCamera(o.scene, in, aspectOf(o));
   const auto lights = lightsOf(o.scene, in, camera);
   GpuPointImage renderer(gpu, scene);
   if (image.fillRoundsPerSubmit > 0) renderer.setRoundsPerSubmit(image.fillRoundsPerSubmit);
@@ -156,7 +169,7 @@ int viewImageHeadless(const ViewOptions& o, const ImageViewOptions& image,
 
 int viewImageCpu(const ViewOptions& o, const ImageViewOptions& image, const ImageInputs& in) {
   PointImageRenderer renderer(withOpacity(in.objects, o.scene.image));
-  const Camera camera = sceneCamera(o.scene, in);
+  const Camera camera = sceneCamera(o.scene, in, aspectOf(o));
   const auto lights = lightsOf(o.scene, in, camera);
   const auto t0 = Clock::now();
   const ImageResult r = renderer.render(
@@ -175,7 +188,7 @@ int viewImageBench(const ViewOptions& o, const ImageViewOptions& image, const Im
   Gpu gpu = gpuFor(o);
   const std::vector<ImageObject> objects = withOpacity(in.objects, o.scene.image);
   const PointImageScene scene(objects);
-  const Camera start = sceneCamera(o.scene, in);
+  const Camera start = sceneCamera(o.scene, in, aspectOf(o));
   const auto lights = lightsOf(o.scene, in, start);
   ImageSettings settings =
       budgeted(settingsOf(o.scene, image), o, scene.size(), lights.size());

@@ -29,6 +29,9 @@ struct ImageInputs {
   uint64_t pointsRead = 0;           // from the files (more than drawn: a subsample, --vram)
   std::string choice;                // how the points drawn were chosen, when not all are
   bool preview = false;              // what was read so far (a window draws it while reading)
+  // What the default camera frames (sceneCamera), when not empty: a subsample of all the points
+  // read, each as wide as the points it stands for (else the objects' points are framed).
+  std::vector<SurfaceCell> framing;
 };
 
 // The objects with the scene's opacity (one for all, or one an object; UsageError otherwise).
@@ -42,7 +45,8 @@ struct ImageViewOptions {
 
 // The scene's camera (framed on the points when it has none), lights (a point light made a small
 // square one for the scene's shadow samples) and settings, for the points' frame.
-Camera sceneCamera(const Scene& scene, const ImageInputs& inputs);
+// `aspect`: the picture's width / height.
+Camera sceneCamera(const Scene& scene, const ImageInputs& inputs, double aspect);
 ImageCamera cameraOf(const ImageInputs& inputs, const Camera& camera, uint32_t width,
                      uint32_t height);
 std::vector<ImageLight> lightsOf(const Scene& scene, const ImageInputs& inputs,

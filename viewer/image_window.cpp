@@ -123,7 +123,8 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
       drawn.renderer->setScene(*points);
       drawn.scene = std::move(points);
       drawnOpacity = scene.image.opacity;
-      if (!cameraMoved && !options.scene.camera) scene.camera = sceneCamera(options.scene, *next);
+      if (!cameraMoved && !options.scene.camera)
+        scene.camera = sceneCamera(options.scene, *next, aspectOf(options));
       drawn.inputs = next;
       final = !next->preview;
       // The first of all the points was chosen for the framed view.
@@ -137,6 +138,11 @@ int viewImageWindow(const ViewOptions& options, const ImageViewOptions& imageOpt
     if (!drawn.inputs) {
       glfwWaitEventsTimeout(0.02);  // nothing read yet
       continue;
+    }
+    if (std::exchange(input.home, false)) {
+      scene.camera = sceneCamera(options.scene, *drawn.inputs, aspectOf(w.swapchain));
+      cameraMoved = false;
+      lastMove = now;
     }
     if (moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height)) {
       cameraMoved = true;

@@ -118,7 +118,7 @@ const char* modeName(const PssViewOptions& pss) { return pss.exact ? "exact" : "
 
 int viewPssCpu(const ViewOptions& o, const PssViewOptions& pss, const ImageInputs& in) {
   const PssScene s = pssScene(in, pss, o.scene);
-  const PssRender r = pssRender(o, pss, in, s, sceneCamera(o.scene, in));
+  const PssRender r = pssRender(o, pss, in, s, sceneCamera(o.scene, in, aspectOf(o)));
   const auto t0 = Clock::now();
   const std::vector<glm::vec3> linear = renderPss(*s.surface, s.colors, r);
   const double render = seconds(Clock::now() - t0);
@@ -139,7 +139,7 @@ int viewPssHeadless(const ViewOptions& o, const PssViewOptions& pss, const Image
   GpuPss renderer(gpu, *s.surface, s.colors);
   double gpuSeconds = 0.0;
   const std::vector<uint32_t> pixels =
-      renderer.render(pssRender(o, pss, in, s, sceneCamera(o.scene, in)), &gpuSeconds);
+      renderer.render(pssRender(o, pss, in, s, sceneCamera(o.scene, in, aspectOf(o))), &gpuSeconds);
   writeRgba8Image(o.out, o.width, o.height, pixels);
   printScene(in, s);
   fmt::print("{}: {}x{} point set surface ({} mode) on {}, {:.3f} s GPU, GPU memory {:.1f} MiB\n",
@@ -152,7 +152,7 @@ int viewPssBench(const ViewOptions& o, const PssViewOptions& pss, const ImageInp
   Gpu gpu = gpuFor(o);
   const PssScene s = pssScene(in, pss, o.scene);
   GpuPss renderer(gpu, *s.surface, s.colors);
-  const Camera start = sceneCamera(o.scene, in);
+  const Camera start = sceneCamera(o.scene, in, aspectOf(o));
   const uint32_t frames = std::max(o.benchFrames, 2u);
   std::vector<double> wall, device;
   for (uint32_t f = 0; f < frames; ++f) {

@@ -45,7 +45,7 @@ int viewPssWindow(const ViewOptions& options, const PssViewOptions& pssOptions,
   const PssScene scene = pssScene(in, pss, o.scene);
   printScene(in, scene);
   GpuPss renderer(w.gpu, *scene.surface, scene.colors);
-  Camera camera = sceneCamera(o.scene, in);
+  Camera camera = sceneCamera(o.scene, in, aspectOf(o));
 
   Input input;
   listen(window, input);
@@ -67,6 +67,11 @@ int viewPssWindow(const ViewOptions& options, const PssViewOptions& pssOptions,
     const double dt = seconds(now - last);
     last = now;
     changed = changed || o.frames > 0;  // --frames: every frame traced, to count them
+    if (std::exchange(input.home, false)) {
+      camera = sceneCamera(o.scene, in, aspectOf(w.swapchain));
+      lastMove = now;
+      changed = true;
+    }
     if (moveCamera(window, camera, input, mouse, dt, w.swapchain.extent.height)) {
       lastMove = now;
       changed = true;

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -363,17 +364,124 @@ void loadScene(const std::filesystem::path& path, Scene& scene) {
   if (j.contains("volume")) readVolume(f, j["volume"], scene.volume);
 }
 
-Camera frameCamera(const Bounds& b, const Vec3d& up, double fovDegrees) {
-  const Vec3d center = 0.5 * (b.lo + b.hi);
-  const double radius = 0.5 * glm::length(b.hi - b.lo);
+namespace {
+
+// A view direction (from the surface towards the eye) and what is seen from it.
+struct CandidateView {
+  Vec3d from{};
+  size_t seen = 0;  // cells nearest the eye in at least one grid pixel
+  std::vector<uint32_t> seenCells;
+};
+
+// The cells seen looking along -from, orthographically: nearest the eye in at least one pixel of
+// a grid over their extent whose pixels are `pixel` wide (at most kMaxGrid of them a side).
+CandidateView seenFrom(const std::vector<SurfaceCell>& cells, const Vec3d& from, const Vec3d& up,
+                       double pixel) {
+  constexpr int kMaxGrid = 1024;
+  const Vec3d right = glm::normalize(glm::cross(-from, up)), top = glm::cross(right, -from);
+  double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+  for (const SurfaceCell& c : cells) {
+    const double x = glm::dot(c.center, right), y = glm::dot(c.center, top);
+    lo[0] = std::min(lo[0], x - c.size / 2), hi[0] = std::max(hi[0], x + c.size / 2);
+    lo[1] = std::min(lo[1], y - c.size / 2), hi[1] = std::max(hi[1], y + c.size / 2);
+  }
+  pixel = std::max(pixel, std::max({hi[0] - lo[0], hi[1] - lo[1], 1e-300}) / kMaxGrid);
+  const int grid =
+      std::clamp(int(std::ceil(std::max(hi[0] - lo[0], hi[1] - lo[1]) / pixel)), 1, kMaxGrid);
+  std::vector<double> depth(size_t(grid) * grid, -INFINITY);
+  std::vector<uint32_t> nearest(size_t(grid) * grid, UINT32_MAX);
+  const auto cellOf = [&](double v, int axis) {
+    return std::clamp(int(std::floor((v - lo[axis]) / pixel)), 0, grid - 1);
+  };
+  for (uint32_t i = 0; i < cells.size(); ++i) {
+    const SurfaceCell& c = cells[i];
+    const double x = glm::dot(c.center, right), y = glm::dot(c.center, top);
+    const double z = glm::dot(c.center, from);  // larger: nearer the eye
+    for (int py = cellOf(y - c.size / 2, 1); py <= cellOf(y + c.size / 2, 1); ++py)
+      for (int px = cellOf(x - c.size / 2, 0); px <= cellOf(x + c.size / 2, 0); ++px)
+        if (const size_t at = size_t(py) * grid + px; z > depth[at]) {
+          depth[at] = z;
+          nearest[at] = i;
+        }
+  }
+  CandidateView view{.from = from};
+  std::vector<bool> seen(cells.size(), false);
+  for (const uint32_t i : nearest)
+    if (i != UINT32_MAX && !seen[i]) {
+      seen[i] = true;
+      view.seenCells.push_back(i);
+    }
+  view.seen = view.seenCells.size();
+  return view;
+}
+
+}  // namespace
+
+Camera defaultCamera(const std::vector<SurfaceCell>& cells, const Vec3d& up, double fovDegrees,
+                     double aspect) {
+  if (cells.empty()) throw UsageError("nothing to frame: no surface and no points");
   const Vec3d u = normalized(up);
-  // A horizontal direction not along up, then 20 degrees above the horizon.
-  Vec3d side = std::abs(u[2]) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, -1, 0};
-  side = normalized(side - u * glm::dot(side, u));
-  const Vec3d right = normalized(glm::cross(side, u));
-  const Vec3d view = normalized(side + right * 0.35 + u * 0.36);
-  const double distance = radius / std::sin(fovDegrees * M_PI / 360.0) * 1.05;
-  return {center + view * distance, center, u, fovDegrees};
+  // The front: a horizontal direction not along up; vertical views lean 20 degrees towards it.
+  Vec3d front = std::abs(u[2]) < 0.9 ? Vec3d{0, 0, 1} : Vec3d{0, -1, 0};
+  front = normalized(front - u * glm::dot(front, u));
+  // Pixels as wide as the median cell: a view that sees the surface at a slant sees fewer cells.
+  std::vector<double> sizes;
+  for (const SurfaceCell& c : cells) sizes.push_back(c.size);
+  std::nth_element(sizes.begin(), sizes.begin() + sizes.size() / 2, sizes.end());
+  const double pixel = sizes[sizes.size() / 2];
+  std::optional<CandidateView> best;
+  for (int i = -1; i <= 1; ++i)
+    for (int j = -1; j <= 1; ++j)
+      for (int k = -1; k <= 1; ++k) {
+        if (i == 0 && j == 0 && k == 0) continue;
+        Vec3d from = glm::normalize(Vec3d(i, j, k));
+        if (const double along = glm::dot(from, u); std::abs(along) > 0.99) {
+          const double tilt = 20.0 * M_PI / 180.0;
+          from = (along > 0 ? u : -u) * std::cos(tilt) + front * std::sin(tilt);
+        }
+        if (glm::dot(from, u) < -1e-9) continue;  // below the horizon: the ground, the underside
+        CandidateView view = seenFrom(cells, from, u, pixel);
+        if (!best || view.seen > best->seen ||
+            (view.seen == best->seen && glm::dot(from, u) > glm::dot(best->from, u)))
+          best = std::move(view);
+      }
+
+  // The seen cells' box across the view and along it; the target at its center.
+  const Vec3d from = best->from, forward = -from;
+  const Vec3d right = glm::normalize(glm::cross(forward, u)), top = glm::cross(right, forward);
+  Vec3d lo(INFINITY), hi(-INFINITY);
+  std::vector<Vec3d> seen;
+  for (const uint32_t i : best->seenCells) {
+    const Vec3d& c = cells[i].center;
+    const Vec3d p(glm::dot(c, right), glm::dot(c, top), glm::dot(c, from));
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+    seen.push_back(c);
+  }
+  const Vec3d mid = (lo + hi) * 0.5;
+  const Vec3d target = right * mid[0] + top * mid[1] + from * mid[2];
+  // The distance at which the seen cell farthest from the picture's center reaches 80 % of the
+  // half-width or half-height: bisection, the fill falling as the eye moves away.
+  const double tanHalf = std::tan(fovDegrees * M_PI / 360.0);
+  const auto fill = [&](double distance) -> double {
+    const Vec3d eye = target + from * distance;
+    double most = 0.0;
+    for (const Vec3d& p : seen) {
+      const Vec3d d = p - eye;
+      const double z = glm::dot(d, forward);
+      if (z <= 0.0) return INFINITY;  // behind the eye: far too close
+      most = std::max({most, std::abs(glm::dot(d, right)) / (z * tanHalf * aspect),
+                       std::abs(glm::dot(d, top)) / (z * tanHalf)});
+    }
+    return most;
+  };
+  double nearD = 1e-9 * std::max(glm::length(hi - lo), 1e-300), farD = nearD;
+  while (fill(farD) > 0.8) farD *= 2.0;
+  for (int step = 0; step < 60; ++step) {
+    const double d = std::sqrt(nearD * farD);
+    (fill(d) > 0.8 ? nearD : farD) = d;
+  }
+  return {target + from * farD, target, u, fovDegrees};
 }
 
 LightSpec defaultLight(const Camera& c, const Bounds& b) {

@@ -144,8 +144,21 @@ struct Bounds {
   Vec3d lo{}, hi{};
 };
 
-// A camera that frames the bounds, looking from the front and a little above.
-Camera frameCamera(const Bounds& bounds, const Vec3d& up, double fovDegrees);
+// A cube of surface (a cell of the coarsest chunk's deepest level, or a point) that the default
+// camera looks at: its center and edge, world units.
+struct SurfaceCell {
+  Vec3d center{};
+  double size = 0.0;
+};
+
+// The default view (specs/viewer.md, "Default view"): of the 26 axis and diagonal directions, the
+// one from which the most cells are seen (nearest in a 128 × 128 grid, looking along the
+// direction; a vertical direction tilted 20 degrees towards the front, so that `up` stays up;
+// ties to the view from higher up), with the seen cells' extent filling 80 % of the picture's
+// width or height, whichever it reaches first at this aspect (width / height). UsageError for no
+// cells.
+Camera defaultCamera(const std::vector<SurfaceCell>& cells, const Vec3d& up, double fovDegrees,
+                     double aspect);
 // The default light for a camera: above and to the left of it.
 LightSpec defaultLight(const Camera& camera, const Bounds& bounds);
 

@@ -91,14 +91,23 @@ void placeGround(Scene& scene, const Asset& asset) {
   scene.groundHeight = lowest;
 }
 
+Camera startCamera(const ViewOptions& options, const Asset& asset, double aspect) {
+  const Scene& scene = options.scene;
+  if (scene.camera) {
+    Camera camera = *scene.camera;
+    if (scene.fovDegrees) camera.fovDegrees = *scene.fovDegrees;
+    return camera;
+  }
+  return defaultCamera(asset.cells, scene.up.value_or(asset.up), scene.fovDegrees.value_or(40.0),
+                       aspect);
+}
+
 Scene completeScene(const ViewOptions& options, const Asset& asset) {
   Scene scene = options.scene;
   if (scene.draw != Draw::Surface && !asset.splats)
     throw FileError(asset.reader.name(), std::nullopt,
                     "the file keeps no points to draw as splats (convert with --keep-points)");
-  const Vec3d up = scene.up.value_or(asset.up);
-  if (!scene.camera) scene.camera = frameCamera(asset.bounds, up, scene.fovDegrees.value_or(40.0));
-  if (scene.fovDegrees) scene.camera->fovDegrees = *scene.fovDegrees;
+  scene.camera = startCamera(options, asset, aspectOf(options));
   if (scene.lights.empty()) scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
   placeGround(scene, asset);
   return scene;

@@ -2,6 +2,7 @@
 // picture (GPU or CPU reference tracer), and a benchmark along a camera path (bench.cpp).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -47,13 +48,21 @@ struct ViewOptions {
   std::shared_ptr<const PssObject> pss;
 };
 
+// The picture's width / height.
+inline double aspectOf(const ViewOptions& o) {
+  return double(o.width) / double(std::max(o.height, 1u));
+}
+
 struct Asset;
 struct Gpu;
 // The Vulkan device the options name (--device, --validation).
 Gpu gpuFor(const ViewOptions& options);
-// The options' scene with a camera (framed on the asset when it has none) and lights (one over the
-// camera's shoulder when it has none).
+// The options' scene with a camera (the default view of the asset, defaultCamera, when it has
+// none) and lights (one over the camera's shoulder when it has none).
 Scene completeScene(const ViewOptions& options, const Asset& asset);
+// The camera a view starts at, and the window's Home key goes back to: the options' camera, or
+// the default view of the asset for a picture of this aspect (width / height).
+Camera startCamera(const ViewOptions& options, const Asset& asset, double aspect);
 // A ground asked for without a height (Scene::groundAuto, or caustics without a ground) placed
 // just under the asset's bounds.
 void placeGround(Scene& scene, const Asset& asset);

@@ -5,8 +5,8 @@
 // down and up, 1 shadows, 2 reflections, 3 refractions, B back faces (shown, tinted, hidden),
 // K what is drawn (surface, kept points as splats, both, and the kept points as image-space
 // points: image_window.cpp's drawing, in this window), + and - samples per pixel, P
-// screenshot, R reloads the scene file (it also reloads by itself
-// when the file changes), Esc quits.
+// screenshot, R reloads the scene file (it also reloads by itself when the file changes), Home or
+// 0 goes back to the view it started at, Esc quits.
 #include <fmt/core.h>
 #include <glm/geometric.hpp>
 
@@ -274,6 +274,8 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
     const auto now = Clock::now();
     const double dt = std::chrono::duration<double>(now - last).count();
     last = now;
+    if (std::exchange(input.home, false))
+      scene.camera = startCamera(options, *asset, aspectOf(w.swapchain));
     moveCamera(window, *scene.camera, input, mouse, dt, w.swapchain.extent.height);
     applySwitches(input, scene, options.scene.caustics, image.read ? &imageOn : nullptr);
     reloadScene(options, input, scene, sceneTime, [&](Scene& next) {

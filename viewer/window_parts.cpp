@@ -92,6 +92,7 @@ void listen(GLFWwindow* window, Input& input) {
     if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
     if (key == GLFW_KEY_P || key == GLFW_KEY_F12) in.screenshot = true;
     if (key == GLFW_KEY_R) in.reload = true;
+    if (key == GLFW_KEY_HOME || key == GLFW_KEY_0) in.home = true;
     if (key == GLFW_KEY_1 || key == GLFW_KEY_2 || key == GLFW_KEY_3) in.toggled.push_back(key - GLFW_KEY_0);
     if (key == GLFW_KEY_B) in.toggled.push_back(4);
     if (key == GLFW_KEY_K) in.toggled.push_back(5);

@@ -6,6 +6,7 @@
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -20,6 +21,7 @@ namespace iso::viewer {
 struct Input {
   double wheel = 0;
   bool screenshot = false, reload = false;
+  bool home = false;  // back to the view the window started at (Home or 0)
   // Switches pressed since the last frame, in order: 1 shadows, 2 reflections, 3 refractions,
   // 4 back faces (next mode), 5 draw (K), 6 caustics, 7 shading mode (M), 8 layers (L),
   // 9 exact or fast point set surfaces (X)
@@ -33,6 +35,10 @@ struct Swapchain {
   VkExtent2D extent{};
   std::vector<VkImage> images;
 };
+// Its width / height.
+inline double aspectOf(const Swapchain& s) {
+  return double(s.extent.width) / double(std::max(s.extent.height, 1u));
+}
 
 // A swapchain for the surface at the window's size (width × height when the surface leaves it
 // to us), replacing `old` when given.

@@ -39,7 +39,13 @@ Agreement agree(const std::filesystem::path& scan, int size) {
   const auto file = dir / "scan.iso";
   convertToIso(cloud, file, BuildOptions{});
   const auto asset = Asset::open(file);
-  const Camera camera = frameCamera(asset->bounds, asset->up, 40.0);
+  // From the front, a little to the right and above, the bounds' sphere filling the picture's
+  // height: the scale (points a pixel) these bounds were measured at.
+  const Vec3d center = 0.5 * (asset->bounds.lo + asset->bounds.hi);
+  const double radius = 0.5 * glm::length(asset->bounds.hi - asset->bounds.lo);
+  const Vec3d view = normalized(Vec3d(0.35, 0.36, 1.0));
+  const Camera camera{center + view * (radius / std::sin(20.0 * M_PI / 180.0) * 1.05), center,
+                      asset->up, 40.0};
   const int kSize = size;
 
   // The tracer's first hits, one ray a pixel center.
@@ -61,7 +67,6 @@ Agreement agree(const std::filesystem::path& scan, int size) {
   traceCpu(pool, params, rays, hits);
 
   // The raw points in image space, from the same camera.
-  const glm::dvec3 center = 0.5 * (asset->bounds.lo + asset->bounds.hi);
   PointCloud copy = cloud;
   ViewingPoints v = prepareForViewing(std::move(copy), center, 1.0f);
   ImageObject o;

@@ -82,7 +82,7 @@ Gpu& gpu() { return testGpu(); }
 
 Scene sceneFor(const Asset& asset) {
   Scene scene;
-  scene.camera = frameCamera(asset.bounds, asset.up, 40.0);
+  scene.camera = defaultCamera(asset.cells, asset.up, 40.0, 1.0);
   scene.lights.push_back(defaultLight(*scene.camera, asset.bounds));
   return scene;
 }

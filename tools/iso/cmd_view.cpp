@@ -127,7 +127,8 @@ int viewImage(ViewArgs& a) {
       try {
         const ImagePoints points = readImagePoints(files, load);
         if (stop) return;
-        const viewer::Camera framed = viewer::sceneCamera(a.view.scene, points.frame);
+        const viewer::Camera framed =
+            viewer::sceneCamera(a.view.scene, points.frame, viewer::aspectOf(a.view));
         feed.publish(forCamera(points, framed, a.view.width, a.view.height));
         if (points.store.size() <= load.maxPoints) return;  // all of them drawn
         while (!stop)
@@ -155,7 +156,8 @@ int viewImage(ViewArgs& a) {
     finish(inputs);
     return viewer::viewImageBench(a.view, a.image, inputs);
   }
-  const viewer::Camera camera = viewer::sceneCamera(a.view.scene, points.frame);
+  const viewer::Camera camera =
+      viewer::sceneCamera(a.view.scene, points.frame, viewer::aspectOf(a.view));
   const viewer::ImageInputs inputs = forCamera(points, camera, a.view.width, a.view.height);
   if (a.cpu) return viewer::viewImageCpu(a.view, a.image, inputs);
   return viewer::viewImageHeadless(a.view, a.image, inputs);
@@ -389,7 +391,8 @@ void addViewCommand(CLI::App& app, int& exitCode) {
       ->capture_default_str()
       ->check(CLI::Range(8, 16384));
   c->add_option("--camera", a->camera,
-                "eye,target,up in world units (9 numbers; default: framed on the surface)");
+                "eye,target,up in world units (9 numbers; default: the side showing the most of "
+                "the surface, filling 80 % of the picture)");
   c->add_option("--fov", a->fov, "Vertical field of view in degrees (default 40)");
   c->add_option("--up", a->up,
                 "The scene's up: x, y, z, -x, -y, -z or X,Y,Z (default: z for "
