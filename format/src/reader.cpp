@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "bytes.h"
+#include "chunk_rules.h"
 #include "file_io.h"
 #include "iso/check.h"
 #include "iso/error.h"
@@ -121,73 +122,6 @@ class Parser {
     return t;
   }
 
-  // The first rule of the chunk table (specs/iso-format.md) that entry c breaks, as the offset of
-  // the field in the entry and the reason; `expectedOffset` is where the layout puts its payload.
-  std::optional<detail::FieldProblem> entryProblem(const ChunkInfo& c, uint32_t index,
-                                                   uint64_t expectedOffset) const {
-    namespace e = detail::entry;
-    if (c.id != index) return detail::FieldProblem{e::kId, "id is " + std::to_string(c.id)};
-    if (c.codec != Codec::Raw && c.codec != Codec::Zstd)
-      return detail::FieldProblem{e::kCodec, "unknown codec " + std::to_string(int(c.codec))};
-    if (c.level > r_.header.maxLevel)
-      return detail::FieldProblem{e::kLevel, "level " + std::to_string(c.level) +
-                                                 " is above the file's maximum level " +
-                                                 std::to_string(r_.header.maxLevel)};
-    if (!isValidKey(c.level, c.key))
-      return detail::FieldProblem{e::kKey, "key does not fit its level"};
-    if (c.rawSize > kMaxChunkRawSize)
-      return detail::FieldProblem{e::kRawSize, "raw size is over the limit of 2^30 bytes"};
-    if (c.codec == Codec::Raw && c.storedSize != c.rawSize)
-      return detail::FieldProblem{e::kStoredSize, "raw chunk with stored size != raw size"};
-    if (c.codec == Codec::Zstd && c.storedSize == 0)
-      return detail::FieldProblem{e::kStoredSize, "zstd chunk with no stored bytes"};
-    if (c.codec == Codec::Zstd && (c.rawSize + kMaxZstdRatio - 1) / kMaxZstdRatio > c.storedSize)
-      return detail::FieldProblem{e::kRawSize,
-                                  "raw size is more than 32768 times the stored size (more than "
-                                  "a zstd frame of that size decodes to)"};
-    if (c.offset != expectedOffset)
-      return detail::FieldProblem{e::kOffset, "payload offset " + std::to_string(c.offset) +
-                                                  " is not where the layout puts it (" +
-                                                  std::to_string(expectedOffset) + ")"};
-    if (c.storedSize > r_.chunkTableOffset - c.offset)
-      return detail::FieldProblem{e::kStoredSize, "payload runs into the chunk table"};
-    if (!std::isfinite(c.geometricError) || c.geometricError < 0.0f)
-      return detail::FieldProblem{e::kGeometricError, "geometric error is negative or not finite"};
-    if (c.kind == kPointsKind || c.kind == kVolumePointsKind || c.kind == kValuesKind)
-      return pointsEntryProblem(c);
-    if (c.kind == kLightingKind) return lightingEntryProblem(c);
-    return std::nullopt;
-  }
-
-  // The rule of "Points chunks" (and, since 2.1, of "Volume points" and "Values chunks") that the
-  // entry of such a chunk breaks.
-  static std::optional<detail::FieldProblem> pointsEntryProblem(const ChunkInfo& c) {
-    namespace e = detail::entry;
-    const std::string what(c.kind == kValuesKind ? "a values chunk" : "a points chunk");
-    if (c.pointCount == 0 || c.pointCount > kMaxPointsPerChunk)
-      return detail::FieldProblem{e::kPointCount,
-                                  what + " holds 1 to " + std::to_string(kMaxPointsPerChunk) +
-                                      " points, not " + std::to_string(c.pointCount)};
-    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, what + " has nodes"};
-    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, what + " has leaves"};
-    if (c.kind != kPointsKind && c.parent != kNoParent)
-      return detail::FieldProblem{e::kParent, what + " of this kind has no parent"};
-    return std::nullopt;
-  }
-
-  // The rule of "Lighting chunks" (since 2.2) that the entry of such a chunk breaks.
-  static std::optional<detail::FieldProblem> lightingEntryProblem(const ChunkInfo& c) {
-    namespace e = detail::entry;
-    if (c.pointCount != 0) return detail::FieldProblem{e::kPointCount, "a lighting chunk has points"};
-    if (c.nodeCount != 0) return detail::FieldProblem{e::kNodeCount, "a lighting chunk has nodes"};
-    if (c.leafCount != 0) return detail::FieldProblem{e::kLeafCount, "a lighting chunk has leaves"};
-    if (c.parent != kNoParent)
-      return detail::FieldProblem{e::kParent, "a lighting chunk has no parent"};
-    if (c.geometricError != 0.0f)
-      return detail::FieldProblem{e::kGeometricError, "a lighting chunk has no geometric error"};
-    return std::nullopt;
-  }
-
   void parseChunkTable(const detail::Trailer& t) {
     const uint64_t alignment = r_.header.payloadAlignment();
     uint64_t expected = alignUp(kHeaderSize, alignment);
@@ -198,7 +132,8 @@ class Parser {
       const ChunkInfo c = detail::decodeChunkEntry(bytes_.data() + at, reserved);
       if (reserved)
         fail(at + *reserved, "chunk " + std::to_string(i) + ": reserved field is not zero");
-      if (std::optional<detail::FieldProblem> problem = entryProblem(c, i, expected))
+      if (std::optional<detail::FieldProblem> problem =
+              detail::chunkEntryProblem(c, i, r_.header.maxLevel, expected, t.chunkTableOffset))
         fail(at + problem->offset, "chunk " + std::to_string(i) + ": " + problem->reason);
       expected = alignUp(c.offset + c.storedSize, alignment);
       r_.chunks[i] = c;
@@ -206,46 +141,15 @@ class Parser {
     if (expected != t.chunkTableOffset)
       fail(t.chunkTableOffset, "chunk table does not follow the last payload (expected at byte " +
                                    std::to_string(expected) + ")");
-    for (const ChunkInfo& c : r_.chunks) {
-      if (c.parent == kNoParent) continue;
-      const uint64_t at =
-          t.chunkTableOffset + uint64_t{c.id} * kChunkEntrySize + detail::entry::kParent;
-      const std::string who =
-          "chunk " + std::to_string(c.id) + ": parent " + std::to_string(c.parent);
-      if (c.parent >= r_.chunks.size()) fail(at, who + " does not exist");
-      const ChunkInfo& p = r_.chunks[c.parent];
-      if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
-        fail(at, who + " is not a coarser cell containing it");
-      if (c.kind == kPointsKind && p.kind != kPointsKind)
-        fail(at, who + " is not a points chunk (a points chunk's parent is its subsample)");
-    }
-    checkSurfacePointCounts(t.chunkTableOffset);
+    if (std::optional<detail::ChunkProblem> problem = detail::parentProblem(r_.chunks))
+      failEntry(t.chunkTableOffset, *problem);
+    if (std::optional<detail::ChunkProblem> problem = detail::surfacePointCountProblem(r_.chunks))
+      failEntry(t.chunkTableOffset, *problem);
   }
 
-  // The input points of surface chunks: those whose parent is a surface chunk count together at
-  // most their parent's points (their cells are disjoint parts of its cells); the others count
-  // together at most kMaxPointCount. Every sum over surface chunks then stays below 2^58.
-  void checkSurfacePointCounts(uint64_t tableOffset) const {
-    std::vector<uint64_t> children(r_.chunks.size(), 0);
-    uint64_t tops = 0;
-    for (const ChunkInfo& c : r_.chunks) {
-      if (c.kind != kSurfaceKind) continue;
-      const uint64_t at =
-          tableOffset + uint64_t{c.id} * kChunkEntrySize + detail::entry::kPointCount;
-      const std::string who =
-          "chunk " + std::to_string(c.id) + ": point count " + std::to_string(c.pointCount);
-      if (c.parent != kNoParent && r_.chunks[c.parent].kind == kSurfaceKind) {
-        const ChunkInfo& p = r_.chunks[c.parent];
-        if (c.pointCount > p.pointCount - children[p.id])
-          fail(at, who + " and those of the other chunks of parent " + std::to_string(p.id) +
-                       " exceed its " + std::to_string(p.pointCount));
-        children[p.id] += c.pointCount;
-      } else {
-        if (c.pointCount > kMaxPointCount - tops)
-          fail(at, who + " brings the points of the top surface chunks over 2^53");
-        tops += c.pointCount;
-      }
-    }
+  [[noreturn]] void failEntry(uint64_t tableOffset, const detail::ChunkProblem& problem) const {
+    fail(tableOffset + uint64_t{problem.chunk} * kChunkEntrySize + problem.field.offset,
+         "chunk " + std::to_string(problem.chunk) + ": " + problem.field.reason);
   }
 
   const std::string& name_;

@@ -6,11 +6,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <vector>
 
 #include "bytes.h"
+#include "chunk_rules.h"
 #include "iso/atomic_file.h"
 #include "iso/check.h"
 #include "layout.h"
@@ -59,6 +61,7 @@ struct Writer::Impl {
   uint32_t append(ChunkInfo c, std::span<const std::byte> stored) {
     c.offset = file.position();
     ISO_CHECK(c.offset % header.payloadAlignment() == 0);
+    requireValidEntry(c);
     file.write(stored);
     file.writeZeros(alignUp(file.position(), header.payloadAlignment()) - file.position());
     chunks.push_back(c);
@@ -76,18 +79,25 @@ struct Writer::Impl {
     file.flush();  // a reader may open the temporary file now
   }
 
-  void validateParents() const {
-    for (const ChunkInfo& c : chunks) {
-      if (c.parent == kNoParent) continue;
-      const std::string who = "chunk " + std::to_string(c.id);
-      if (c.parent >= chunks.size())
-        throw InternalError(who + ": parent " + std::to_string(c.parent) +
-                                    " does not exist");
-      const ChunkInfo& p = chunks[c.parent];
-      if (p.level >= c.level || !cellContains(p.level, p.key, c.level, c.key))
-        throw InternalError(who + ": parent " + std::to_string(c.parent) +
-                                    " is not a coarser cell containing it");
-    }
+  // Throw unless entry c, its payload written at c.offset, follows the rules that a reader checks
+  // of each entry on its own (specs/iso-format.md, "Chunk table"): the chunk table follows
+  // whatever is written, so no payload can run into it.
+  void requireValidEntry(const ChunkInfo& c) const {
+    if (std::optional<detail::FieldProblem> problem = detail::chunkEntryProblem(
+            c, c.id, header.maxLevel, c.offset, std::numeric_limits<uint64_t>::max()))
+      throw InternalError(refusal(c.id, problem->reason));
+  }
+
+  // The same for the rules of the whole table (parents, the surface chunks' point counts).
+  void requireValidTable() const {
+    std::optional<detail::ChunkProblem> problem = detail::parentProblem(chunks);
+    if (!problem) problem = detail::surfacePointCountProblem(chunks);
+    if (problem) throw InternalError(refusal(problem->chunk, problem->field.reason));
+  }
+
+  static std::string refusal(uint32_t chunk, const std::string& reason) {
+    return "iso::Writer: chunk " + std::to_string(chunk) + ": " + reason +
+           " (a reader would refuse the file: specs/iso-format.md, \"Chunk table\")";
   }
 };
 
@@ -113,16 +123,6 @@ Writer& Writer::operator=(Writer&&) noexcept = default;
 uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data) {
   Impl& w = *impl_;
   w.requireOpen();
-  if (desc.level > w.header.maxLevel)
-    throw InternalError("chunk level is above the header's maxLevel");
-  if (!isValidKey(desc.level, desc.key))
-    throw InternalError("chunk key does not fit its level");
-  if (data.size() > kMaxChunkRawSize)
-    throw InternalError("chunk data is over the format's limit of 2^30 bytes");
-  if (!std::isfinite(desc.geometricError) || desc.geometricError < 0.0f)
-    throw InternalError("chunk geometric error must be finite and non-negative");
-  if (desc.codec != Codec::Raw && desc.codec != Codec::Zstd)
-    throw InternalError("unknown chunk codec");
   if (w.chunks.size() >= kNoParent) throw InternalError("too many chunks");
 
   ChunkInfo c;
@@ -136,9 +136,14 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
   c.leafCount = desc.leafCount;
   c.geometricError = desc.geometricError;
   c.rawSize = data.size();
+  // The description is checked as the raw entry it would be before anything is compressed (an
+  // unknown codec too); append() checks the entry as it is stored.
+  c.codec = desc.codec == Codec::Zstd ? Codec::Raw : desc.codec;
+  c.storedSize = c.rawSize;
+  c.offset = w.file.position();
+  w.requireValidEntry(c);
 
   std::span<const std::byte> stored = data;
-  c.codec = Codec::Raw;
   if (desc.codec == Codec::Zstd && w.compress(data)) {
     stored = w.compressed;
     c.codec = Codec::Zstd;
@@ -151,13 +156,12 @@ uint32_t Writer::addChunk(const ChunkDesc& desc, std::span<const std::byte> data
 uint32_t Writer::copyChunk(const ChunkInfo& info, std::span<const std::byte> stored) {
   Impl& w = *impl_;
   w.requireOpen();
-  if (info.level > w.header.maxLevel)
-    throw InternalError("chunk level is above the header's maxLevel");
-  if (!isValidKey(info.level, info.key)) throw InternalError("chunk key does not fit its level");
-  if (stored.size() != info.storedSize) throw InternalError("copyChunk: stored size differs");
   if (w.chunks.size() >= kNoParent) throw InternalError("too many chunks");
   ChunkInfo c = info;
   c.id = static_cast<uint32_t>(w.chunks.size());
+  c.offset = w.file.position();
+  w.requireValidEntry(c);
+  if (stored.size() != info.storedSize) throw InternalError("copyChunk: stored size differs");
   c.checksum = detail::checksum(stored);
   if (c.checksum != info.checksum) throw InternalError("copyChunk: the bytes are not the chunk's");
   return w.append(c, stored);
@@ -166,7 +170,10 @@ uint32_t Writer::copyChunk(const ChunkInfo& info, std::span<const std::byte> sto
 void Writer::setParent(uint32_t chunk, uint32_t parent) {
   impl_->requireOpen();
   if (chunk >= impl_->chunks.size()) throw InternalError("setParent: no such chunk");
-  impl_->chunks[chunk].parent = parent;
+  ChunkInfo c = impl_->chunks[chunk];
+  c.parent = parent;
+  impl_->requireValidEntry(c);  // some kinds have no parent
+  impl_->chunks[chunk] = c;
 }
 
 namespace {
@@ -194,7 +201,7 @@ void Writer::finish() {
 void Writer::close() {
   Impl& w = *impl_;
   w.requireOpen();
-  w.validateParents();
+  w.requireValidTable();
 
   detail::Trailer& trailer = w.trailer;
   trailer.chunkTableOffset = w.file.position();

@@ -433,7 +433,8 @@ TEST_F(Hostile, metadataThatStartsWithAByteOrderMarkIsRejectedByVerify) {
 }
 
 // A file of surface chunks (level 0, then level-1 children of chunk 0, then more top chunks) with
-// these point counts, and a blob with every count; the payloads are not read when opening.
+// these point counts, and a blob with every count; the payloads are not read when opening. The
+// writer refuses counts that break the rules, so it writes none and they are put in the table.
 std::vector<std::byte> surfaceCountsFile(const std::filesystem::path& path,
                                          const std::vector<uint64_t>& children,
                                          const std::vector<uint64_t>& tops) {
@@ -442,20 +443,25 @@ std::vector<std::byte> surfaceCountsFile(const std::filesystem::path& path,
   header.payloadAlignmentLog2 = 3;
   Writer writer(path, header);
   const std::vector<std::byte> data(8);
-  writer.addChunk({.kind = kSurfaceKind, .pointCount = tops.at(0), .codec = Codec::Raw}, data);
-  for (size_t i = 0; i < children.size(); ++i)
-    writer.addChunk({.kind = kSurfaceKind,
-                     .level = 1,
-                     .key = i,
-                     .parent = 0,
-                     .pointCount = children[i],
-                     .codec = Codec::Raw},
+  std::vector<uint64_t> counts = {tops.at(0)};
+  writer.addChunk({.kind = kSurfaceKind, .codec = Codec::Raw}, data);
+  for (size_t i = 0; i < children.size(); ++i) {
+    writer.addChunk({.kind = kSurfaceKind, .level = 1, .key = i, .parent = 0, .codec = Codec::Raw},
                     data);
-  for (size_t i = 1; i < tops.size(); ++i)
-    writer.addChunk({.kind = kSurfaceKind, .pointCount = tops[i], .codec = Codec::Raw}, data);
+    counts.push_back(children[i]);
+  }
+  for (size_t i = 1; i < tops.size(); ++i) {
+    writer.addChunk({.kind = kSurfaceKind, .codec = Codec::Raw}, data);
+    counts.push_back(tops[i]);
+  }
   writer.addChunk({.pointCount = ~uint64_t{0}, .codec = Codec::Raw}, data);  // a blob: no rule
   writer.finish();
-  return test::readFile(path);
+  std::vector<std::byte> b = test::readFile(path);
+  const uint64_t table = get<uint64_t>(b, b.size() - 64);
+  for (size_t i = 0; i < counts.size(); ++i)
+    put<uint64_t>(b, size_t(table + 80 * i + 40), counts[i]);
+  test::resealChecksums(b);
+  return b;
 }
 
 TEST(HostileFiles, surfacePointCountsAreBoundedByTheirParentsAndBy2To53) {

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <functional>
 
+#include "iso/check.h"
 #include "iso/error.h"
 #include "iso/lighting.h"
 #include "iso/reader.h"
@@ -114,7 +115,24 @@ TEST(LightingChunk, everyBrokenRuleIsRefusedByName) {
     std::vector<std::byte> data = encodeLightingChunk(lighting);
     if (damage) damage(data);
     const std::filesystem::path path = dir / (name + ".iso");
-    writeLit(path, golden, lit.surfaceId, data, edit);
+    try {
+      writeLit(path, golden, lit.surfaceId, data, edit);
+    } catch (const InternalError& error) {
+      // A rule of the chunk table: the writer refuses the entry, naming the rule; written as it
+      // may be, then the entry changed, the file is refused below.
+      EXPECT_NE(std::string(error.what()).find(rule), std::string::npos) << error.what();
+      writeLit(path, golden, lit.surfaceId, data);
+      test::writeFile(
+          path, test::withChangedEntry(
+                    test::readFile(path), uint32_t(golden.chunks().size()), [&](ChunkInfo& c) {
+                      ChunkDesc d{.kind = c.kind, .level = c.level, .key = c.key};
+                      edit(d);
+                      c.level = d.level;
+                      c.key = d.key;
+                      c.parent = d.parent;
+                      c.pointCount = d.pointCount;
+                    }));
+    }
     std::string message;
     try {
       const Reader reader = Reader::open(path);

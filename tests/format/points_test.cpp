@@ -142,22 +142,36 @@ TEST(PointsChunk, aPointsChunksParentMustBeAPointsChunk) {
   test::TempDir dir;
   const std::vector<std::byte> good = encodePointsChunk(randomPoints(300, false, false, 3));
   const auto path = dir / "parent.iso";
-  {
+  const auto write = [&](uint32_t parent) {
     Writer writer(path, pointsHeader());
     ChunkDesc blob;
     blob.level = 2;
     blob.key = 0x1a5 >> 3;
-    const uint32_t parent = writer.addChunk(blob, good);
+    writer.addChunk(blob, good);
     ChunkDesc child = pointsDesc(300);
     child.parent = parent;
     writer.addChunk(child, good);
     writer.finish();
+  };
+  // The writer refuses the link, the reader refuses it in the table.
+  try {
+    write(0);
+    ADD_FAILURE() << "written";
+  } catch (const InternalError& error) {
+    EXPECT_NE(std::string(error.what()).find("chunk 1: parent 0 is not a points chunk"),
+              std::string::npos)
+        << error.what();
   }
+  EXPECT_FALSE(std::filesystem::exists(path));
+  write(kNoParent);
+  test::writeFile(
+      path, test::withChangedEntry(test::readFile(path), 1, [](ChunkInfo& c) { c.parent = 0; }));
   try {
     Reader::open(path);
     ADD_FAILURE() << "opened";
   } catch (const FileError& error) {
-    EXPECT_NE(error.reason().find("is not a points chunk"), std::string::npos) << error.what();
+    EXPECT_NE(error.reason().find("chunk 1: parent 0 is not a points chunk"), std::string::npos)
+        << error.what();
   }
 }
 
@@ -241,22 +255,48 @@ void expectRefusedAtOpen(const std::filesystem::path& path, const std::string& r
   }
 }
 
+// A file holding one chunk of these bytes whose entry has the counts `desc` gives, which break a
+// rule of points chunks: the writer refuses to write it (naming the rule), so it is written with
+// 300 points and the entry changed.
+std::filesystem::path fileWithRefusedEntry(const test::TempDir& dir, const std::string& name,
+                                           const ChunkDesc& desc,
+                                           const std::vector<std::byte>& data,
+                                           const std::string& reason) {
+  try {
+    fileWith(dir, name, desc, data);
+    ADD_FAILURE() << "written";
+  } catch (const InternalError& error) {
+    EXPECT_NE(std::string(error.what()).find("chunk 0: " + reason), std::string::npos)
+        << error.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / name));
+  const auto path = fileWith(dir, name, pointsDesc(300, desc.level, desc.key), data);
+  test::writeFile(path, test::withChangedEntry(test::readFile(path), 0, [&](ChunkInfo& c) {
+                    c.pointCount = desc.pointCount;
+                    c.nodeCount = desc.nodeCount;
+                    c.leafCount = desc.leafCount;
+                  }));
+  return path;
+}
+
 TEST(PointsChunk, tableEntriesThatBreakTheRulesAreRefusedAtOpen) {
   test::TempDir dir;
   const std::vector<std::byte> good = encodePointsChunk(randomPoints(300, true, true, 3));
-  expectRefusedAtOpen(fileWith(dir, "zero.iso", pointsDesc(0), good),
-                      "a points chunk holds 1 to 1048576 points, not 0", 40);
-  expectRefusedAtOpen(fileWith(dir, "many.iso", pointsDesc(uint64_t{1} << 21), good),
-                      "a points chunk holds 1 to 1048576 points, not 2097152", 40);
-  expectRefusedAtOpen(fileWith(dir, "huge.iso", pointsDesc(~uint64_t{0}), good),
-                      "a points chunk holds 1 to 1048576 points, not 18446744073709551615", 40);
+  const auto refused = [&](const std::string& name, const ChunkDesc& desc,
+                           const std::string& reason, uint32_t field) {
+    expectRefusedAtOpen(fileWithRefusedEntry(dir, name, desc, good, reason), reason, field);
+  };
+  refused("zero.iso", pointsDesc(0), "a points chunk holds 1 to 1048576 points, not 0", 40);
+  refused("many.iso", pointsDesc(uint64_t{1} << 21),
+          "a points chunk holds 1 to 1048576 points, not 2097152", 40);
+  refused("huge.iso", pointsDesc(~uint64_t{0}),
+          "a points chunk holds 1 to 1048576 points, not 18446744073709551615", 40);
   ChunkDesc withNodes = pointsDesc(300);
   withNodes.nodeCount = 1;
-  expectRefusedAtOpen(fileWith(dir, "nodes.iso", withNodes, good), "a points chunk has nodes", 56);
+  refused("nodes.iso", withNodes, "a points chunk has nodes", 56);
   ChunkDesc withLeaves = pointsDesc(300);
   withLeaves.leafCount = 1;
-  expectRefusedAtOpen(fileWith(dir, "leaves.iso", withLeaves, good), "a points chunk has leaves",
-                      60);
+  refused("leaves.iso", withLeaves, "a points chunk has leaves", 60);
 }
 
 TEST(PointsChunk, hostileChunksAreRejectedWithTheirReason) {
@@ -484,13 +524,27 @@ TEST(ValuesChunk, valuesThatBreakTheRulesAreRefusedWithTheirReason) {
                 "not finite");
   expectRefused("short.iso", std::vector<std::byte>(good.begin(), good.end() - 2),
                 valuesDesc(100), "not its header and 2 bytes a value");
-  // Entry rules, at open: a count of 0, and a parent (values chunks have none).
+  // Entry rules, at open: a parent (values chunks have none). The writer refuses to write it; in
+  // the table, opening refuses it.
   ChunkDesc parented = valuesDesc(100);
   parented.parent = 0;
   parented.level = 4;
   parented.key = 0x1a5 << 3;
   try {
-    Reader::open(fileWithValues(dir, "parent.iso", points, 100, good, parented));
+    fileWithValues(dir, "parent.iso", points, 100, good, parented);
+    ADD_FAILURE() << "written";
+  } catch (const InternalError& error) {
+    EXPECT_NE(std::string(error.what()).find("chunk 1: a values chunk of this kind has no parent"),
+              std::string::npos)
+        << error.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "parent.iso"));
+  parented.parent = kNoParent;
+  const auto path = fileWithValues(dir, "parent.iso", points, 100, good, parented);
+  test::writeFile(
+      path, test::withChangedEntry(test::readFile(path), 1, [](ChunkInfo& c) { c.parent = 0; }));
+  try {
+    Reader::open(path);
     ADD_FAILURE() << "opened";
   } catch (const FileError& error) {
     EXPECT_NE(error.reason().find("chunk 1: a values chunk of this kind has no parent"),

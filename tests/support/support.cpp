@@ -114,6 +114,32 @@ void resealChecksums(std::vector<std::byte>& b) {
   store64(b, trailer + 48, hash(b, trailer, 48));
 }
 
+std::vector<std::byte> withChangedEntry(std::vector<std::byte> bytes, uint32_t chunk,
+                                        const std::function<void(ChunkInfo&)>& change) {
+  ChunkInfo c = Reader::fromMemory(bytes, "changed").chunk(chunk);
+  change(c);
+  const size_t at = size_t(load64(bytes, bytes.size() - 64)) + size_t{80} * chunk;
+  const auto put = [&](size_t offset, const auto& value) {
+    std::memcpy(bytes.data() + at + offset, &value, sizeof value);
+  };
+  put(0, c.offset);
+  put(8, c.storedSize);
+  put(16, c.rawSize);
+  put(24, c.checksum);
+  put(32, c.key);
+  put(40, c.pointCount);
+  put(48, c.id);
+  put(52, c.parent);
+  put(56, c.nodeCount);
+  put(60, c.leafCount);
+  put(64, c.geometricError);
+  put(68, c.level);
+  put(69, c.codec);
+  put(70, c.kind);
+  resealChecksums(bytes);
+  return bytes;
+}
+
 FileHeader goldenHeader() {
   FileHeader h;
   h.maxLevel = 3;

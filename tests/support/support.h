@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -54,6 +55,12 @@ void writeFile(const std::filesystem::path& path, const std::vector<std::byte>& 
 // place, wherever the trailer's fields point inside the file, so that tests and fuzzers reach the
 // structural checks behind the checksums. Files too small to hold a header and trailer are left.
 void resealChecksums(std::vector<std::byte>& bytes);
+
+// A valid file's bytes with chunk `chunk`'s table entry changed by `change` (each field put where
+// specs/iso-format.md, "Chunk table", puts it) and every checksum recomputed: how tests make a
+// file whose table breaks a rule, which the writer refuses to write.
+std::vector<std::byte> withChangedEntry(std::vector<std::byte> bytes, uint32_t chunk,
+                                        const std::function<void(ChunkInfo&)>& change);
 
 // The content of tests/data/golden-v2.iso: header, chunks and data, and metadata.
 struct GoldenChunk {

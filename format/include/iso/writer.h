@@ -46,9 +46,11 @@ class Writer {
   Writer& operator=(Writer&&) noexcept;
 
   // Compress (when asked and worthwhile), checksum and write one chunk; returns its id (the index
-  // in the chunk table, in the order of the calls). Throws iso::InternalError for an invalid
-  // description (level above the header's maxLevel, key out of range, data over kMaxChunkRawSize)
-  // and iso::FileError when writing fails.
+  // in the chunk table, in the order of the calls). Throws iso::InternalError, before writing
+  // anything, for a description whose entry a reader would refuse: any rule of an entry on its
+  // own in specs/iso-format.md, "Chunk table" (level above the header's maxLevel, key out of
+  // range, data over kMaxChunkRawSize, the entry rules of its kind...), which the reader checks
+  // with the same code; and iso::FileError when writing fails.
   uint32_t addChunk(const ChunkDesc& desc, std::span<const std::byte> data);
 
   // Write chunk `info` of another file as that file stores it: `stored` (its stored bytes, which
@@ -56,13 +58,16 @@ class Writer {
   // addChunk does for a description this file cannot hold.
   uint32_t copyChunk(const ChunkInfo& info, std::span<const std::byte> stored);
   // Set the parent of a chunk added earlier (parents are often written after their children).
+  // Throws iso::InternalError for a chunk whose kind has no parent; the link itself is checked
+  // when the table is written (close()).
   void setParent(uint32_t chunk, uint32_t parent);
 
   // The metadata JSON object, written at finish(). Defaults to "{}".
   void setMetadata(std::string json);
 
   // Write the chunk table, metadata and trailer, flush, and rename to the output path. Throws
-  // iso::InternalError when a parent link breaks the format's rules, iso::FileError on I/O
+  // iso::InternalError when a parent link or the surface chunks' point counts break the rules of
+  // the table (specs/iso-format.md, "Chunk table"), before writing it; iso::FileError on I/O
   // failure; either way nothing appears at the output path. Same as close() then commit().
   void finish();
 
