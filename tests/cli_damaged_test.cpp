@@ -271,6 +271,37 @@ TEST_F(CliDamaged, aFlippedPointsPayloadByteIsRefusedByEveryCommandThatReadsIt) 
                            flipped(chunk([](const ChunkInfo& c) { return c.kind == 2; })));
 }
 
+// `iso info` prints the chunk table's figures without reading a payload: on a file with a flipped
+// payload byte it answers as on the intact file and says, in text and JSON, that it checked no
+// payload; `iso verify` names the chunk.
+TEST_F(CliDamaged, infoSaysThatItChecksNoPayloadAndVerifyFindsTheFlippedByte) {
+  const ChunkInfo& top = chunk(isTopSurface);
+  TempDir dir;
+  const auto file = dir / "flipped.iso";
+  writeFile(file, flipped(top));
+  const std::string notChecked =
+      "payloads    not checked (the figures above are the chunk table's): iso verify checks them\n";
+  for (const auto& path : {intactIso(), file}) {
+    SCOPED_TRACE(path.string());
+    CommandResult run = runIso("info " + quoted(path));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    EXPECT_NE(run.out.find(notChecked), std::string::npos) << run.out;
+    run = runIso("info --json " + quoted(path));
+    ASSERT_EQ(run.exitCode, 0) << run.err;
+    const nlohmann::json j = nlohmann::json::parse(run.out);
+    ASSERT_TRUE(j.contains("payloads_checked"));
+    EXPECT_EQ(j["payloads_checked"], false);
+  }
+  const Command text = {"info", "info FILE", Answer::Text};
+  EXPECT_EQ(runOn(text, file).answer, intactOutcome(text).answer);
+  const CommandResult verify = runIso("verify " + quoted(file));
+  EXPECT_EQ(verify.exitCode, 1);
+  EXPECT_NE(verify.err.find(file.string()), std::string::npos) << verify.err;
+  EXPECT_NE(verify.err.find("chunk " + std::to_string(top.id) + " "), std::string::npos)
+      << verify.err;
+  EXPECT_NE(verify.err.find("checksum mismatch"), std::string::npos) << verify.err;
+}
+
 TEST_F(CliDamaged, metadataWithAByteOrderMarkIsRejectedByVerifyAndReadAlikeByTheRest) {
   std::vector<std::byte> b = bytes_;
   const uint64_t metadata = get(b.size() - 64 + 16), size = get(b.size() - 64 + 24);
