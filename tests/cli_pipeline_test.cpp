@@ -499,6 +499,52 @@ TEST_F(CliPipeline, exportWritesATilesetOnlyWhereItMayAndTheValidatorAcceptsItsT
     EXPECT_EQ(entry.path().filename().string().find(".isotmp"), std::string::npos) << entry.path();
 }
 
+// A tileset's directory named with a trailing slash ("tiles/", "tiles//") is the directory
+// "tiles": made new, refused when it exists, replaced with --force, and the same files as without.
+TEST_F(CliPipeline, aTilesetDirectoryNamedWithATrailingSlashIsWrittenAsWithout) {
+  namespace fs = std::filesystem;
+  ASSERT_EQ(runIso("convert -q --chunk-nodes 2000 " + quoted(dir_ / "sphere.ply") + " -o " +
+                   quoted(dir_ / "s.iso"))
+                .exitCode,
+            0);
+  const std::string iso = quoted(dir_ / "s.iso");
+  const auto filesIn = [](const fs::path& dir) {
+    std::map<std::string, std::string> files;
+    for (const auto& entry : fs::directory_iterator(dir))
+      files[entry.path().filename().string()] = test::slurp(entry.path());
+    return files;
+  };
+  auto run = runIso("export " + iso + " --tiles " + quoted(dir_ / "plain"));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  const auto expected = filesIn(dir_ / "plain");
+  ASSERT_TRUE(expected.contains("tileset.json"));
+  const std::string slashed = quoted(fs::path((dir_ / "slashed").string() + "/"));
+  run = runIso("export " + iso + " --tiles " + slashed);
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(filesIn(dir_ / "slashed"), expected);
+  // There now: refused without --force, untouched; replaced with it (two slashes too).
+  fs::remove(dir_ / "slashed" / "tileset.json");
+  run = runIso("export " + iso + " --tiles " + slashed);
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find((dir_ / "slashed").string() + ": exists (use --force to replace it)"),
+            std::string::npos)
+      << run.err;
+  EXPECT_FALSE(fs::exists(dir_ / "slashed" / "tileset.json"));
+  run = runIso("export -f " + iso + " --tiles " +
+               quoted(fs::path((dir_ / "slashed").string() + "//")));
+  ASSERT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_EQ(filesIn(dir_ / "slashed"), expected);
+  // A file in the way is named, and nothing is left beside it.
+  run =
+      runIso("export -f " + iso + " --tiles " + quoted(fs::path((dir_ / "s.iso").string() + "/")));
+  EXPECT_EQ(run.exitCode, 1);
+  EXPECT_NE(run.err.find((dir_ / "s.iso").string() + ": exists and is not a directory"),
+            std::string::npos)
+      << run.err;
+  for (const auto& entry : fs::directory_iterator(dir_.path()))
+    EXPECT_EQ(entry.path().filename().string().find(".isotmp"), std::string::npos) << entry.path();
+}
+
 TEST_F(CliPipeline, keptPointsExportAsTheInputPointsAndBrokenOnesAreReported) {
   // Real scans with normals (the kitten) and colors (the lion, 8-bit codes times 256, when
   // ../shared/data is there), and a sphere 5,000 km from the origin: every point back within the
@@ -1094,6 +1140,8 @@ TEST_F(CliPipeline, aMissingOutputDirectoryIsNamedByEveryCommandThatWrites) {
       "convert " + ply + " -o " + quoted(dir_ / "x.iso") + " --report " + out,
       "export " + iso + " --mesh " + out,
       "export " + iso + " --points " + out,
+      "export " + iso + " --tiles " + out,
+      "export " + iso + " --tiles " + out + "/",
       "gen sphere -n 1000 -o " + out,
       "view " + iso + " --cpu --width 16 --height 16 --out " + out,
       "view " + iso + " --cpu --width 16 --height 16 --out " + quoted(dir_ / "x.png") +

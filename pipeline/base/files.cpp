@@ -28,6 +28,13 @@ fs::path directoryOf(const fs::path& path) {
   return path.has_parent_path() ? path.parent_path() : fs::path(".");
 }
 
+// `path` without the separators it ends with: "tiles/" and "tiles//" name the directory "tiles",
+// whose parent is where it is made and whose name its temporary sibling takes.
+fs::path withoutTrailingSeparators(fs::path path) {
+  while (!path.has_filename() && path.has_relative_path()) path = path.parent_path();
+  return path;
+}
+
 // Why `directory` cannot hold a file: it or a parent is missing, or a parent is not a directory.
 std::string missingDirectory(const fs::path& directory) {
   std::error_code error;
@@ -106,19 +113,18 @@ std::vector<uint8_t> readFileBytes(const fs::path& path) {
 // ---- OutputDirectory
 
 OutputDirectory::OutputDirectory(const fs::path& final, const std::string& role, bool replace)
-    : final_(final) {
+    : final_(withoutTrailingSeparators(final)) {
   std::error_code error;
-  const fs::file_status status = fs::symlink_status(final, error);
+  const fs::file_status status = fs::symlink_status(final_, error);
   if (fs::exists(status)) {
-    if (!fs::is_directory(status)) fail(final, "exists and is not a directory (" + role + ")");
-    if (!replace) fail(final, "exists (use --force to replace it)");
+    if (!fs::is_directory(status)) fail(final_, "exists and is not a directory (" + role + ")");
+    if (!replace) fail(final_, "exists (use --force to replace it)");
   }
-  const fs::path parent = directoryOf(final);
-  if (!fs::is_directory(parent, error))
-    fail(final, "cannot be made: " + parent.string() + " is not a directory");
-  staged_ = siblingName(final, "new");
+  const fs::path parent = directoryOf(final_);
+  if (!fs::is_directory(parent, error)) fail(final_, missingDirectory(parent));
+  staged_ = siblingName(final_, "new");
   if (::mkdir(staged_.c_str(), 0755) != 0)
-    fail(final, "cannot be made (" + role + "): " + std::strerror(errno));
+    fail(final_, "cannot be made (" + role + "): " + std::strerror(errno));
   registration_ = TemporaryRegistration(staged_);
 }
 
