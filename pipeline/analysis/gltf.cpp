@@ -261,14 +261,18 @@ std::vector<uint8_t> encodeGlb(const TriangleMesh& source, const MeshAttributes&
                          {"accessors", accessors},
                          {"bufferViews", views},
                          {"buffers", buffers}};
+  // Double-sided: a scan's surface is open where the scan ends, and its inside shows there (as
+  // iso view draws it); a viewer would cull those faces and leave holes. Otherwise the default
+  // material, or for baked colors an unlit one (glTF 2.0 §3.9.2, KHR_materials_unlit).
+  nlohmann::json material = {{"doubleSided", true}};
   if (options.unlit) {
-    gltf["materials"] = {{{"pbrMetallicRoughness",
-                           {{"baseColorFactor", {1.0, 1.0, 1.0, 1.0}},
-                            {"metallicFactor", 0.0},
-                            {"roughnessFactor", 1.0}}},
-                          {"extensions", {{"KHR_materials_unlit", nlohmann::json::object()}}}}};
-    for (nlohmann::json& p : gltf["meshes"][0]["primitives"]) p["material"] = 0;
+    material["pbrMetallicRoughness"] = {{"baseColorFactor", {1.0, 1.0, 1.0, 1.0}},
+                                        {"metallicFactor", 0.0},
+                                        {"roughnessFactor", 1.0}};
+    material["extensions"] = {{"KHR_materials_unlit", nlohmann::json::object()}};
   }
+  gltf["materials"] = nlohmann::json::array({material});
+  for (nlohmann::json& p : gltf["meshes"][0]["primitives"]) p["material"] = 0;
   std::string json = gltf.dump();
   json.resize(padded(json.size()), ' ');
 

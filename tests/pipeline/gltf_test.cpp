@@ -245,6 +245,31 @@ TEST(GlbExport, aBakedFilesColorsAreLitAndItsMaterialUnlit) {
   EXPECT_TRUE(glb.json["meshes"][0]["primitives"][0]["attributes"].contains("COLOR_0"));
 }
 
+// An open surface shows its inside where it ends: every primitive (the surface and the skirts)
+// has the one material, double-sided, lit by default or unlit for baked colors, so that a viewer
+// culls no face of it.
+TEST(GlbExport, everyPrimitiveIsDrawnDoubleSidedLitOrUnlit) {
+  // Two triangles of a square, open all around; the second counts as a skirt.
+  TriangleMesh square;
+  square.vertices = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}};
+  MeshAttributes attributes;
+  for (const bool unlit : {false, true}) {
+    SCOPED_TRACE(unlit ? "unlit" : "lit");
+    const Glb glb = parseGlb(encodeGlb(square, attributes, {.skirtsFrom = 1, .unlit = unlit}));
+    ASSERT_EQ(glb.json["materials"].size(), 1u);
+    const nlohmann::json& material = glb.json["materials"][0];
+    EXPECT_EQ(material["doubleSided"], true);
+    EXPECT_EQ(material.contains("extensions"), unlit);
+    if (!unlit) {
+      EXPECT_EQ(material, nlohmann::json({{"doubleSided", true}}));
+    }
+    const nlohmann::json& primitives = glb.json["meshes"][0]["primitives"];
+    ASSERT_EQ(primitives.size(), 2u);
+    for (const nlohmann::json& primitive : primitives) EXPECT_EQ(primitive["material"], 0);
+  }
+}
+
 TEST(MeshSimplification, staysWithinItsErrorOfTheSphereAndKeepsOpenBorders) {
   test::TempDir dir;
   const test::Converted sphere = test::convertAndLoad(test::scanOf("sphere", 30000), dir / "s.iso");
