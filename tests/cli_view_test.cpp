@@ -178,15 +178,22 @@ TEST(CliView, theWindowResizesTakesScreenshotsOrbitsAndReloadsItsScene) {
   TempDir dir;
   ASSERT_TRUE(windowSession("window_session.sh", kittenIso(), dir.path()));
   EXPECT_NE(slurp(dir / "out.txt").find("saved"), std::string::npos) << slurp(dir / "out.txt");
-  // Both pictures are at the new size; the orbit between them turned the view.
+  // Every picture is at the new size; the orbit turned the view by the time the second was taken
+  // (with the button still down) and for good.
   expectPicture(dir / "iso-screenshot-1.png", 480, 260);
+  expectPicture(dir / "iso-screenshot-2.png", 480, 260);
   expectPicture(dir / "final.png", 480, 260);
   uint32_t w = 0, h = 0;
   const auto before = readRgba8Image(dir / "iso-screenshot-1.png", w, h);
+  const auto during = readRgba8Image(dir / "iso-screenshot-2.png", w, h);
   const auto after = readRgba8Image(dir / "final.png", w, h);
-  size_t changed = 0;
-  for (size_t i = 0; i < before.size(); ++i) changed += before[i] != after[i];
-  EXPECT_GT(changed, before.size() / 20);
+  const auto changedFromBefore = [&](const std::vector<uint32_t>& picture) {
+    size_t changed = 0;
+    for (size_t i = 0; i < before.size(); ++i) changed += before[i] != picture[i];
+    return changed;
+  };
+  EXPECT_GT(changedFromBefore(during), before.size() / 20);
+  EXPECT_GT(changedFromBefore(after), before.size() / 20);
   // The scene file changed under the window: the surface turned red, and the window said so.
   EXPECT_NE(slurp(dir / "out.txt").find("reloaded"), std::string::npos) << slurp(dir / "out.txt");
   const auto redder = [](const std::vector<uint32_t>& picture) {

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <future>
 
@@ -233,6 +234,7 @@ void saveScreenshot(const std::filesystem::path& file, Renderer& renderer, bool 
   const std::vector<uint32_t> pixels = toRgba(renderer.pixels(), bgra);
   writeRgba8Image(file, renderer.setup().width, renderer.setup().height, pixels);
   fmt::print("iso view: saved {}\n", file.string());
+  std::fflush(stdout);  // a session watching the output sees it now
 }
 
 }  // namespace
@@ -306,6 +308,7 @@ int viewWindow(const ViewOptions& options, const WindowImageMode& image) {
       if (!points) return saveScreenshot(file, renderer, bgra);
       writeRgba8Image(file, w.swapchain.extent.width, w.swapchain.extent.height, drawImage.lastPicture);
       fmt::print("iso view: saved {}\n", file.string());
+      std::fflush(stdout);  // a session watching the output sees it now
     };
     if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++screenshots));
     input.screenshot = false;

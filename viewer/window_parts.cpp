@@ -313,6 +313,7 @@ void saveScreenshots(Input& input, const ViewOptions& options, bool lastFrame, u
   const auto save = [&](const std::filesystem::path& file) {
     writeRgba8Image(file, width, height, picture);
     fmt::print("iso view: saved {}\n", file.string());
+    std::fflush(stdout);  // a session watching the output sees it now
   };
   if (input.screenshot) save(fmt::format("iso-screenshot-{}.png", ++taken));
   input.screenshot = false;
