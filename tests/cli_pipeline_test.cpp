@@ -110,9 +110,10 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   std::string bytes[3];
   for (int threads : {1, 2, 0}) {
     const auto out = dir_ / ("t" + std::to_string(threads) + ".iso");
-    // Small orientation blocks, so that components are aligned across blocks too.
+    // Small orientation blocks, so that components are aligned across blocks too, in chunks of
+    // the point stages of at most 6,990 points.
     const auto run =
-        runIso("convert -q --orient-block-points 512 --memory 4M --threads " +
+        runIso("convert -q --orient-block-points 512 --chunk-points 6990 --threads " +
                std::to_string(threads) + " " + quoted(dir_ / "t.ply") + " -o " + quoted(out));
     ASSERT_EQ(run.exitCode, 0) << run.err;
     bytes[threads] = test::slurp(out);
@@ -122,16 +123,16 @@ TEST_F(CliPipeline, convertWritesTheSameBytesOnAnyNumberOfThreads) {
   EXPECT_TRUE(bytes[1] == bytes[0]) << "1 thread and all cores differ";
 }
 
-TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
+TEST_F(CliPipeline, tinyChunksOfThePointStagesGiveTheSameFileAsOneChunk) {
   const auto gen =
       runIso("gen torus -n 60000 --noise 0.3 --no-normals -o " + quoted(dir_ / "t.ply"));
   ASSERT_EQ(gen.exitCode, 0);
   std::string bytes[2];
   nlohmann::json reports[2];
-  const char* budgets[2] = {"150K", "8G"};
+  const char* budgets[2] = {"--chunk-points 256", "--memory 8G"};
   for (int b = 0; b < 2; ++b) {
     const auto out = dir_ / ("t" + std::to_string(b) + ".iso");
-    const auto run = runIso(std::string("convert -q --json --orient-block-points 256 --memory ") +
+    const auto run = runIso(std::string("convert -q --json --orient-block-points 256 ") +
                             budgets[b] + " --tmp " + quoted(dir_.path()) + " " +
                             quoted(dir_ / "t.ply") + " -o " + quoted(out));
     ASSERT_EQ(run.exitCode, 0) << run.err;
@@ -141,15 +142,15 @@ TEST_F(CliPipeline, aTinyMemoryBudgetGivesTheSameFileAsAHugeOne) {
   EXPECT_GE(reports[0]["out_of_core"]["chunks"].get<int>(), 150);
   EXPECT_EQ(reports[1]["out_of_core"]["chunks"].get<int>(), 1);
   EXPECT_GT(reports[0]["out_of_core"]["temporary_bytes_peak"].get<uint64_t>(), 60000u * 24);
-  EXPECT_TRUE(bytes[0] == bytes[1]) << "the budget changed the output";
+  EXPECT_TRUE(bytes[0] == bytes[1]) << "the chunks changed the output";
   for (const auto& entry : std::filesystem::directory_iterator(dir_.path()))
     EXPECT_NE(entry.path().extension(), ".isotmp") << "left behind: " << entry.path();
 }
 
 TEST_F(CliPipeline, aTemporaryDiskLimitIsKeptOrTheConversionStopsWithNothingWritten) {
   ASSERT_EQ(runIso("gen torus -n 100000 --noise 0.3 -o " + quoted(dir_ / "t.ply")).exitCode, 0);
-  const std::string convert = "convert -q --json --memory 150K --tmp " + quoted(dir_.path()) + " " +
-                              quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso");
+  const std::string convert = "convert -q --json --chunk-points 256 --tmp " + quoted(dir_.path()) +
+                              " " + quoted(dir_ / "t.ply") + " -o " + quoted(dir_ / "t.iso");
   auto run = runIso(convert + " --max-temp 1G");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   const nlohmann::json c = nlohmann::json::parse(run.out)["out_of_core"];
@@ -174,13 +175,31 @@ TEST_F(CliPipeline, aTemporaryDiskLimitIsKeptOrTheConversionStopsWithNothingWrit
 }
 
 TEST_F(CliPipeline, badMemoryIsRefused) {
-  for (const char* options : {"--memory lots", "--memory -2G", "--memory 0"}) {
+  for (const char* options : {"--memory lots", "--memory -2G", "--memory 0", "--chunk-points 0"}) {
     const auto run = runIso(std::string("convert ") + options + " " + quoted(dir_ / "sphere.ply") +
                             " -o " + quoted(dir_ / "x.iso"));
     EXPECT_EQ(run.exitCode, 2) << options << run.err;
-    EXPECT_NE(run.err.find("--memory"), std::string::npos) << run.err;
+    EXPECT_NE(run.err.find(std::string(options).substr(0, 8)), std::string::npos) << run.err;
     EXPECT_FALSE(std::filesystem::exists(dir_ / "x.iso"));
   }
+  // Budgets below the smallest one a conversion keeps to (its peak within --memory + 10 %) are
+  // refused with it, before anything is read; an old output stays as it was.
+  std::ofstream(dir_ / "old.iso") << "old";
+  for (const char* memory : {"200M", "511M", "523263K", "4M"}) {
+    const auto run = runIso(std::string("convert -f --memory ") + memory + " " +
+                            quoted(dir_ / "sphere.ply") + " -o " + quoted(dir_ / "old.iso"));
+    EXPECT_EQ(run.exitCode, 2) << memory << run.err;
+    EXPECT_NE(run.err.find(std::string("--memory ") + memory +
+                           ": below the smallest budget a conversion keeps to, 512M"),
+              std::string::npos)
+        << run.err;
+    EXPECT_EQ(run.err.find("read "), std::string::npos) << run.err;
+    EXPECT_EQ(test::slurp(dir_ / "old.iso"), "old");
+  }
+  const auto run = runIso("convert -q --memory 512M " + quoted(dir_ / "sphere.ply") + " -o " +
+                          quoted(dir_ / "x.iso"));
+  EXPECT_EQ(run.exitCode, 0) << run.err;
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "x.iso"));
 }
 
 TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
@@ -1121,7 +1140,7 @@ TEST_F(CliPipeline, everyByteSizeOptionRefusesOverflowNegativeNaNAndGarbage) {
   EXPECT_FALSE(fs::exists(dir_ / "x.iso"));
   EXPECT_FALSE(fs::exists(dir_ / "x.png"));
   // The largest size there is, exactly, and units in either case.
-  auto run = runIso(convert + " --json --max-temp 18446744073709551615 --memory 64mib");
+  auto run = runIso(convert + " --json --max-temp 18446744073709551615 --memory 512mib");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_EQ(nlohmann::json::parse(run.out)["out_of_core"]["temporary_disk_limit"].get<uint64_t>(),
             18446744073709551615u);
@@ -1558,7 +1577,7 @@ TEST_F(CliPipeline, keptScalarsComeBackWithTheirPoints) {
   const std::array<std::string, 3> names = {"intensity", "classification", "gps_time"};
   for (size_t k = 0; k < names.size(); ++k) {
     SCOPED_TRACE(names[k]);
-    for (const std::string memory : {"", " --memory 4M"}) {
+    for (const std::string memory : {"", " --chunk-points 6990"}) {
       const auto iso = dir_ / ("s-" + names[k] + (memory.empty() ? "" : "-small") + ".iso");
       auto run = runIso("convert -q --keep-points --point-bits 30 --keep-scalar " + names[k] +
                         memory + " " + quoted(dir_ / "s.las") + " -o " + quoted(iso));
@@ -1774,7 +1793,7 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
   };
 
   // Killed in the point stages of many chunks, it keeps the chunks it finished.
-  report = killAfter("--memory 20M --orient-block-points 20000 ", "chunk-0-2",
+  report = killAfter("--chunk-points 34952 --orient-block-points 20000 ", "chunk-0-2",
                      "points.checkpoint", dir_ / "chunked.iso");
   EXPECT_GE(report["out_of_core"]["chunks_resumed"].get<int>(), 2) << report.dump();
   EXPECT_LT(report["out_of_core"]["chunks_resumed"], report["out_of_core"]["chunks"]);
@@ -1839,9 +1858,9 @@ TEST_F(CliPipeline, twoMpiRanksWriteTheSameBytesAsOneProcess) {
   const fs::path in = dir_ / "torus.ply", far = dir_ / "far.xyz";
   ASSERT_EQ(runIso("gen torus -n 200000 -o " + quoted(in)).exitCode, 0);
   put(far, "5 5 5\n5.01 5 5\n");  // strays that held the bounds: every chunk runs again
-  // Chunks of at most 34,952 points (--memory 20M) and orientation blocks that fit them.
-  const std::string options = " --memory 20M --orient-block-points 20000 -f --json " + quoted(in) +
-                              " " + quoted(far) + " -o ";
+  // Chunks of at most 34,952 points and orientation blocks that fit them.
+  const std::string options = " --chunk-points 34952 --orient-block-points 20000 -f --json " +
+                              quoted(in) + " " + quoted(far) + " -o ";
   const auto one = runIso("convert" + options + quoted(dir_ / "one.iso"));
   ASSERT_EQ(one.exitCode, 0) << one.err;
   // As root (a container, CI) OpenMPI asks for these; --oversubscribe: fewer cores than ranks.

@@ -78,6 +78,11 @@ struct OutOfCoreBudget {
   // bytes per loaded point: positions, attributes, neighbours, their graph, chunk and halo
   // together), and every per-point array of memory / 32 or more spilled.
   static OutOfCoreBudget forMemory(uint64_t memory);
+  // The smallest budget a conversion keeps to, its peak memory within the budget + 10 % (measured
+  // with the default orientation blocks and octree chunk jobs: specs/pipeline.md §15). Below it,
+  // what does not shrink with the budget takes more: the process itself (about 150 MiB), a chunk
+  // of the point stages (an orientation block at least) and a chunk job of the octree stages.
+  static constexpr uint64_t kSmallestMemory = uint64_t{512} << 20;
 };
 // The same for points streamed to disk (pipeline/outofcore/spill.h): the point stages run chunk by
 // chunk, chunks of at most budget.maxChunkPoints points with their halos, and the prepared points

@@ -4,6 +4,7 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <map>
@@ -39,6 +40,7 @@ struct Options {
   std::string fit = "sphere";
   std::string orient = "auto";
   std::string memory = "auto";                 // --memory
+  std::optional<uint64_t> chunkPoints;         // --chunk-points; default: from --memory
   std::string tmp;                             // --tmp; default: the output's directory
   std::string maxTemp = "auto";                // --max-temp
   std::string report;                          // --report FILE
@@ -211,6 +213,25 @@ uint64_t parseBytes(const std::string& text, const char* option) {
   return parseSize(text, option);
 }
 
+// --memory: a size no smaller than the smallest budget a conversion keeps to; auto: half the
+// physical memory, at least that.
+uint64_t memoryBudget(const std::string& text) {
+  constexpr uint64_t smallest = OutOfCoreBudget::kSmallestMemory;
+  const uint64_t memory = parseBytes(text, "--memory");
+  if (text == "auto") return std::max(memory, smallest);
+  if (memory < smallest)
+    throw UsageError(fmt::format(
+        "--memory {}: below the smallest budget a conversion keeps to, {}M", text, smallest >> 20));
+  return memory;
+}
+
+// The budget of an out-of-core conversion: --memory's, with --chunk-points when given.
+OutOfCoreBudget outOfCoreBudget(const Options& o, uint64_t memory) {
+  OutOfCoreBudget budget = OutOfCoreBudget::forMemory(memory);
+  if (o.chunkPoints) budget.maxChunkPoints = *o.chunkPoints;
+  return budget;
+}
+
 // --max-temp: a size, or auto: 90 % of the space free on the file system of the temporary files.
 uint64_t temporaryDiskLimit(const std::string& text, const std::filesystem::path& tmp) {
   if (text != "auto") return parseBytes(text, "--max-temp");
@@ -233,7 +254,8 @@ void checkOptions(Options& o) {
     o.build.texture.at = named(kTextureAtNames, o.textureAt, "--texture-at");
     o.build.texture.image = o.texture;
   }
-  if (o.memory != "auto") parseSize(o.memory, "--memory");
+  memoryBudget(o.memory);
+  if (o.chunkPoints && *o.chunkPoints == 0) throw UsageError("--chunk-points must be 1 or more");
   if (o.maxTemp != "auto") parseSize(o.maxTemp, "--max-temp");
   const std::string& scalar = o.build.keepScalar;
   if (!scalar.empty() && !o.build.keepPoints && o.volumePoints.empty())
@@ -410,7 +432,7 @@ int runConversion(Options& o, const MpiRanks* mpi) {
     threads.emplace(tbb::global_control::max_allowed_parallelism, size_t(o.threads));
   ProgressReporter progress(mode);
   progress.observeStages(interrupted);
-  const uint64_t memory = parseBytes(o.memory, "--memory");
+  const uint64_t memory = memoryBudget(o.memory);
   TemporaryDiskLimit temporaryLimit(temporaryDiskLimit(o.maxTemp, tmp));
   // The points go to disk as they are read (each file is parsed once); the point stages then
   // run chunk by chunk.
@@ -452,8 +474,7 @@ int runConversion(Options& o, const MpiRanks* mpi) {
   }
   reportCoordinateSystem(coordinateSystemOf(loaded.inputs), o.quiet || mode == ProgressMode::Json);
   if (worker) {
-    prepareAsRank(*raw, spill, OutOfCoreBudget::forMemory(memory), o.build, *ranks,
-                  !o.writeStrays.empty());
+    prepareAsRank(*raw, spill, outOfCoreBudget(o, memory), o.build, *ranks, !o.writeStrays.empty());
     return kExitOk;
   }
   // An octree run of all points (not chunk jobs) keeps its work lists in memory (specs/pipeline.md
@@ -483,8 +504,7 @@ int runConversion(Options& o, const MpiRanks* mpi) {
     source.onStrays = [&](PointCloud removed) { strays = std::move(removed); };
   nlohmann::json report;
   try {
-    report =
-        convertSpilled(*raw, spill, OutOfCoreBudget::forMemory(memory), output, o.build, source);
+    report = convertSpilled(*raw, spill, outOfCoreBudget(o, memory), output, o.build, source);
   } catch (const ConvertError& error) {
     std::string names;
     for (const auto& file : files) names += (names.empty() ? "" : ", ") + file.string();
@@ -649,11 +669,17 @@ void addConvertCommand(CLI::App& app, int& exitCode) {
                 "update) or none")
       ->capture_default_str();
   c->add_option("--memory", o->memory,
-                "Memory budget (e.g. 2G, 512M; units K, M, G, T are powers of 1024; auto: half "
-                "the RAM): the point stages run in chunks "
-                "that fit it, and the large arrays live in temporary files whose pages are "
-                "dropped when the process nears it; the output does not depend on it")
+                fmt::format("Memory budget (e.g. 2G, 512M; units K, M, G, T are powers of 1024; "
+                            "auto: half the RAM), at least {}M, the smallest a conversion keeps "
+                            "to: the point stages run in chunks that fit it, and the large arrays "
+                            "live in temporary files whose pages are dropped when the process "
+                            "nears it; the output does not depend on it",
+                            OutOfCoreBudget::kSmallestMemory >> 20))
       ->capture_default_str();
+  c->add_option("--chunk-points", o->chunkPoints,
+                "Points a chunk of the point stages holds at most, besides its halo (default: "
+                "--memory / 600; at least --orient-block-points); the output does not depend on "
+                "it");
   c->add_option("--tmp", o->tmp,
                 "Directory for temporary files (default: the output's; made with its parents "
                 "when missing): the points as read, sorted, and their arrays; all removed "
