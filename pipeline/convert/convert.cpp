@@ -517,9 +517,8 @@ void requireFrame(const Frame& frame) {
 // as chunk jobs when the points are many, with their counts and times in the report.
 CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                                      const BuildOptions& options, const RadiusStats& radii,
-                                     StageTimer& timer, nlohmann::json& report,
-                                     const ConvertSource& source) {
-  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
+                                     const OctreeChunkPlan& plan, StageTimer& timer,
+                                     nlohmann::json& report, const ConvertSource& source) {
   const Ranks* ranks =
       source.ranks != nullptr && source.ranks->count > 1 ? source.ranks : nullptr;
   if (plan.chunks() == 1) {
@@ -576,6 +575,8 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
 
   // The signed distance and its point index are needed until the level-of-detail corners.
   auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
+  // The chunk jobs' partition: the corner stages' and the level of detail's.
+  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
   std::optional<CornerStageResults> resumed;
   if (source.resume != nullptr && report.contains("resumed") &&
       source.resume->has(kCornersCheckpoint)) {
@@ -585,10 +586,10 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   }
   CornerStageResults built =
       resumed ? std::move(*resumed)
-              : buildCornerStages(points, *sdf, options, radii, timer, report, source);
+              : buildCornerStages(points, *sdf, options, radii, plan, timer, report, source);
   // A chunked run's jobs are its checkpoints: a run killed after them redoes only the merge, which
   // costs about three of the corners' checkpoint (specs/pipeline.md §15, "Resume").
-  if (source.resume != nullptr && !resumed && !report.contains("octree_chunks")) {
+  if (source.resume != nullptr && !resumed && plan.chunks() == 1) {
     timer.next("checkpoint");
     saveCornerStage(*source.resume, built);
     source.resume->removeStartingWith(kOctreeChunkPrefix);  // the corners' checkpoint holds them
@@ -602,7 +603,6 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   // The points' signed distance and index go once the levels that read them are done: the writer
   // reads points, not neighbours.
   // A chunk run's corners by chunk (cell_index.h), in the order its tree's nodes come.
-  const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
   LodField lod = sampleLodCorners(
       octree, points, *sdf, options,
       [&] {

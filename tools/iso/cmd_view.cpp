@@ -156,9 +156,10 @@ int viewImage(ViewArgs& a) {
     finish(inputs);
     return viewer::viewImageBench(a.view, a.image, inputs);
   }
-  const viewer::Camera camera =
-      viewer::sceneCamera(a.view.scene, points.frame, viewer::aspectOf(a.view));
-  const viewer::ImageInputs inputs = forCamera(points, camera, a.view.width, a.view.height);
+  // Chosen once: the drivers draw from the camera the points were chosen for.
+  a.view.scene.camera = viewer::sceneCamera(a.view.scene, points.frame, viewer::aspectOf(a.view));
+  const viewer::ImageInputs inputs =
+      forCamera(points, *a.view.scene.camera, a.view.width, a.view.height);
   if (a.cpu) return viewer::viewImageCpu(a.view, a.image, inputs);
   return viewer::viewImageHeadless(a.view, a.image, inputs);
 }
