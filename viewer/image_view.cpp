@@ -42,13 +42,13 @@ Camera sceneCamera(const Scene& s, const ImageInputs& in, double aspect) {
     if (s.fovDegrees) c.fovDegrees = *s.fovDegrees;
     return c;
   }
-  // The inputs' framing, or their points as cells of their spacing: at most about 200,000 of
+  // The inputs' framing, or their points as cells of their spacing: about kFramingPoints of
   // them, each as wide as the points it stands for.
   std::vector<SurfaceCell> cells = in.framing;
   if (cells.empty()) {
     size_t points = 0;
     for (const ImageObject& o : in.objects) points += o.positions.size();
-    const size_t stride = std::max<size_t>(1, points / 200000);
+    const size_t stride = std::max<size_t>(1, points / kFramingPoints);
     for (const ImageObject& o : in.objects)
       for (size_t i = 0; i < o.positions.size(); i += stride)
         cells.push_back({in.origin + Vec3d(o.positions[i]), o.spacing * std::sqrt(double(stride))});

@@ -30,9 +30,11 @@ struct ImageInputs {
   std::string choice;                // how the points drawn were chosen, when not all are
   bool preview = false;              // what was read so far (a window draws it while reading)
   // What the default camera frames (sceneCamera), when not empty: a subsample of all the points
-  // read, each as wide as the points it stands for (else the objects' points are framed).
+  // read (about kFramingPoints), each as wide as the points it stands for (else the objects'
+  // points are framed, as many).
   std::vector<SurfaceCell> framing;
 };
+inline constexpr size_t kFramingPoints = 200000;
 
 // The objects with the scene's opacity (one for all, or one an object; UsageError otherwise).
 std::vector<ImageObject> withOpacity(const std::vector<ImageObject>& objects,

@@ -35,10 +35,9 @@ viewer::ImageInputs frameOf(const PointStore& store, const ImageFiles& files) {
   in.bounds = {store.lo(), store.hi()};
   in.origin = 0.5 * (store.lo() + store.hi());
   for (const auto& path : files.paths) in.names.push_back(path.string());
-  // About 200,000 points for the default camera, each as wide as a cell of a grid of as many
-  // cells over the bounds' largest side squared (a surface's spacing, roughly).
-  constexpr uint64_t kFramingPoints = 200000;
-  const uint64_t stride = std::max<uint64_t>(1, store.size() / kFramingPoints);
+  // About kFramingPoints points for the default camera, each as wide as a cell of a grid of as
+  // many cells over the bounds' largest side squared (a surface's spacing, roughly).
+  const uint64_t stride = std::max<uint64_t>(1, store.size() / viewer::kFramingPoints);
   const glm::dvec3 extent = store.hi() - store.lo();
   const double size = std::max({extent.x, extent.y, extent.z, 1e-9}) /
                       std::sqrt(double(std::max<uint64_t>(store.size() / stride, 1)));
