@@ -1875,6 +1875,8 @@ TEST_F(CliPipeline, twoMpiRanksWriteTheSameBytesAsOneProcess) {
   EXPECT_EQ(report["out_of_core"]["ranks"], 2);
   EXPECT_GT(report["out_of_core"]["chunks"].get<int>(), 4);
   EXPECT_EQ(report["points"]["outliers_removed"], 2);
+  // Rank 1 measured what a viewer shows (the same numbers: they are in the file's metadata).
+  EXPECT_EQ(report["out_of_core"]["visibility_rank"], 1);
   EXPECT_TRUE(test::slurp(dir_ / "two.iso") == test::slurp(dir_ / "one.iso"));
   EXPECT_TRUE(temporariesUnder(dir_.path()).empty());
 

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
@@ -336,6 +337,68 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
                        timer, report, started);
 }
 
+// ---- the measures of a distributed run: rank 1 measures what a viewer shows while rank 0
+// measures the distances (the same code on the same file: the same numbers, the same bytes).
+
+constexpr const char* kMeasuresFingerprint = "the measures of one run";
+constexpr const char* kSharedVisibility = "visibility";
+
+ResumeState sharedMeasures(const Ranks& ranks) {
+  return ResumeState(ranks.shared / "measures", kMeasuresFingerprint);
+}
+
+// Rank 0's word to the others once the file is written: its path, the spacing and the sample.
+std::vector<std::byte> measureMessage(const std::filesystem::path& written, double spacing,
+                                      std::span<const glm::dvec3> sample) {
+  const std::string path = written.string();
+  const uint64_t pathBytes = path.size(), points = sample.size();
+  std::vector<std::byte> word(2 * sizeof(uint64_t) + sizeof(double) + path.size() +
+                              sample.size_bytes());
+  std::byte* at = word.data();
+  const auto put = [&](const void* from, size_t bytes) {
+    std::memcpy(at, from, bytes);
+    at += bytes;
+  };
+  put(&pathBytes, sizeof pathBytes);
+  put(path.data(), path.size());
+  put(&spacing, sizeof spacing);
+  put(&points, sizeof points);
+  put(sample.data(), sample.size_bytes());
+  return word;
+}
+
+// A rank other than 0, once its part of the octree stages is done: rank 1 measures the written
+// file's visibility and keeps it in the shared directory for rank 0 ("unseen" when the file is
+// not on a file system it sees: rank 0 measures it then).
+void measureAsRank(const Ranks& ranks) {
+  std::vector<std::byte> word;
+  ranks.broadcast(word);
+  if (ranks.rank == 1 && !word.empty()) {
+    const std::byte* at = word.data();
+    const auto take = [&](void* to, size_t bytes) {
+      std::memcpy(to, at, bytes);
+      at += bytes;
+    };
+    uint64_t pathBytes = 0, points = 0;
+    double spacing = 0.0;
+    take(&pathBytes, sizeof pathBytes);
+    std::string path(pathBytes, '\0');
+    take(path.data(), pathBytes);
+    take(&spacing, sizeof spacing);
+    take(&points, sizeof points);
+    std::vector<glm::dvec3> sample(points);
+    take(sample.data(), points * sizeof(glm::dvec3));
+    std::error_code error;
+    nlohmann::json visibility = "unseen";
+    if (std::filesystem::is_regular_file(path, error))
+      visibility = visibilityReport(Reader::open(path), sample, spacing);
+    const std::unique_ptr<CheckpointWriter> out = sharedMeasures(ranks).create(kSharedVisibility);
+    out->json(kSharedVisibility, visibility);
+    out->commit();
+  }
+  ranks.barrier();  // rank 0 reads it after this
+}
+
 }  // namespace
 
 nlohmann::json coordinateSystemOf(const nlohmann::json& inputs) {
@@ -407,6 +470,7 @@ void prepareAsRank(const RawSpill& raw, SpillDirectory& directory, const OutOfCo
       raw, directory, options, budget.maxChunkPoints, [](const std::string&, uint64_t) {},
       collectStrays, &ranks);
   runCornerStagesAsRank(options, ranks);
+  measureAsRank(ranks);
 }
 
 namespace {
@@ -453,10 +517,16 @@ void reportPoints(const ReadyPoints& ready, uint64_t input, uint64_t nonFinite,
 }
 
 // The written file in the report: its size, and what it makes of the sampled input points (the
-// distance to its zero set, what the viewer shows of them).
+// distance to its zero set, what the viewer shows of them). With ranks (rank 0 of several), rank
+// 1 measures the visibility meanwhile (measureAsRank).
 void reportWritten(const std::filesystem::path& written, const WriteStats& stats,
                    const std::vector<glm::dvec3>& sample, uint64_t inputPoints, double spacing,
-                   const Frame& frame, StageTimer& timer, nlohmann::json& report) {
+                   const Frame& frame, const Ranks* ranks, StageTimer& timer,
+                   nlohmann::json& report) {
+  if (ranks != nullptr) {
+    std::vector<std::byte> word = measureMessage(written, spacing, sample);
+    ranks->broadcast(word);
+  }
   timer.next("accuracy");
   const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
   report["file"] = {
@@ -481,7 +551,22 @@ void reportWritten(const std::filesystem::path& written, const WriteStats& stats
                         {"rms_over_spacing", d.rms / spacing},
                         {"max_over_spacing", d.max / spacing}};
   timer.next("visibility");
-  report["visibility"] = visibilityReport(writtenReader, sample, spacing);
+  nlohmann::json visibility = "unseen";
+  if (ranks != nullptr) {
+    ranks->barrier();
+    ResumeState share = sharedMeasures(*ranks);
+    const std::unique_ptr<CheckpointReader> in = share.open(kSharedVisibility);
+    if (!in)
+      throw std::runtime_error("rank 1's visibility measure cannot be read from " +
+                               share.path(kSharedVisibility).string());
+    visibility = in->json(kSharedVisibility);
+    in->finish();
+    share.finish();
+  }
+  if (ranks != nullptr) report["out_of_core"]["visibility_rank"] = visibility.is_string() ? 0 : 1;
+  report["visibility"] = visibility.is_string()
+                             ? visibilityReport(writtenReader, sample, spacing)
+                             : std::move(visibility);
   timer.end();
 }
 
@@ -713,7 +798,9 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   };
   writeSurfaceFile(
       output, write, [&](const std::filesystem::path& written, const WriteStats& stats) {
-        reportWritten(written, stats, ready.sample, inputPoints, spacing, frame, timer, report);
+        reportWritten(written, stats, ready.sample, inputPoints, spacing, frame,
+                      source.ranks != nullptr && source.ranks->count > 1 ? source.ranks : nullptr,
+                      timer, report);
         const double seconds =
             std::chrono::duration<double>(Clock::now() - started).count() + source.readSeconds;
         reportRun(seconds, double(inputPoints + source.nonFiniteDropped) / seconds, report);
