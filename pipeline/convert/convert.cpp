@@ -350,7 +350,7 @@ ResumeState sharedMeasures(const Ranks& ranks) {
 // Rank 0's word to the others once the file is written: its path, the spacing and the sample.
 std::vector<std::byte> measureMessage(const std::filesystem::path& written, double spacing,
                                       std::span<const glm::dvec3> sample) {
-  const std::string path = written.string();
+  const std::string path = std::filesystem::absolute(written).string();  // ranks' folders differ
   const uint64_t pathBytes = path.size(), points = sample.size();
   std::vector<std::byte> word(2 * sizeof(uint64_t) + sizeof(double) + path.size() +
                               sample.size_bytes());
