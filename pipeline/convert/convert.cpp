@@ -5,10 +5,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <glm/geometric.hpp>
 #include <map>
 #include <numeric>
+#include <optional>
 
 #include "iso/error.h"
 #include "iso/reader.h"
@@ -338,61 +338,67 @@ nlohmann::json convertWith(uint64_t inputPoints, const std::filesystem::path& ou
 }
 
 // ---- the measures of a distributed run: rank 1 measures what a viewer shows while rank 0
-// measures the distances (the same code on the same file: the same numbers, the same bytes).
+// measures the distances (the same code on the same file: the same numbers, the same bytes). They
+// pass the request and the answer as checkpoints in the shared directory.
 
 constexpr const char* kMeasuresFingerprint = "the measures of one run";
+constexpr const char* kMeasureRequest = "request";
 constexpr const char* kSharedVisibility = "visibility";
 
 ResumeState sharedMeasures(const Ranks& ranks) {
   return ResumeState(ranks.shared / "measures", kMeasuresFingerprint);
 }
 
-// Rank 0's word to the others once the file is written: its path, the spacing and the sample.
-std::vector<std::byte> measureMessage(const std::filesystem::path& written, double spacing,
-                                      std::span<const glm::dvec3> sample) {
-  const std::string path = std::filesystem::absolute(written).string();  // ranks' folders differ
-  const uint64_t pathBytes = path.size(), points = sample.size();
-  std::vector<std::byte> word(2 * sizeof(uint64_t) + sizeof(double) + path.size() +
-                              sample.size_bytes());
-  std::byte* at = word.data();
-  const auto put = [&](const void* from, size_t bytes) {
-    std::memcpy(at, from, bytes);
-    at += bytes;
-  };
-  put(&pathBytes, sizeof pathBytes);
-  put(path.data(), path.size());
-  put(&spacing, sizeof spacing);
-  put(&points, sizeof points);
-  put(sample.data(), sample.size_bytes());
-  return word;
+// Rank 0, once the file is written: asks rank 1 to measure its visibility.
+void askForVisibility(const Ranks& ranks, const ResumeState& share,
+                      const std::filesystem::path& written, double spacing,
+                      const std::vector<glm::dvec3>& sample) {
+  const std::unique_ptr<CheckpointWriter> out = share.create(kMeasureRequest);
+  // Absolute: the ranks may have started in other folders.
+  out->json(kMeasureRequest, {{"file", std::filesystem::absolute(written).string()},
+                              {"spacing", spacing}});
+  out->array("sample", sample);
+  out->commit();
+  std::vector<std::byte> word{std::byte{1}};
+  ranks.broadcast(word);
+}
+
+// Rank 0, once its own measure is done: rank 1's visibility, or "unseen" when rank 1 could not
+// see the file (rank 0 measures it then).
+nlohmann::json visibilityOfRank1(const Ranks& ranks, ResumeState& share) {
+  ranks.barrier();
+  const std::unique_ptr<CheckpointReader> in = share.open(kSharedVisibility);
+  if (!in)
+    throw std::runtime_error("rank 1's visibility measure cannot be read from " +
+                             share.path(kSharedVisibility).string());
+  nlohmann::json visibility = in->json(kSharedVisibility);
+  in->finish();
+  share.finish();
+  return visibility;
 }
 
 // A rank other than 0, once its part of the octree stages is done: rank 1 measures the written
 // file's visibility and keeps it in the shared directory for rank 0 ("unseen" when the file is
-// not on a file system it sees: rank 0 measures it then).
+// not on a file system it sees).
 void measureAsRank(const Ranks& ranks) {
   std::vector<std::byte> word;
   ranks.broadcast(word);
   if (ranks.rank == 1 && !word.empty()) {
-    const std::byte* at = word.data();
-    const auto take = [&](void* to, size_t bytes) {
-      std::memcpy(to, at, bytes);
-      at += bytes;
-    };
-    uint64_t pathBytes = 0, points = 0;
-    double spacing = 0.0;
-    take(&pathBytes, sizeof pathBytes);
-    std::string path(pathBytes, '\0');
-    take(path.data(), pathBytes);
-    take(&spacing, sizeof spacing);
-    take(&points, sizeof points);
-    std::vector<glm::dvec3> sample(points);
-    take(sample.data(), points * sizeof(glm::dvec3));
+    ResumeState share = sharedMeasures(ranks);
+    const std::unique_ptr<CheckpointReader> in = share.open(kMeasureRequest);
+    if (!in)
+      throw std::runtime_error("rank 0's measure request cannot be read from " +
+                               share.path(kMeasureRequest).string());
+    const nlohmann::json request = in->json(kMeasureRequest);
+    std::vector<glm::dvec3> sample;
+    in->array("sample", sample);
+    in->finish();
+    const std::string file = request["file"];
     std::error_code error;
     nlohmann::json visibility = "unseen";
-    if (std::filesystem::is_regular_file(path, error))
-      visibility = visibilityReport(Reader::open(path), sample, spacing);
-    const std::unique_ptr<CheckpointWriter> out = sharedMeasures(ranks).create(kSharedVisibility);
+    if (std::filesystem::is_regular_file(file, error))
+      visibility = visibilityReport(Reader::open(file), sample, request["spacing"].get<double>());
+    const std::unique_ptr<CheckpointWriter> out = share.create(kSharedVisibility);
     out->json(kSharedVisibility, visibility);
     out->commit();
   }
@@ -523,9 +529,10 @@ void reportWritten(const std::filesystem::path& written, const WriteStats& stats
                    const std::vector<glm::dvec3>& sample, uint64_t inputPoints, double spacing,
                    const Frame& frame, const Ranks* ranks, StageTimer& timer,
                    nlohmann::json& report) {
+  std::optional<ResumeState> share;
   if (ranks != nullptr) {
-    std::vector<std::byte> word = measureMessage(written, spacing, sample);
-    ranks->broadcast(word);
+    share.emplace(sharedMeasures(*ranks));
+    askForVisibility(*ranks, *share, written, spacing, sample);
   }
   timer.next("accuracy");
   const uint64_t leaves = report["octree"]["leaves"].get<uint64_t>();
@@ -551,22 +558,10 @@ void reportWritten(const std::filesystem::path& written, const WriteStats& stats
                         {"rms_over_spacing", d.rms / spacing},
                         {"max_over_spacing", d.max / spacing}};
   timer.next("visibility");
-  nlohmann::json visibility = "unseen";
-  if (ranks != nullptr) {
-    ranks->barrier();
-    ResumeState share = sharedMeasures(*ranks);
-    const std::unique_ptr<CheckpointReader> in = share.open(kSharedVisibility);
-    if (!in)
-      throw std::runtime_error("rank 1's visibility measure cannot be read from " +
-                               share.path(kSharedVisibility).string());
-    visibility = in->json(kSharedVisibility);
-    in->finish();
-    share.finish();
-  }
-  if (ranks != nullptr) report["out_of_core"]["visibility_rank"] = visibility.is_string() ? 0 : 1;
-  report["visibility"] = visibility.is_string()
-                             ? visibilityReport(writtenReader, sample, spacing)
-                             : std::move(visibility);
+  nlohmann::json visibility = share ? visibilityOfRank1(*ranks, *share) : "unseen";
+  if (share) report["out_of_core"]["visibility_rank"] = visibility.is_string() ? 0 : 1;
+  if (visibility.is_string()) visibility = visibilityReport(writtenReader, sample, spacing);
+  report["visibility"] = std::move(visibility);
   timer.end();
 }
 
