@@ -3,8 +3,11 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <fstream>
 #include <system_error>
 
@@ -18,7 +21,6 @@ namespace iso {
 namespace {
 
 constexpr char kMagic[8] = {'I', 'S', 'O', 'C', 'K', 'P', 'T', '1'};
-constexpr size_t kBufferBytes = size_t{8} << 20;
 
 uint64_t hashOf(const std::string& text) { return XXH3_64bits(text.data(), text.size()); }
 
@@ -32,7 +34,30 @@ std::span<const std::byte> bytesOf(const T& value) {
   return {reinterpret_cast<const std::byte*>(&value), sizeof(T)};
 }
 
+// open(2) with O_DIRECT where the file system takes it, else without; `direct` says which.
+int openUnbuffered(const std::filesystem::path& path, int flags, bool& direct) {
+  int fd = ::open(path.c_str(), flags | O_DIRECT, 0644);
+  direct = fd >= 0;
+  if (fd < 0 && errno == EINVAL) fd = ::open(path.c_str(), flags, 0644);
+  return fd;
+}
+
 }  // namespace
+
+// ---- blocks
+
+AlignedBlocks::AlignedBlocks()
+    : data_(static_cast<std::byte*>(std::aligned_alloc(kAlignment, kCapacity))) {
+  if (!data_) throw std::bad_alloc();
+}
+
+void AlignedBlocks::Free::operator()(std::byte* p) const { std::free(p); }
+
+void AlignedBlocks::stopDirect(int fd) {
+  if (!direct) return;
+  if (const int flags = ::fcntl(fd, F_GETFL); flags >= 0) ::fcntl(fd, F_SETFL, flags & ~O_DIRECT);
+  direct = false;
+}
 
 // ---- writer
 
@@ -41,9 +66,8 @@ CheckpointWriter::CheckpointWriter(std::filesystem::path final, const std::strin
   staged_ = final_;
   staged_ += ".part";
   registration_ = TemporaryRegistration(staged_);
-  fd_ = ::open(staged_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  fd_ = openUnbuffered(staged_, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, buffer_.direct);
   if (fd_ < 0) fileFailure(staged_, "cannot write the checkpoint", errno);
-  buffer_.reserve(kBufferBytes);
   put({reinterpret_cast<const std::byte*>(kMagic), sizeof kMagic});
   put(bytesOf(hashOf(fingerprint)));
 }
@@ -60,18 +84,28 @@ void CheckpointWriter::put(std::span<const std::byte> data) {
   chargeTemporaryDisk(data.size(), staged_);
   written_ += data.size();
   while (!data.empty()) {
-    const size_t n = std::min(data.size(), kBufferBytes - buffer_.size());
-    buffer_.insert(buffer_.end(), data.begin(), data.begin() + ptrdiff_t(n));
+    const size_t n = std::min(data.size(), AlignedBlocks::kCapacity - buffer_.size);
+    std::memcpy(buffer_.data() + buffer_.size, data.data(), n);
+    buffer_.size += n;
     data = data.subspan(n);
-    if (buffer_.size() < kBufferBytes) break;
-    for (size_t done = 0; done < buffer_.size();) {
-      const ssize_t w = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) fileFailure(staged_, "cannot write the checkpoint", w < 0 ? errno : ENOSPC);
-      done += size_t(w);
-    }
-    buffer_.clear();
+    if (buffer_.size == AlignedBlocks::kCapacity) flush();
   }
+}
+
+void CheckpointWriter::flush() {
+  if (buffer_.size % AlignedBlocks::kAlignment != 0) buffer_.stopDirect(fd_);  // the tail
+  for (size_t done = 0; done < buffer_.size;) {
+    const ssize_t w = ::write(fd_, buffer_.data() + done, buffer_.size - done);
+    if (w < 0 && errno == EINTR) continue;
+    if (w < 0 && errno == EINVAL && buffer_.direct) {  // blocks larger than ours
+      buffer_.stopDirect(fd_);
+      continue;
+    }
+    if (w <= 0) fileFailure(staged_, "cannot write the checkpoint", w < 0 ? errno : ENOSPC);
+    done += size_t(w);
+    if (done % AlignedBlocks::kAlignment != 0) buffer_.stopDirect(fd_);
+  }
+  buffer_.size = 0;
 }
 
 void CheckpointWriter::bytes(const std::string& name, std::span<const std::byte> data) {
@@ -90,13 +124,7 @@ void CheckpointWriter::json(const std::string& name, const nlohmann::json& value
 
 uint64_t CheckpointWriter::commit() {
   put(bytesOf(uint32_t{0}));  // the end
-  for (size_t done = 0; done < buffer_.size();) {
-    const ssize_t w = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
-    if (w < 0 && errno == EINTR) continue;
-    if (w <= 0) fileFailure(staged_, "cannot write the checkpoint", w < 0 ? errno : ENOSPC);
-    done += size_t(w);
-  }
-  buffer_ = {};
+  flush();
   if (::fdatasync(fd_) != 0) fileFailure(staged_, "cannot write the checkpoint", errno);
   ::close(fd_);
   fd_ = -1;
@@ -118,7 +146,7 @@ uint64_t CheckpointWriter::commit() {
 CheckpointReader::CheckpointReader(const std::filesystem::path& path,
                                    const std::string& fingerprint)
     : path_(path) {
-  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  fd_ = openUnbuffered(path, O_RDONLY | O_CLOEXEC, buffer_.direct);
   if (fd_ < 0) fail(std::strerror(errno));
   const off_t end = ::lseek(fd_, 0, SEEK_END);
   if (end < 0) fail(std::strerror(errno));
@@ -142,13 +170,28 @@ void CheckpointReader::fail(const std::string& why) const {
 
 void CheckpointReader::read(std::span<std::byte> data) {
   if (data.size() > size_ - offset_) fail("cut short");
-  for (size_t done = 0; done < data.size();) {
-    const ssize_t r = ::pread(fd_, data.data() + done, data.size() - done, off_t(offset_ + done));
-    if (r < 0 && errno == EINTR) continue;
-    if (r <= 0) fail(r < 0 ? std::strerror(errno) : "cut short");
-    done += size_t(r);
+  while (!data.empty()) {
+    if (offset_ < bufferStart_ || offset_ >= bufferStart_ + buffer_.size) {
+      // The blocks from the one that holds offset_.
+      bufferStart_ = offset_ - offset_ % AlignedBlocks::kAlignment;
+      buffer_.size = 0;
+      ssize_t r = -1;
+      while (r < 0) {
+        r = ::pread(fd_, buffer_.data(), AlignedBlocks::kCapacity, off_t(bufferStart_));
+        if (r < 0 && errno == EINVAL && buffer_.direct)
+          buffer_.stopDirect(fd_);
+        else if (r < 0 && errno != EINTR)
+          fail(std::strerror(errno));
+      }
+      buffer_.size = size_t(r);
+      if (buffer_.size <= offset_ - bufferStart_) fail("cut short");
+    }
+    const size_t at = size_t(offset_ - bufferStart_);
+    const size_t n = std::min(data.size(), buffer_.size - at);
+    std::memcpy(data.data(), buffer_.data() + at, n);
+    data = data.subspan(n);
+    offset_ += n;
   }
-  offset_ += data.size();
 }
 
 uint64_t CheckpointReader::begin(const std::string& name) {
