@@ -518,7 +518,10 @@ CornerStageResults runCornerStagesByChunk(const PointSet& points, const OctreeCh
     share.finish();
   }
   lap(&seconds.merge);
-  CornerStageResults r = merger.finish(sdf, options, stats);
+  CornerStageResults r = [&] {
+    const ProgressMute mute;  // the stage counts points; the seams' new corners are not
+    return merger.finish(sdf, options, stats);
+  }();
   r.stats = sum.stats;
   r.passive = sum.passive;
   r.splits = sum.splits + stats.seamSplits;
