@@ -108,6 +108,11 @@ void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, C
 // After the tree's filled leaves changed: the corner levels set from the final leaves (every
 // corner they use is in the field), the hanging corners found again and snapped.
 void refreshCorners(const Octree& tree, Closure& closure);
+// The same after only the filled leaves `emptied` were emptied (trimming) in a tree whose levels,
+// hanging corners and snapped values were up to date (snap.cpp): only the corners those leaves
+// touch are looked at, with the same result as refreshCorners over the whole tree.
+void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
+                                 std::span<const uint32_t> emptied);
 // Whether the closure fills the empty cell (level, key) that the zero set of the leaf (leafLevel,
 // leafKey) runs into.
 using ExitFilter =

@@ -7,6 +7,8 @@
 #include <glm/geometric.hpp>
 #include <numeric>
 #include <optional>
+#include <span>
+#include <vector>
 
 #include "pipeline/base/collect.h"
 #include "pipeline/octree/field.h"
@@ -59,7 +61,92 @@ std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerFie
   return std::nullopt;
 }
 
+// The coarsest level of the filled leaves that have p as a corner, or kUnusedCorner: each such
+// leaf holds one of the 8 finest cells around p, and the walk down the tree toward each of them
+// ends at the leaf that holds it.
+uint8_t coarsestLeafAt(const Octree& tree, const GridPoint& p) {
+  const std::array<uint32_t, 3> c = {p.x, p.y, p.z};
+  constexpr uint32_t kCells = 1u << kMaxLevel;
+  uint8_t best = kUnusedCorner;
+  for (int d = 0; d < 8; ++d) {
+    std::array<uint32_t, 3> x{};
+    bool inside = true;
+    for (int a = 0; a < 3; ++a) {
+      const bool up = (d >> a) & 1;
+      inside = inside && (up ? c[size_t(a)] < kCells : c[size_t(a)] > 0);
+      x[size_t(a)] = up ? c[size_t(a)] : c[size_t(a)] - 1;
+    }
+    if (!inside) continue;
+    const uint64_t finest = mortonEncode(x[0], x[1], x[2]);
+    uint32_t id = 0;
+    while (tree.nodes[id].level < best) {
+      const OctreeNode& node = tree.nodes[id];
+      if (node.kind == NodeKind::Internal) {
+        id = node.firstChild + uint32_t((finest >> (3 * (kMaxLevel - node.level - 1))) & 7);
+        continue;
+      }
+      const uint32_t size = 1u << (kMaxLevel - node.level);
+      if (node.isFilled() && c[0] % size == 0 && c[1] % size == 0 && c[2] % size == 0)
+        best = node.level;
+      break;
+    }
+  }
+  return best;
+}
+
+// Hanging corners in the order findHangingCorners gives them: coarse first, then by entry.
+bool hangsBefore(const CornerField& field, const HangingCorner& a, const HangingCorner& b) {
+  const uint8_t la = field.coarsestLevel[a.corner], lb = field.coarsestLevel[b.corner];
+  return la != lb ? la < lb : a.corner < b.corner;
+}
+
 }  // namespace
+
+void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
+                                 std::span<const uint32_t> emptied) {
+  CornerField& field = closure.corners;
+  // What can change: the levels of the emptied leaves' corners, and the relations of those and of
+  // the corners that hung on an emptied leaf (corners of leaves one level finer, in the middles of
+  // its 12 edges and 6 faces).
+  std::vector<uint32_t> touched;
+  for (const uint32_t id : emptied) {
+    const OctreeNode& leaf = tree.nodes[id];
+    const GridPoint o = cornerPoint(leaf.level, leaf.key, 0);
+    const uint32_t size = 1u << (kMaxLevel - leaf.level);
+    for (uint32_t i = 0; i < 27; ++i) {
+      const std::array<uint32_t, 3> step = {i % 3, i / 3 % 3, i / 9};  // halves of the leaf
+      const bool middle = step[0] == 1 || step[1] == 1 || step[2] == 1;
+      if (i == 13 || (middle && size == 1)) continue;  // its centre; no finer leaf
+      const uint32_t e = field.find(GridPoint{o.x + step[0] * size / 2, o.y + step[1] * size / 2,
+                                              o.z + step[2] * size / 2});
+      if (e != kNoNode) touched.push_back(e);
+    }
+  }
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  for (const uint32_t e : touched) {
+    const uint8_t level = coarsestLeafAt(tree, field.point(e));
+    closure.cornersInUse += size_t(level != kUnusedCorner);
+    closure.cornersInUse -= size_t(field.coarsestLevel[e] != kUnusedCorner);
+    field.coarsestLevel[e] = level;
+  }
+  HangingCorners& hanging = closure.hanging;
+  hanging.erase(std::remove_if(hanging.begin(), hanging.end(),
+                               [&](const HangingCorner& h) {
+                                 return std::binary_search(touched.begin(), touched.end(),
+                                                           h.corner);
+                               }),
+                hanging.end());
+  const auto kept = ptrdiff_t(hanging.size());
+  for (const uint32_t e : touched)
+    if (auto h = hangingRelation(tree, field, e)) hanging.push_back(*h);
+  const auto before = [&](const HangingCorner& a, const HangingCorner& b) {
+    return hangsBefore(field, a, b);
+  };
+  std::sort(hanging.begin() + kept, hanging.end(), before);
+  std::inplace_merge(hanging.begin(), hanging.begin() + kept, hanging.end(), before);
+  snapHangingCorners(field, hanging);
+}
 
 HangingCorners findHangingCorners(const Octree& tree, const CornerField& field) {
   HangingCorners hanging = collectInParallel<HangingCorner, HangingCorners>(

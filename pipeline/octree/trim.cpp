@@ -109,18 +109,18 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
                         far[i] = isFarFromPoints(leaf, f, sdf, points, reach);
                       }
                     });
-  size_t trimmed = 0;
+  std::vector<uint32_t> emptied;
   for (size_t i = 0; i < far.size(); ++i)
     if (far[i]) {
       tree.nodes[nodeAt(i)].kind = NodeKind::Empty;
-      ++trimmed;
+      emptied.push_back(nodeAt(i));
     }
-  if (trimmed == 0) return 0;
+  if (emptied.empty()) return 0;
   emptyBareInternalNodes(tree);
   // Corners of emptied leaves are no longer in use, and a corner that hung on an emptied leaf's
   // face keeps its value but no longer hangs.
-  refreshCorners(tree, closure);
-  return trimmed;
+  refreshCornersAfterEmptying(tree, closure, emptied);
+  return emptied.size();
 }
 
 }  // namespace iso
