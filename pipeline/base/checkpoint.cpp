@@ -7,8 +7,8 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
-#include <new>
 #include <fstream>
+#include <new>
 #include <system_error>
 
 #define XXH_INLINE_ALL

@@ -94,12 +94,6 @@ uint8_t coarsestLeafAt(const Octree& tree, const GridPoint& p) {
   return best;
 }
 
-// Hanging corners in the order findHangingCorners gives them: coarse first, then by entry.
-bool hangsBefore(const CornerField& field, const HangingCorner& a, const HangingCorner& b) {
-  const uint8_t la = field.coarsestLevel[a.corner], lb = field.coarsestLevel[b.corner];
-  return la != lb ? la < lb : a.corner < b.corner;
-}
-
 }  // namespace
 
 void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
@@ -140,8 +134,10 @@ void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
   const auto kept = ptrdiff_t(hanging.size());
   for (const uint32_t e : touched)
     if (auto h = hangingRelation(tree, field, e)) hanging.push_back(*h);
+  // The order findHangingCorners gives: coarse first, then by entry.
   const auto before = [&](const HangingCorner& a, const HangingCorner& b) {
-    return hangsBefore(field, a, b);
+    const uint8_t la = field.coarsestLevel[a.corner], lb = field.coarsestLevel[b.corner];
+    return la != lb ? la < lb : a.corner < b.corner;
   };
   std::sort(hanging.begin() + kept, hanging.end(), before);
   std::inplace_merge(hanging.begin(), hanging.begin() + kept, hanging.end(), before);
