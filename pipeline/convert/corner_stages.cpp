@@ -190,10 +190,30 @@ class ChunkMerger {
                         }
                       });
     field_.index.openPart(index, size_t(std::count(used.begin(), used.end(), uint8_t{1})));
+    // With the values, the chunk's corner levels and hanging corners: those of a corner no leaf of
+    // another chunk uses, away from the seams, are what the merged tree gives (refreshed around
+    // the seams in finish()).
+    std::vector<uint32_t> merged(used.size(), kNoNode);
+    std::vector<uint8_t> first(used.size(), 0);  // the first chunk using the corner
     for (uint32_t e = 0; e < used.size(); ++e) {
       if (!used[e]) continue;
       const auto [entry, added] = field_.insert(corners.index.key(e));
-      if (added) field_.value[entry] = corners.value[e];
+      merged[e] = entry;
+      first[e] = added;
+      if (!added) continue;
+      field_.value[entry] = corners.value[e];
+      field_.coarsestLevel[entry] = corners.coarsestLevel[e];
+    }
+    for (const HangingCorner& h : chunk.closure.hanging) {
+      if (!first[h.corner]) continue;
+      HangingCorner m = h;
+      m.corner = merged[h.corner];
+      bool known = true;
+      for (size_t k = 0; k < h.sourceCount; ++k) {
+        m.sources[k] = merged[h.sources[k]];
+        known = known && m.sources[k] != kNoNode;
+      }
+      if (known) hanging_.push_back(m);
     }
     for (const auto& [merged, own] : filled)
       if (touchesOtherChunk(tree_.nodes[merged], index)) seamLeaves_.push_back(merged);
@@ -212,10 +232,18 @@ class ChunkMerger {
       if (!any) node.kind = NodeKind::Empty;
     }
     field_.index.closeParts();
+    std::vector<uint8_t> jobsFilled(tree_.nodes.size());
+    for (size_t i = 0; i < jobsFilled.size(); ++i) jobsFilled[i] = tree_.nodes[i].isFilled();
     std::vector<uint32_t> created;
     stats.seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
     CornerStageResults r;
     r.octree = std::move(tree_);
+    // The order findHangingCorners gives: coarse first, then by entry.
+    std::sort(hanging_.begin(), hanging_.end(), [&](const HangingCorner& a, const HangingCorner& b) {
+      const uint8_t la = field_.coarsestLevel[a.corner], lb = field_.coarsestLevel[b.corner];
+      return la != lb ? la < lb : a.corner < b.corner;
+    });
+    r.closure.hanging = std::move(hanging_);
     r.closure.corners = std::move(field_);
     r.lod = std::move(lod_);
     // The surface closed across the seams (a job may not have filled a cell of another chunk's
@@ -234,6 +262,13 @@ class ChunkMerger {
                     [&](uint8_t leafLevel, uint64_t leafKey, uint8_t level, uint64_t key) {
                       return ownerOfNode(leafLevel, leafKey) != ownerOfNode(level, key);
                     });
+    // Levels and hanging corners found again where the seams changed the filled leaves (splits,
+    // fills) and at the corners of the leaves next to another chunk's.
+    std::vector<uint32_t> changed;
+    for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)
+      if (r.octree.nodes[i].isFilled() != (i < jobsFilled.size() && jobsFilled[i]))
+        changed.push_back(i);
+    refreshCornersAround(r.octree, r.closure, changed, seamLeaves_);
     // The jobs trimmed what their closures filled far from the points; so are the seams' fills.
     std::vector<uint32_t> filled;
     for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)
@@ -325,6 +360,7 @@ class ChunkMerger {
   std::vector<uint32_t> placeholders_;  // nodes above the plan's level, parents first
   std::vector<uint32_t> seamLeaves_;    // filled leaves next to another chunk's cells
   SpillVector<LodSample> lod_;          // the jobs' level-of-detail corners, in chunk order
+  HangingCorners hanging_;              // the jobs' hanging corners, in merged entries
 };
 
 // What the ranks share: the points, and the chunk jobs' results, as checkpoints in a directory of

@@ -204,9 +204,10 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
 }
 
 // Fill the exits of the given leaves, then of the leaves each pass adds, until none is left;
-// then set the corner levels from the final leaves and snap the hanging corners.
+// then (with `refresh`) set the corner levels from the final leaves and snap the hanging corners.
 void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points,
-               const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {}) {
+               const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {},
+               bool refresh = true) {
   addLeafCorners(closure.corners, tree, fresh, sdf);
   // Exits are found on the values as they are: snapping moves hanging corners very little.
   for (closure.passes = 1; closure.passes <= kMaxClosurePasses; ++closure.passes) {
@@ -221,7 +222,7 @@ void closeFrom(std::vector<uint32_t> fresh, Octree& tree, const PointSet& points
     addLeafCorners(closure.corners, tree, fresh, sdf);
   }
   // Splits left corners of leaves that are leaves no more.
-  refreshCorners(tree, closure);
+  if (refresh) refreshCorners(tree, closure);
 }
 
 }  // namespace
@@ -245,27 +246,33 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
 
 void closeFromLeaves(std::vector<uint32_t> leaves, Octree& tree, const PointSet& points,
                      const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass) {
-  closeFrom(std::move(leaves), tree, points, sdf, closure, firstPass);
+  closeFrom(std::move(leaves), tree, points, sdf, closure, firstPass, false);
 }
 
 void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,
                 const std::vector<uint8_t>& wasNegative) {
-  const CornerField& field = closure.corners;
+  // The filled leaves using a corner whose sign changed, found from those corners (few).
   std::vector<uint32_t> changed;
-  for (uint32_t i = 0; i < tree.nodes.size(); ++i) {
-    const OctreeNode& leaf = tree.nodes[i];
-    if (!leaf.isFilled()) continue;
-    for (int c = 0; c < kCorners; ++c) {
-      const uint32_t e = field.find(cornerPoint(leaf.level, leaf.key, c));
-      if (wasNegative[e] != uint8_t(field.value[e].distance < 0.0f)) {
-        changed.push_back(i);
-        break;
-      }
-    }
+  const CornerField& field = closure.corners;
+  for (uint32_t e = 0; e < wasNegative.size(); ++e) {
+    if (wasNegative[e] == uint8_t(field.value[e].distance < 0.0f)) continue;
+    std::array<uint32_t, 8> leaves{};
+    const size_t count = filledLeavesAt(tree, field.point(e), leaves);
+    changed.insert(changed.end(), leaves.begin(), leaves.begin() + ptrdiff_t(count));
   }
+  std::sort(changed.begin(), changed.end());
+  changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+  std::vector<uint8_t> wasFilled(tree.nodes.size());
+  for (size_t i = 0; i < wasFilled.size(); ++i) wasFilled[i] = tree.nodes[i].isFilled();
   const size_t before = closure.filled;
-  closeFrom(std::move(changed), tree, points, sdf, closure);
+  closeFrom(std::move(changed), tree, points, sdf, closure, {}, false);
   closure.refilled = closure.filled - before;
+  // The levels and hanging corners were up to date (the corner fit moves values only): they
+  // change where the passes filled or split leaves.
+  std::vector<uint32_t> around;
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
+    if (tree.nodes[i].isFilled() != (i < wasFilled.size() && wasFilled[i])) around.push_back(i);
+  refreshCornersAround(tree, closure, around);
 }
 
 }  // namespace iso

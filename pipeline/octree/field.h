@@ -105,21 +105,25 @@ Closure sampleClosedSurface(Octree& tree, const PointSet& points, const SdfEvalu
 // move); the cells they fill get sampled corners.
 void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, Closure& closure,
                 const std::vector<uint8_t>& wasNegative);
+// The filled leaves that have the grid point p as a corner, each once; returns how many.
+size_t filledLeavesAt(const Octree& tree, const GridPoint& p, std::array<uint32_t, 8>& out);
 // After the tree's filled leaves changed: the corner levels set from the final leaves (every
 // corner they use is in the field), the hanging corners found again and snapped.
 void refreshCorners(const Octree& tree, Closure& closure);
-// The same after only the filled leaves `emptied` were emptied (trimming) in a tree whose levels,
-// hanging corners and snapped values were up to date (snap.cpp): only the corners those leaves
-// touch are looked at, with the same result as refreshCorners over the whole tree.
-void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
-                                 std::span<const uint32_t> emptied);
+// The same where the filled leaves changed only at the `changed` nodes (leaves emptied or filled,
+// filled leaves split, new ones) and the levels, hanging corners and snapped values are up to date
+// everywhere else, except at the corners of the `cornersOf` leaves (snap.cpp): only the corners
+// those nodes touch are looked at, with the same result as refreshCorners over the whole tree.
+void refreshCornersAround(const Octree& tree, Closure& closure, std::span<const uint32_t> changed,
+                          std::span<const uint32_t> cornersOf = {});
 // Whether the closure fills the empty cell (level, key) that the zero set of the leaf (leafLevel,
 // leafKey) runs into.
 using ExitFilter =
     std::function<bool(uint8_t leafLevel, uint64_t leafKey, uint8_t level, uint64_t key)>;
 // Close the surface from these filled leaves (where a chunk run's jobs met): their missing corners
 // sampled, then the closure's passes from them (the first pass filling only the cells `firstPass`
-// accepts, when given), then refreshCorners. The cells it fills are counted in closure.filled.
+// accepts, when given). The cells it fills are counted in closure.filled. The corner levels and
+// hanging corners are left for the caller to refresh (refreshCornersAround the leaves that changed).
 void closeFromLeaves(std::vector<uint32_t> leaves, Octree& tree, const PointSet& points,
                      const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {});
 

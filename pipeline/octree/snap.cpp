@@ -61,13 +61,32 @@ std::optional<HangingCorner> hangingRelation(const Octree& tree, const CornerFie
   return std::nullopt;
 }
 
-// The coarsest level of the filled leaves that have p as a corner, or kUnusedCorner: each such
-// leaf holds one of the 8 finest cells around p, and the walk down the tree toward each of them
-// ends at the leaf that holds it.
+// The coarsest level of the filled leaves that have p as a corner, or kUnusedCorner.
 uint8_t coarsestLeafAt(const Octree& tree, const GridPoint& p) {
+  std::array<uint32_t, 8> leaves{};
+  const size_t count = filledLeavesAt(tree, p, leaves);
+  uint8_t best = kUnusedCorner;
+  for (size_t i = 0; i < count; ++i) best = std::min(best, tree.nodes[leaves[i]].level);
+  return best;
+}
+
+}  // namespace
+
+size_t filledLeavesAt(const Octree& tree, const GridPoint& p, std::array<uint32_t, 8>& out) {
   const std::array<uint32_t, 3> c = {p.x, p.y, p.z};
   constexpr uint32_t kCells = 1u << kMaxLevel;
-  uint8_t best = kUnusedCorner;
+  // Each such leaf holds one of the 8 finest cells around p, and the walk down the tree toward
+  // each of them ends at the leaf that holds it. The walks share the path through the internal
+  // nodes whose children hold p strictly inside.
+  uint32_t start = 0;
+  while (tree.nodes[start].kind == NodeKind::Internal) {
+    const OctreeNode& node = tree.nodes[start];
+    const int shift = kMaxLevel - node.level - 1;  // the children's size is 1 << shift
+    const uint32_t inside = (1u << shift) - 1;
+    if ((c[0] & inside) == 0 || (c[1] & inside) == 0 || (c[2] & inside) == 0) break;
+    start = node.firstChild + uint32_t((mortonEncode(c[0], c[1], c[2]) >> (3 * shift)) & 7);
+  }
+  size_t count = 0;
   for (int d = 0; d < 8; ++d) {
     std::array<uint32_t, 3> x{};
     bool inside = true;
@@ -78,52 +97,48 @@ uint8_t coarsestLeafAt(const Octree& tree, const GridPoint& p) {
     }
     if (!inside) continue;
     const uint64_t finest = mortonEncode(x[0], x[1], x[2]);
-    uint32_t id = 0;
-    while (tree.nodes[id].level < best) {
+    uint32_t id = start;
+    while (tree.nodes[id].kind == NodeKind::Internal) {
       const OctreeNode& node = tree.nodes[id];
-      if (node.kind == NodeKind::Internal) {
-        id = node.firstChild + uint32_t((finest >> (3 * (kMaxLevel - node.level - 1))) & 7);
-        continue;
-      }
-      const uint32_t size = 1u << (kMaxLevel - node.level);
-      if (node.isFilled() && c[0] % size == 0 && c[1] % size == 0 && c[2] % size == 0)
-        best = node.level;
-      break;
+      id = node.firstChild + uint32_t((finest >> (3 * (kMaxLevel - node.level - 1))) & 7);
     }
+    const OctreeNode& leaf = tree.nodes[id];
+    const uint32_t size = 1u << (kMaxLevel - leaf.level);
+    if (leaf.isFilled() && c[0] % size == 0 && c[1] % size == 0 && c[2] % size == 0 &&
+        std::find(out.begin(), out.begin() + ptrdiff_t(count), id) == out.begin() + ptrdiff_t(count))
+      out[count++] = id;
   }
-  return best;
+  return count;
 }
 
-}  // namespace
-
-void refreshCornersAfterEmptying(const Octree& tree, Closure& closure,
-                                 std::span<const uint32_t> emptied) {
+void refreshCornersAround(const Octree& tree, Closure& closure, std::span<const uint32_t> changed,
+                          std::span<const uint32_t> cornersOf) {
   CornerField& field = closure.corners;
-  // What can change: the levels of the emptied leaves' corners, and the relations of those and of
-  // the corners that hung on an emptied leaf (corners of leaves one level finer, in the middles of
-  // its 12 edges and 6 faces).
+  // What can change: the levels of a changed node's corners, and the relations of those and of
+  // the corners that hung on it (corners of leaves one level finer, in the middles of its 12 edges
+  // and 6 faces); for `cornersOf`, of their 8 corners.
   std::vector<uint32_t> touched;
-  for (const uint32_t id : emptied) {
-    const OctreeNode& leaf = tree.nodes[id];
-    const GridPoint o = cornerPoint(leaf.level, leaf.key, 0);
-    const uint32_t size = 1u << (kMaxLevel - leaf.level);
+  const auto touch = [&](uint32_t id, bool middles) {
+    const OctreeNode& node = tree.nodes[id];
+    const GridPoint o = cornerPoint(node.level, node.key, 0);
+    const uint32_t size = 1u << (kMaxLevel - node.level);
     for (uint32_t i = 0; i < 27; ++i) {
-      const std::array<uint32_t, 3> step = {i % 3, i / 3 % 3, i / 9};  // halves of the leaf
+      const std::array<uint32_t, 3> step = {i % 3, i / 3 % 3, i / 9};  // halves of the node
       const bool middle = step[0] == 1 || step[1] == 1 || step[2] == 1;
-      if (i == 13 || (middle && size == 1)) continue;  // its centre; no finer leaf
+      if (i == 13 || (middle && (size == 1 || !middles))) continue;  // its centre; no finer leaf
       const uint32_t e = field.find(GridPoint{o.x + step[0] * size / 2, o.y + step[1] * size / 2,
                                               o.z + step[2] * size / 2});
       if (e != kNoNode) touched.push_back(e);
     }
-  }
+  };
+  for (const uint32_t id : changed) touch(id, true);
+  for (const uint32_t id : cornersOf) touch(id, false);
   std::sort(touched.begin(), touched.end());
   touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-  for (const uint32_t e : touched) {
-    const uint8_t level = coarsestLeafAt(tree, field.point(e));
-    closure.cornersInUse += size_t(level != kUnusedCorner);
-    closure.cornersInUse -= size_t(field.coarsestLevel[e] != kUnusedCorner);
-    field.coarsestLevel[e] = level;
-  }
+  for (const uint32_t e : touched) field.coarsestLevel[e] = coarsestLeafAt(tree, field.point(e));
+  closure.cornersInUse =
+      size_t(std::count_if(field.coarsestLevel.begin(), field.coarsestLevel.end(),
+                           [](uint8_t l) { return l != kUnusedCorner; }));
   HangingCorners& hanging = closure.hanging;
   hanging.erase(std::remove_if(hanging.begin(), hanging.end(),
                                [&](const HangingCorner& h) {

@@ -119,7 +119,7 @@ size_t trimFarSurface(Octree& tree, const PointSet& points, const SdfEvaluator& 
   emptyBareInternalNodes(tree);
   // Corners of emptied leaves are no longer in use, and a corner that hung on an emptied leaf's
   // face keeps its value but no longer hangs.
-  refreshCornersAfterEmptying(tree, closure, emptied);
+  refreshCornersAround(tree, closure, emptied);
   return emptied.size();
 }
 

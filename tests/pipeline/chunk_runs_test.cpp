@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <glm/geometric.hpp>
 #include <memory>
 #include <random>
@@ -237,6 +238,39 @@ TEST(ChunkRuns, theMergedTreeIsBalancedSampledAndCrackFreeAcrossSeams) {
         for (uint32_t i = node.pointBegin; i < node.pointEnd; ++i) ++covered[i];
     EXPECT_TRUE(std::all_of(covered.begin(), covered.end(), [](uint32_t n) { return n == 1; }))
         << shape;
+  }
+}
+
+// The merge keeps the jobs' corner levels and hanging corners away from the seams and finds them
+// again around the seams only: what a refresh over the whole merged tree gives, entry for entry,
+// in the same order, with the same snapped values.
+TEST(ChunkRuns, theMergesCornerLevelsAndHangingCornersAreTheWholeTreesRefresh) {
+  for (const char* shape : {"sphere", "cube", "torus"}) {
+    const std::unique_ptr<MergedRun> run = mergedRun(shape);
+    const Closure& merged = run->merged.closure;
+    Closure whole = merged;
+    refreshCorners(run->merged.octree, whole);
+    std::printf("%s: %zu seam splits, %zu seam fills, %zu hanging of %zu corners\n", shape,
+                run->stats.seamSplits, run->stats.seamFills, merged.hanging.size(),
+                merged.corners.size());
+    ASSERT_GT(merged.hanging.size(), 1000u) << shape;
+    EXPECT_EQ(merged.cornersInUse, whole.cornersInUse) << shape;
+    const CornerField &a = merged.corners, &b = whole.corners;
+    ASSERT_EQ(a.size(), b.size()) << shape;
+    size_t levels = 0, values = 0;
+    for (uint32_t e = 0; e < a.size(); ++e) {
+      levels += a.coarsestLevel[e] != b.coarsestLevel[e];
+      values += std::memcmp(&a.value[e], &b.value[e], sizeof(CornerSample)) != 0;
+    }
+    EXPECT_EQ(levels, 0u) << shape;
+    EXPECT_EQ(values, 0u) << shape;
+    ASSERT_EQ(merged.hanging.size(), whole.hanging.size()) << shape;
+    for (size_t i = 0; i < whole.hanging.size(); ++i) {
+      const HangingCorner &x = merged.hanging[i], &y = whole.hanging[i];
+      ASSERT_TRUE(x.corner == y.corner && x.sourceCount == y.sourceCount &&
+                  x.sources == y.sources)
+          << shape << " hanging corner " << i;
+    }
   }
 }
 

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 
 #include "pipeline/base/options.h"
 #include "pipeline/octree/field.h"
@@ -18,6 +19,8 @@ namespace {
 
 struct Built {
   PointSet points;
+  std::unique_ptr<PointIndex> index;
+  std::unique_ptr<SdfEvaluator> sdf;
   Octree tree;
   Closure closure;
   const CornerField& corners = closure.corners;
@@ -28,16 +31,16 @@ void buildStages(const PointCloud& cloud, Built& b) {
   b.points = makePointSet(cloud, frame);
   sortByKey(b.points);
   mergeDuplicates(b.points);
-  const PointIndex tree(b.points.position);
-  const Neighbors neighbors = findNeighbors(b.points, tree, 10);
+  b.index = std::make_unique<PointIndex>(b.points.position);
+  const Neighbors neighbors = findNeighbors(b.points, *b.index, 10);
   const RadiusStats radii = estimateRadii(b.points, neighbors);
   estimateRoughness(b.points, neighbors);
-  const SdfEvaluator sdf(b.points, tree, 1.0, FitMode::Sphere);
+  b.sdf = std::make_unique<SdfEvaluator>(b.points, *b.index, 1.0, FitMode::Sphere);
   CornerField corners;
-  b.tree = buildOctree(b.points, sdf, BuildOptions{}, radii, corners);
+  b.tree = buildOctree(b.points, *b.sdf, BuildOptions{}, radii, corners);
   markPassiveLeaves(b.tree, b.points);
   balanceOctree(b.tree, b.points);
-  b.closure = sampleClosedSurface(b.tree, b.points, sdf, std::move(corners));
+  b.closure = sampleClosedSurface(b.tree, b.points, *b.sdf, std::move(corners));
 }
 
 // The patch of a filled leaf at frame point p.
@@ -106,7 +109,7 @@ TEST(CrackFree, aRefreshAfterEmptyingLeavesIsTheWholeTreesRefresh) {
     for (Built* b : {&whole, &touched})
       for (const uint32_t i : emptied) b->tree.nodes[i].kind = NodeKind::Empty;
     refreshCorners(whole.tree, whole.closure);
-    refreshCornersAfterEmptying(touched.tree, touched.closure, emptied);
+    refreshCornersAround(touched.tree, touched.closure, emptied);
 
     const CornerField &a = whole.corners, &b = touched.corners;
     ASSERT_EQ(a.size(), b.size());
@@ -132,6 +135,69 @@ TEST(CrackFree, aRefreshAfterEmptyingLeavesIsTheWholeTreesRefresh) {
     // The emptying changed what the refresh computes, so the comparison can fail.
     EXPECT_GT(levelsChanged, 100u);
     EXPECT_NE(hangingBefore, ha.size());
+  }
+}
+
+// Closing again after corners changed sign (as the corner fit makes some do) finds the filled
+// leaves using those corners from the corners themselves and refreshes only around what the passes
+// filled: the same tree and closure as the passes from every such leaf, found by looking at every
+// filled leaf's corners, followed by a refresh over the whole tree.
+TEST(CrackFree, closingAgainIsThePassesFromEveryChangedLeafAndAWholeRefresh) {
+  for (const char* shape : {"sphere", "cube"}) {
+    const PointCloud scan = test::scanOf(shape, 60000);
+    Built fast, brute;
+    buildStages(scan, fast);
+    buildStages(scan, brute);
+    std::vector<uint8_t> wasNegative(fast.corners.size());
+    for (size_t e = 0; e < wasNegative.size(); ++e)
+      wasNegative[e] = fast.corners.value[e].distance < 0.0f;
+    // Every 40th corner in use moved across the surface, in both.
+    size_t moved = 0;
+    for (Built* b : {&fast, &brute})
+      for (size_t e = 0, inUse = 0; e < b->corners.size(); ++e)
+        if (b->corners.coarsestLevel[e] != kUnusedCorner && inUse++ % 40 == 0) {
+          b->closure.corners.value[e].distance = -b->corners.value[e].distance;
+          moved += b == &fast;
+        }
+    closeAgain(fast.tree, fast.points, *fast.sdf, fast.closure, wasNegative);
+    std::vector<uint32_t> changed;
+    for (uint32_t i = 0; i < brute.tree.nodes.size(); ++i) {
+      const OctreeNode& leaf = brute.tree.nodes[i];
+      if (!leaf.isFilled()) continue;
+      for (int c = 0; c < kCorners; ++c) {
+        const uint32_t e = brute.corners.find(cornerPoint(leaf.level, leaf.key, c));
+        if (wasNegative[e] != uint8_t(brute.corners.value[e].distance < 0.0f)) {
+          changed.push_back(i);
+          break;
+        }
+      }
+    }
+    const size_t filledBefore = brute.closure.filled;
+    closeFromLeaves(changed, brute.tree, brute.points, *brute.sdf, brute.closure);
+    refreshCorners(brute.tree, brute.closure);
+    std::printf("%s: %zu corners moved, %zu leaves using them, %zu cells filled again, %zu "
+                "hanging corners\n",
+                shape, moved, changed.size(), brute.closure.filled - filledBefore,
+                brute.closure.hanging.size());
+    EXPECT_GT(brute.closure.filled - filledBefore, 10u) << shape;  // the passes changed the tree
+    EXPECT_EQ(fast.closure.refilled, brute.closure.filled - filledBefore) << shape;
+    ASSERT_EQ(fast.tree.nodes.size(), brute.tree.nodes.size()) << shape;
+    for (size_t i = 0; i < fast.tree.nodes.size(); ++i)
+      ASSERT_EQ(fast.tree.nodes[i].kind, brute.tree.nodes[i].kind) << shape << " node " << i;
+    const CornerField &a = fast.corners, &b = brute.corners;
+    ASSERT_EQ(a.size(), b.size()) << shape;
+    for (size_t e = 0; e < a.size(); ++e) {
+      ASSERT_EQ(a.coarsestLevel[e], b.coarsestLevel[e]) << shape << " corner " << e;
+      ASSERT_EQ(a.value[e].distance, b.value[e].distance) << shape << " corner " << e;
+      ASSERT_EQ(a.value[e].normal, b.value[e].normal) << shape << " corner " << e;
+    }
+    EXPECT_EQ(fast.closure.cornersInUse, brute.closure.cornersInUse) << shape;
+    const HangingCorners &ha = fast.closure.hanging, &hb = brute.closure.hanging;
+    ASSERT_EQ(ha.size(), hb.size()) << shape;
+    for (size_t i = 0; i < ha.size(); ++i)
+      ASSERT_TRUE(ha[i].corner == hb[i].corner && ha[i].sourceCount == hb[i].sourceCount &&
+                  ha[i].sources == hb[i].sources)
+          << shape << " hanging corner " << i;
   }
 }
 
