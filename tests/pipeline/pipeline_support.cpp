@@ -1,6 +1,8 @@
 #include "pipeline/base/options.h"
 #include "tests/pipeline/pipeline_support.h"
 
+#include <gtest/gtest.h>
+
 #include <cstring>
 #include <random>
 
@@ -60,6 +62,25 @@ std::vector<uint8_t> randomImage(uint32_t width, uint32_t height, uint32_t seed)
   std::vector<uint8_t> rgb(size_t(width) * height * 3);
   for (uint8_t& b : rgb) b = uint8_t(random() & 0xFF);
   return rgb;
+}
+
+void expectSameClosure(const Closure& a, const Closure& b, const std::string& what) {
+  EXPECT_EQ(a.cornersInUse, b.cornersInUse) << what;
+  const CornerField &x = a.corners, &y = b.corners;
+  ASSERT_EQ(x.size(), y.size()) << what;
+  size_t levels = 0, values = 0;
+  for (uint32_t e = 0; e < x.size(); ++e) {
+    levels += x.coarsestLevel[e] != y.coarsestLevel[e];
+    values += std::memcmp(&x.value[e], &y.value[e], sizeof(CornerSample)) != 0;
+  }
+  EXPECT_EQ(levels, 0u) << what << ": corner levels that differ";
+  EXPECT_EQ(values, 0u) << what << ": corner values that differ";
+  ASSERT_EQ(a.hanging.size(), b.hanging.size()) << what;
+  for (size_t i = 0; i < a.hanging.size(); ++i) {
+    const HangingCorner &h = a.hanging[i], &k = b.hanging[i];
+    ASSERT_TRUE(h.corner == k.corner && h.sourceCount == k.sourceCount && h.sources == k.sources)
+        << what << ": hanging corner " << i;
+  }
 }
 
 }  // namespace iso::test

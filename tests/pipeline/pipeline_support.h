@@ -12,6 +12,7 @@
 #include "pipeline/convert/convert.h"
 #include "pipeline/geom/generate.h"
 #include "pipeline/geom/shape.h"
+#include "pipeline/octree/field.h"
 #include "tests/support/support.h"
 
 namespace iso::test {
@@ -34,6 +35,11 @@ struct Converted {
 // Convert points to path (quietly) and load the written surface.
 Converted convertAndLoad(const PointCloud& points, const std::filesystem::path& path,
                          const BuildOptions& options = {});
+
+// Two closures agree entry for entry: the corners' coarsest levels and values (bit for bit), the
+// corners in use, and the hanging corners in the same order with the same sources (failures name
+// `what`).
+void expectSameClosure(const Closure& a, const Closure& b, const std::string& what);
 
 // evaluateAgainstShape with the report's spacing.
 nlohmann::json evaluate(const Converted& converted, const Shape& truth, uint64_t rays = 20000);
