@@ -232,17 +232,14 @@ class ChunkMerger {
       if (!any) node.kind = NodeKind::Empty;
     }
     field_.index.closeParts();
-    std::vector<uint8_t> jobsFilled(tree_.nodes.size());
-    for (size_t i = 0; i < jobsFilled.size(); ++i) jobsFilled[i] = tree_.nodes[i].isFilled();
+    const std::vector<uint8_t> jobsFilled = filledNodes(tree_);
     std::vector<uint32_t> created;
     stats.seamSplits = balanceAfter(tree_, points_, seamLeaves_, created);
     CornerStageResults r;
     r.octree = std::move(tree_);
-    // The order findHangingCorners gives: coarse first, then by entry.
-    std::sort(hanging_.begin(), hanging_.end(), [&](const HangingCorner& a, const HangingCorner& b) {
-      const uint8_t la = field_.coarsestLevel[a.corner], lb = field_.coarsestLevel[b.corner];
-      return la != lb ? la < lb : a.corner < b.corner;
-    });
+    std::sort(
+        hanging_.begin(), hanging_.end(),
+        [&](const HangingCorner& a, const HangingCorner& b) { return hangsBefore(field_, a, b); });
     r.closure.hanging = std::move(hanging_);
     r.closure.corners = std::move(field_);
     r.lod = std::move(lod_);
@@ -252,8 +249,7 @@ class ChunkMerger {
     for (const uint32_t id : seamLeaves_)
       if (r.octree.nodes[id].isFilled()) fresh.push_back(id);
     fresh.insert(fresh.end(), created.begin(), created.end());
-    std::vector<uint8_t> wasFilled(r.octree.nodes.size());
-    for (size_t i = 0; i < wasFilled.size(); ++i) wasFilled[i] = r.octree.nodes[i].isFilled();
+    const std::vector<uint8_t> wasFilled = filledNodes(r.octree);
     // Only exits into another chunk's cells: within its own cells, each job closed its surface.
     const auto ownerOfNode = [&](uint8_t level, uint64_t key) {
       return ownerOf(plan_, key >> (3 * (level - cellLevel_)));
@@ -264,11 +260,7 @@ class ChunkMerger {
                     });
     // Levels and hanging corners found again where the seams changed the filled leaves (splits,
     // fills) and at the corners of the leaves next to another chunk's.
-    std::vector<uint32_t> changed;
-    for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)
-      if (r.octree.nodes[i].isFilled() != (i < jobsFilled.size() && jobsFilled[i]))
-        changed.push_back(i);
-    refreshCornersAround(r.octree, r.closure, changed, seamLeaves_);
+    refreshCornersAround(r.octree, r.closure, nodesChangedSince(r.octree, jobsFilled), seamLeaves_);
     // The jobs trimmed what their closures filled far from the points; so are the seams' fills.
     std::vector<uint32_t> filled;
     for (uint32_t i = 0; i < r.octree.nodes.size(); ++i)

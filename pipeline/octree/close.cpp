@@ -185,10 +185,9 @@ std::vector<uint32_t> fillExits(Octree& tree, const PointSet& points, const SdfE
         exitsOf(tree, points, sdf, field, leaves[i], out);
         if (!accept) return;
         const OctreeNode& leaf = tree.nodes[leaves[i]];
-        out.erase(std::remove_if(out.begin() + ptrdiff_t(before), out.end(),
-                                 [&](const Exit& e) {
-                                   return !accept(leaf.level, leaf.key, e.level, e.key);
-                                 }),
+        out.erase(std::remove_if(
+                      out.begin() + ptrdiff_t(before), out.end(),
+                      [&](const Exit& e) { return !accept(leaf.level, leaf.key, e.level, e.key); }),
                   out.end());
       });
   std::sort(targets.begin(), targets.end());
@@ -262,17 +261,13 @@ void closeAgain(Octree& tree, const PointSet& points, const SdfEvaluator& sdf, C
   }
   std::sort(changed.begin(), changed.end());
   changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
-  std::vector<uint8_t> wasFilled(tree.nodes.size());
-  for (size_t i = 0; i < wasFilled.size(); ++i) wasFilled[i] = tree.nodes[i].isFilled();
+  const std::vector<uint8_t> wasFilled = filledNodes(tree);
   const size_t before = closure.filled;
   closeFrom(std::move(changed), tree, points, sdf, closure, {}, false);
   closure.refilled = closure.filled - before;
   // The levels and hanging corners were up to date (the corner fit moves values only): they
   // change where the passes filled or split leaves.
-  std::vector<uint32_t> around;
-  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
-    if (tree.nodes[i].isFilled() != (i < wasFilled.size() && wasFilled[i])) around.push_back(i);
-  refreshCornersAround(tree, closure, around);
+  refreshCornersAround(tree, closure, nodesChangedSince(tree, wasFilled));
 }
 
 }  // namespace iso

@@ -17,6 +17,7 @@
 #include <functional>
 #include <span>
 #include <utility>
+#include <vector>
 
 #include "iso/flat_map.h"
 #include "iso/format.h"
@@ -116,6 +117,13 @@ void refreshCorners(const Octree& tree, Closure& closure);
 // those nodes touch are looked at, with the same result as refreshCorners over the whole tree.
 void refreshCornersAround(const Octree& tree, Closure& closure, std::span<const uint32_t> changed,
                           std::span<const uint32_t> cornersOf = {});
+// Whether each node is a filled leaf now, and the nodes for which that differs from such a
+// snapshot (nodes added since included): the `changed` nodes of refreshCornersAround.
+std::vector<uint8_t> filledNodes(const Octree& tree);
+std::vector<uint32_t> nodesChangedSince(const Octree& tree, const std::vector<uint8_t>& filled);
+// The order of the hanging corners: coarse first (a source may itself hang from a leaf another
+// level up), then by entry.
+bool hangsBefore(const CornerField& field, const HangingCorner& a, const HangingCorner& b);
 // Whether the closure fills the empty cell (level, key) that the zero set of the leaf (leafLevel,
 // leafKey) runs into.
 using ExitFilter =
@@ -123,7 +131,8 @@ using ExitFilter =
 // Close the surface from these filled leaves (where a chunk run's jobs met): their missing corners
 // sampled, then the closure's passes from them (the first pass filling only the cells `firstPass`
 // accepts, when given). The cells it fills are counted in closure.filled. The corner levels and
-// hanging corners are left for the caller to refresh (refreshCornersAround the leaves that changed).
+// hanging corners are left for the caller to refresh (refreshCornersAround the leaves that
+// changed).
 void closeFromLeaves(std::vector<uint32_t> leaves, Octree& tree, const PointSet& points,
                      const SdfEvaluator& sdf, Closure& closure, const ExitFilter& firstPass = {});
 

@@ -105,7 +105,8 @@ size_t filledLeavesAt(const Octree& tree, const GridPoint& p, std::array<uint32_
     const OctreeNode& leaf = tree.nodes[id];
     const uint32_t size = 1u << (kMaxLevel - leaf.level);
     if (leaf.isFilled() && c[0] % size == 0 && c[1] % size == 0 && c[2] % size == 0 &&
-        std::find(out.begin(), out.begin() + ptrdiff_t(count), id) == out.begin() + ptrdiff_t(count))
+        std::find(out.begin(), out.begin() + ptrdiff_t(count), id) ==
+            out.begin() + ptrdiff_t(count))
       out[count++] = id;
   }
   return count;
@@ -126,8 +127,8 @@ void refreshCornersAround(const Octree& tree, Closure& closure, std::span<const 
       const std::array<uint32_t, 3> step = {i % 3, i / 3 % 3, i / 9};  // halves of the node
       const bool middle = step[0] == 1 || step[1] == 1 || step[2] == 1;
       if (i == 13 || (middle && (size == 1 || !middles))) continue;  // its centre; no finer leaf
-      const uint32_t e = field.find(GridPoint{o.x + step[0] * size / 2, o.y + step[1] * size / 2,
-                                              o.z + step[2] * size / 2});
+      const uint32_t e = field.find(
+          GridPoint{o.x + step[0] * size / 2, o.y + step[1] * size / 2, o.z + step[2] * size / 2});
       if (e != kNoNode) touched.push_back(e);
     }
   };
@@ -149,14 +150,30 @@ void refreshCornersAround(const Octree& tree, Closure& closure, std::span<const 
   const auto kept = ptrdiff_t(hanging.size());
   for (const uint32_t e : touched)
     if (auto h = hangingRelation(tree, field, e)) hanging.push_back(*h);
-  // The order findHangingCorners gives: coarse first, then by entry.
   const auto before = [&](const HangingCorner& a, const HangingCorner& b) {
-    const uint8_t la = field.coarsestLevel[a.corner], lb = field.coarsestLevel[b.corner];
-    return la != lb ? la < lb : a.corner < b.corner;
+    return hangsBefore(field, a, b);
   };
   std::sort(hanging.begin() + kept, hanging.end(), before);
   std::inplace_merge(hanging.begin(), hanging.begin() + kept, hanging.end(), before);
   snapHangingCorners(field, hanging);
+}
+
+std::vector<uint8_t> filledNodes(const Octree& tree) {
+  std::vector<uint8_t> filled(tree.nodes.size());
+  for (size_t i = 0; i < filled.size(); ++i) filled[i] = tree.nodes[i].isFilled();
+  return filled;
+}
+
+std::vector<uint32_t> nodesChangedSince(const Octree& tree, const std::vector<uint8_t>& filled) {
+  std::vector<uint32_t> changed;
+  for (uint32_t i = 0; i < tree.nodes.size(); ++i)
+    if (tree.nodes[i].isFilled() != (i < filled.size() && filled[i])) changed.push_back(i);
+  return changed;
+}
+
+bool hangsBefore(const CornerField& field, const HangingCorner& a, const HangingCorner& b) {
+  const uint8_t la = field.coarsestLevel[a.corner], lb = field.coarsestLevel[b.corner];
+  return la != lb ? la < lb : a.corner < b.corner;
 }
 
 HangingCorners findHangingCorners(const Octree& tree, const CornerField& field) {
