@@ -220,6 +220,10 @@ glm::dvec3 framePoint(const GridPoint& p) {
 
 }  // namespace
 
+// The serial walks over every node map the nodes' spilled pages as fast as they read them: they
+// wait for the pager (spillPause) every so many nodes, as the parallel stages do between blocks.
+constexpr size_t kNodesBetweenPauses = size_t{1} << 16;
+
 LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfEvaluator& pointsSdf,
                           const BuildOptions& options, const std::function<void()>& pointsSdfDone,
                           const CellCut& cut, const SpillVector<LodSample>* known,
@@ -229,14 +233,19 @@ LodField sampleLodCorners(const Octree& tree, const PointSet& points, const SdfE
   std::vector<size_t> internalOf(cut.firstCell.size(), 0);
   if (!cut.firstCell.empty()) {
     field.index.cutByCells(cut, 0);
-    for (const OctreeNode& node : tree.nodes)
+    for (size_t i = 0; i < tree.nodes.size(); ++i) {
+      if (i % kNodesBetweenPauses == 0) spillPause();
+      const OctreeNode& node = tree.nodes[i];
       if (const size_t p = cut.partOfNode(node.level, node.key);
           node.kind == NodeKind::Internal && p != CellCut::kNoPart)
         ++internalOf[p];
+    }
   }
   size_t part = CellCut::kNoPart;
   LevelCorners byLevel;
-  for (const OctreeNode& node : tree.nodes) {
+  for (size_t i = 0; i < tree.nodes.size(); ++i) {
+    if (i % kNodesBetweenPauses == 0) spillPause();
+    const OctreeNode& node = tree.nodes[i];
     if (node.kind != NodeKind::Internal) continue;
     if (!cut.firstCell.empty()) {
       const size_t p = cut.partOfNode(node.level, node.key);
