@@ -41,6 +41,7 @@ struct Z_env_instance_t {
   uint32_t destructor = 0;
   Binding constructor, open, getPoint;
   char message[kMessageBytes] = {};  // what the module threw last
+  bool heapRefused = false;          // a growth of the memory was refused since the last open
 };
 struct Z_wasi_snapshot_preview1_instance_t {};
 
@@ -138,7 +139,9 @@ u32 Z_envZ_emscripten_resize_heap(Z_env_instance_t* env, u32 bytes) {
       std::min<uint64_t>(std::max<uint64_t>(needed, memory.pages * 3 / 2), memory.max_pages);
   if (pages >= needed && wasm_rt_grow_memory(&memory, uint32_t(pages - memory.pages)) != UINT32_MAX)
     return 1;
-  return wasm_rt_grow_memory(&memory, uint32_t(needed - memory.pages)) != UINT32_MAX ? 1 : 0;
+  if (wasm_rt_grow_memory(&memory, uint32_t(needed - memory.pages)) != UINT32_MAX) return 1;
+  env->heapRefused = true;
+  return 0;
 }
 
 u32 Z_envZ_strftime_l(Z_env_instance_t*, u32, u32, u32, u32, u32) { return 0; }
@@ -166,8 +169,17 @@ namespace {
 
 // Bytes of zeros after a chunk's copy: the decoder reads its input through a bare pointer.
 constexpr size_t kPadding = 64;
-// Records decoded into the module's memory before they are copied out.
-constexpr size_t kSliceRecords = 4096;
+// Records decoded into the module's memory before they are copied out: 4,096, or fewer when
+// their extra bytes make them long (a record takes at most 65,535), within 1 MiB.
+size_t sliceRecords(size_t recordLength) {
+  return std::clamp<size_t>((size_t{1} << 20) / std::max<size_t>(recordLength, 1), 1, 4096);
+}
+// What a chunk's decoding may take of the module's memory past the chunk's copy and the decoded
+// records: laz-perf keeps the layers of a point format 6-8 chunk in buffers of the sizes the chunk
+// declares (together at most the chunk's bytes; twice that is allowed), and its models take a few
+// MiB. A chunk whose declared sizes are damaged fails to open instead of taking up to the module's
+// whole memory (1 GiB) for a few bytes of input.
+constexpr size_t kDecodingHeadroom = size_t{16} << 20;
 
 // Signatures of the functions called through the table, as the compiled module registers them.
 struct FunctionTypes {
@@ -210,7 +222,8 @@ struct LazChunkDecoder::Instance {
   Z_wasi_snapshot_preview1_instance_t wasi;
   Module owner;
   Z_lazperf_instance_t& module = owner.instance;
-  uint32_t decoder = 0;  // the ChunkDecoder object
+  uint32_t decoder = 0;   // the ChunkDecoder object
+  uint32_t maxPages = 0;  // the module's own limit on its memory
   uint32_t input = 0, output = 0;
   size_t inputCapacity = 0, outputCapacity = 0;
   bool isBroken = false;
@@ -220,6 +233,7 @@ struct LazChunkDecoder::Instance {
     env.module = &module;
     Z_lazperf_instantiate(&module, &env, &wasi);
     owner.isLive = true;
+    maxPages = module.w2c_memory.max_pages;
     auto start = [&] {
       Z_lazperfZ_emscripten_stack_init(&module);
       Z_lazperfZ___wasm_call_ctors(&module);
@@ -264,12 +278,25 @@ struct LazChunkDecoder::Instance {
     capacity = bytes;
   }
 
+  // Let the memory grow no further than `bytes` past its size now (nor past the module's limit).
+  void limitGrowth(uint64_t bytes) {
+    wasm_rt_memory_t& memory = module.w2c_memory;
+    const uint64_t pages = (uint64_t{memory.size} + bytes + 65535) / 65536;
+    memory.max_pages = uint32_t(std::clamp<uint64_t>(pages, memory.pages, maxPages));
+    env.heapRefused = false;
+  }
+
   void check(int trap, const char* doing) {
     if (trap == 0) return;
     isBroken = true;
     std::string what = wasm_rt_strerror(wasm_rt_trap_t(trap));
     if (trap == WASM_RT_TRAP_UNCAUGHT_EXCEPTION)
       what = env.message[0] != '\0' ? std::string("laz-perf: ") + env.message : "an exception";
+    if (env.heapRefused)
+      what = fmt::format(
+          "it asked for more than the {} MiB of memory a chunk of its size may take: "
+          "the sizes the chunk declares are damaged",
+          module.w2c_memory.max_pages / 16);
     fail(fmt::format("the LAZ decoder failed {} ({})", doing, what));
   }
 
@@ -287,6 +314,8 @@ void LazChunkDecoder::open(int format, size_t recordLength, std::span<const std:
                                      chunk.size(), kMaxLazChunkBytes));
   if (instance_->isBroken) instance_ = std::make_unique<Instance>();
   Instance& w = *instance_;
+  w.limitGrowth(uint64_t{2} * (chunk.size() + kPadding) +
+                sliceRecords(recordLength) * recordLength + kDecodingHeadroom);
   w.reserve(w.input, w.inputCapacity, chunk.size() + kPadding);
   std::byte* input = reinterpret_cast<std::byte*>(w.module.w2c_memory.data + w.input);
   std::copy(chunk.begin(), chunk.end(), input);
@@ -302,14 +331,17 @@ void LazChunkDecoder::open(int format, size_t recordLength, std::span<const std:
   recordLength_ = recordLength;
 }
 
+size_t LazChunkDecoder::memoryBytes() const { return instance_->module.w2c_memory.size; }
+
 void LazChunkDecoder::decode(size_t count, std::byte* out) {
   Instance& w = *instance_;
   if (w.isBroken || recordLength_ == 0) throw LazDecodeError("no chunk is open");
-  w.reserve(w.output, w.outputCapacity, std::min(count, kSliceRecords) * recordLength_);
+  const size_t records = sliceRecords(recordLength_);
+  w.reserve(w.output, w.outputCapacity, std::min(count, records) * recordLength_);
   const auto getPoint =
       w.function<void (*)(void*, u32, u32, u32)>(w.env.getPoint, functionTypes().getPoint);
   for (size_t done = 0; done < count;) {
-    const size_t slice = std::min(count - done, kSliceRecords);
+    const size_t slice = std::min(count - done, records);
     auto call = [&] {
       for (size_t i = 0; i < slice; ++i)
         getPoint.call(getPoint.instance, w.env.getPoint.context, w.decoder,

@@ -43,6 +43,9 @@ class LazChunkDecoder {
   // Decode the next `count` records of the open chunk into out (count × recordLength bytes).
   // Throws LazDecodeError when the decoder fails; the decoder then needs a new open().
   void decode(size_t count, std::byte* out);
+  // The bytes the decoder's module holds now: a chunk may grow them by about twice its own size
+  // and 16 MiB, and no further (its declared layer sizes are checked against that, not trusted).
+  size_t memoryBytes() const;
 
  private:
   struct Instance;

@@ -350,5 +350,33 @@ TEST_F(LazReader, aDecoderFailsCleanlyOnAChunkAndThenDecodesTheNextOne) {
   }
 }
 
+// A chunk that declares layers of hundreds of MiB (found by the point readers' fuzzer: 13 KiB of
+// input took 1 GiB of the decoder's memory, and decoded) fails saying so, within a bounded memory.
+TEST_F(LazReader, aChunkDeclaringHugeLayersFailsWithoutTakingTheirMemory) {
+  const std::filesystem::path path = sample("las14-f6-variable-evlr.laz");
+  io::InputStream in(path);
+  const io::LasHeader header = io::readLasHeader(in);
+  auto bytes = test::readFile(path);
+  const uint32_t chunkSize = io::checkLaszipRecord(
+      in, header, std::span(bytes).subspan(laszipPayloadAt(bytes), 34 + 4 * 9));
+  const io::LazChunk chunk = io::readLazChunkTable(in, header, chunkSize, bytes.size()).at(0);
+  // After the first point (30 bytes) and the count, the layers' sizes: the first four say 200 MiB.
+  ASSERT_EQ(loadAt<uint32_t>(bytes, chunk.offset + 30), chunk.points);
+  for (uint64_t layer = 0; layer < 4; ++layer)
+    storeAt(bytes, chunk.offset + 34 + 4 * layer, uint32_t{200} << 20);
+  io::LazChunkDecoder decoder;
+  std::vector<std::byte> out(chunk.points * header.recordLength);
+  try {
+    decoder.open(header.pointFormat, header.recordLength,
+                 std::span(bytes).subspan(chunk.offset, chunk.bytes));
+    decoder.decode(chunk.points, out.data());
+    ADD_FAILURE() << "decoded a chunk whose layers are larger than the chunk";
+  } catch (const io::LazDecodeError& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "the sizes the chunk declares are damaged");
+  }
+  EXPECT_LT(decoder.memoryBytes(), size_t{32} << 20);
+  EXPECT_CONTAINS(lazError(bytes), "chunk 1 of 6: the LAZ decoder failed");
+}
+
 }  // namespace
 }  // namespace iso
