@@ -222,9 +222,9 @@ TEST_F(CliPipeline, convertReportsProgressAsJsonAndWritesTheReportFile) {
       EXPECT_LE(j["done"].get<uint64_t>(), j["total"].get<uint64_t>()) << line;
     }
   }
-  const std::vector<std::string> stages = {"read",   "distribute",      "points",    "orient",
-                                           "octree", "passive+balance", "corners",   "lod",
-                                           "write",  "accuracy",        "visibility"};
+  const std::vector<std::string> stages = {"read",  "distribute", "points",          "orient",
+                                           "index", "octree",     "passive+balance", "corners",
+                                           "lod",   "write",      "accuracy",        "visibility"};
   EXPECT_EQ(ended, stages);
   const nlohmann::json report = nlohmann::json::parse(test::slurp(dir_ / "r.json"));
   EXPECT_EQ(report["points"]["input"], 20000);
@@ -1797,6 +1797,30 @@ TEST_F(CliPipeline, aKilledResumableConversionGoesOnFromItsLastCheckpointToTheSa
                      "points.checkpoint", dir_ / "chunked.iso");
   EXPECT_GE(report["out_of_core"]["chunks_resumed"].get<int>(), 2) << report.dump();
   EXPECT_LT(report["out_of_core"]["chunks_resumed"], report["out_of_core"]["chunks"]);
+  // A chunk's checkpoint damaged past its points (found once they were read into the results):
+  // the chunk runs again, the chunks after it are kept, and the bytes are the same.
+  {
+    const pid_t pid = startIso({"convert", "--resume", "-f", "--chunk-points", "34952",
+                                "--orient-block-points", "20000", in.string(), "-o", out.string()},
+                               dir_ / "err");
+    EXPECT_TRUE(waitUntil(pid, [&] { return fs::exists(state / "chunk-0-2"); }));
+    kill(pid, SIGKILL);
+    waitpid(pid, nullptr, 0);
+  }
+  int finished = 0;
+  for (const fs::directory_entry& e : fs::directory_iterator(state))
+    finished += e.path().filename().string().starts_with("chunk-0-") ? 1 : 0;
+  {
+    const fs::path chunk = state / "chunk-0-1";
+    std::fstream f(chunk, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(std::streamoff(fs::file_size(chunk) * 95 / 100));
+    const char was = char(f.peek());
+    f.put(char(was ^ 0x5a));
+  }
+  std::tie(report, err) = resume("--chunk-points 34952 --orient-block-points 20000 ");
+  EXPECT_EQ(report["out_of_core"]["chunks_resumed"].get<int>(), finished - 1) << report.dump();
+  EXPECT_NE(err.find("chunk-0-1: section"), std::string::npos) << err;
+  EXPECT_TRUE(test::slurp(out) == test::slurp(dir_ / "chunked.iso"));
 
   // Killed in the chunk jobs of the octree stages, it keeps the jobs it finished.
   report = killAfter("--octree-chunk-points 20000 ", "octree-chunk-2", "corners.checkpoint",

@@ -99,10 +99,19 @@ class CheckpointReader {
   void array(const std::string& name, Vector& values) {
     using T = typename Vector::value_type;
     static_assert(std::is_trivially_copyable_v<T>);
+    values.clear();
+    appendArray(name, values);
+  }
+  // The section `name`, as array(), after the values already in `values`.
+  template <typename Vector>
+  void appendArray(const std::string& name, Vector& values) {
+    using T = typename Vector::value_type;
+    static_assert(std::is_trivially_copyable_v<T>);
     const uint64_t size = begin(name);
     if (size % sizeof(T) != 0) fail("section " + name + " is not a whole number of values");
-    values.resize(size / sizeof(T));
-    const std::span<std::byte> data(reinterpret_cast<std::byte*>(values.data()), size);
+    const size_t before = values.size();
+    values.resize(before + size / sizeof(T));
+    const std::span<std::byte> data(reinterpret_cast<std::byte*>(values.data() + before), size);
     read(data);
     check(name, data);
   }

@@ -69,7 +69,6 @@ std::optional<ReadyPoints> loadPoints(ResumeState& state) {
     in.array("strays.normals", ready.strays.normals);
     in.array("strays.colors", ready.strays.colors);
     in.array("strays.extras", ready.strays.extras);
-    ready.index = std::make_unique<PointIndex>(ready.points.position);
     return ready;
   });
 }

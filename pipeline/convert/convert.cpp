@@ -593,24 +593,23 @@ void requireFrame(const Frame& frame) {
                      ") is beyond what an .iso file holds: " + std::string(problem->reason));
 }
 
+// The run's ranks when there are several (a distributed run's rank 0), else null.
+const Ranks* ranksOf(const ConvertSource& source) {
+  return source.ranks != nullptr && source.ranks->count > 1 ? source.ranks : nullptr;
+}
+
 // The octree stages before the level of detail (pipeline/convert/corner_stages.h): in one run, or
 // as chunk jobs when the points are many, with their counts and times in the report.
 CornerStageResults buildCornerStages(PointSet& points, const SdfEvaluator& sdf,
                                      const BuildOptions& options, const RadiusStats& radii,
                                      const OctreeChunkPlan& plan, StageTimer& timer,
                                      nlohmann::json& report, const ConvertSource& source) {
-  const Ranks* ranks =
-      source.ranks != nullptr && source.ranks->count > 1 ? source.ranks : nullptr;
+  const Ranks* ranks = ranksOf(source);
   if (plan.chunks() == 1) {
-    if (ranks != nullptr) tellRanks(*ranks, nullptr, radii);  // rank 0 runs them alone
     CornerStageResults r = runCornerStages(points, sdf, options, radii, 0,
                                            [&](const char* stage) { timer.next(stage); });
     points.roughness = {};  // only the octree's tolerance reads it
     return r;
-  }
-  if (ranks != nullptr) {
-    timer.next("ranks");
-    tellRanks(*ranks, &points, radii);
   }
   timer.next("octree chunks", points.size());
   CornerStageSeconds seconds;
@@ -653,8 +652,6 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
   std::optional<TriplanarTexture> texture =
       textureOf(std::move(textureImage), options.texture, points, frame, timer, report);
 
-  // The signed distance and its point index are needed until the level-of-detail corners.
-  auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
   // The chunk jobs' partition: the corner stages' and the level of detail's.
   const OctreeChunkPlan plan = planOctreeChunks(points, radii, options);
   std::optional<CornerStageResults> resumed;
@@ -664,6 +661,18 @@ nlohmann::json buildAndWrite(ReadyPoints& ready, uint64_t inputPoints,
     resumed = loadCornerStage(*source.resume);
     if (resumed) report["resumed"]["from"] = "corners";
   }
+  // The other ranks start on their chunk jobs (or are told that rank 0 runs them alone) before
+  // rank 0 builds the point index, which only its own stages read.
+  if (const Ranks* ranks = ranksOf(source); ranks != nullptr && !resumed) {
+    timer.next("ranks");
+    tellRanks(*ranks, plan.chunks() > 1 ? &points : nullptr, radii);
+  }
+  if (!ready.index) {
+    timer.next("index", points.size());
+    ready.index = std::make_unique<PointIndex>(points.position);
+  }
+  // The signed distance and its point index are needed until the level-of-detail corners.
+  auto sdf = std::make_unique<SdfEvaluator>(points, *ready.index, options.smoothing, options.fit);
   CornerStageResults built =
       resumed ? std::move(*resumed)
               : buildCornerStages(points, *sdf, options, radii, plan, timer, report, source);

@@ -14,10 +14,13 @@
 #include <cstring>
 #include <glm/common.hpp>
 #include <limits>
+#include <map>
+#include <thread>
 #include <type_traits>
 
 #include "iso/check.h"
 #include "pipeline/base/checkpoint.h"
+#include "pipeline/base/files.h"
 #include "pipeline/base/options.h"
 #include "pipeline/base/progress.h"
 #include "pipeline/points/points.h"
@@ -501,20 +504,6 @@ void joinEdgesOut(Accumulated& done, uint64_t rawSize) {
 
 constexpr const char* kShareFingerprint = "the point stages' results of a rank";
 
-// The chunks [first, last) of a rank: ranges in Morton order of about equal points.
-std::pair<size_t, size_t> chunksOfRank(const std::vector<SpillChunk>& chunks, int rank, int count) {
-  uint64_t total = 0;
-  for (const SpillChunk& c : chunks) total += c.size();
-  const auto start = [&](int r) {
-    const uint64_t target = total * uint64_t(r) / uint64_t(count);
-    uint64_t before = 0;
-    size_t c = 0;
-    while (c < chunks.size() && before < target) before += chunks[c++].size();
-    return c;
-  };
-  return {start(rank), start(rank + 1)};
-}
-
 // Results of some chunks, with each point's group root (by place; a root is in the point's own
 // chunk) when strays are looked for.
 struct Share {
@@ -528,58 +517,80 @@ void takeRoots(Share& share) {
     for (size_t i = 0; i < a.points.size(); ++i) share.roots.push_back(a.groups->root(uint32_t(i)));
 }
 
-// A share's arrays, in a checkpoint's order: written with a CheckpointWriter, read with a reader.
-template <typename Io>
-void shareArrays(Io& io, Share& share) {
-  Accumulated& a = share.results;
-  io.array("chunks", a.chunks);
-  if constexpr (std::is_same_v<Io, CheckpointWriter>)
-    writeColumns(io, a.points);
-  else
-    readColumns(io, a.points);
-  io.array("first", a.firstDistance);
-  io.array("boundary", a.boundarySource);
-  io.array("boundary.near", a.boundaryNeighbor);
-  io.array("of", a.components.of);
-  io.array("anchored", a.components.anchored);
-  io.array("votes", a.components.seedVote);
-  io.array("kth", a.kth);
-  io.array("edges", a.edgesOut);
-  io.array("roots", share.roots);
+// A share's arrays, in the order appendShareFile reads them.
+void writeShareArrays(CheckpointWriter& out, const Share& share) {
+  const Accumulated& a = share.results;
+  out.array("chunks", a.chunks);
+  writeColumns(out, a.points);
+  out.array("first", a.firstDistance);
+  out.array("boundary", a.boundarySource);
+  out.array("boundary.near", a.boundaryNeighbor);
+  out.array("of", a.components.of);
+  out.array("anchored", a.components.anchored);
+  out.array("votes", a.components.seedVote);
+  out.array("kth", a.kth);
+  out.array("edges", a.edgesOut);
+  out.array("roots", share.roots);
 }
 
-void saveShare(const std::filesystem::path& file, const std::string& fingerprint, Share& share) {
+void saveShare(const std::filesystem::path& file, const std::string& fingerprint,
+               const Share& share) {
   const Accumulated& a = share.results;
   CheckpointWriter out(file, fingerprint);
   out.json(
       "counts",
       {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
-  shareArrays(out, share);
+  writeShareArrays(out, share);
   out.commit();
 }
 
-// CheckpointError when the file is not whole.
-Share loadShare(const std::filesystem::path& file, const std::string& fingerprint) {
-  Share share;
-  Accumulated& a = share.results;
-  CheckpointReader in(file, fingerprint);
-  const nlohmann::json counts = in.json("counts");
-  a.k = counts["k"];
-  a.haloPoints = counts["halo"];
-  a.widenings = counts["widenings"];
-  a.maxLoaded = counts["loaded"];
-  shareArrays(in, share);
-  in.finish();
-  return share;
+// The sizes of results before a share is appended to them.
+struct AppendMark {
+  uint32_t points, components;
+  size_t firstDistance, boundary, boundaryNeighbors, of, kth, edges;
+};
+
+AppendMark markOf(const Accumulated& a) {
+  return {uint32_t(a.points.size()),
+          uint32_t(a.components.anchored.size()),
+          a.firstDistance.size(),
+          a.boundarySource.size(),
+          a.boundaryNeighbor.size(),
+          a.components.of.size(),
+          a.kth.size(),
+          a.edgesOut.size()};
+}
+
+// After a share's arrays were appended at `mark`: its indices made the results' own (its points
+// and components come after those there were), its groups joined, its chunks and counts added.
+void fixAppended(Accumulated& to, const AppendMark& mark, const std::span<const uint32_t> roots,
+                 const std::span<const ChunkRecord> chunks, const Accumulated& counts) {
+  for (size_t i = mark.of; i < to.components.of.size(); ++i)
+    if (to.components.of[i] != kNoNode) to.components.of[i] += mark.components;
+  for (size_t e = mark.edges; e < to.edgesOut.size(); ++e) to.edgesOut[e][0] += mark.points;
+  if (to.groups)
+    for (size_t i = 0; i < roots.size(); ++i)
+      to.groups->join(mark.points + uint32_t(i), mark.points + roots[i]);
+  for (ChunkRecord record : chunks) {
+    record.pointBegin += mark.points;
+    record.pointEnd += mark.points;
+    record.componentBegin += mark.components;
+    record.componentEnd += mark.components;
+    record.boundaryBegin += mark.boundary;
+    record.boundaryEnd += mark.boundary;
+    to.chunks.push_back(record);
+  }
+  if (to.points.size() > mark.points) to.k = counts.k;
+  to.haloPoints += counts.haloPoints;
+  to.widenings += counts.widenings;
+  to.maxLoaded = std::max(to.maxLoaded, counts.maxLoaded);
 }
 
 // Append a share's results (in chunk order after those of `to`); `to.groups`, when finding
 // strays, covers every point of the distribution.
 void appendShare(const Share& share, Accumulated& to) {
   const Accumulated& from = share.results;
-  const auto pointBase = uint32_t(to.points.size());
-  const auto componentBase = uint32_t(to.components.anchored.size());
-  const size_t boundaryBase = to.boundarySource.size();
+  const AppendMark mark = markOf(to);
   appendRange(to.points, from.points, 0, uint32_t(from.points.size()));
   const auto append = [](auto& dst, const auto& src) {
     dst.insert(dst.end(), src.begin(), src.end());
@@ -587,29 +598,65 @@ void appendShare(const Share& share, Accumulated& to) {
   append(to.firstDistance, from.firstDistance);
   append(to.boundarySource, from.boundarySource);
   append(to.boundaryNeighbor, from.boundaryNeighbor);
-  for (const uint32_t of : from.components.of)
-    to.components.of.push_back(of == kNoNode ? kNoNode : of + componentBase);
+  append(to.components.of, from.components.of);
   append(to.components.anchored, from.components.anchored);
   append(to.components.seedVote, from.components.seedVote);
   append(to.kth, from.kth);
-  for (const auto& [place, other] : from.edgesOut)
-    to.edgesOut.push_back({place + pointBase, other});
-  if (to.groups)
-    for (size_t i = 0; i < share.roots.size(); ++i)
-      to.groups->join(pointBase + uint32_t(i), pointBase + share.roots[i]);
-  for (ChunkRecord record : from.chunks) {
-    record.pointBegin += pointBase;
-    record.pointEnd += pointBase;
-    record.componentBegin += componentBase;
-    record.componentEnd += componentBase;
-    record.boundaryBegin += boundaryBase;
-    record.boundaryEnd += boundaryBase;
-    to.chunks.push_back(record);
+  append(to.edgesOut, from.edgesOut);
+  fixAppended(to, mark, share.roots, from.chunks, from);
+}
+
+// Append the share a file holds, as appendShare, reading each array into its place (the file is
+// read once, and its arrays are not copied again). CheckpointError when the file is not whole:
+// `to` is then as it was.
+void appendShareFile(const std::filesystem::path& file, const std::string& fingerprint,
+                     Accumulated& to) {
+  const AppendMark mark = markOf(to);
+  const auto rollBack = [&] {
+    PointSet::forEachColumn(
+        [&](auto& column) {
+          if (column.size() > mark.points) column.resize(mark.points);
+        },
+        to.points);
+    to.firstDistance.resize(mark.firstDistance);
+    to.components.of.resize(mark.of);
+    to.components.anchored.resize(mark.components);
+    to.components.seedVote.resize(mark.components);
+    to.boundarySource.resize(mark.boundary);
+    to.boundaryNeighbor.resize(mark.boundaryNeighbors);
+    to.kth.resize(mark.kth);
+    to.edgesOut.resize(mark.edges);
+  };
+  Accumulated counts;
+  std::vector<ChunkRecord> chunks;
+  SpillVector<uint32_t> roots;
+  try {
+    CheckpointReader in(file, fingerprint);
+    const nlohmann::json c = in.json("counts");
+    counts.k = c["k"];
+    counts.haloPoints = c["halo"];
+    counts.widenings = c["widenings"];
+    counts.maxLoaded = c["loaded"];
+    in.array("chunks", chunks);
+    int column = 0;
+    PointSet::forEachColumn(
+        [&](auto& values) { in.appendArray("points." + std::to_string(column++), values); },
+        to.points);
+    in.appendArray("first", to.firstDistance);
+    in.appendArray("boundary", to.boundarySource);
+    in.appendArray("boundary.near", to.boundaryNeighbor);
+    in.appendArray("of", to.components.of);
+    in.appendArray("anchored", to.components.anchored);
+    in.appendArray("votes", to.components.seedVote);
+    in.appendArray("kth", to.kth);
+    in.appendArray("edges", to.edgesOut);
+    in.array("roots", roots);
+    in.finish();
+  } catch (const CheckpointError&) {
+    rollBack();
+    throw;
   }
-  if (from.points.size() > 0) to.k = from.k;
-  to.haloPoints += from.haloPoints;
-  to.widenings += from.widenings;
-  to.maxLoaded = std::max(to.maxLoaded, from.maxLoaded);
+  fixAppended(to, mark, roots, chunks, counts);
 }
 
 // Results of `points` points to come, as one process would hold them.
@@ -630,52 +677,80 @@ size_t runResumable(const Distribution& distribution, ChunkRunner& runner, Resum
   for (size_t c = 0; c < distribution.chunks().size(); ++c) {
     const SpillChunk& chunk = distribution.chunks()[c];
     const std::string name = "chunk-" + std::to_string(pass) + "-" + std::to_string(c);
-    std::optional<Share> share;
     if (resume.has(name)) try {
-        share = loadShare(resume.path(name), fingerprint);
+        appendShareFile(resume.path(name), fingerprint, done);
         progressAdvance(chunk.size());
         ++kept;
+        continue;
       } catch (const CheckpointError& e) {
         resume.discard(name, e.what());
       }
-    if (!share) {
-      share.emplace();
-      share->results = resultsFor(chunk.size(), layout, findingOutliers);
-      runner.run(chunk, share->results);
-      takeRoots(*share);
-      saveShare(resume.path(name), fingerprint, *share);
-    }
-    appendShare(*share, done);
+    Share share{resultsFor(chunk.size(), layout, findingOutliers), {}};
+    runner.run(chunk, share.results);
+    takeRoots(share);
+    saveShare(resume.path(name), fingerprint, share);
+    appendShare(share, done);
   }
   return kept;
 }
 
-// Each rank runs its range of the chunks; rank 0's results go to `done`, the others' to files in
-// the shared directory, which rank 0 then appends in order.
-void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks& ranks,
+// The ranks claim the chunks in order as they become free (claimFile in the shared directory) and
+// run them; rank 0 appends every chunk's results to `done` in chunk order: its own as it runs them
+// (or, run before their turn, once it comes), the others' from their files in the shared
+// directory as they come. The ranks' loads balance, and rank 0 appends while the others run.
+void runShare(const Distribution& distribution, ChunkRunner& runner, const Ranks& ranks, int pass,
               const PointLayout& layout, bool findingOutliers, Accumulated& done) {
-  const auto [first, last] = chunksOfRank(distribution.chunks(), ranks.rank, ranks.count);
-  if (ranks.rank == 0) {
-    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], done);
-  } else {
-    uint64_t points = 0;
-    for (size_t c = first; c < last; ++c) points += distribution.chunks()[c].size();
-    Share mine{resultsFor(points, layout, findingOutliers), {}};
-    for (size_t c = first; c < last; ++c) runner.run(distribution.chunks()[c], mine.results);
-    takeRoots(mine);
-    saveShare(ranks.shared / ("rank-" + std::to_string(ranks.rank)), kShareFingerprint, mine);
+  const std::vector<SpillChunk>& chunks = distribution.chunks();
+  const auto file = [&](const char* what, size_t c) {
+    return ranks.shared /
+           (std::string(what) + "-" + std::to_string(pass) + "-" + std::to_string(c));
+  };
+  const auto runApart = [&](size_t c) {
+    Share share{resultsFor(chunks[c].size(), layout, findingOutliers), {}};
+    runner.run(chunks[c], share.results);
+    takeRoots(share);
+    return share;
+  };
+  if (ranks.rank != 0) {
+    for (size_t c = 0; c < chunks.size(); ++c)
+      if (claimFile(file("claim", c))) saveShare(file("points", c), kShareFingerprint, runApart(c));
+    ranks.barrier();
+    return;
+  }
+  std::map<size_t, Share> ahead;  // rank 0's, run before their turn
+  size_t claimFrom = 0;
+  for (size_t next = 0; next < chunks.size();) {
+    if (const auto own = ahead.find(next); own != ahead.end()) {
+      appendShare(own->second, done);
+      ahead.erase(own);
+      ++next;
+      continue;
+    }
+    if (const std::filesystem::path theirs = file("points", next);
+        std::filesystem::exists(theirs)) {
+      try {
+        appendShareFile(theirs, kShareFingerprint, done);
+      } catch (const CheckpointError& e) {
+        throw std::runtime_error(std::string("a rank's results cannot be read: ") + e.what());
+      }
+      std::filesystem::remove(theirs);
+      progressAdvance(chunks[next].size());
+      ++next;
+      continue;
+    }
+    while (claimFrom < chunks.size() && !claimFile(file("claim", claimFrom))) ++claimFrom;
+    if (claimFrom < chunks.size()) {
+      if (claimFrom == next)
+        runner.run(chunks[next++], done);
+      else
+        ahead.emplace(claimFrom, runApart(claimFrom));
+      ++claimFrom;
+      continue;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));  // `next` is another rank's
   }
   ranks.barrier();
-  if (ranks.rank != 0) return;
-  for (int r = 1; r < ranks.count; ++r) {
-    const std::filesystem::path file = ranks.shared / ("rank-" + std::to_string(r));
-    try {
-      appendShare(loadShare(file, kShareFingerprint), done);
-    } catch (const CheckpointError& e) {
-      throw std::runtime_error(std::string("a rank's results cannot be read: ") + e.what());
-    }
-    std::filesystem::remove(file);
-  }
+  for (size_t c = 0; c < chunks.size(); ++c) std::filesystem::remove(file("claim", c));
 }
 
 // Rank 0's word to the others once it has judged the strays: empty when they are done, else the
@@ -743,7 +818,7 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
     const bool one = distribution.chunks().size() == 1;  // rank 0 runs it alone
     if (findingOutliers && one) runner.deferRest();
     if (shared && !one)
-      runShare(distribution, runner, *ranks, raw.layout(), findingOutliers, done);
+      runShare(distribution, runner, *ranks, pass, raw.layout(), findingOutliers, done);
     else if (resume != nullptr && !one)
       resumed +=
           runResumable(distribution, runner, *resume, pass, raw.layout(), findingOutliers, done);
@@ -831,7 +906,6 @@ ReadyPoints prepareOutOfCore(const RawSpill& raw, SpillDirectory& directory,
   SpillVector<float> radii = points.radius;
   ready.radii.medianRadius = medianOf(radii);
   ready.points = std::move(points);
-  ready.index = std::make_unique<PointIndex>(ready.points.position);
 
   ready.sample = accuracySample(raw, keep);
   ready.outOfCore = {{"chunks", chunks},

@@ -27,7 +27,7 @@ class ResumeState;
 struct ReadyPoints {
   Frame frame;
   PointSet points;                    // sorted by key, merged, with radii, normals, roughness
-  std::unique_ptr<PointIndex> index;  // over points.position
+  std::unique_ptr<PointIndex> index;  // over points.position; null where not yet built
   RadiusStats radii;
   NormalStats normals;
   size_t duplicates = 0;  // input points merged into others
@@ -42,11 +42,11 @@ struct ReadyPoints {
 };
 
 // The ranks of a distributed run (`mpirun -np N iso convert`; the engine's calls are in
-// tools/iso/ranks.cpp). The point stages' chunks are split between them in Morton order, ranges
-// of about equal points; each rank runs its range and leaves its results in `shared`, which rank 0
-// joins in chunk order, so that the results are those of one process. Rank 0 alone judges the
-// strays (the others run the chunks again when they change the frame) and goes on to the octree
-// stages.
+// tools/iso/ranks.cpp). Each rank claims the point stages' chunks in chunk order as it becomes
+// free (a file made with O_EXCL in `shared`) and runs them; the others leave each chunk's results
+// in `shared`, which rank 0 appends to its own in chunk order as they come, so that the results
+// are those of one process. Rank 0 alone judges the strays (the others run the chunks again when
+// they change the frame) and goes on to the octree stages.
 struct Ranks {
   int rank = 0, count = 1;
   std::filesystem::path shared;  // a directory every rank sees

@@ -45,6 +45,23 @@ TEST(Checkpoint, readsBackWhatWasWritten) {
   in.finish();
 }
 
+TEST(Checkpoint, appendsASectionAfterTheValuesAlreadyThere) {
+  test::TempDir dir;
+  write(dir / "c", "run 1");
+  CheckpointReader in(dir / "c", "run 1");
+  in.json("meta");
+  std::vector<double> values = {-1.0, -2.0};
+  in.appendArray("values", values);
+  std::vector<double> expected = {-1.0, -2.0};
+  const std::vector<double> read = numbers(3'000'000);
+  expected.insert(expected.end(), read.begin(), read.end());
+  EXPECT_EQ(values, expected);
+  std::vector<int> kept{7};
+  in.appendArray("empty", kept);
+  EXPECT_EQ(kept, std::vector<int>{7});
+  in.finish();
+}
+
 TEST(Checkpoint, refusesWhatIsCutDamagedForeignOrReadOutOfOrder) {
   test::TempDir dir;
   write(dir / "c", "run 1");
