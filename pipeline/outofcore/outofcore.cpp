@@ -517,20 +517,21 @@ void takeRoots(Share& share) {
     for (size_t i = 0; i < a.points.size(); ++i) share.roots.push_back(a.groups->root(uint32_t(i)));
 }
 
-// A share's arrays, in the order appendShareFile reads them.
-void writeShareArrays(CheckpointWriter& out, const Share& share) {
-  const Accumulated& a = share.results;
-  out.array("chunks", a.chunks);
-  writeColumns(out, a.points);
-  out.array("first", a.firstDistance);
-  out.array("boundary", a.boundarySource);
-  out.array("boundary.near", a.boundaryNeighbor);
-  out.array("of", a.components.of);
-  out.array("anchored", a.components.anchored);
-  out.array("votes", a.components.seedVote);
-  out.array("kth", a.kth);
-  out.array("edges", a.edgesOut);
-  out.array("roots", share.roots);
+// A share's arrays of points, in their order in its file: f(name, array) for each (the points'
+// columns as "points.N", like writeColumns), after the section "chunks" and before "roots".
+template <typename Results, typename F>
+void forEachShareArray(Results& a, F&& f) {
+  int column = 0;
+  PointSet::forEachColumn([&](auto& values) { f("points." + std::to_string(column++), values); },
+                          a.points);
+  f("first", a.firstDistance);
+  f("boundary", a.boundarySource);
+  f("boundary.near", a.boundaryNeighbor);
+  f("of", a.components.of);
+  f("anchored", a.components.anchored);
+  f("votes", a.components.seedVote);
+  f("kth", a.kth);
+  f("edges", a.edgesOut);
 }
 
 void saveShare(const std::filesystem::path& file, const std::string& fingerprint,
@@ -540,7 +541,10 @@ void saveShare(const std::filesystem::path& file, const std::string& fingerprint
   out.json(
       "counts",
       {{"k", a.k}, {"halo", a.haloPoints}, {"widenings", a.widenings}, {"loaded", a.maxLoaded}});
-  writeShareArrays(out, share);
+  out.array("chunks", a.chunks);
+  forEachShareArray(a,
+                    [&](const std::string& name, const auto& values) { out.array(name, values); });
+  out.array("roots", share.roots);
   out.commit();
 }
 
@@ -638,18 +642,8 @@ void appendShareFile(const std::filesystem::path& file, const std::string& finge
     counts.widenings = c["widenings"];
     counts.maxLoaded = c["loaded"];
     in.array("chunks", chunks);
-    int column = 0;
-    PointSet::forEachColumn(
-        [&](auto& values) { in.appendArray("points." + std::to_string(column++), values); },
-        to.points);
-    in.appendArray("first", to.firstDistance);
-    in.appendArray("boundary", to.boundarySource);
-    in.appendArray("boundary.near", to.boundaryNeighbor);
-    in.appendArray("of", to.components.of);
-    in.appendArray("anchored", to.components.anchored);
-    in.appendArray("votes", to.components.seedVote);
-    in.appendArray("kth", to.kth);
-    in.appendArray("edges", to.edgesOut);
+    forEachShareArray(to,
+                      [&](const std::string& name, auto& values) { in.appendArray(name, values); });
     in.array("roots", roots);
     in.finish();
   } catch (const CheckpointError&) {
