@@ -97,8 +97,6 @@ class CheckpointReader {
   nlohmann::json json(const std::string& name);
   template <typename Vector>
   void array(const std::string& name, Vector& values) {
-    using T = typename Vector::value_type;
-    static_assert(std::is_trivially_copyable_v<T>);
     values.clear();
     appendArray(name, values);
   }
